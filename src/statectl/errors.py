@@ -1,0 +1,103 @@
+"""One error root and the diagnostics that loading and checking report.
+
+Rules:
+1. Loading and checking never stop at the first problem: they collect
+   :class:`Diagnostic` values, each with a stable code, where it was found,
+   what was found and what to do.
+2. A caller that needs a usable result from a load with errors gets a
+   :class:`DiagnosticError` carrying every diagnostic, never a traceback.
+3. Exceptions raised at run time (misuse of the API, an event the current state
+   rejects under the ``error`` policy) derive from :class:`StatectlError`.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+__all__ = [
+    "Diagnostic",
+    "DiagnosticError",
+    "Location",
+    "Severity",
+    "StatectlError",
+    "UnhandledEventError",
+    "has_errors",
+]
+
+
+class StatectlError(Exception):
+    """Root of every error statectl raises on purpose."""
+
+
+class Severity(enum.Enum):
+    ERROR = "error"
+    WARNING = "warning"
+    INFO = "info"
+
+
+@dataclass(frozen=True, slots=True)
+class Location:
+    """Where an element came from: a file and a line, or a sheet and a row.
+
+    ``line`` is 1-based in text files (YAML, CSV, SCXML); ``sheet``/``row``
+    name a spreadsheet cell row (1-based, as the spreadsheet shows it).
+    """
+
+    file: str = "<memory>"
+    line: int | None = None
+    sheet: str | None = None
+    column: str | None = None
+
+    def __str__(self) -> str:
+        text = self.file
+        if self.sheet is not None:
+            text += f"[{self.sheet}]"
+        if self.line is not None:
+            text += f":{self.line}"
+        return text
+
+
+@dataclass(frozen=True, slots=True)
+class Diagnostic:
+    """One problem: ``file:line: CODE severity: message (hint)``."""
+
+    code: str
+    severity: Severity
+    where: Location
+    message: str
+    hint: str = ""
+
+    def __str__(self) -> str:
+        text = f"{self.where}: {self.code} {self.severity.value}: {self.message}"
+        if self.hint:
+            text += f" ({self.hint})"
+        return text
+
+    def to_json(self) -> dict[str, object]:
+        return {
+            "code": self.code,
+            "severity": self.severity.value,
+            "file": self.where.file,
+            "line": self.where.line,
+            "sheet": self.where.sheet,
+            "message": self.message,
+            "hint": self.hint,
+        }
+
+
+def has_errors(diagnostics: Iterable[Diagnostic]) -> bool:
+    return any(d.severity is Severity.ERROR for d in diagnostics)
+
+
+class DiagnosticError(StatectlError):
+    """A load or build that produced errors; carries all of them."""
+
+    def __init__(self, diagnostics: Iterable[Diagnostic]) -> None:
+        self.diagnostics: tuple[Diagnostic, ...] = tuple(diagnostics)
+        super().__init__("\n".join(str(d) for d in self.diagnostics))
+
+
+class UnhandledEventError(StatectlError):
+    """An event the active configuration neither handles nor ignores (policy ``error``)."""

@@ -1,0 +1,226 @@
+"""The chart as a value: frozen records that describe a device's statechart.
+
+Rules:
+1. A :class:`Chart` is immutable and says nothing about a run; the runtime holds
+   the configuration (which states are active), never the chart.
+2. States are listed in document order, every parent before its children; that
+   order is the W3C SCXML document order the semantics relies on.
+3. Every element keeps the :class:`~statectl.errors.Location` it came from, so a
+   message about it can point at the table row or the SCXML line.
+4. Actions are a closed set of frozen records; the semantics returns them and
+   the runtime performs them.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+from statectl.errors import Location
+
+__all__ = [
+    "Action",
+    "Api",
+    "Chart",
+    "ControlKind",
+    "DataItem",
+    "EventDef",
+    "EventKind",
+    "Invoke",
+    "Log",
+    "Notify",
+    "Raise",
+    "State",
+    "StateKind",
+    "Transition",
+]
+
+NOWHERE = Location()
+
+
+class ControlKind(enum.Enum):
+    """The paper's "required state control" column."""
+
+    DEFAULT = "default"
+    MONITORING = "monitoring required"
+    TRIGGER = "event trigger required"
+
+
+class EventKind(enum.Enum):
+    """Who produces an event, which decides whether taking it calls the device."""
+
+    COMMAND = "command"  # from outside or a sensor: drives the device API
+    COMPLETION = "completion"  # reported back by the device through its API
+    FAULT = "fault"  # raised by a monitor: drives the API's fault handling
+    INTERNAL = "internal"  # raised by the chart itself
+
+
+class StateKind(enum.Enum):
+    ATOMIC = "atomic"
+    COMPOUND = "compound"
+    PARALLEL = "parallel"
+    FINAL = "final"
+    HISTORY_SHALLOW = "history-shallow"
+    HISTORY_DEEP = "history-deep"
+
+    @property
+    def is_history(self) -> bool:
+        return self in (StateKind.HISTORY_SHALLOW, StateKind.HISTORY_DEEP)
+
+
+class Action:
+    """Base of the closed set of actions a step can ask the runtime to perform."""
+
+    __slots__ = ()
+
+
+@dataclass(frozen=True, slots=True)
+class Notify(Action):
+    """Notify the specific observer registered for ``invoke`` (the paper's step 3)."""
+
+    invoke: int
+    name: str  # the invoke enumeration member, e.g. "Moving"
+    method: str  # the observer method it maps to, e.g. "Movement"
+    event: str  # the event whose transition issued it
+
+
+@dataclass(frozen=True, slots=True)
+class Raise(Action):
+    """Put an event on the internal queue (processed before the next external one)."""
+
+    event: str
+
+
+@dataclass(frozen=True, slots=True)
+class Log(Action):
+    label: str
+    message: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class State:
+    """A chart state; ``parent`` is ``None`` for a top-level state."""
+
+    name: str
+    kind: StateKind = StateKind.ATOMIC
+    parent: str | None = None
+    initial: tuple[str, ...] = ()  # default entry targets of a compound state
+    controls: frozenset[ControlKind] = frozenset()
+    description: str = ""
+    component: str = ""  # the paper's "component name/API" column
+    on_entry: tuple[Action, ...] = ()
+    on_exit: tuple[Action, ...] = ()
+    history_default: tuple[str, ...] = ()  # targets of a history state with no value yet
+    origin: Location = NOWHERE
+
+
+@dataclass(frozen=True, slots=True)
+class Transition:
+    """``source + event [guard] / actions = targets``; no targets means targetless."""
+
+    source: str
+    events: tuple[str, ...]  # empty: eventless
+    targets: tuple[str, ...]
+    guard: str | None = None
+    condition: str = ""  # the paper's prose "condition for the trigger"
+    internal: bool = False
+    actions: tuple[Action, ...] = ()
+    origin: Location = NOWHERE
+
+    @property
+    def label(self) -> str:
+        """The paper's transition label, ``event [condition]``."""
+        text = " ".join(self.events)
+        if self.guard:
+            text += f" [{self.guard}]"
+        return text
+
+
+@dataclass(frozen=True, slots=True)
+class EventDef:
+    name: str
+    kind: EventKind = EventKind.COMMAND
+    api: str | None = None  # the observer method (device API) this event drives or reports on
+    description: str = ""
+    origin: Location = NOWHERE
+
+
+@dataclass(frozen=True, slots=True)
+class Api:
+    """An observer method: one device API shared by every event that names it."""
+
+    method: str
+    events: tuple[str, ...]
+    origin: Location = NOWHERE
+
+
+@dataclass(frozen=True, slots=True)
+class Invoke:
+    """An invoke number: the enumerated value a notification carries."""
+
+    number: int
+    name: str
+    method: str
+
+
+@dataclass(frozen=True, slots=True)
+class DataItem:
+    """A datamodel variable; ``expr`` is evaluated in the chart's expression language."""
+
+    name: str
+    expr: str | None = None
+    origin: Location = NOWHERE
+
+
+@dataclass(frozen=True, slots=True)
+class Chart:
+    """A device's statechart: the value every host (runtime, verifier, codegen) reads."""
+
+    name: str
+    states: tuple[State, ...]
+    transitions: tuple[Transition, ...]
+    initial: tuple[str, ...]
+    events: tuple[EventDef, ...] = ()
+    apis: tuple[Api, ...] = ()
+    invokes: tuple[Invoke, ...] = ()
+    ignored: frozenset[tuple[str, str]] = frozenset()  # (state, event) declared ignored
+    data: tuple[DataItem, ...] = ()
+    datamodel: str = "safe"
+    component: str = ""
+    origin: Location = field(default=NOWHERE)
+
+    def state(self, name: str) -> State:
+        for s in self.states:
+            if s.name == name:
+                return s
+        raise KeyError(name)
+
+    def has_state(self, name: str) -> bool:
+        return any(s.name == name for s in self.states)
+
+    def event(self, name: str) -> EventDef | None:
+        for e in self.events:
+            if e.name == name:
+                return e
+        return None
+
+    def children(self, name: str | None) -> Iterator[State]:
+        return (s for s in self.states if s.parent == name)
+
+    def transitions_from(self, name: str) -> Iterator[Transition]:
+        return (t for t in self.transitions if t.source == name)
+
+    @property
+    def default_states(self) -> tuple[str, ...]:
+        """States marked ``default`` in the State Definition table."""
+        return tuple(s.name for s in self.states if ControlKind.DEFAULT in s.controls)
+
+    @property
+    def event_names(self) -> tuple[str, ...]:
+        """Every event the chart knows: declared, then used by transitions, in order."""
+        seen: dict[str, None] = {e.name: None for e in self.events}
+        for t in self.transitions:
+            for e in t.events:
+                seen.setdefault(e, None)
+        return tuple(seen)

@@ -1,0 +1,569 @@
+"""The pure kernel: what happens when an event meets a configuration.
+
+Follows the algorithm of the W3C SCXML recommendation (Appendix D) and names its
+parts after it, so the pseudocode can be read beside this file. Rules:
+
+1. :func:`initial` and :func:`step` return a :class:`Step` that *describes* the
+   exit set, the transitions taken, the entry set and the actions to perform;
+   nothing is performed here (no observer is called, no clock is read).
+2. A step is one macrostep: the external event's microstep, then eventless
+   transitions and internally raised events (``Raise``, ``done.state.*``) until
+   the configuration is stable, which is run-to-completion.
+3. Transition selection is in document order of the active atomic states; a
+   state's own transitions before its ancestors'; conflicts are resolved by
+   :func:`remove_conflicting_transitions` (a descendant's transition preempts).
+4. A chart is compiled once (:class:`Machine`): ancestors, descendants,
+   candidate transitions per (state, event), static transition domains and
+   compiled guards. Where no guard was consulted a step depends only on
+   ``(snapshot, event)`` and is memoised, so dispatch is close to a lookup.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from statectl.errors import DiagnosticError, StatectlError
+from statectl.expr import Expression, compile_expression
+from statectl.model import Action, Chart, Raise, StateKind, Transition
+
+__all__ = [
+    "LivelockError",
+    "Machine",
+    "Microstep",
+    "Snapshot",
+    "Step",
+    "initial",
+    "name_match",
+    "step",
+]
+
+#: Bound on microsteps in one macrostep; a chart that exceeds it loops forever.
+MAX_MICROSTEPS = 10_000
+
+History = tuple[tuple[str, tuple[str, ...]], ...]
+
+
+class LivelockError(StatectlError):
+    """Eventless or raised transitions that never settle."""
+
+
+@dataclass(frozen=True, slots=True)
+class Snapshot:
+    """All the semantics remembers between steps: active states, history, previous state.
+
+    ``previous`` is the atomic state left by the last transition that changed the
+    configuration; device tables use it in guards ("the previous state was Moving").
+    """
+
+    active: frozenset[str]
+    history: History = ()
+    previous: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Microstep:
+    event: str | None
+    transitions: tuple[Transition, ...]
+    exited: tuple[str, ...]
+    entered: tuple[str, ...]
+    actions: tuple[Action, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Step:
+    """The decision for one external event (or for start-up, ``event=None``)."""
+
+    event: str | None
+    source: Snapshot
+    target: Snapshot
+    microsteps: tuple[Microstep, ...]
+    handled: bool  # a transition was taken for the external event
+    ignored: bool  # unhandled, but declared ignored in an active state
+    final: bool  # a top-level final state was reached
+    guarded: bool = False  # a guard was consulted (the step is not memoised)
+
+    @property
+    def actions(self) -> tuple[Action, ...]:
+        return tuple(a for m in self.microsteps for a in m.actions)
+
+    @property
+    def transitions(self) -> tuple[Transition, ...]:
+        return tuple(t for m in self.microsteps for t in m.transitions)
+
+    @property
+    def exited(self) -> tuple[str, ...]:
+        return tuple(s for m in self.microsteps for s in m.exited)
+
+    @property
+    def entered(self) -> tuple[str, ...]:
+        return tuple(s for m in self.microsteps for s in m.entered)
+
+
+def name_match(descriptors: Iterable[str], event: str) -> bool:
+    """SCXML event matching: ``error`` matches ``error`` and ``error.execution``; ``*`` all."""
+    for d in descriptors:
+        if d == "*" or d == event:
+            return True
+        d = d.removesuffix(".*")
+        if event.startswith(d) and event[len(d) : len(d) + 1] == ".":
+            return True
+    return False
+
+
+@dataclass(slots=True)
+class _Run:
+    """Mutable scratch for one macrostep; never escapes this module."""
+
+    active: set[str]
+    history: dict[str, tuple[str, ...]]
+    previous: str | None
+    data: Mapping[str, Any]
+    event: str | None = None
+    guarded: bool = False
+    internal: list[str] = field(default_factory=list)
+    final: bool = False
+
+
+class Machine:
+    """A chart compiled for stepping: static tables computed once at load."""
+
+    def __init__(self, chart: Chart) -> None:
+        self.chart = chart
+        self.order: dict[str, int] = {s.name: i for i, s in enumerate(chart.states)}
+        self.kind: dict[str, StateKind] = {s.name: s.kind for s in chart.states}
+        self.parent: dict[str, str | None] = {s.name: s.parent for s in chart.states}
+        self.initial_of: dict[str, tuple[str, ...]] = {}
+        self.history_default: dict[str, tuple[str, ...]] = {}
+        children: dict[str | None, list[str]] = {}
+        for s in chart.states:
+            children.setdefault(s.parent, []).append(s.name)
+        self.children: dict[str | None, tuple[str, ...]] = {
+            k: tuple(v) for k, v in children.items()
+        }
+        self.ancestors: dict[str, tuple[str, ...]] = {}
+        for s in chart.states:
+            chain: list[str] = []
+            p = s.parent
+            while p is not None:
+                chain.append(p)
+                p = self.parent[p]
+            self.ancestors[s.name] = tuple(chain)
+        self.descendants: dict[str | None, frozenset[str]] = {None: frozenset(self.order)}
+        for s in chart.states:
+            self.descendants[s.name] = frozenset(
+                d for d in self.order if s.name in self.ancestors[d]
+            )
+        for s in chart.states:
+            if s.kind is StateKind.COMPOUND:
+                kids = [c for c in self.children.get(s.name, ()) if not self.kind[c].is_history]
+                self.initial_of[s.name] = s.initial or (kids[:1] and (kids[0],)) or ()
+            if s.kind.is_history:
+                self.history_default[s.name] = s.history_default
+        self.top_initial: tuple[str, ...] = chart.initial or self.children.get(None, ())[:1]
+        self.transitions_of: dict[str, tuple[Transition, ...]] = {
+            name: tuple(t for t in chart.transitions if t.source == name) for name in self.order
+        }
+        self.histories_of: dict[str, tuple[str, ...]] = {
+            name: tuple(c for c in self.children.get(name, ()) if self.kind[c].is_history)
+            for name in self.order
+        }
+        self.guards: dict[str, Expression] = {}
+        problems = []
+        for t in chart.transitions:
+            if t.guard and t.guard not in self.guards:
+                expr, diags = compile_expression(t.guard, t.origin)
+                problems.extend(diags)
+                if expr is not None:
+                    self.guards[t.guard] = expr
+        if problems:
+            raise DiagnosticError(problems)
+        self.ignored = chart.ignored
+        self._static_domain: dict[int, str | None] = {}
+        for t in chart.transitions:
+            if t.targets and not any(self.kind[x].is_history for x in t.targets):
+                self._static_domain[id(t)] = self._domain(t, t.targets)
+        self._candidates: dict[tuple[str, str | None], tuple[Transition, ...]] = {}
+        self._memo: dict[tuple[Snapshot, str], Step] = {}
+
+    # -- structure -------------------------------------------------------------------------
+
+    def is_descendant(self, state: str, ancestor: str | None) -> bool:
+        return ancestor is None or ancestor in self.ancestors[state]
+
+    def is_atomic(self, state: str) -> bool:
+        return self.kind[state] in (StateKind.ATOMIC, StateKind.FINAL)
+
+    def candidates(self, atomic: str, event: str | None) -> tuple[Transition, ...]:
+        """Transitions an atomic state offers for ``event``: its own first, then ancestors'."""
+        key = (atomic, event)
+        found = self._candidates.get(key)
+        if found is None:
+            out: list[Transition] = []
+            for s in (atomic, *self.ancestors[atomic]):
+                for t in self.transitions_of[s]:
+                    eventless = event is None and not t.events
+                    if eventless or (event is not None and name_match(t.events, event)):
+                        out.append(t)
+            found = self._candidates[key] = tuple(out)
+        return found
+
+    def _find_lcca(self, states: list[str]) -> str | None:
+        head, tail = states[0], states[1:]
+        for anc in self.ancestors[head]:
+            if self.kind[anc] is StateKind.COMPOUND and all(
+                self.is_descendant(s, anc) for s in tail
+            ):
+                return anc
+        return None
+
+    def _domain(self, t: Transition, targets: Iterable[str]) -> str | None:
+        tstates = list(targets)
+        if (
+            t.internal
+            and self.kind[t.source] is StateKind.COMPOUND
+            and all(self.is_descendant(s, t.source) for s in tstates)
+        ):
+            return t.source
+        return self._find_lcca([t.source, *tstates])
+
+
+# -- the W3C algorithm ------------------------------------------------------------------------
+
+
+def _in_env(run: _Run, m: Machine, event_data: Any) -> dict[str, Any]:
+    active = run.active
+    env: dict[str, Any] = dict(run.data)
+    env["previous"] = run.previous
+    env["In"] = active.__contains__
+    env["_event"] = {"name": run.event, "data": event_data}
+    return env
+
+
+def condition_match(m: Machine, run: _Run, t: Transition, event_data: Any) -> bool:
+    if not t.guard:
+        return True
+    run.guarded = True
+    try:
+        return bool(m.guards[t.guard].evaluate(_in_env(run, m, event_data)))
+    except Exception:  # a failing guard is false, as in SCXML
+        return False
+
+
+def select_transitions(
+    m: Machine, run: _Run, event: str | None, event_data: Any = None
+) -> list[Transition]:
+    enabled: list[Transition] = []
+    atomic = sorted((s for s in run.active if m.is_atomic(s)), key=m.order.__getitem__)
+    for state in atomic:
+        for t in m.candidates(state, event):
+            if condition_match(m, run, t, event_data):
+                if t not in enabled:
+                    enabled.append(t)
+                break
+    return remove_conflicting_transitions(m, run, enabled)
+
+
+def remove_conflicting_transitions(
+    m: Machine, run: _Run, enabled: list[Transition]
+) -> list[Transition]:
+    filtered: list[Transition] = []
+    for t1 in enabled:
+        preempted = False
+        to_remove: list[Transition] = []
+        exit1 = compute_exit_set(m, run, [t1])
+        for t2 in filtered:
+            if exit1 & compute_exit_set(m, run, [t2]):
+                if m.is_descendant(t1.source, t2.source):
+                    to_remove.append(t2)
+                else:
+                    preempted = True
+                    break
+        if not preempted:
+            filtered = [t for t in filtered if t not in to_remove]
+            filtered.append(t1)
+    return filtered
+
+
+def get_effective_target_states(m: Machine, run: _Run, t: Transition) -> list[str]:
+    targets: list[str] = []
+
+    def add(names: Iterable[str]) -> None:
+        for s in names:
+            if m.kind[s].is_history:
+                if s in run.history:
+                    add(run.history[s])
+                else:
+                    add(m.history_default[s])
+            elif s not in targets:
+                targets.append(s)
+
+    add(t.targets)
+    return targets
+
+
+def get_transition_domain(m: Machine, run: _Run, t: Transition) -> str | None:
+    static = m._static_domain.get(id(t), "")
+    if static != "":
+        return static
+    return m._domain(t, get_effective_target_states(m, run, t))
+
+
+def compute_exit_set(m: Machine, run: _Run, transitions: list[Transition]) -> set[str]:
+    to_exit: set[str] = set()
+    for t in transitions:
+        if t.targets:
+            domain = get_transition_domain(m, run, t)
+            to_exit |= run.active & m.descendants[domain]
+    return to_exit
+
+
+def exit_states(
+    m: Machine, run: _Run, enabled: list[Transition], actions: list[Action]
+) -> list[str]:
+    to_exit = sorted(compute_exit_set(m, run, enabled), key=m.order.__getitem__, reverse=True)
+    for s in to_exit:
+        for h in m.histories_of[s]:
+            if m.kind[h] is StateKind.HISTORY_DEEP:
+                saved = [x for x in run.active if m.is_atomic(x) and m.is_descendant(x, s)]
+            else:
+                saved = [x for x in run.active if m.parent[x] == s]
+            run.history[h] = tuple(sorted(saved, key=m.order.__getitem__))
+    chart = m.chart
+    for s in to_exit:
+        actions.extend(chart.states[m.order[s]].on_exit)
+        run.active.discard(s)
+    return to_exit
+
+
+def compute_entry_set(
+    m: Machine, run: _Run, transitions: list[Transition]
+) -> tuple[list[str], set[str], dict[str, tuple[Action, ...]]]:
+    to_enter: list[str] = []
+    default_entry: set[str] = set()
+    history_content: dict[str, tuple[Action, ...]] = {}
+    for t in transitions:
+        for s in t.targets:
+            add_descendant_states_to_enter(m, run, s, to_enter, default_entry, history_content)
+        ancestor = get_transition_domain(m, run, t)
+        for s in get_effective_target_states(m, run, t):
+            add_ancestor_states_to_enter(
+                m, run, s, ancestor, to_enter, default_entry, history_content
+            )
+    return to_enter, default_entry, history_content
+
+
+def add_descendant_states_to_enter(
+    m: Machine,
+    run: _Run,
+    state: str,
+    to_enter: list[str],
+    default_entry: set[str],
+    history_content: dict[str, tuple[Action, ...]],
+) -> None:
+    if m.kind[state].is_history:
+        parent = m.parent[state]
+        saved = run.history.get(state)
+        targets = saved if saved is not None else m.history_default[state]
+        for s in targets:
+            add_descendant_states_to_enter(m, run, s, to_enter, default_entry, history_content)
+        for s in targets:
+            add_ancestor_states_to_enter(
+                m, run, s, parent, to_enter, default_entry, history_content
+            )
+        return
+    if state not in to_enter:
+        to_enter.append(state)
+    kind = m.kind[state]
+    if kind is StateKind.COMPOUND:
+        default_entry.add(state)
+        targets = m.initial_of[state]
+        for s in targets:
+            add_descendant_states_to_enter(m, run, s, to_enter, default_entry, history_content)
+        for s in targets:
+            add_ancestor_states_to_enter(
+                m, run, s, state, to_enter, default_entry, history_content
+            )
+    elif kind is StateKind.PARALLEL:
+        for child in m.children.get(state, ()):
+            if m.kind[child].is_history:
+                continue
+            if not any(m.is_descendant(s, child) or s == child for s in to_enter):
+                add_descendant_states_to_enter(
+                    m, run, child, to_enter, default_entry, history_content
+                )
+
+
+def add_ancestor_states_to_enter(
+    m: Machine,
+    run: _Run,
+    state: str,
+    ancestor: str | None,
+    to_enter: list[str],
+    default_entry: set[str],
+    history_content: dict[str, tuple[Action, ...]],
+) -> None:
+    for anc in m.ancestors[state]:
+        if anc == ancestor:
+            break
+        if anc not in to_enter:
+            to_enter.append(anc)
+        if m.kind[anc] is StateKind.PARALLEL:
+            for child in m.children.get(anc, ()):
+                if m.kind[child].is_history:
+                    continue
+                if not any(m.is_descendant(s, child) or s == child for s in to_enter):
+                    add_descendant_states_to_enter(
+                        m, run, child, to_enter, default_entry, history_content
+                    )
+
+
+def is_in_final_state(m: Machine, run: _Run, s: str) -> bool:
+    kind = m.kind[s]
+    if kind is StateKind.COMPOUND:
+        return any(
+            m.kind[c] is StateKind.FINAL and c in run.active for c in m.children.get(s, ())
+        )
+    if kind is StateKind.PARALLEL:
+        return all(
+            is_in_final_state(m, run, c)
+            for c in m.children.get(s, ())
+            if not m.kind[c].is_history
+        )
+    return False
+
+
+def enter_states(
+    m: Machine, run: _Run, enabled: list[Transition], actions: list[Action]
+) -> list[str]:
+    to_enter, _default_entry, _history_content = compute_entry_set(m, run, enabled)
+    ordered = sorted(to_enter, key=m.order.__getitem__)
+    chart = m.chart
+    for s in ordered:
+        run.active.add(s)
+        actions.extend(chart.states[m.order[s]].on_entry)
+        if m.kind[s] is StateKind.FINAL:
+            parent = m.parent[s]
+            if parent is None:
+                run.final = True
+            else:
+                run.internal.append("done.state." + parent)
+                grandparent = m.parent[parent]
+                if (
+                    grandparent is not None
+                    and m.kind[grandparent] is StateKind.PARALLEL
+                    and is_in_final_state(m, run, grandparent)
+                ):
+                    run.internal.append("done.state." + grandparent)
+    return ordered
+
+
+def microstep(m: Machine, run: _Run, enabled: list[Transition], event: str | None) -> Microstep:
+    actions: list[Action] = []
+    exited = exit_states(m, run, enabled, actions)
+    for t in enabled:
+        actions.extend(t.actions)
+    entered = enter_states(m, run, enabled, actions)
+    left_atomic = [s for s in exited if m.is_atomic(s)]
+    if left_atomic:
+        run.previous = left_atomic[0]
+    for a in actions:
+        if isinstance(a, Raise):
+            run.internal.append(a.event)
+    return Microstep(event, tuple(enabled), tuple(exited), tuple(entered), tuple(actions))
+
+
+def _settle(m: Machine, run: _Run, steps: list[Microstep]) -> None:
+    """Eventless transitions, then internal events, until stable (run-to-completion)."""
+    while not run.final:
+        if len(steps) > MAX_MICROSTEPS:
+            raise LivelockError(
+                f"chart {m.chart.name!r} took more than {MAX_MICROSTEPS} microsteps "
+                "without settling; look for eventless or raised transitions that loop"
+            )
+        run.event = None
+        enabled = select_transitions(m, run, None)
+        if enabled:
+            steps.append(microstep(m, run, enabled, None))
+            continue
+        if not run.internal:
+            return
+        internal = run.internal.pop(0)
+        run.event = internal
+        enabled = select_transitions(m, run, internal)
+        if enabled:
+            steps.append(microstep(m, run, enabled, internal))
+
+
+def _snapshot(run: _Run) -> Snapshot:
+    return Snapshot(frozenset(run.active), tuple(sorted(run.history.items())), run.previous)
+
+
+def initial(m: Machine, data: Mapping[str, Any] | None = None) -> Step:
+    """Enter the chart's initial configuration and settle it."""
+    run = _Run(set(), {}, None, data or {})
+    start = Transition(source="", events=(), targets=m.top_initial)
+    actions: list[Action] = []
+    to_enter: list[str] = []
+    default_entry: set[str] = set()
+    history_content: dict[str, tuple[Action, ...]] = {}
+    for s in start.targets:
+        add_descendant_states_to_enter(m, run, s, to_enter, default_entry, history_content)
+    for s in start.targets:
+        add_ancestor_states_to_enter(m, run, s, None, to_enter, default_entry, history_content)
+    ordered = sorted(to_enter, key=m.order.__getitem__)
+    chart = m.chart
+    for s in ordered:
+        run.active.add(s)
+        actions.extend(chart.states[m.order[s]].on_entry)
+        if m.kind[s] is StateKind.FINAL and m.parent[s] is None:
+            run.final = True
+        elif m.kind[s] is StateKind.FINAL:
+            run.internal.append("done.state." + str(m.parent[s]))
+    for a in actions:
+        if isinstance(a, Raise):
+            run.internal.append(a.event)
+    steps = [Microstep(None, (), (), tuple(ordered), tuple(actions))]
+    _settle(m, run, steps)
+    empty = Snapshot(frozenset())
+    return Step(None, empty, _snapshot(run), tuple(steps), True, False, run.final, run.guarded)
+
+
+def step(
+    m: Machine,
+    snapshot: Snapshot,
+    event: str,
+    data: Mapping[str, Any] | None = None,
+    event_data: Any = None,
+) -> Step:
+    """Process one external event to completion; return what happened, perform nothing."""
+    key = (snapshot, event)
+    cached = m._memo.get(key)
+    if cached is not None:
+        return cached
+    run = _Run(set(snapshot.active), dict(snapshot.history), snapshot.previous, data or {})
+    run.event = event
+    steps: list[Microstep] = []
+    enabled = select_transitions(m, run, event, event_data)
+    handled = bool(enabled)
+    ignored = False
+    if enabled:
+        steps.append(microstep(m, run, enabled, event))
+        _settle(m, run, steps)
+    else:
+        ignored = any((s, event) in m.ignored for s in snapshot.active)
+    result = Step(
+        event,
+        snapshot,
+        _snapshot(run) if handled else snapshot,
+        tuple(steps),
+        handled,
+        ignored,
+        run.final,
+        run.guarded,
+    )
+    if not run.guarded and len(m._memo) < 100_000:
+        m._memo[key] = result
+    return result
+
