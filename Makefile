@@ -1,0 +1,24 @@
+# One entry point per job; the README's quick start calls these two.
+PY ?= python3
+
+.PHONY: demo test install dev lint types unit
+
+demo: install
+	$(PY) -m statectl demo
+
+test: dev lint types unit
+
+install:
+	$(PY) -m pip install -q --disable-pip-version-check -e .
+
+dev:
+	$(PY) -m pip install -q --disable-pip-version-check -e '.[dev]'
+
+lint:
+	$(PY) -m ruff check src tests bench
+
+types:
+	$(PY) -m mypy
+
+unit:
+	$(PY) -m pytest

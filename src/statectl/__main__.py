@@ -1,0 +1,4 @@
+from statectl.cli import main
+import sys
+
+sys.exit(main())

@@ -1,0 +1,273 @@
+"""The ``statectl`` command: parse, call one function, print, exit code.
+
+Exit codes: 0 success, 1 problems found (diagnostics, a failed run), 2 usage error.
+Every command takes ``argv`` so tests call :func:`main` in-process. Imports of the
+pipeline happen inside each command so ``statectl --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TextIO
+
+from statectl.errors import Diagnostic, DiagnosticError, Severity, StatectlError, has_errors
+
+__all__ = ["main"]
+
+OK, PROBLEMS, USAGE = 0, 1, 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that exits with 2 and a one-line hint instead of printing usage twice."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.print_usage(sys.stderr)
+        self.exit(USAGE, f"{self.prog}: error: {message}\n")
+
+
+def _print_diagnostics(diags: Sequence[Diagnostic], out: TextIO, as_json: bool) -> None:
+    if as_json:
+        json.dump([d.to_json() for d in diags], out, indent=2)
+        out.write("\n")
+        return
+    for d in diags:
+        out.write(f"{d}\n")
+
+
+def _summary(diags: Sequence[Diagnostic]) -> str:
+    n_err = sum(d.severity is Severity.ERROR for d in diags)
+    n_warn = sum(d.severity is Severity.WARNING for d in diags)
+    return f"{n_err} error(s), {n_warn} warning(s)"
+
+
+def _load_chart(path: str, err: TextIO) -> object | None:
+    """Load and build a device file; print every diagnostic on failure."""
+    from statectl.build import load_and_build
+
+    chart, diags = load_and_build(path)
+    if chart is None or has_errors(diags):
+        _print_diagnostics([d for d in diags if d.severity is not Severity.INFO], err, False)
+        err.write(f"{path}: not loaded: {_summary(diags)}\n")
+        return None
+    return chart
+
+
+# -- commands -------------------------------------------------------------------------------
+
+
+def cmd_check(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    from statectl.check import check_paths
+
+    for p in args.files:
+        if not Path(p).exists():
+            err.write(f"statectl check: {p}: no such file\n")
+            return USAGE
+    diags = check_paths(args.files)
+    shown = [d for d in diags if args.verbose or d.severity is not Severity.INFO]
+    _print_diagnostics(shown, out, args.json)
+    failed = has_errors(diags) or (
+        args.strict and any(d.severity is Severity.WARNING for d in diags)
+    )
+    if not args.json:
+        verdict = "problems found" if failed else "ok"
+        out.write(f"{len(args.files)} file(s) checked: {_summary(diags)}: {verdict}\n")
+    return PROBLEMS if failed else OK
+
+
+def cmd_build(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    from statectl.build import load_and_build
+
+    chart, diags = load_and_build(args.file)
+    _print_diagnostics(diags, err if chart is None else out, False)
+    if chart is None or has_errors(diags):
+        err.write(f"{args.file}: not built: {_summary(diags)}\n")
+        return PROBLEMS
+    out.write(f"chart {chart.name}: {len(chart.states)} states, "
+              f"{len(chart.transitions)} transitions, initial {', '.join(chart.initial)}\n")
+    for t in chart.transitions:
+        out.write(f"  {t.source} + {t.label} = {' '.join(t.targets) or '(targetless)'}\n")
+    return OK
+
+
+def cmd_observers(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    from statectl.model import Chart
+    from statectl.observers import extract
+
+    chart = _load_chart(args.file, err)
+    if not isinstance(chart, Chart):
+        return PROBLEMS
+    model = extract(chart)
+    if args.json:
+        json.dump(model.to_json(), out, indent=2)
+        out.write("\n")
+        return OK
+    out.write(f"Subject: {model.subject} (notifies the observer registered for an invoke number)\n")
+    out.write("Invoke enumeration:\n")
+    for i in model.invokes:
+        out.write(f"  {i.name} = {i.number}\n")
+    out.write("Observers (device + API):\n")
+    for api in model.apis:
+        inv = model.invoke_for_method(api.method)
+        out.write(f"  {api.method}()  <- invoke {inv.name} ({inv.number}); "
+                  f"events: {', '.join(api.events)}\n")
+    out.write("Notifications (events whose transition calls the device):\n")
+    for event, number in model.notifying:
+        out.write(f"  {event} -> invoke {number}\n")
+    out.write("Monitors (run while the state is active):\n")
+    if not model.monitors:
+        out.write("  none\n")
+    for m in model.monitors:
+        out.write(f"  {m.state}: raises {', '.join(m.raises) or '(nothing)'}\n")
+    return OK
+
+
+def cmd_render(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    from statectl.model import Chart
+    from statectl.render import render
+
+    chart = _load_chart(args.file, err)
+    if not isinstance(chart, Chart):
+        return PROBLEMS
+    text = render(chart, args.format)
+    if args.out:
+        _write_atomic(Path(args.out), text)
+        out.write(f"wrote {args.out}\n")
+    else:
+        out.write(text if text.endswith("\n") else text + "\n")
+    return OK
+
+
+def cmd_tables(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    from statectl.tables import dump, load, save
+
+    tables, diags = load(args.file)
+    if tables is None or has_errors(diags):
+        _print_diagnostics([d for d in diags if d.severity is not Severity.INFO], err, False)
+        err.write(f"{args.file}: not converted: {_summary(diags)}; nothing written\n")
+        return PROBLEMS
+    if args.out is None:
+        if args.to in ("csv", "xlsx"):
+            err.write(f"statectl tables: --to {args.to} writes files: give --out PATH\n")
+            return USAGE
+        text = dump(tables, args.to)
+        assert isinstance(text, str)
+        out.write(text)
+        return OK
+    written = save(tables, args.out, args.to)
+    for p in written or [args.out]:
+        out.write(f"wrote {p}\n")
+    return OK
+
+
+def cmd_demo(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    from statectl.demo import run_demo
+
+    run_demo(out, driver=args.driver, config=args.config)
+    return OK
+
+
+def cmd_scxml_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    from statectl.scxml import run_file
+
+    final = run_file(str(Path(args.file).resolve()), args.timeout)
+    if final is None:
+        err.write(f"statectl scxml run: no top-level final state within {args.timeout} s\n")
+        return PROBLEMS
+    out.write(f"final: {final}\n")
+    out.flush()
+    return OK
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text, encoding="utf-8")
+    tmp.replace(path)
+
+
+# -- parser -------------------------------------------------------------------------------------
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(
+        prog="statectl",
+        description="State control for industrial robot devices: device tables -> statechart "
+        "-> observers -> runtime.",
+    )
+    from statectl import __version__
+
+    p.add_argument("--version", action="version", version=f"statectl {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    s = sub.add_parser("demo", help="run the paper's Motor case study on a simulated motor")
+    s.add_argument("--driver", default="sim-motor", help="driver for the Motor (sim-motor, "
+                   "sim-stepper, or package.module:Class)")
+    s.add_argument("--config", help="driver configuration YAML (overrides --driver)")
+    s.set_defaults(func=cmd_demo)
+
+    s = sub.add_parser("check", help="report every problem in device files")
+    s.add_argument("files", nargs="+", metavar="FILE")
+    s.add_argument("--json", action="store_true", help="machine-readable diagnostics")
+    s.add_argument("--strict", action="store_true", help="warnings fail the check too")
+    s.add_argument("-v", "--verbose", action="store_true", help="also show info (merges)")
+    s.set_defaults(func=cmd_check)
+
+    s = sub.add_parser("build", help="build the statechart and show it with the merges made")
+    s.add_argument("file", metavar="FILE")
+    s.set_defaults(func=cmd_build)
+
+    s = sub.add_parser("observers", help="print the Subject, observers and invoke numbers")
+    s.add_argument("file", metavar="FILE")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=cmd_observers)
+
+    s = sub.add_parser("render", help="draw the statechart")
+    s.add_argument("file", metavar="FILE")
+    s.add_argument("--format", default="mermaid",
+                   choices=("mermaid", "dot", "plantuml", "svg", "md"))
+    s.add_argument("--out", help="write to this file instead of standard output")
+    s.set_defaults(func=cmd_render)
+
+    s = sub.add_parser("tables", help="convert device tables between YAML, CSV, XLSX, Markdown")
+    s.add_argument("file", metavar="FILE")
+    s.add_argument("--to", required=True, choices=("yaml", "csv", "xlsx", "md"))
+    s.add_argument("--out", help="output path (a directory or NAME for the CSV pair)")
+    s.set_defaults(func=cmd_tables)
+
+    scxml = sub.add_parser("scxml", help="SCXML documents")
+    ssub = scxml.add_subparsers(dest="scxml_command", required=True, parser_class=_Parser)
+    s = ssub.add_parser("run", help="run a document; print 'final: <id>' at a top-level final")
+    s.add_argument("file", metavar="FILE")
+    s.add_argument("--timeout", type=float, default=10.0)
+    s.set_defaults(func=cmd_scxml_run)
+    return p
+
+
+def main(argv: Sequence[str] | None = None, out: TextIO | None = None,
+         err: TextIO | None = None) -> int:
+    out = out or sys.stdout
+    err = err or sys.stderr
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        return int(exc.code) if isinstance(exc.code, int) else USAGE
+    try:
+        code: int = args.func(args, out, err)
+    except DiagnosticError as exc:
+        _print_diagnostics(exc.diagnostics, err, False)
+        return PROBLEMS
+    except StatectlError as exc:
+        err.write(f"statectl: {exc}\n")
+        return PROBLEMS
+    except KeyboardInterrupt:
+        err.write("statectl: interrupted\n")
+        return 130
+    return code
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

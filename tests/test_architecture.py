@@ -1,0 +1,89 @@
+"""The layout tells the pipeline: imports point toward the kernel, never outward."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+import statectl
+
+SRC = Path(statectl.__file__).parent
+
+#: Each layer may import only from the layers listed for it (and from itself).
+KERNEL = ("errors", "model", "expr", "semantics")
+ALLOWED: dict[str, tuple[str, ...]] = {
+    "errors": (),
+    "model": ("errors",),
+    "expr": ("errors",),
+    "semantics": ("errors", "model", "expr"),
+    "observers": ("errors", "model"),
+    "tables": ("errors", "model"),
+    "build": ("errors", "model", "expr", "observers", "tables"),
+    "check": ("errors", "model", "expr", "semantics", "observers", "tables", "build"),
+    "render": ("errors", "model", "observers", "semantics"),
+    "scxml": ("errors", "model", "expr", "semantics", "observers", "runtime"),
+    "runtime": ("errors", "model", "expr", "semantics", "observers"),
+    "devices": ("errors", "model", "observers", "runtime"),
+}
+THIRD_PARTY_FREE = KERNEL + ("observers",)
+
+
+def layer_of(path: Path) -> str:
+    rel = path.relative_to(SRC)
+    return rel.parts[0].removesuffix(".py")
+
+
+def imported_modules(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    found: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            found.add(node.module)
+    return found
+
+
+MODULES = sorted(p for p in SRC.rglob("*.py") if layer_of(p) in ALLOWED)
+
+
+@pytest.mark.parametrize("path", MODULES, ids=lambda p: str(p.relative_to(SRC)))
+def test_imports_point_inward(path: Path) -> None:
+    """A module imports statectl layers only inward of its own (DESIGN.md's rings)."""
+    layer = layer_of(path)
+    allowed = {*ALLOWED[layer], layer}
+    bad = []
+    for mod in imported_modules(path):
+        parts = mod.split(".")
+        if parts[0] == "statectl" and len(parts) > 1 and parts[1] not in allowed:
+            bad.append(mod)
+    assert not bad, f"{path.name} ({layer}) imports outward: {bad}"
+
+
+@pytest.mark.parametrize(
+    "path",
+    [p for p in MODULES if layer_of(p) in THIRD_PARTY_FREE],
+    ids=lambda p: str(p.relative_to(SRC)),
+)
+def test_kernel_has_no_third_party_dependencies(path: Path) -> None:
+    """errors, model, expr, semantics and observers use the standard library only."""
+    import sys
+
+    for mod in imported_modules(path):
+        top = mod.split(".")[0]
+        assert top in sys.stdlib_module_names or top in {"statectl", "__future__"}, mod
+
+
+def test_every_layer_is_known() -> None:
+    """A new top-level module must be placed in the import rules above (or be the CLI/outer ring)."""
+    outer = {"cli", "demo", "__init__", "__main__"}
+    unknown = {layer_of(p) for p in SRC.rglob("*.py")} - set(ALLOWED) - outer
+    assert not unknown, f"add {sorted(unknown)} to ALLOWED in this test"
+
+
+def test_public_names_exist() -> None:
+    """The curated ``__all__`` of the package names only things that exist."""
+    for name in statectl.__all__:
+        assert hasattr(statectl, name), name

@@ -1,0 +1,263 @@
+"""The pure kernel: one external event in, one decision out, W3C SCXML rules."""
+
+from __future__ import annotations
+
+import pytest
+
+from statectl.model import Chart, Notify, Raise, State, StateKind, Transition
+from statectl.semantics import LivelockError, Machine, Snapshot, initial, name_match, step
+
+A, CP, P, F = StateKind.ATOMIC, StateKind.COMPOUND, StateKind.PARALLEL, StateKind.FINAL
+HS, HD = StateKind.HISTORY_SHALLOW, StateKind.HISTORY_DEEP
+
+
+def chart(rows: str, states: list[State], initial_: tuple[str, ...] = (),
+          ignored: frozenset[tuple[str, str]] = frozenset()) -> Chart:
+    """Build a chart from Boost.SML-like rows: ``src + event [guard] / !raise = dst``."""
+    transitions = []
+    for line in rows.strip().splitlines():
+        line = line.strip()
+        left, _, dst = line.rpartition(" = ")
+        src, _, rest = left.partition("+")
+        guard = None
+        if "[" in rest:
+            rest, _, g = rest.partition("[")
+            guard = g.rstrip("] /!").strip() or None
+            g_tail = g.partition("]")[2]
+        else:
+            g_tail = rest
+        actions = tuple(Raise(a.strip()) for a in g_tail.split("!")[1:])
+        event = rest.split("/")[0].strip()
+        transitions.append(Transition(
+            src.strip(), (event,) if event else (), tuple(dst.split()), guard=guard,
+            actions=actions))
+    return Chart("t", tuple(states), tuple(transitions), initial_, ignored=ignored)
+
+
+def run(c: Chart, events: list[str]) -> list[frozenset[str]]:
+    m = Machine(c)
+    snap = initial(m).target
+    out = [snap.active]
+    for e in events:
+        snap = step(m, snap, e).target
+        out.append(snap.active)
+    return out
+
+
+def motor() -> Chart:
+    rows = """
+        Blocked + Movement = Moving
+        Moving + Movement completion = Blocked
+        Blocked + Initialization [previous == 'Moving'] = Returning
+        Returning + Initialization completion = Blocked
+        Moving + Error = Returning
+        Returning + Error completion = Blocked
+    """
+    c = chart(rows, [State("Blocked"), State("Moving"), State("Returning")], ("Blocked",),
+              ignored=frozenset({("Moving", "Movement")}))
+    return c
+
+
+@pytest.mark.parametrize(
+    ("events", "final"),
+    [
+        ([], "Blocked"),
+        (["Movement"], "Moving"),
+        (["Movement", "Movement completion"], "Blocked"),
+        (["Initialization"], "Blocked"),  # guard: previous state was not Moving
+        (["Movement", "Movement completion", "Initialization"], "Returning"),
+        (["Movement", "Error", "Error completion", "Initialization"], "Blocked"),
+        (["Movement", "Error", "Error completion"], "Blocked"),
+        (["Movement", "Movement"], "Moving"),
+    ],
+)
+def test_motor_sequences(events: list[str], final: str) -> None:
+    """The paper's Motor follows its Event Definition table, guard included."""
+    assert run(motor(), events)[-1] == {final}
+
+
+def test_unhandled_event_reports_ignored_flag() -> None:
+    """An unhandled event leaves the snapshot unchanged and says whether it was declared ignored."""
+    m = Machine(motor())
+    moving = step(m, initial(m).target, "Movement").target
+    declared = step(m, moving, "Movement")
+    undeclared = step(m, moving, "Initialization completion")
+    assert (declared.handled, declared.ignored, declared.target) == (False, True, moving)
+    assert (undeclared.handled, undeclared.ignored) == (False, False)
+
+
+def test_previous_is_the_atomic_state_left() -> None:
+    """``previous`` records the state the last transition left, for guards."""
+    m = Machine(motor())
+    s = initial(m).target
+    s = step(m, s, "Movement").target
+    assert s.previous == "Blocked"
+    s = step(m, s, "Movement completion").target
+    assert s.previous == "Moving"
+
+
+def test_unguarded_steps_are_memoised_guarded_are_not() -> None:
+    """A step that consulted no guard is cached; one that did is evaluated every time."""
+    m = Machine(motor())
+    s0 = initial(m).target
+    assert step(m, s0, "Movement") is step(m, s0, "Movement")
+    g = step(m, Snapshot(frozenset({"Blocked"}), (), "Moving"), "Initialization")
+    assert g.guarded and g.handled
+    assert not step(m, Snapshot(frozenset({"Blocked"}), (), "Blocked"), "Initialization").handled
+
+
+def estop() -> Chart:
+    """An E-stop superstate that preempts everything inside Operating."""
+    states = [
+        State("Operating", CP, initial=("Idle",)),
+        State("Idle", parent="Operating"),
+        State("Working", CP, parent="Operating", initial=("Fast",)),
+        State("Fast", parent="Working"),
+        State("Slow", parent="Working"),
+        State("H", HS, parent="Operating", history_default=("Idle",)),
+        State("Stopped"),
+    ]
+    rows = """
+        Operating + estop = Stopped
+        Idle + go = Working
+        Fast + slow = Slow
+        Working + go = Idle
+        Stopped + reset = Operating
+        Stopped + resume = H
+    """
+    return chart(rows, states, ("Operating",))
+
+
+@pytest.mark.parametrize(
+    ("events", "expected"),
+    [
+        ([], {"Operating", "Idle"}),
+        (["go"], {"Operating", "Working", "Fast"}),
+        (["go", "slow", "estop"], {"Stopped"}),
+        (["go", "slow", "estop", "reset"], {"Operating", "Idle"}),
+        (["go", "slow", "estop", "resume"], {"Operating", "Working", "Fast"}),  # shallow
+        (["resume"], {"Operating", "Idle"}),
+        (["go", "go"], {"Operating", "Idle"}),  # parent handles what the child does not
+    ],
+)
+def test_hierarchy_and_shallow_history(events: list[str], expected: set[str]) -> None:
+    """A superstate's transition preempts its descendants; shallow history restores one level."""
+    assert run(estop(), events)[-1] == expected
+
+
+def test_deep_history_restores_leaves() -> None:
+    """Deep history restores the atomic descendants, not only the child."""
+    c = estop()
+    states = tuple(
+        State("H", HD, parent="Operating", history_default=("Idle",)) if s.name == "H" else s
+        for s in c.states
+    )
+    c = Chart(c.name, states, c.transitions, c.initial)
+    assert run(c, ["go", "slow", "estop", "resume"])[-1] == {"Operating", "Working", "Slow"}
+
+
+def test_exit_and_entry_order() -> None:
+    """Exit goes innermost first; entry outermost first (document order)."""
+    m = Machine(estop())
+    s = step(m, initial(m).target, "go").target
+    st = step(m, s, "estop")
+    assert st.exited == ("Fast", "Working", "Operating")
+    back = step(m, st.target, "resume")
+    assert back.entered == ("Operating", "Working", "Fast")
+
+
+def cell() -> Chart:
+    """Two regions working at once, each with a final state."""
+    states = [
+        State("Run", P),
+        State("Arm", CP, parent="Run", initial=("ArmIdle",)),
+        State("ArmIdle", parent="Arm"),
+        State("ArmDone", F, parent="Arm"),
+        State("Grip", CP, parent="Run", initial=("Open",)),
+        State("Open", parent="Grip"),
+        State("Closed", F, parent="Grip"),
+        State("Done"),
+    ]
+    rows = """
+        ArmIdle + place = ArmDone
+        Open + close = Closed
+        Run + done.state.Run = Done
+    """
+    return chart(rows, states, ("Run",))
+
+
+def test_parallel_regions_and_done_events() -> None:
+    """Both regions are active; when each reaches final, done.state of the parallel fires."""
+    trace = run(cell(), ["place", "close"])
+    assert trace[0] == {"Run", "Arm", "ArmIdle", "Grip", "Open"}
+    assert trace[1] == {"Run", "Arm", "ArmDone", "Grip", "Open"}
+    assert trace[2] == {"Done"}
+
+
+def test_one_event_taken_in_both_regions() -> None:
+    """An event handled in two regions fires both transitions in one microstep."""
+    states = [State("R", P), State("A", CP, parent="R"), State("a1", parent="A"),
+              State("a2", parent="A"), State("B", CP, parent="R"), State("b1", parent="B"),
+              State("b2", parent="B")]
+    c = chart("a1 + tick = a2\nb1 + tick = b2", states, ("R",))
+    m = Machine(c)
+    st = step(m, initial(m).target, "tick")
+    assert len(st.microsteps) == 1 and len(st.transitions) == 2
+    assert st.target.active == {"R", "A", "a2", "B", "b2"}
+
+
+def test_conflict_descendant_preempts() -> None:
+    """Of two conflicting transitions, the one from the descendant state wins."""
+    states = [State("P", CP), State("c", parent="P"), State("x"), State("y")]
+    c = chart("c + e = x\nP + e = y", states, ("P",))
+    assert run(c, ["e"])[-1] == {"x"}
+
+
+def test_raise_and_eventless_run_to_completion() -> None:
+    """Raised events and eventless transitions settle inside one step, in order."""
+    states = [State("s0"), State("s1"), State("s2"), State("s3")]
+    c = chart("s0 + go / !next = s1\ns1 + next = s2\ns2 + [True] = s3", states, ("s0",))
+    m = Machine(c)
+    st = step(m, initial(m).target, "go")
+    assert [ms.event for ms in st.microsteps] == ["go", "next", None]
+    assert st.target.active == {"s3"}
+
+
+def test_eventless_loop_is_a_livelock_error() -> None:
+    """Eventless transitions that never settle raise LivelockError instead of hanging."""
+    c = chart("a + [True] = b\nb + [True] = a", [State("a"), State("b")], ("a",))
+    with pytest.raises(LivelockError, match="microsteps"):
+        initial(Machine(c))
+
+
+def test_top_level_final_ends_the_run() -> None:
+    """Entering a top-level final state marks the step final."""
+    c = chart("a + stop = end", [State("a"), State("end", F)], ("a",))
+    m = Machine(c)
+    assert step(m, initial(m).target, "stop").final
+
+
+def test_notify_actions_are_returned_not_performed() -> None:
+    """A transition's Notify action comes back in the step, in order, for the runtime."""
+    n = Notify(0, "Moving", "Movement", "Movement")
+    c = Chart("m", (State("B"), State("M")),
+              (Transition("B", ("Movement",), ("M",), actions=(n,)),), ("B",))
+    m = Machine(c)
+    assert step(m, initial(m).target, "Movement").actions == (n,)
+
+
+@pytest.mark.parametrize(
+    ("descriptors", "event", "expected"),
+    [
+        (("error",), "error", True),
+        (("error",), "error.execution", True),
+        (("error",), "errors", False),
+        (("error.*",), "error.execution", True),
+        (("*",), "anything", True),
+        (("a", "b"), "b", True),
+        (("Movement",), "Movement completion", False),
+    ],
+)
+def test_name_match(descriptors: tuple[str, ...], event: str, expected: bool) -> None:
+    """SCXML event descriptors match by dotted prefix token, or '*'."""
+    assert name_match(descriptors, event) is expected
