@@ -25,7 +25,9 @@ HERE = Location("motor.yaml", 12)
         ("x is None", {"x": None}, True),
     ],
 )
-def test_accepted_expressions_evaluate(source: str, env: dict[str, object], expected: object) -> None:
+def test_accepted_expressions_evaluate(
+    source: str, env: dict[str, object], expected: object
+) -> None:
     """A checked expression evaluates like Python over the given names."""
     expr, diags = compile_expression(source, HERE)
     assert diags == []
