@@ -1,0 +1,621 @@
+"""Static checks of a built chart: every problem at once, each with a stable code.
+
+Rules (guards are ignored except where C403 says otherwise):
+
+C401 error    A state is unreachable: no run from the initial configuration enters it,
+              even if every guard held. Only the outermost unreachable state is reported;
+              its descendants are unreachable with it.
+C402 warning  A non-final atomic state has no way out (no transition of its own or of an
+              ancestor leads anywhere else), in a chart with more than one state.
+C403 error    Two rows of the same state and event can both fire and neither has a guard.
+C403 warning  Two rows of the same state and event have guards that may both hold; rows
+              whose guards are provably exclusive (:func:`guards_exclusive`) are fine.
+C404 warning  A state neither handles an event (itself or through an ancestor) nor lists it
+              in its ignore column: the paper's missed transitions.
+C405 warning  An event is declared but no transition uses it.
+C406 warning  A state's ignore column lists an event the state (or an ancestor) handles.
+C407 warning  A ``monitoring required`` state has no ``fault`` event leaving it, so its
+              monitor would have nothing to raise.
+C408 warning  A ``fault`` event leaves a state that is not ``monitoring required``, so no
+              monitor is running there to raise it.
+
+Undefined guard names and other table errors are the builder's (X3xx, T/B codes);
+:func:`check_paths` reports those too, then checks each chart that built.
+"""
+
+from __future__ import annotations
+
+import ast
+import operator
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from statectl.build import load_and_build
+from statectl.errors import Diagnostic, DiagnosticError, Location, Severity
+from statectl.model import Chart, ControlKind, EventKind, State, StateKind, Transition
+from statectl.semantics import name_match
+
+__all__ = ["CODES", "check_chart", "check_paths", "guards_exclusive"]
+
+#: Every code this module reports, with a one-line summary (docs/check.md expands them).
+CODES: dict[str, str] = {
+    "C401": "unreachable state",
+    "C402": "state with no way out",
+    "C403": "two rows for the same state and event may both fire",
+    "C404": "event neither handled nor ignored by a state (missed transition)",
+    "C405": "event declared but used by no transition",
+    "C406": "ignore entry for an event the state handles",
+    "C407": "monitoring-required state with no fault event leaving it",
+    "C408": "fault event leaving a state that is not monitoring required",
+}
+
+
+# -- chart structure ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class _Structure:
+    """Parent/child/ancestor tables of a chart, computed once per check."""
+
+    chart: Chart
+    by_name: dict[str, State]
+    children: dict[str | None, tuple[str, ...]]
+    ancestors: dict[str, tuple[str, ...]]
+
+    @classmethod
+    def of(cls, chart: Chart) -> _Structure:
+        by_name = {s.name: s for s in chart.states}
+        children: dict[str | None, list[str]] = {}
+        for s in chart.states:
+            children.setdefault(s.parent, []).append(s.name)
+        ancestors: dict[str, tuple[str, ...]] = {}
+        for s in chart.states:
+            chain: list[str] = []
+            p = s.parent
+            while p is not None and p in by_name and p not in chain:
+                chain.append(p)
+                p = by_name[p].parent
+            ancestors[s.name] = tuple(chain)
+        return cls(chart, by_name, {k: tuple(v) for k, v in children.items()}, ancestors)
+
+    def kind(self, name: str) -> StateKind:
+        return self.by_name[name].kind
+
+    def handles(self, state: str, event: str) -> bool:
+        """Whether a transition of ``state`` or an ancestor names ``event``."""
+        return any(
+            name_match(t.events, event)
+            for s in (state, *self.ancestors.get(state, ()))
+            for t in self.chart.transitions_from(s)
+        )
+
+    def ignores(self, state: str, event: str) -> bool:
+        return any(
+            (s, event) in self.chart.ignored for s in (state, *self.ancestors.get(state, ()))
+        )
+
+
+def _where(state: State) -> Location:
+    return state.origin
+
+
+def _line(loc: Location) -> str:
+    return f"line {loc.line}" if loc.line is not None else str(loc)
+
+
+# -- C401 reachability ----------------------------------------------------------------------
+
+
+def _reachable(st: _Structure) -> set[str]:
+    """States some run can enter, taking every transition as if its guard held."""
+    reached: set[str] = set()
+    work: list[str] = []
+
+    def mark(name: str) -> None:
+        if name in st.by_name and name not in reached:
+            reached.add(name)
+            work.append(name)
+
+    def enter_default(name: str) -> None:
+        if name not in st.by_name:
+            return
+        mark(name)
+        kind = st.kind(name)
+        if kind is StateKind.COMPOUND:
+            kids = [c for c in st.children.get(name, ()) if not st.kind(c).is_history]
+            for target in st.by_name[name].initial or tuple(kids[:1]):
+                enter(target, name)
+        elif kind is StateKind.PARALLEL:
+            for c in st.children.get(name, ()):
+                if not st.kind(c).is_history:
+                    enter_default(c)
+        elif kind.is_history:
+            parent = st.by_name[name].parent
+            for target in st.by_name[name].history_default:
+                enter(target, parent)
+
+    def enter(target: str, upto: str | None) -> None:
+        """Enter ``target`` and its ancestors below ``upto``, with their other regions."""
+        if target not in st.by_name:
+            return
+        enter_default(target)
+        path = target
+        for anc in st.ancestors[target]:
+            if anc == upto:
+                break
+            mark(anc)
+            if st.kind(anc) is StateKind.PARALLEL:
+                for c in st.children.get(anc, ()):
+                    if c != path and not st.kind(c).is_history:
+                        enter_default(c)
+            path = anc
+
+    top = st.chart.initial or st.children.get(None, ())[:1]
+    for name in top:
+        enter(name, None)
+    while work:
+        name = work.pop()
+        for t in st.chart.transitions_from(name):
+            for target in t.targets:
+                enter(target, None)
+    return reached
+
+
+def _check_reachable(st: _Structure) -> Iterator[Diagnostic]:
+    reached = _reachable(st)
+    start = ", ".join(st.chart.initial) or "the first state"
+    for s in st.chart.states:
+        if s.name in reached or s.kind.is_history:
+            continue
+        if any(a not in reached for a in st.ancestors[s.name]):
+            continue  # reported with its outermost unreachable ancestor
+        below = sum(1 for d, anc in st.ancestors.items() if s.name in anc and d not in reached)
+        extra = f" (and its {below} substates)" if below else ""
+        yield Diagnostic(
+            "C401",
+            Severity.ERROR,
+            _where(s),
+            f"state {s.name!r}{extra} is unreachable from the initial state {start}",
+            f"add an event row with new state {s.name!r}, or remove the state",
+        )
+
+
+# -- C402 no way out ------------------------------------------------------------------------
+
+
+def _check_way_out(st: _Structure) -> Iterator[Diagnostic]:
+    real = [s for s in st.chart.states if not s.kind.is_history]
+    if len(real) <= 1:
+        return
+    for s in real:
+        if s.kind is not StateKind.ATOMIC:
+            continue
+        leaves = any(
+            any(x != s.name for x in t.targets)
+            for src in (s.name, *st.ancestors[s.name])
+            for t in st.chart.transitions_from(src)
+        )
+        if not leaves:
+            yield Diagnostic(
+                "C402",
+                Severity.WARNING,
+                _where(s),
+                f"state {s.name!r} has no transition out: once entered the device stays there",
+                "add an event row with this old state, or mark the state final if it is",
+            )
+
+
+# -- C403 overlapping rows ------------------------------------------------------------------
+
+
+def _check_overlaps(st: _Structure) -> Iterator[Diagnostic]:
+    events: tuple[str | None, ...] = (*st.chart.event_names, None)
+    seen: set[tuple[int, int]] = set()
+    for s in st.chart.states:
+        own = tuple(st.chart.transitions_from(s.name))
+        for event in events:
+            if event is None:
+                rows = [t for t in own if not t.events]
+            else:
+                rows = [t for t in own if name_match(t.events, event)]
+            for i, first in enumerate(rows):
+                for second in rows[i + 1 :]:
+                    key = (id(first), id(second))
+                    if key in seen:
+                        continue
+                    seen.add(key)
+                    diag = _overlap(s.name, event, first, second)
+                    if diag is not None:
+                        yield diag
+
+
+def _overlap(
+    state: str, event: str | None, first: Transition, second: Transition
+) -> Diagnostic | None:
+    what = f"event {event!r}" if event is not None else "no event (eventless)"
+    rows = f"{_line(first.origin)} and {_line(second.origin)}"
+    if first.guard is None and second.guard is None:
+        return Diagnostic(
+            "C403",
+            Severity.ERROR,
+            second.origin,
+            f"state {state!r} has two unguarded rows for {what} ({rows}); "
+            "only the first can ever fire",
+            "merge the rows, or give them guards that exclude each other",
+        )
+    if guards_exclusive(first.guard, second.guard):
+        return None
+    guards = f"[{first.guard or 'no guard'}] and [{second.guard or 'no guard'}]"
+    return Diagnostic(
+        "C403",
+        Severity.WARNING,
+        second.origin,
+        f"state {state!r} has rows for {what} ({rows}) whose guards {guards} may both hold",
+        "make the guards exclusive, e.g. 'g' and 'not g', or x < c and x >= c",
+    )
+
+
+# -- the exclusive-guard decision procedure ---------------------------------------------------
+#
+# Rules: 1. A guard becomes negation normal form, then disjunctive normal form (capped; too
+# big means "not proven"). 2. Two guards are exclusive when every conjunction of the one,
+# joined with every conjunction of the other, is contradictory. 3. A conjunction is
+# contradictory when it holds an opaque literal and its negation, or when its comparisons
+# of one expression against constants leave no value (==, !=, <, <=, >, >=, in, not in;
+# `is` only against None/True/False and never mixed with ==). 4. Anything else (two names
+# compared, calls, arithmetic) is opaque: never assumed exclusive, so the answer is sound.
+
+_MAX_CONJUNCTIONS = 256
+_FLIP: dict[type[ast.cmpop], type[ast.cmpop]] = {
+    ast.Lt: ast.Gt,
+    ast.LtE: ast.GtE,
+    ast.Gt: ast.Lt,
+    ast.GtE: ast.LtE,
+    ast.Eq: ast.Eq,
+    ast.NotEq: ast.NotEq,
+}
+_NEGATE: dict[type[ast.cmpop], type[ast.cmpop]] = {
+    ast.Eq: ast.NotEq,
+    ast.NotEq: ast.Eq,
+    ast.Lt: ast.GtE,
+    ast.GtE: ast.Lt,
+    ast.Gt: ast.LtE,
+    ast.LtE: ast.Gt,
+    ast.In: ast.NotIn,
+    ast.NotIn: ast.In,
+    ast.Is: ast.IsNot,
+    ast.IsNot: ast.Is,
+}
+_IDENTITY_CONSTANTS = (None, True, False)
+
+
+class _TooBig(Exception):
+    """DNF exceeded the cap; the procedure answers "not proven"."""
+
+
+@dataclass(frozen=True, slots=True)
+class _Opaque:
+    key: str
+    positive: bool
+
+
+@dataclass(frozen=True, slots=True)
+class _Cmp:
+    """``subject op value``: ``family`` is "eq" (==, <, in, ...) or "is"."""
+
+    family: str
+    subject: str
+    op: type[ast.cmpop]
+    value: Any  # a constant, or a tuple of constants for in / not in
+
+
+_Literal = _Opaque | _Cmp
+_Conj = tuple[_Literal, ...]
+
+
+def _constant(node: ast.expr) -> tuple[bool, Any]:
+    if isinstance(node, ast.Constant):
+        return True, node.value
+    if (
+        isinstance(node, ast.UnaryOp)
+        and isinstance(node.op, ast.USub | ast.UAdd)
+        and isinstance(node.operand, ast.Constant)
+        and isinstance(node.operand.value, int | float)
+        and not isinstance(node.operand.value, bool)
+    ):
+        v = node.operand.value
+        return True, -v if isinstance(node.op, ast.USub) else v
+    return False, None
+
+
+def _constants(node: ast.expr) -> tuple[bool, tuple[Any, ...]]:
+    if isinstance(node, ast.Tuple | ast.List | ast.Set):
+        values = []
+        for elt in node.elts:
+            ok, v = _constant(elt)
+            if not ok:
+                return False, ()
+            values.append(v)
+        return True, tuple(values)
+    return False, ()
+
+
+def _literal(node: ast.Compare, positive: bool) -> _Literal:
+    """One comparison as a literal; comparisons we cannot reason about stay opaque."""
+    op = type(node.ops[0])
+    left, right = node.left, node.comparators[0]
+    if not positive:
+        op = _NEGATE.get(op, op)
+    if _constant(left)[0] and op in _FLIP:
+        left, right, op = right, left, _FLIP[op]
+    if not _constant(left)[0]:
+        subject = ast.dump(left)
+        is_const, value = _constant(right)
+        if op in (ast.In, ast.NotIn):
+            ok, values = _constants(right)
+            if ok:
+                return _Cmp("eq", subject, op, values)
+        elif op in (ast.Is, ast.IsNot):
+            if is_const and any(value is c for c in _IDENTITY_CONSTANTS):
+                return _Cmp("is", subject, op, value)
+        elif is_const:
+            return _Cmp("eq", subject, op, value)
+    # opaque: canonical op with polarity so `a >= b` and `a < b` still meet
+    base = type(node.ops[0])
+    pol = positive
+    if base in (ast.NotEq, ast.GtE, ast.Gt, ast.NotIn, ast.IsNot):
+        base, pol = _NEGATE[base], not pol
+    key = f"{ast.dump(node.left)} {base.__name__} {ast.dump(node.comparators[0])}"
+    return _Opaque(key, pol)
+
+
+def _dnf(node: ast.expr, positive: bool = True) -> list[_Conj]:
+    """Disjunctive normal form of ``node`` (negated when not ``positive``)."""
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.Not):
+        return _dnf(node.operand, not positive)
+    if isinstance(node, ast.BoolOp):
+        parts = [_dnf(v, positive) for v in node.values]
+        conjunctive = isinstance(node.op, ast.And) == positive
+        if not conjunctive:
+            out = [c for p in parts for c in p]
+        else:
+            out = [()]
+            for p in parts:
+                out = [a + b for a in out for b in p]
+                if len(out) > _MAX_CONJUNCTIONS:
+                    raise _TooBig
+        if len(out) > _MAX_CONJUNCTIONS:
+            raise _TooBig
+        return out
+    if isinstance(node, ast.Compare):
+        if len(node.ops) > 1:  # a < b < c is a < b and b < c
+            pairs = [
+                ast.Compare(left=a, ops=[op], comparators=[b])
+                for a, op, b in zip(
+                    [node.left, *node.comparators[:-1]], node.ops, node.comparators, strict=True
+                )
+            ]
+            return _dnf(ast.BoolOp(op=ast.And(), values=list(pairs)), positive)
+        return [(_literal(node, positive),)]
+    return [(_Opaque(ast.dump(node), positive),)]
+
+
+@dataclass(slots=True)
+class _Range:
+    """What a conjunction allows for one subject."""
+
+    allowed: list[Any] | None = None  # None: any value
+    excluded: list[Any] = field(default_factory=list)
+    low: tuple[Any, bool] | None = None  # (bound, inclusive)
+    high: tuple[Any, bool] | None = None
+
+
+def _member(value: Any, values: Sequence[Any]) -> bool:
+    return any(value == v for v in values)
+
+
+_ORDER: dict[type[ast.cmpop], Callable[[Any, Any], bool]] = {
+    ast.Lt: operator.lt,
+    ast.LtE: operator.le,
+    ast.Gt: operator.gt,
+    ast.GtE: operator.ge,
+}
+
+
+def _tighten(r: _Range, op: type[ast.cmpop], value: Any) -> None:
+    if op in (ast.Gt, ast.GtE):
+        bound = (value, op is ast.GtE)
+        if r.low is None or value > r.low[0] or (value == r.low[0] and not bound[1]):
+            r.low = bound
+    else:
+        bound = (value, op is ast.LtE)
+        if r.high is None or value < r.high[0] or (value == r.high[0] and not bound[1]):
+            r.high = bound
+
+
+def _in_bounds(r: _Range, value: Any) -> bool:
+    if r.low is not None and not (value >= r.low[0] if r.low[1] else value > r.low[0]):
+        return False
+    return r.high is None or (value <= r.high[0] if r.high[1] else value < r.high[0])
+
+
+def _empty(r: _Range) -> bool:
+    """Whether no value satisfies ``r``; a TypeError (mixed types) means not proven."""
+    try:
+        candidates = r.allowed
+        if candidates is None and r.low is not None and r.high is not None:
+            lo, hi = r.low, r.high
+            if lo[0] > hi[0] or (lo[0] == hi[0] and not (lo[1] and hi[1])):
+                return True
+            if lo[0] == hi[0]:
+                candidates = [lo[0]]
+        if candidates is None:
+            return False
+        return all(_member(v, r.excluded) or not _in_bounds(r, v) for v in candidates)
+    except TypeError:
+        return False
+
+
+def _contradictory(conj: _Conj) -> bool:
+    opaque: dict[str, bool] = {}
+    ranges: dict[tuple[str, str], _Range] = {}
+    try:
+        for lit in conj:
+            if isinstance(lit, _Opaque):
+                if opaque.setdefault(lit.key, lit.positive) != lit.positive:
+                    return True
+                continue
+            r = ranges.setdefault((lit.family, lit.subject), _Range())
+            if lit.op in (ast.Eq, ast.Is, ast.In):
+                values = list(lit.value) if lit.op is ast.In else [lit.value]
+                if r.allowed is None:
+                    r.allowed = values
+                elif lit.family == "is":
+                    r.allowed = [v for v in r.allowed if any(v is w for w in values)]
+                else:
+                    r.allowed = [v for v in r.allowed if _member(v, values)]
+            elif lit.op in (ast.NotEq, ast.IsNot, ast.NotIn):
+                r.excluded.extend(lit.value if lit.op is ast.NotIn else (lit.value,))
+            elif lit.op in _ORDER:
+                _tighten(r, lit.op, lit.value)
+    except TypeError:
+        return False  # bounds of mixed types: not proven
+    return any(_empty(r) for r in ranges.values())
+
+
+def _parse(guard: str) -> ast.expr | None:
+    try:
+        return ast.parse(guard.strip(), mode="eval").body
+    except SyntaxError:
+        return None
+
+
+def guards_exclusive(first: str | None, second: str | None) -> bool:
+    """Whether the two guards can never both hold (``None`` is no guard, always true).
+
+    Sound but incomplete: ``True`` is a proof, ``False`` means "not proven".
+    """
+    a = _parse(first) if first else ast.Constant(value=True)
+    b = _parse(second) if second else ast.Constant(value=True)
+    if a is None or b is None:
+        return False
+    try:
+        left = _dnf(a) if first else [()]
+        right = _dnf(b) if second else [()]
+        return all(_contradictory(x + y) for x in left for y in right)
+    except _TooBig:
+        return False
+
+
+# -- C404 .. C408 ----------------------------------------------------------------------------
+
+
+def _check_missed(st: _Structure) -> Iterator[Diagnostic]:
+    events = st.chart.event_names
+    for s in st.chart.states:
+        if s.kind is not StateKind.ATOMIC:
+            continue
+        missed = [e for e in events if not st.handles(s.name, e) and not st.ignores(s.name, e)]
+        if missed:
+            names = ", ".join(repr(e) for e in missed)
+            yield Diagnostic(
+                "C404",
+                Severity.WARNING,
+                _where(s),
+                f"state {s.name!r} neither handles nor ignores {names} (missed transition)",
+                "add an event row with this old state, or list the event in the state's "
+                "ignore column",
+            )
+
+
+def _check_unused_events(st: _Structure) -> Iterator[Diagnostic]:
+    for e in st.chart.events:
+        if not any(name_match(t.events, e.name) for t in st.chart.transitions):
+            yield Diagnostic(
+                "C405",
+                Severity.WARNING,
+                e.origin,
+                f"event {e.name!r} is declared but no transition uses it",
+                "add an event row for it, or remove the declaration",
+            )
+
+
+def _check_contradictory_ignores(st: _Structure) -> Iterator[Diagnostic]:
+    for state, event in sorted(st.chart.ignored):
+        if state in st.by_name and st.handles(state, event):
+            yield Diagnostic(
+                "C406",
+                Severity.WARNING,
+                _where(st.by_name[state]),
+                f"state {state!r} lists {event!r} as ignored but a transition handles it",
+                f"remove {event!r} from the state's ignore column, or remove the event row",
+            )
+
+
+def _is_fault(chart: Chart, event: str) -> bool:
+    edef = chart.event(event)
+    return edef is not None and edef.kind is EventKind.FAULT
+
+
+def _check_monitors(st: _Structure) -> Iterator[Diagnostic]:
+    chart = st.chart
+    for s in chart.states:
+        if ControlKind.MONITORING not in s.controls:
+            continue
+        raises = any(_is_fault(chart, e) for t in chart.transitions_from(s.name) for e in t.events)
+        if not raises:
+            yield Diagnostic(
+                "C407",
+                Severity.WARNING,
+                _where(s),
+                f"state {s.name!r} is monitoring required but no fault event leaves it, "
+                "so its monitor would have nothing to raise",
+                "add a fault-kind event row with this old state, or drop 'monitoring required'",
+            )
+    for t in chart.transitions:
+        source = st.by_name.get(t.source)
+        if source is None or ControlKind.MONITORING in source.controls:
+            continue
+        for e in t.events:
+            if _is_fault(chart, e):
+                yield Diagnostic(
+                    "C408",
+                    Severity.WARNING,
+                    t.origin,
+                    f"fault event {e!r} leaves {t.source!r}, which is not monitoring required, "
+                    "so no monitor runs there to raise it",
+                    f"mark {t.source!r} 'monitoring required', or make {e!r} a command event",
+                )
+
+
+_RULES: tuple[Callable[[_Structure], Iterator[Diagnostic]], ...] = (
+    _check_reachable,
+    _check_way_out,
+    _check_overlaps,
+    _check_missed,
+    _check_unused_events,
+    _check_contradictory_ignores,
+    _check_monitors,
+)
+
+
+def check_chart(chart: Chart) -> Iterator[Diagnostic]:
+    """Yield every problem the rules above find in ``chart``, rule by rule."""
+    st = _Structure.of(chart)
+    for rule in _RULES:
+        yield from rule(st)
+
+
+def check_paths(paths: Sequence[str]) -> list[Diagnostic]:
+    """Load and build each file (its diagnostics included), then check each chart that built."""
+    out: list[Diagnostic] = []
+    for path in paths:
+        try:
+            chart, diagnostics = load_and_build(path)
+        except DiagnosticError as exc:
+            chart, diagnostics = None, list(exc.diagnostics)
+        out.extend(diagnostics)
+        if chart is not None:
+            out.extend(check_chart(chart))
+    return out
