@@ -1,0 +1,29 @@
+"""Device drivers: the protocol, the base class, simulated twins and driver configuration."""
+
+from statectl.devices.base import Driver, connect, requested_target
+from statectl.devices.config import (
+    DRIVERS,
+    DriverConfig,
+    load_driver_config,
+    make_driver,
+    resolve_driver,
+)
+from statectl.devices.motor import SimMotor
+from statectl.devices.protocol import ApiCall, DeviceDriver, Report
+from statectl.devices.stepper import SimStepper
+
+__all__ = [
+    "DRIVERS",
+    "ApiCall",
+    "DeviceDriver",
+    "Driver",
+    "DriverConfig",
+    "Report",
+    "SimMotor",
+    "SimStepper",
+    "connect",
+    "load_driver_config",
+    "make_driver",
+    "requested_target",
+    "resolve_driver",
+]

@@ -1,0 +1,225 @@
+"""Which driver runs which device: configuration, so a hardware change touches no model file.
+
+Rules:
+1. A driver is named by a registry name (:data:`DRIVERS`: ``sim-motor``,
+   ``sim-stepper``) or by an entry string ``package.module:Class``.
+2. A driver config file is YAML::
+
+       devices:
+         Motor: {driver: sim-motor, options: {speed: 10}}
+
+   :func:`load_driver_config` reports every problem at once as diagnostics
+   D501-D508 with the file and line, raising one
+   :class:`~statectl.errors.DiagnosticError` if any is an error.
+3. Options are checked against the driver's constructor when the file loads,
+   so a misspelt option is a diagnostic, not a ``TypeError`` at start-up.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from statectl.devices.motor import SimMotor
+from statectl.devices.protocol import DeviceDriver
+from statectl.devices.stepper import SimStepper
+from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, StatectlError
+
+__all__ = [
+    "DRIVERS",
+    "DriverConfig",
+    "load_driver_config",
+    "make_driver",
+    "resolve_driver",
+]
+
+#: The drivers statectl ships, by the name a config file uses.
+DRIVERS: Mapping[str, Callable[..., DeviceDriver]] = {
+    "sim-motor": SimMotor,
+    "sim-stepper": SimStepper,
+}
+
+#: device -> (driver name, options)
+DriverConfig = dict[str, tuple[str, dict[str, Any]]]
+
+_DEVICE_KEYS = ("driver", "options")
+
+
+def _available() -> str:
+    return ", ".join(DRIVERS) + ", or an entry 'package.module:Class'"
+
+
+def resolve_driver(name: str) -> Callable[..., DeviceDriver]:
+    """The driver class a registry name or ``package.module:Class`` entry names."""
+    if name in DRIVERS:
+        return DRIVERS[name]
+    module_name, sep, attr = name.partition(":")
+    if not sep or not module_name or not attr:
+        raise StatectlError(f"unknown driver {name!r}; available: {_available()}")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise StatectlError(f"driver {name!r}: cannot import {module_name!r} ({exc})") from None
+    obj = module
+    for part in attr.split("."):
+        if not hasattr(obj, part):
+            raise StatectlError(f"driver {name!r}: {module_name!r} has no {attr!r}")
+        obj = getattr(obj, part)
+    if not (
+        isinstance(obj, type)
+        and all(callable(getattr(obj, m, None)) for m in ("update", "bind", "poll_fault"))
+    ):
+        raise StatectlError(
+            f"driver {name!r} is not a device driver class "
+            "(needs update(), bind() and poll_fault(); see statectl.devices.DeviceDriver)"
+        )
+    factory: Callable[..., DeviceDriver] = obj
+    return factory
+
+
+def make_driver(name: str, options: Mapping[str, Any] | None = None) -> DeviceDriver:
+    """Create the driver ``name`` with keyword ``options``."""
+    factory = resolve_driver(name)
+    problem = _option_problem(factory, options or {})
+    if problem:
+        raise StatectlError(f"driver {name!r}: {problem}")
+    return factory(**dict(options or {}))
+
+
+def _option_problem(factory: Callable[..., Any], options: Mapping[str, Any]) -> str | None:
+    try:
+        signature = inspect.signature(factory)
+    except (TypeError, ValueError):  # no signature to check against: let the call decide
+        return None
+    params = signature.parameters.values()
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
+        return None
+    accepted = [
+        p.name
+        for p in params
+        if p.kind in (inspect.Parameter.KEYWORD_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+    ]
+    unknown = [k for k in options if k not in accepted]
+    if unknown:
+        return f"unknown option(s) {unknown}; it accepts {accepted or 'none'}"
+    return None
+
+
+def load_driver_config(path: str | Path) -> DriverConfig:
+    """Read a driver config file; every problem becomes a D5xx diagnostic."""
+    file = str(path)
+    diags: list[Diagnostic] = []
+
+    def error(code: str, line: int | None, message: str, hint: str = "") -> None:
+        diags.append(Diagnostic(code, Severity.ERROR, Location(file, line), message, hint))
+
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        error("D501", None, f"cannot read driver config ({exc})", "check the path")
+        raise DiagnosticError(diags) from None
+    loader = yaml.SafeLoader(text)
+    try:
+        root = loader.get_single_node()
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = mark.line + 1 if mark is not None else None
+        error("D502", line, f"not valid YAML ({getattr(exc, 'problem', exc)})")
+        raise DiagnosticError(diags) from None
+    finally:
+        loader.dispose()
+
+    def line_of(node: yaml.Node) -> int:
+        return int(node.start_mark.line) + 1
+
+    def value(node: yaml.Node) -> Any:
+        return yaml.SafeLoader("").construct_object(node, deep=True)
+
+    result: DriverConfig = {}
+    devices_node: yaml.Node | None = None
+    if not isinstance(root, yaml.MappingNode):
+        error(
+            "D503",
+            line_of(root) if root is not None else 1,
+            "a driver config must be a mapping with a 'devices' key",
+            "write 'devices: {Motor: {driver: sim-motor}}'",
+        )
+    else:
+        for key, val in root.value:
+            if value(key) == "devices":
+                devices_node = val
+            else:
+                error("D507", line_of(key), f"unknown key {value(key)!r}", "only 'devices' is read")
+        if devices_node is None:
+            error(
+                "D503",
+                line_of(root),
+                "no 'devices' mapping",
+                "add 'devices:' with one entry per device",
+            )
+        elif not isinstance(devices_node, yaml.MappingNode):
+            error("D503", line_of(devices_node), "'devices' must map device names to entries")
+            devices_node = None
+    for key, entry in devices_node.value if devices_node is not None else ():
+        device = str(value(key))
+        here = line_of(key)
+        if not isinstance(entry, yaml.MappingNode):
+            error(
+                "D504",
+                here,
+                f"device {device!r}: entry must be a mapping (got {value(entry)!r})",
+                "write '{driver: <name>, options: {...}}'",
+            )
+            continue
+        fields = {str(value(k)): (k, v) for k, v in entry.value}
+        for name, (k, _) in fields.items():
+            if name not in _DEVICE_KEYS:
+                error(
+                    "D507",
+                    line_of(k),
+                    f"device {device!r}: unknown key {name!r}",
+                    f"an entry has {', '.join(_DEVICE_KEYS)}",
+                )
+        if "driver" not in fields:
+            error("D504", here, f"device {device!r}: no 'driver'", f"name one of: {_available()}")
+            continue
+        dnode = fields["driver"][1]
+        driver = value(dnode)
+        options: dict[str, Any] = {}
+        if "options" in fields:
+            onode = fields["options"][1]
+            raw = value(onode)
+            if raw is None:
+                raw = {}
+            if not isinstance(raw, dict) or not all(isinstance(k, str) for k in raw):
+                error(
+                    "D506",
+                    line_of(onode),
+                    f"device {device!r}: options must be a mapping of names to values "
+                    f"(got {raw!r})",
+                )
+                continue
+            options = raw
+        if not isinstance(driver, str):
+            error(
+                "D505", line_of(dnode), f"device {device!r}: driver must be a name (got {driver!r})"
+            )
+            continue
+        try:
+            factory = resolve_driver(driver)
+        except StatectlError as exc:
+            error("D505", line_of(dnode), f"device {device!r}: {exc}")
+            continue
+        problem = _option_problem(factory, options)
+        if problem:
+            error("D508", line_of(fields["options"][1]), f"device {device!r}: {problem}")
+            continue
+        result[device] = (driver, options)
+    if diags:
+        raise DiagnosticError(diags)
+    return result

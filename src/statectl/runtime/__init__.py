@@ -1,0 +1,58 @@
+"""The runtime around the pure kernel: clock, Subject (owner + queue), monitors, trace records."""
+
+from statectl.runtime.clock import Clock, SimClock, Timer, WallClock
+from statectl.runtime.monitors import DEFAULT_PERIOD, FaultSource, Monitor, attach_monitors
+from statectl.runtime.records import (
+    ApiCall,
+    EventIgnored,
+    EventReceived,
+    EventRejected,
+    FaultDetected,
+    Finished,
+    IgnoreReason,
+    InvokeIssued,
+    MonitorStarted,
+    MonitorStopped,
+    ObserverCalled,
+    Record,
+    Started,
+    StateEntered,
+    StateExited,
+    TransitionTaken,
+)
+from statectl.runtime.subject import ApiLogging, Listener, Policy, Subject
+from statectl.runtime.trace import TraceWriter, format_data, format_record
+
+__all__ = [
+    "DEFAULT_PERIOD",
+    "ApiCall",
+    "ApiLogging",
+    "Clock",
+    "EventIgnored",
+    "EventReceived",
+    "EventRejected",
+    "FaultDetected",
+    "FaultSource",
+    "Finished",
+    "IgnoreReason",
+    "InvokeIssued",
+    "Listener",
+    "Monitor",
+    "MonitorStarted",
+    "MonitorStopped",
+    "ObserverCalled",
+    "Policy",
+    "Record",
+    "SimClock",
+    "Started",
+    "StateEntered",
+    "StateExited",
+    "Subject",
+    "Timer",
+    "TraceWriter",
+    "TransitionTaken",
+    "WallClock",
+    "attach_monitors",
+    "format_data",
+    "format_record",
+]

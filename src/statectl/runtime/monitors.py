@@ -1,0 +1,129 @@
+"""Monitors: the paper's error thread, one per state that needs monitoring.
+
+Rules:
+1. Each ``MonitorSpec`` of :func:`statectl.observers.extract` becomes a
+   :class:`Monitor` that runs only while its state is active: it starts on
+   ``StateEntered`` and stops on ``StateExited`` (or when the run finishes),
+   recording ``MonitorStarted`` / ``MonitorStopped``.
+2. While running it polls the device every ``period`` seconds on the Subject's
+   clock. The poll itself runs on the Subject's owner (queued with
+   ``call_soon``), so it never races the events the owner processes.
+3. When ``poll_fault()`` returns a detail string the monitor records
+   ``FaultDetected`` and posts the state's first fault event with
+   ``{"detail": detail}`` as its data; the transition it drives stops the monitor.
+4. A monitored state with no fault event leaving it gets no monitor: there is
+   nothing it could raise (``statectl check`` reports such a state).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from statectl.errors import StatectlError
+from statectl.observers import MonitorSpec, extract
+from statectl.runtime.clock import Timer
+from statectl.runtime.records import (
+    FaultDetected,
+    Finished,
+    MonitorStarted,
+    MonitorStopped,
+    Record,
+    StateEntered,
+    StateExited,
+)
+from statectl.runtime.subject import Subject
+
+__all__ = ["DEFAULT_PERIOD", "FaultSource", "Monitor", "attach_monitors"]
+
+#: Seconds between two polls of a device, unless told otherwise.
+DEFAULT_PERIOD = 0.1
+
+
+class FaultSource(Protocol):
+    """What a monitor needs of a device: a fault detail, reported once, or ``None``."""
+
+    def poll_fault(self) -> str | None: ...
+
+
+class Monitor:
+    """Watches ``device`` while ``spec.state`` is active and raises ``spec.raises[0]``."""
+
+    def __init__(
+        self, subject: Subject, spec: MonitorSpec, device: FaultSource, period: float
+    ) -> None:
+        if not period > 0:
+            raise StatectlError(f"a monitor period must be > 0 seconds (got {period!r})")
+        if not spec.raises:
+            raise StatectlError(f"state {spec.state!r} has no fault event for a monitor to raise")
+        self.subject = subject
+        self.spec = spec
+        self.device = device
+        self.period = period
+        self.active = False
+        self.polls = 0
+        self._timer: Timer | None = None
+        self._generation = 0  # a poll queued before a stop must not run after it
+
+    def __call__(self, record: Record) -> None:
+        if isinstance(record, StateEntered) and record.state == self.spec.state:
+            self._start()
+        elif isinstance(record, StateExited) and record.state == self.spec.state:
+            self._stop(record=True)
+        elif isinstance(record, Finished):
+            self._stop(record=False)
+
+    def _start(self) -> None:
+        if self.active:
+            return
+        self.active = True
+        self._generation += 1
+        s = self.subject
+        s.emit(MonitorStarted(s.name, s.clock.now(), self.spec.state))
+        self._schedule()
+
+    def _stop(self, *, record: bool) -> None:
+        if not self.active:
+            return
+        self.active = False
+        self._generation += 1
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        if record:
+            s = self.subject
+            s.emit(MonitorStopped(s.name, s.clock.now(), self.spec.state))
+
+    def _schedule(self) -> None:
+        generation = self._generation
+        self._timer = self.subject.clock.call_later(
+            self.period, lambda: self.subject.call_soon(lambda: self._poll(generation))
+        )
+
+    def _poll(self, generation: int) -> None:
+        if not self.active or generation != self._generation:
+            return
+        self.polls += 1
+        detail = self.device.poll_fault()
+        if detail is not None:
+            s = self.subject
+            event = self.spec.raises[0]
+            s.emit(FaultDetected(s.name, s.clock.now(), self.spec.state, event, detail))
+            s.post(event, {"detail": detail})
+        self._schedule()
+
+
+def attach_monitors(
+    subject: Subject, device: FaultSource, *, period: float = DEFAULT_PERIOD
+) -> tuple[Monitor, ...]:
+    """Create and register a monitor for every monitored state of the subject's chart.
+
+    Call before :meth:`Subject.start` so a monitored initial state is watched too.
+    """
+    monitors = tuple(
+        Monitor(subject, spec, device, period)
+        for spec in extract(subject.chart).monitors
+        if spec.raises
+    )
+    for m in monitors:
+        subject.listen(m)
+    return monitors

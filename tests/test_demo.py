@@ -1,0 +1,170 @@
+"""The Motor demo: the paper's step 3 running on a simulated clock."""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import re
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import statectl
+from statectl.demo import FAULT, run_demo
+from statectl.runtime import Record, Subject
+
+ROOT = Path(__file__).parent.parent
+EXAMPLES = ROOT / "examples" / "motor"
+
+#: The demo's records as (type, key fields), device and time left out.
+EXPECTED: list[tuple[Any, ...]] = [
+    ("Started",),
+    ("StateEntered", "Blocked"),
+    # an external Movement request of 10
+    ("EventReceived", "Movement", {"amount": 10}),
+    ("StateExited", "Blocked"),
+    ("TransitionTaken", "Movement", ("Blocked",), ("Moving",), "Movement"),
+    ("StateEntered", "Moving"),
+    ("MonitorStarted", "Moving"),
+    ("InvokeIssued", 0, "Moving", "Movement", "Movement"),
+    ("ObserverCalled", "Movement", "SimMotor.move_to(10.0)"),
+    ("EventReceived", "Movement completion", {"position": 10.0}),
+    ("StateExited", "Moving"),
+    ("MonitorStopped", "Moving"),
+    ("TransitionTaken", "Movement completion", ("Moving",), ("Blocked",), "Movement completion"),
+    ("StateEntered", "Blocked"),
+    # Initialization back: previous == 'Moving' holds
+    ("EventReceived", "Initialization", None),
+    ("StateExited", "Blocked"),
+    (
+        "TransitionTaken",
+        "Initialization",
+        ("Blocked",),
+        ("Returning",),
+        "Initialization [previous == 'Moving']",
+    ),
+    ("StateEntered", "Returning"),
+    ("InvokeIssued", 1, "Returning", "Initialization", "Initialization"),
+    ("ObserverCalled", "Initialization", "SimMotor.return_to(0.0)"),
+    ("EventReceived", "Initialization completion", {"position": 0.0}),
+    ("StateExited", "Returning"),
+    (
+        "TransitionTaken",
+        "Initialization completion",
+        ("Returning",),
+        ("Blocked",),
+        "Initialization completion",
+    ),
+    ("StateEntered", "Blocked"),
+    # a new Movement; the motor faults half-way and the monitor raises Error
+    ("EventReceived", "Movement", {"amount": 10}),
+    ("StateExited", "Blocked"),
+    ("TransitionTaken", "Movement", ("Blocked",), ("Moving",), "Movement"),
+    ("StateEntered", "Moving"),
+    ("MonitorStarted", "Moving"),
+    ("InvokeIssued", 0, "Moving", "Movement", "Movement"),
+    ("ObserverCalled", "Movement", "SimMotor.move_to(10.0)"),
+    ("FaultDetected", "Moving", "Error", FAULT),
+    ("EventReceived", "Error", {"detail": FAULT}),
+    ("StateExited", "Moving"),
+    ("MonitorStopped", "Moving"),
+    ("TransitionTaken", "Error", ("Moving",), ("Returning",), "Error"),
+    ("StateEntered", "Returning"),
+    ("InvokeIssued", 2, "Error", "Error", "Error"),
+    ("ObserverCalled", "Error", "SimMotor.stop()"),
+    ("ObserverCalled", "Error", "SimMotor.return_to(0.0)"),
+    ("EventReceived", "Error completion", {"position": 0.0}),
+    ("StateExited", "Returning"),
+    ("TransitionTaken", "Error completion", ("Returning",), ("Blocked",), "Error completion"),
+    ("StateEntered", "Blocked"),
+    ("Finished",),
+]
+
+
+def keys(records: list[Record]) -> list[tuple[Any, ...]]:
+    out = []
+    for r in records:
+        fields = tuple(
+            getattr(r, f.name) for f in dataclasses.fields(r) if f.name not in ("device", "time")
+        )
+        out.append((type(r).__name__, *fields))
+    return out
+
+
+def demo(**kw: Any) -> tuple[list[Record], str, Subject]:
+    """Run the demo: (its records, its printed output, the finished subject)."""
+    out = io.StringIO()
+    records: list[Record] = []
+    subject = run_demo(out, listeners=[records.append], **kw)
+    return records, out.getvalue(), subject
+
+
+def test_demo_records_the_papers_scenario() -> None:
+    """The demo's records follow the scenario exactly, fault and recovery included."""
+    records, _, _ = demo()
+    assert keys(records) == EXPECTED
+
+
+def test_demo_ends_blocked() -> None:
+    """After the recovery the Motor is Blocked and the run finished."""
+    _, text, subject = demo()
+    assert subject.configuration == {"Blocked"} and subject.finished
+    assert text.rstrip().endswith(
+        "final state Blocked; 7 events processed; 4 invokes issued; 5 API calls"
+    )
+
+
+@pytest.mark.parametrize(
+    "needle",
+    [
+        "#0 Moving -> observer Movement()",
+        "#1 Returning -> observer Initialization()",
+        "#2 Error -> observer Error()",
+        "Movement() -> SimMotor.move_to(10.0)",
+        "Error() -> SimMotor.return_to(0.0)",
+        "monitor  Moving started",
+        f"{FAULT!r} while Moving -> raises Error",
+    ],
+)
+def test_demo_output_mentions_each_invoke_and_method(needle: str) -> None:
+    """The printed trace names every invoke number and observer method."""
+    _, text, _ = demo()
+    assert needle in text
+
+
+def test_demo_output_has_aligned_columns() -> None:
+    """Every trace line has its kind column at the same place and no colour codes."""
+    _, text, _ = demo()
+    lines = [line for line in text.splitlines() if line.startswith("t=")]
+    assert len(lines) == len(EXPECTED)
+    assert len({line.index("Motor") for line in lines}) == 1
+    assert "\x1b" not in text
+
+
+def test_demo_on_the_stepper_config_has_the_same_states() -> None:
+    """With stepper.yaml the records differ only in the API calls."""
+
+    def states(records: list[Record]) -> list[tuple[Any, ...]]:
+        return [k for k in keys(records) if k[0] != "ObserverCalled"]
+
+    motor, _, _ = demo()
+    stepper, text, _ = demo(config=str(EXAMPLES / "stepper.yaml"))
+    assert states(stepper) == states(motor)
+    assert "SimStepper.step(2000, 1)" in text
+
+
+def test_packaged_motor_model_is_the_example() -> None:
+    """src/statectl/data/motor.yaml is a byte-identical copy of examples/motor/motor.yaml."""
+    packaged = Path(statectl.__file__).parent / "data" / "motor.yaml"
+    assert packaged.read_bytes() == (EXAMPLES / "motor.yaml").read_bytes()
+
+
+def test_runtime_docs_example_runs(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The Python example in docs/runtime.md runs as written, from the repository root."""
+    monkeypatch.chdir(ROOT)
+    text = (ROOT / "docs" / "runtime.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"```python\n(.*?)```", text, re.S)
+    assert blocks
+    for block in blocks:
+        exec(compile(block, "docs/runtime.md", "exec"), {})
