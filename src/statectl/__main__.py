@@ -1,4 +1,7 @@
-from statectl.cli import main
+"""``python -m statectl``: the same as the ``statectl`` command."""
+
 import sys
+
+from statectl.cli import main
 
 sys.exit(main())

@@ -22,15 +22,26 @@ from statectl.errors import Location
 __all__ = [
     "Action",
     "Api",
+    "Assign",
+    "Block",
+    "Cancel",
     "Chart",
+    "Content",
     "ControlKind",
     "DataItem",
+    "DoneData",
     "EventDef",
     "EventKind",
+    "Foreach",
+    "If",
     "Invoke",
+    "InvokeDef",
     "Log",
     "Notify",
+    "Param",
     "Raise",
+    "Script",
+    "Send",
     "State",
     "StateKind",
     "Transition",
@@ -96,6 +107,121 @@ class Raise(Action):
 class Log(Action):
     label: str
     message: str = ""
+    expr: str | None = None  # SCXML ``<log expr>``: evaluated by the host's datamodel
+    origin: Location = NOWHERE
+
+
+# -- SCXML executable content: performed by a host-supplied executor, never by the kernel --
+
+
+@dataclass(frozen=True, slots=True)
+class Param:
+    """``<param name expr|location>``: one name/value pair of event or done data."""
+
+    name: str
+    expr: str | None = None
+    location: str | None = None
+    origin: Location = NOWHERE
+
+
+@dataclass(frozen=True, slots=True)
+class Content:
+    """``<content expr>`` or inline content; ``body`` is text or serialised XML."""
+
+    expr: str | None = None
+    body: str | None = None
+    origin: Location = NOWHERE
+
+
+@dataclass(frozen=True, slots=True)
+class DoneData:
+    """``<donedata>`` of a final state: the data of its ``done.state`` event."""
+
+    params: tuple[Param, ...] = ()
+    content: Content | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Block(Action):
+    """One handler (``<onentry>``/``<onexit>``) of several: an error skips only its rest."""
+
+    actions: tuple[Action, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Assign(Action):
+    location: str
+    expr: str | None = None
+    body: str | None = None  # inline content instead of ``expr``
+    origin: Location = NOWHERE
+
+
+@dataclass(frozen=True, slots=True)
+class Script(Action):
+    source: str
+    origin: Location = NOWHERE
+
+
+@dataclass(frozen=True, slots=True)
+class If(Action):
+    """``<if>/<elseif>/<else>``: the first branch whose condition holds (``None``: else)."""
+
+    branches: tuple[tuple[str | None, tuple[Action, ...]], ...]
+    origin: Location = NOWHERE
+
+
+@dataclass(frozen=True, slots=True)
+class Foreach(Action):
+    array: str
+    item: str
+    index: str | None = None
+    actions: tuple[Action, ...] = ()
+    origin: Location = NOWHERE
+
+
+@dataclass(frozen=True, slots=True)
+class Send(Action):
+    """``<send>``: every ``*expr`` twin is evaluated when the send is performed."""
+
+    event: str | None = None
+    eventexpr: str | None = None
+    target: str | None = None
+    targetexpr: str | None = None
+    type: str | None = None
+    typeexpr: str | None = None
+    id: str | None = None
+    idlocation: str | None = None
+    delay: str | None = None
+    delayexpr: str | None = None
+    namelist: tuple[str, ...] = ()
+    params: tuple[Param, ...] = ()
+    content: Content | None = None
+    origin: Location = NOWHERE
+
+
+@dataclass(frozen=True, slots=True)
+class Cancel(Action):
+    sendid: str | None = None
+    sendidexpr: str | None = None
+    origin: Location = NOWHERE
+
+
+@dataclass(frozen=True, slots=True)
+class InvokeDef:
+    """``<invoke>`` of a state: a child session started when the state settles active."""
+
+    type: str | None = None
+    typeexpr: str | None = None
+    src: str | None = None
+    srcexpr: str | None = None
+    id: str | None = None
+    idlocation: str | None = None
+    namelist: tuple[str, ...] = ()
+    autoforward: bool = False
+    params: tuple[Param, ...] = ()
+    content: Content | None = None
+    finalize: tuple[Action, ...] = ()
+    origin: Location = NOWHERE
 
 
 @dataclass(frozen=True, slots=True)
@@ -113,6 +239,11 @@ class State:
     on_exit: tuple[Action, ...] = ()
     history_default: tuple[str, ...] = ()  # targets of a history state with no value yet
     origin: Location = NOWHERE
+    initial_actions: tuple[Action, ...] = ()  # content of an ``<initial>`` transition
+    history_actions: tuple[Action, ...] = ()  # content of a history state's default transition
+    data: tuple[DataItem, ...] = ()  # ``<datamodel>`` declared in this state
+    invokes: tuple[InvokeDef, ...] = ()
+    donedata: DoneData | None = None  # of a final state
 
 
 @dataclass(frozen=True, slots=True)
@@ -171,6 +302,8 @@ class DataItem:
     name: str
     expr: str | None = None
     origin: Location = NOWHERE
+    src: str | None = None  # SCXML ``<data src>``
+    body: str | None = None  # SCXML inline ``<data>`` content
 
 
 @dataclass(frozen=True, slots=True)
@@ -189,6 +322,8 @@ class Chart:
     datamodel: str = "safe"
     component: str = ""
     origin: Location = field(default=NOWHERE)
+    binding: str = "early"  # SCXML data binding: "early" or "late"
+    script: tuple[Action, ...] = ()  # SCXML top-level ``<script>``, run once at start
 
     def state(self, name: str) -> State:
         for s in self.states:

@@ -16,26 +16,45 @@ parts after it, so the pseudocode can be read beside this file. Rules:
    candidate transitions per (state, event), static transition domains and
    compiled guards. Where no guard was consulted a step depends only on
    ``(snapshot, event)`` and is memoised, so dispatch is close to a lookup.
+5. A host that runs executable content (the SCXML session) drives the same
+   functions one microstep at a time through a :class:`Run` that carries an
+   :class:`Executor`. The executor evaluates conditions and performs content at
+   the spec's points, in order: each exited state's onexit, the transitions'
+   content, then per entered state its onentry, initial and history content, and
+   the ``done.state`` events. Events it raises go straight to the internal queue,
+   so the queue order is the spec's. Without an executor, ``Raise`` is the only
+   content the kernel acts on (it queues the event at once); the rest is returned.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 from statectl.errors import DiagnosticError, StatectlError
 from statectl.expr import Expression, compile_expression
-from statectl.model import Action, Chart, Raise, StateKind, Transition
+from statectl.model import Action, Chart, Raise, State, StateKind, Transition
 
 __all__ = [
+    "Event",
+    "Executor",
     "LivelockError",
     "Machine",
     "Microstep",
+    "Run",
     "Snapshot",
     "Step",
+    "enter_initial_states",
+    "exit_interpreter",
     "initial",
+    "macrostep",
+    "microstep",
     "name_match",
+    "process_event",
+    "select_eventless_transitions",
+    "select_transitions",
     "step",
 ]
 
@@ -112,9 +131,51 @@ def name_match(descriptors: Iterable[str], event: str) -> bool:
     return False
 
 
+@dataclass(frozen=True, slots=True)
+class Event:
+    """An event on a queue, with the fields SCXML's ``_event`` exposes."""
+
+    name: str
+    data: Any = None
+    type: str = "internal"  # "internal", "external" or "platform"
+    sendid: str = ""
+    origin: str = ""
+    origintype: str = ""
+    invokeid: str = ""
+
+
+class Executor(Protocol):
+    """What a host supplies to run executable content at the spec's points."""
+
+    def condition(self, run: Run, transition: Transition) -> bool:
+        """Evaluate ``transition.guard``; a failure is false (and the host's error event)."""
+        ...
+
+    def execute(self, run: Run, actions: tuple[Action, ...]) -> None:
+        """Perform one block of executable content; raise events into ``run.internal``."""
+        ...
+
+    def state_entered(self, run: Run, state: State) -> None:
+        """Called after ``state`` joins the configuration, before its onentry."""
+        ...
+
+    def state_exited(self, run: Run, state: State) -> None:
+        """Called after ``state``'s onexit, before it leaves the configuration."""
+        ...
+
+    def done_data(self, run: Run, state: State) -> Any:
+        """The data of the ``done.state`` event for entering the final ``state``."""
+        ...
+
+
 @dataclass(slots=True)
-class _Run:
-    """Mutable scratch for one macrostep; never escapes this module."""
+class Run:
+    """The mutable state of one interpretation: configuration, history, internal queue.
+
+    :func:`step` makes one per macrostep and never lets it escape; a host with an
+    :class:`Executor` keeps one for a whole session and drives it with
+    :func:`enter_initial_states`, :func:`macrostep` and :func:`process_event`.
+    """
 
     active: set[str]
     history: dict[str, tuple[str, ...]]
@@ -122,8 +183,15 @@ class _Run:
     data: Mapping[str, Any]
     event: str | None = None
     guarded: bool = False
-    internal: list[str] = field(default_factory=list)
-    final: bool = False
+    internal: deque[Event] = field(default_factory=deque)
+    final: bool = False  # a top-level final state was entered (the session stops running)
+    final_state: str | None = None
+    current: Event | None = None  # the event being processed: SCXML's ``_event``
+    executor: Executor | None = None
+
+    def raise_event(self, event: Event) -> None:
+        """Append to the internal queue (``<raise>``, ``error.*``, ``done.state.*``)."""
+        self.internal.append(event)
 
 
 class Machine:
@@ -171,7 +239,8 @@ class Machine:
         }
         self.guards: dict[str, Expression] = {}
         problems = []
-        for t in chart.transitions:
+        # other datamodels' conditions are the executor's to evaluate
+        for t in chart.transitions if chart.datamodel == "safe" else ():
             if t.guard and t.guard not in self.guards:
                 expr, diags = compile_expression(t.guard, t.origin)
                 problems.extend(diags)
@@ -232,7 +301,7 @@ class Machine:
 # -- the W3C algorithm ------------------------------------------------------------------------
 
 
-def _in_env(run: _Run, m: Machine, event_data: Any) -> dict[str, Any]:
+def _in_env(run: Run, m: Machine, event_data: Any) -> dict[str, Any]:
     active = run.active
     env: dict[str, Any] = dict(run.data)
     env["previous"] = run.previous
@@ -241,10 +310,12 @@ def _in_env(run: _Run, m: Machine, event_data: Any) -> dict[str, Any]:
     return env
 
 
-def condition_match(m: Machine, run: _Run, t: Transition, event_data: Any) -> bool:
+def condition_match(m: Machine, run: Run, t: Transition, event_data: Any) -> bool:
     if not t.guard:
         return True
     run.guarded = True
+    if run.executor is not None:
+        return run.executor.condition(run, t)
     try:
         return bool(m.guards[t.guard].evaluate(_in_env(run, m, event_data)))
     except Exception:  # a failing guard is false, as in SCXML
@@ -252,8 +323,12 @@ def condition_match(m: Machine, run: _Run, t: Transition, event_data: Any) -> bo
 
 
 def select_transitions(
-    m: Machine, run: _Run, event: str | None, event_data: Any = None
+    m: Machine, run: Run, event: str | None, event_data: Any = None
 ) -> list[Transition]:
+    """Per active atomic state in document order, the first enabled transition; no conflicts.
+
+    ``event=None`` selects eventless transitions (the spec's ``selectEventlessTransitions``).
+    """
     enabled: list[Transition] = []
     atomic = sorted((s for s in run.active if m.is_atomic(s)), key=m.order.__getitem__)
     for state in atomic:
@@ -265,8 +340,12 @@ def select_transitions(
     return remove_conflicting_transitions(m, run, enabled)
 
 
+def select_eventless_transitions(m: Machine, run: Run) -> list[Transition]:
+    return select_transitions(m, run, None)
+
+
 def remove_conflicting_transitions(
-    m: Machine, run: _Run, enabled: list[Transition]
+    m: Machine, run: Run, enabled: list[Transition]
 ) -> list[Transition]:
     filtered: list[Transition] = []
     for t1 in enabled:
@@ -286,7 +365,7 @@ def remove_conflicting_transitions(
     return filtered
 
 
-def get_effective_target_states(m: Machine, run: _Run, t: Transition) -> list[str]:
+def get_effective_target_states(m: Machine, run: Run, t: Transition) -> list[str]:
     targets: list[str] = []
 
     def add(names: Iterable[str]) -> None:
@@ -303,14 +382,14 @@ def get_effective_target_states(m: Machine, run: _Run, t: Transition) -> list[st
     return targets
 
 
-def get_transition_domain(m: Machine, run: _Run, t: Transition) -> str | None:
+def get_transition_domain(m: Machine, run: Run, t: Transition) -> str | None:
     static = m._static_domain.get(id(t), "")
     if static != "":
         return static
     return m._domain(t, get_effective_target_states(m, run, t))
 
 
-def compute_exit_set(m: Machine, run: _Run, transitions: list[Transition]) -> set[str]:
+def compute_exit_set(m: Machine, run: Run, transitions: list[Transition]) -> set[str]:
     to_exit: set[str] = set()
     for t in transitions:
         if t.targets:
@@ -319,10 +398,20 @@ def compute_exit_set(m: Machine, run: _Run, transitions: list[Transition]) -> se
     return to_exit
 
 
-def exit_states(
-    m: Machine, run: _Run, enabled: list[Transition], actions: list[Action]
-) -> list[str]:
-    to_exit = sorted(compute_exit_set(m, run, enabled), key=m.order.__getitem__, reverse=True)
+def _perform(run: Run, actions: tuple[Action, ...], record: list[Action]) -> None:
+    """Perform one block of content now: by the executor, or (no executor) queue ``Raise``."""
+    if not actions:
+        return
+    record.extend(actions)
+    if run.executor is not None:
+        run.executor.execute(run, actions)
+        return
+    for a in actions:
+        if isinstance(a, Raise):
+            run.raise_event(Event(a.event))
+
+
+def _record_history(m: Machine, run: Run, to_exit: list[str]) -> None:
     for s in to_exit:
         for h in m.histories_of[s]:
             if m.kind[h] is StateKind.HISTORY_DEEP:
@@ -330,15 +419,34 @@ def exit_states(
             else:
                 saved = [x for x in run.active if m.parent[x] == s]
             run.history[h] = tuple(sorted(saved, key=m.order.__getitem__))
+
+
+def _exit_ordered(m: Machine, run: Run, to_exit: list[str], actions: list[Action]) -> None:
     chart = m.chart
     for s in to_exit:
-        actions.extend(chart.states[m.order[s]].on_exit)
+        state = chart.states[m.order[s]]
+        _perform(run, state.on_exit, actions)
+        if run.executor is not None:
+            run.executor.state_exited(run, state)
         run.active.discard(s)
+
+
+def exit_states(
+    m: Machine, run: Run, enabled: list[Transition], actions: list[Action]
+) -> list[str]:
+    to_exit = sorted(compute_exit_set(m, run, enabled), key=m.order.__getitem__, reverse=True)
+    _record_history(m, run, to_exit)
+    _exit_ordered(m, run, to_exit, actions)
     return to_exit
 
 
+def execute_transition_content(run: Run, enabled: list[Transition], actions: list[Action]) -> None:
+    for t in enabled:
+        _perform(run, t.actions, actions)
+
+
 def compute_entry_set(
-    m: Machine, run: _Run, transitions: list[Transition]
+    m: Machine, run: Run, transitions: list[Transition]
 ) -> tuple[list[str], set[str], dict[str, tuple[Action, ...]]]:
     to_enter: list[str] = []
     default_entry: set[str] = set()
@@ -356,7 +464,7 @@ def compute_entry_set(
 
 def add_descendant_states_to_enter(
     m: Machine,
-    run: _Run,
+    run: Run,
     state: str,
     to_enter: list[str],
     default_entry: set[str],
@@ -365,7 +473,13 @@ def add_descendant_states_to_enter(
     if m.kind[state].is_history:
         parent = m.parent[state]
         saved = run.history.get(state)
-        targets = saved if saved is not None else m.history_default[state]
+        if saved is not None:
+            targets = saved
+        else:
+            targets = m.history_default[state]
+            actions = m.chart.states[m.order[state]].history_actions
+            if actions and parent is not None:
+                history_content[parent] = actions
         for s in targets:
             add_descendant_states_to_enter(m, run, s, to_enter, default_entry, history_content)
         for s in targets:
@@ -397,7 +511,7 @@ def add_descendant_states_to_enter(
 
 def add_ancestor_states_to_enter(
     m: Machine,
-    run: _Run,
+    run: Run,
     state: str,
     ancestor: str | None,
     to_enter: list[str],
@@ -419,7 +533,7 @@ def add_ancestor_states_to_enter(
                     )
 
 
-def is_in_final_state(m: Machine, run: _Run, s: str) -> bool:
+def is_in_final_state(m: Machine, run: Run, s: str) -> bool:
     kind = m.kind[s]
     if kind is StateKind.COMPOUND:
         return any(
@@ -434,98 +548,140 @@ def is_in_final_state(m: Machine, run: _Run, s: str) -> bool:
     return False
 
 
-def enter_states(
-    m: Machine, run: _Run, enabled: list[Transition], actions: list[Action]
+def _enter_ordered(
+    m: Machine,
+    run: Run,
+    to_enter: list[str],
+    default_entry: set[str],
+    history_content: dict[str, tuple[Action, ...]],
+    actions: list[Action],
 ) -> list[str]:
-    to_enter, _default_entry, _history_content = compute_entry_set(m, run, enabled)
+    """The loop of ``enterStates``: per state in document order, content and done events."""
     ordered = sorted(to_enter, key=m.order.__getitem__)
     chart = m.chart
+    executor = run.executor
     for s in ordered:
+        state = chart.states[m.order[s]]
         run.active.add(s)
-        actions.extend(chart.states[m.order[s]].on_entry)
+        if executor is not None:
+            executor.state_entered(run, state)
+        _perform(run, state.on_entry, actions)
+        if s in default_entry:
+            _perform(run, state.initial_actions, actions)
+        if s in history_content:
+            _perform(run, history_content[s], actions)
         if m.kind[s] is StateKind.FINAL:
             parent = m.parent[s]
             if parent is None:
                 run.final = True
+                run.final_state = s
             else:
-                run.internal.append("done.state." + parent)
+                data = executor.done_data(run, state) if executor is not None else None
+                run.raise_event(Event("done.state." + parent, data))
                 grandparent = m.parent[parent]
                 if (
                     grandparent is not None
                     and m.kind[grandparent] is StateKind.PARALLEL
                     and is_in_final_state(m, run, grandparent)
                 ):
-                    run.internal.append("done.state." + grandparent)
+                    run.raise_event(Event("done.state." + grandparent))
     return ordered
 
 
-def microstep(m: Machine, run: _Run, enabled: list[Transition], event: str | None) -> Microstep:
+def enter_states(
+    m: Machine, run: Run, enabled: list[Transition], actions: list[Action]
+) -> list[str]:
+    to_enter, default_entry, history_content = compute_entry_set(m, run, enabled)
+    return _enter_ordered(m, run, to_enter, default_entry, history_content, actions)
+
+
+def microstep(m: Machine, run: Run, enabled: list[Transition], event: str | None) -> Microstep:
+    """Exit, transition content, enter: one set of non-conflicting transitions taken."""
     actions: list[Action] = []
     exited = exit_states(m, run, enabled, actions)
-    for t in enabled:
-        actions.extend(t.actions)
+    execute_transition_content(run, enabled, actions)
     entered = enter_states(m, run, enabled, actions)
     left_atomic = [s for s in exited if m.is_atomic(s)]
     if left_atomic:
         run.previous = left_atomic[0]
-    for a in actions:
-        if isinstance(a, Raise):
-            run.internal.append(a.event)
     return Microstep(event, tuple(enabled), tuple(exited), tuple(entered), tuple(actions))
 
 
-def _settle(m: Machine, run: _Run, steps: list[Microstep]) -> None:
-    """Eventless transitions, then internal events, until stable (run-to-completion)."""
+def _check_livelock(m: Machine, steps: list[Microstep]) -> None:
+    if len(steps) > MAX_MICROSTEPS:
+        raise LivelockError(
+            f"chart {m.chart.name!r} took more than {MAX_MICROSTEPS} microsteps "
+            "without settling; look for eventless or raised transitions that loop"
+        )
+
+
+def macrostep(m: Machine, run: Run, steps: list[Microstep]) -> None:
+    """Eventless transitions, then internal events, until stable (run-to-completion).
+
+    The inner loop of the spec's ``mainEventLoop``; it stops early once a top-level
+    final state is entered. Without an executor an eventless selection sees no
+    ``_event``; with one, ``run.current`` keeps the last event, as in SCXML.
+    """
     while not run.final:
-        if len(steps) > MAX_MICROSTEPS:
-            raise LivelockError(
-                f"chart {m.chart.name!r} took more than {MAX_MICROSTEPS} microsteps "
-                "without settling; look for eventless or raised transitions that loop"
-            )
-        run.event = None
-        enabled = select_transitions(m, run, None)
+        _check_livelock(m, steps)
+        if run.executor is None:
+            run.event = None
+        enabled = select_eventless_transitions(m, run)
         if enabled:
             steps.append(microstep(m, run, enabled, None))
             continue
         if not run.internal:
             return
-        internal = run.internal.pop(0)
-        run.event = internal
-        enabled = select_transitions(m, run, internal)
+        internal = run.internal.popleft()
+        run.current = internal
+        run.event = internal.name
+        enabled = select_transitions(m, run, internal.name, internal.data)
         if enabled:
-            steps.append(microstep(m, run, enabled, internal))
+            steps.append(microstep(m, run, enabled, internal.name))
 
 
-def _snapshot(run: _Run) -> Snapshot:
+
+def process_event(m: Machine, run: Run, event: Event) -> Microstep | None:
+    """Select and take the transitions of one external event (the macrostep's first microstep)."""
+    run.current = event
+    run.event = event.name
+    enabled = select_transitions(m, run, event.name, event.data)
+    if not enabled:
+        return None
+    return microstep(m, run, enabled, event.name)
+
+
+def enter_initial_states(m: Machine, run: Run) -> Microstep:
+    """Enter the document's initial configuration (the spec's ``enterStates([initial])``)."""
+    actions: list[Action] = []
+    to_enter: list[str] = []
+    default_entry: set[str] = set()
+    history_content: dict[str, tuple[Action, ...]] = {}
+    targets = m.top_initial
+    for s in targets:
+        add_descendant_states_to_enter(m, run, s, to_enter, default_entry, history_content)
+    for s in targets:
+        add_ancestor_states_to_enter(m, run, s, None, to_enter, default_entry, history_content)
+    ordered = _enter_ordered(m, run, to_enter, default_entry, history_content, actions)
+    return Microstep(None, (), (), tuple(ordered), tuple(actions))
+
+
+def exit_interpreter(m: Machine, run: Run) -> list[str]:
+    """Exit every active state in exit order, performing onexit (the spec's ``exitInterpreter``)."""
+    to_exit = sorted(run.active, key=m.order.__getitem__, reverse=True)
+    _exit_ordered(m, run, to_exit, [])
+    return to_exit
+
+
+def _snapshot(run: Run) -> Snapshot:
     return Snapshot(frozenset(run.active), tuple(sorted(run.history.items())), run.previous)
 
 
 def initial(m: Machine, data: Mapping[str, Any] | None = None) -> Step:
     """Enter the chart's initial configuration and settle it."""
-    run = _Run(set(), {}, None, data or {})
-    start = Transition(source="", events=(), targets=m.top_initial)
-    actions: list[Action] = []
-    to_enter: list[str] = []
-    default_entry: set[str] = set()
-    history_content: dict[str, tuple[Action, ...]] = {}
-    for s in start.targets:
-        add_descendant_states_to_enter(m, run, s, to_enter, default_entry, history_content)
-    for s in start.targets:
-        add_ancestor_states_to_enter(m, run, s, None, to_enter, default_entry, history_content)
-    ordered = sorted(to_enter, key=m.order.__getitem__)
-    chart = m.chart
-    for s in ordered:
-        run.active.add(s)
-        actions.extend(chart.states[m.order[s]].on_entry)
-        if m.kind[s] is StateKind.FINAL and m.parent[s] is None:
-            run.final = True
-        elif m.kind[s] is StateKind.FINAL:
-            run.internal.append("done.state." + str(m.parent[s]))
-    for a in actions:
-        if isinstance(a, Raise):
-            run.internal.append(a.event)
-    steps = [Microstep(None, (), (), tuple(ordered), tuple(actions))]
-    _settle(m, run, steps)
+    run = Run(set(), {}, None, data or {})
+    steps = [enter_initial_states(m, run)]
+    macrostep(m, run, steps)
     empty = Snapshot(frozenset())
     return Step(None, empty, _snapshot(run), tuple(steps), True, False, run.final, run.guarded)
 
@@ -542,15 +698,14 @@ def step(
     cached = m._memo.get(key)
     if cached is not None:
         return cached
-    run = _Run(set(snapshot.active), dict(snapshot.history), snapshot.previous, data or {})
-    run.event = event
+    run = Run(set(snapshot.active), dict(snapshot.history), snapshot.previous, data or {})
     steps: list[Microstep] = []
-    enabled = select_transitions(m, run, event, event_data)
-    handled = bool(enabled)
+    first = process_event(m, run, Event(event, event_data, "external"))
+    handled = first is not None
     ignored = False
-    if enabled:
-        steps.append(microstep(m, run, enabled, event))
-        _settle(m, run, steps)
+    if first is not None:
+        steps.append(first)
+        macrostep(m, run, steps)
     else:
         ignored = any((s, event) in m.ignored for s in snapshot.active)
     result = Step(
@@ -566,4 +721,3 @@ def step(
     if not run.guarded and len(m._memo) < 100_000:
         m._memo[key] = result
     return result
-

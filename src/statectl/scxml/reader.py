@@ -1,0 +1,544 @@
+"""Read an SCXML document into a :class:`~statectl.model.Chart`.
+
+Rules:
+1. Every element keeps its line (:class:`~statectl.errors.Location`); every
+   problem becomes a diagnostic with a stable code, and reading goes on:
+   S601 not well-formed XML, S602 root is not ``<scxml>``, S603 missing required
+   attribute, S604 duplicate state id, S605 unknown transition/initial target,
+   S606 unknown or misplaced element (warning, skipped), S607 ``src`` file not
+   readable.
+2. States get document order, parents before children; a state without ``id``
+   gets a generated one (``_state3``), which no document can name.
+3. Executable content becomes model actions (``Raise``, ``Log``, ``Assign``,
+   ``If``, ``Foreach``, ``Send``, ``Cancel``, ``Script``); expressions stay text
+   for the session's datamodel. A state with several ``<onentry>`` (or
+   ``<onexit>``) handlers keeps each as a ``Block``, so an error ends only one.
+4. Inline ``<content>`` that holds elements (a child ``<scxml>``) is kept as
+   serialised XML; ``<data>``/``<content>`` text is kept as text.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from xml.parsers import expat
+
+from statectl.errors import Diagnostic, DiagnosticError, Location, Severity
+from statectl.model import (
+    Action,
+    Assign,
+    Block,
+    Cancel,
+    Chart,
+    Content,
+    ControlKind,
+    DataItem,
+    DoneData,
+    Foreach,
+    If,
+    InvokeDef,
+    Log,
+    Notify,
+    Param,
+    Raise,
+    Script,
+    Send,
+    State,
+    StateKind,
+    Transition,
+)
+
+__all__ = ["SCXML_NS", "STATECTL_NS", "read_scxml", "read_scxml_file"]
+
+SCXML_NS = "http://www.w3.org/2005/07/scxml"
+#: Device-table facts SCXML has no word for (controls, notifications) live here.
+STATECTL_NS = "urn:statectl:scxml"
+_SEP = "}"
+
+
+@dataclass(slots=True)
+class _Node:
+    """A parsed element: namespace, local name, attributes, children, text, line."""
+
+    ns: str
+    tag: str
+    attrs: dict[str, str]
+    line: int
+    children: list[_Node] = field(default_factory=list)
+    text: list[str] = field(default_factory=list)  # text chunks, including between children
+
+    def get(self, name: str) -> str | None:
+        return self.attrs.get(name)
+
+    @property
+    def content_text(self) -> str:
+        return "".join(self.text)
+
+    def scxml_children(self, *tags: str) -> list[_Node]:
+        return [c for c in self.children if c.ns == SCXML_NS and (not tags or c.tag in tags)]
+
+
+def _parse_xml(text: str, file: str) -> tuple[_Node | None, list[Diagnostic]]:
+    parser = expat.ParserCreate(namespace_separator=_SEP)
+    stack: list[_Node] = []
+    root: list[_Node] = []
+
+    def split(name: str) -> tuple[str, str]:
+        if _SEP in name:
+            ns, local = name.split(_SEP, 1)
+            return ns, local
+        return "", name
+
+    def start(name: str, attrs: dict[str, str]) -> None:
+        ns, local = split(name)
+        plain = {split(k)[1]: v for k, v in attrs.items()}
+        node = _Node(ns, local, plain, parser.CurrentLineNumber)
+        if stack:
+            stack[-1].children.append(node)
+        else:
+            root.append(node)
+        stack.append(node)
+
+    def end(name: str) -> None:
+        stack.pop()
+
+    def chars(data: str) -> None:
+        if stack:
+            stack[-1].text.append(data)
+
+    parser.StartElementHandler = start
+    parser.EndElementHandler = end
+    parser.CharacterDataHandler = chars
+    try:
+        parser.Parse(text.encode("utf-8"), True)
+    except expat.ExpatError as exc:
+        where = Location(file, exc.lineno)
+        return None, [
+            Diagnostic(
+                "S601",
+                Severity.ERROR,
+                where,
+                f"the document is not well-formed XML: {expat.errors.messages[exc.code]}",
+                "fix the XML syntax at that line (unclosed tag, stray '<' or '&')",
+            )
+        ]
+    return root[0], []
+
+
+def serialise(node: _Node, parent_ns: str | None = None) -> str:
+    """Write a parsed element back as XML text (for inline ``<content>``)."""
+    from xml.sax.saxutils import escape, quoteattr
+
+    attrs = "".join(f" {k}={quoteattr(v)}" for k, v in node.attrs.items())
+    if node.ns != parent_ns and node.ns:
+        attrs = f" xmlns={quoteattr(node.ns)}" + attrs
+    inner = escape("".join(node.text)) + "".join(serialise(c, node.ns) for c in node.children)
+    return f"<{node.tag}{attrs}>{inner}</{node.tag}>"
+
+
+class _Reader:
+    def __init__(self, file: str, base: Path) -> None:
+        self.file = file
+        self.base = base
+        self.diagnostics: list[Diagnostic] = []
+        self.states: list[State] = []
+        self.transitions: list[Transition] = []
+        self.ids: set[str] = set()
+        self.generated = 0
+        self.references: list[tuple[str, tuple[str, ...], Location]] = []  # initial/default
+
+    def at(self, node: _Node) -> Location:
+        return Location(self.file, node.line)
+
+    def problem(
+        self, code: str, node: _Node, message: str, hint: str, *, warn: bool = False
+    ) -> None:
+        severity = Severity.WARNING if warn else Severity.ERROR
+        self.diagnostics.append(Diagnostic(code, severity, self.at(node), message, hint))
+
+    def need(self, node: _Node, attr: str) -> str:
+        value = node.get(attr)
+        if value is None:
+            self.problem(
+                "S603",
+                node,
+                f"<{node.tag}> has no '{attr}' attribute",
+                f'add {attr}="..." to the <{node.tag}> element',
+            )
+            return ""
+        return value
+
+    # -- executable content -------------------------------------------------------------------
+
+    def content_of(self, node: _Node | None) -> Content | None:
+        if node is None:
+            return None
+        elements = [c for c in node.children]
+        body: str | None
+        if elements:
+            body = "".join(serialise(c) for c in elements)
+        else:
+            text = node.content_text
+            body = text if text.strip() or node.get("expr") is None else None
+        if node.get("expr") is not None:
+            body = None
+        return Content(node.get("expr"), body, self.at(node))
+
+    def params_of(self, node: _Node) -> tuple[Param, ...]:
+        return tuple(
+            Param(self.need(p, "name"), p.get("expr"), p.get("location"), self.at(p))
+            for p in node.scxml_children("param")
+        )
+
+    def executable(self, node: _Node) -> tuple[Action, ...]:
+        out: list[Action] = []
+        for c in node.children:
+            if c.ns == STATECTL_NS and c.tag == "notify":
+                out.append(self.notify(c))
+                continue
+            if c.ns != SCXML_NS:
+                continue
+            action = self.action(c)
+            if action is not None:
+                out.append(action)
+        return tuple(out)
+
+    def notify(self, c: _Node) -> Notify:
+        number = c.get("invoke") or "0"
+        if not number.isdigit():
+            self.problem("S603", c, f"notify invoke {number!r} is not a number", "use 0, 1, ...")
+            number = "0"
+        return Notify(int(number), c.get("name") or "", c.get("method") or "", c.get("event") or "")
+
+    def action(self, c: _Node) -> Action | None:
+        at = self.at(c)
+        tag = c.tag
+        if tag == "raise":
+            return Raise(self.need(c, "event"))
+        if tag == "log":
+            return Log(c.get("label") or "", c.get("message") or "", c.get("expr"), at)
+        if tag == "assign":
+            body = (
+                None
+                if c.get("expr") is not None
+                else ("".join(serialise(x) for x in c.children) or c.content_text)
+            )
+            return Assign(self.need(c, "location"), c.get("expr"), body, at)
+        if tag == "script":
+            return Script(self.script_source(c), at)
+        if tag == "if":
+            return self.if_action(c)
+        if tag == "foreach":
+            return Foreach(
+                self.need(c, "array"), self.need(c, "item"), c.get("index"), self.executable(c), at
+            )
+        if tag == "send":
+            content = c.scxml_children("content")
+            return Send(
+                event=c.get("event"),
+                eventexpr=c.get("eventexpr"),
+                target=c.get("target"),
+                targetexpr=c.get("targetexpr"),
+                type=c.get("type"),
+                typeexpr=c.get("typeexpr"),
+                id=c.get("id"),
+                idlocation=c.get("idlocation"),
+                delay=c.get("delay"),
+                delayexpr=c.get("delayexpr"),
+                namelist=tuple((c.get("namelist") or "").split()),
+                params=self.params_of(c),
+                content=self.content_of(content[0] if content else None),
+                origin=at,
+            )
+        if tag == "cancel":
+            return Cancel(c.get("sendid"), c.get("sendidexpr"), at)
+        self.problem(
+            "S606",
+            c,
+            f"<{tag}> is not executable content; it was skipped",
+            "use raise, log, assign, script, if, foreach, send or cancel",
+            warn=True,
+        )
+        return None
+
+    def if_action(self, c: _Node) -> If:
+        branches: list[tuple[str | None, tuple[Action, ...]]] = []
+        cond: str | None = self.need(c, "cond")
+        current: list[Action] = []
+        for x in c.children:
+            if x.ns != SCXML_NS:
+                continue
+            if x.tag in ("elseif", "else"):
+                branches.append((cond, tuple(current)))
+                cond = self.need(x, "cond") if x.tag == "elseif" else None
+                current = []
+                continue
+            action = self.action(x)
+            if action is not None:
+                current.append(action)
+        branches.append((cond, tuple(current)))
+        return If(tuple(branches), self.at(c))
+
+    def script_source(self, c: _Node) -> str:
+        src = c.get("src")
+        if src is None:
+            return c.content_text
+        text = self.read_src(c, src)
+        return text or ""
+
+    def read_src(self, node: _Node, src: str) -> str | None:
+        path = self.base / src.removeprefix("file:")
+        try:
+            return path.read_text(encoding="utf-8")
+        except OSError as exc:
+            self.problem("S607", node, f"cannot read src {src!r}: {exc.strerror}", "check the path")
+            return None
+
+    def handlers(self, node: _Node, tag: str) -> tuple[Action, ...]:
+        blocks = [self.executable(h) for h in node.scxml_children(tag)]
+        if len(blocks) == 1:
+            return blocks[0]
+        return tuple(Block(b) for b in blocks)
+
+    def data_items(self, node: _Node) -> tuple[DataItem, ...]:
+        items: list[DataItem] = []
+        for dm in node.scxml_children("datamodel"):
+            for d in dm.scxml_children("data"):
+                body: str | None = None
+                if d.get("expr") is None and d.get("src") is None:
+                    body = "".join(serialise(x) for x in d.children) or d.content_text
+                    body = body if body.strip() else None
+                items.append(
+                    DataItem(self.need(d, "id"), d.get("expr"), self.at(d), d.get("src"), body)
+                )
+        return tuple(items)
+
+    def invoke_def(self, c: _Node) -> InvokeDef:
+        content = c.scxml_children("content")
+        finalize = c.scxml_children("finalize")
+        return InvokeDef(
+            type=c.get("type"),
+            typeexpr=c.get("typeexpr"),
+            src=c.get("src"),
+            srcexpr=c.get("srcexpr"),
+            id=c.get("id"),
+            idlocation=c.get("idlocation"),
+            namelist=tuple((c.get("namelist") or "").split()),
+            autoforward=(c.get("autoforward") or "false").strip() == "true",
+            params=self.params_of(c),
+            content=self.content_of(content[0] if content else None),
+            finalize=self.executable(finalize[0]) if finalize else (),
+            origin=self.at(c),
+        )
+
+    # -- states -------------------------------------------------------------------------------
+
+    def state_id(self, node: _Node) -> str:
+        sid = node.get("id")
+        if sid is None:
+            self.generated += 1
+            return f"_state{self.generated}"
+        if sid in self.ids:
+            self.problem(
+                "S604", node, f"state id {sid!r} is used twice", "give every state a unique id"
+            )
+        self.ids.add(sid)
+        return sid
+
+    def controls(self, node: _Node) -> frozenset[ControlKind]:
+        found: set[ControlKind] = set()
+        for word in (node.get("controls") or "").split():
+            try:
+                found.add(ControlKind(word.replace("-", " ")))
+            except ValueError:
+                self.problem(
+                    "S603",
+                    node,
+                    f"unknown state control {word!r}",
+                    "use default, monitoring-required or event-trigger-required",
+                    warn=True,
+                )
+        return frozenset(found)
+
+    def transition(self, source: str, t: _Node) -> Transition:
+        return Transition(
+            source=source,
+            events=tuple((t.get("event") or "").split()),
+            targets=tuple((t.get("target") or "").split()),
+            guard=t.get("cond"),
+            condition=t.get("condition") or "",
+            internal=(t.get("type") or "external") == "internal",
+            actions=self.executable(t),
+            origin=self.at(t),
+        )
+
+    def state(self, node: _Node, parent: str | None) -> None:
+        tag = node.tag
+        name = self.state_id(node)
+        index = len(self.states)
+        self.states.append(State(name))  # placeholder keeps document order
+        children = [c for c in node.scxml_children("state", "parallel", "final", "history")]
+        initial: tuple[str, ...] = tuple((node.get("initial") or "").split())
+        initial_actions: tuple[Action, ...] = ()
+        for init in node.scxml_children("initial"):
+            ts = init.scxml_children("transition")
+            if ts:
+                initial = tuple((ts[0].get("target") or "").split())
+                initial_actions = self.executable(ts[0])
+        self.references.append((name, initial, self.at(node)))
+        history_default: tuple[str, ...] = ()
+        history_actions: tuple[Action, ...] = ()
+        if tag == "state":
+            kind = StateKind.COMPOUND if children else StateKind.ATOMIC
+        elif tag == "parallel":
+            kind = StateKind.PARALLEL
+        elif tag == "final":
+            kind = StateKind.FINAL
+        else:
+            deep = (node.get("type") or "shallow") == "deep"
+            kind = StateKind.HISTORY_DEEP if deep else StateKind.HISTORY_SHALLOW
+            ts = node.scxml_children("transition")
+            if ts:
+                history_default = tuple((ts[0].get("target") or "").split())
+                history_actions = self.executable(ts[0])
+        donedata = None
+        if tag == "final":
+            for dd in node.scxml_children("donedata"):
+                content = dd.scxml_children("content")
+                donedata = DoneData(
+                    self.params_of(dd), self.content_of(content[0] if content else None)
+                )
+        if tag != "history":
+            for t in node.scxml_children("transition"):
+                self.transitions.append(self.transition(name, t))
+        self.states[index] = State(
+            name,
+            kind,
+            parent,
+            initial if kind is StateKind.COMPOUND else (),
+            on_entry=self.handlers(node, "onentry"),
+            on_exit=self.handlers(node, "onexit"),
+            history_default=history_default,
+            controls=self.controls(node),
+            description=node.get("description") or "",
+            component=node.get("component") or "",
+            origin=self.at(node),
+            initial_actions=initial_actions,
+            history_actions=history_actions,
+            data=self.data_items(node),
+            invokes=tuple(self.invoke_def(i) for i in node.scxml_children("invoke")),
+            donedata=donedata,
+        )
+        for c in children:
+            self.state(c, name)
+
+    def check_targets(self, chart: Chart) -> None:
+        known = {s.name for s in chart.states}
+        for t in chart.transitions:
+            for x in t.targets:
+                if x not in known:
+                    self.diagnostics.append(
+                        Diagnostic(
+                            "S605",
+                            Severity.ERROR,
+                            t.origin,
+                            f"transition from {t.source!r} targets unknown state {x!r}",
+                            "known states: " + ", ".join(sorted(known)),
+                        )
+                    )
+        references = [
+            *self.references,
+            *((s.name, s.history_default, s.origin) for s in chart.states),
+        ]
+        for name, targets, origin in references:
+            for x in targets:
+                if x not in known:
+                    self.diagnostics.append(
+                        Diagnostic(
+                            "S605",
+                            Severity.ERROR,
+                            origin,
+                            f"state {name!r} names unknown initial/default state {x!r}",
+                            "known states: " + ", ".join(sorted(known)),
+                        )
+                    )
+        for x in chart.initial:
+            if x not in known:
+                self.diagnostics.append(
+                    Diagnostic(
+                        "S605",
+                        Severity.ERROR,
+                        chart.origin,
+                        f"<scxml initial> names unknown state {x!r}",
+                        "known states: " + ", ".join(sorted(known)),
+                    )
+                )
+
+    def chart(self, root: _Node, default_name: str) -> Chart:
+        scripts = tuple(
+            Script(self.script_source(s), self.at(s)) for s in root.scxml_children("script")
+        )
+        for c in root.scxml_children("state", "parallel", "final"):
+            self.state(c, None)
+        chart = Chart(
+            name=root.get("name") or default_name,
+            states=tuple(self.states),
+            transitions=tuple(self.transitions),
+            initial=tuple((root.get("initial") or "").split()),
+            data=self.data_items(root),
+            datamodel=root.get("datamodel") or "null",
+            origin=self.at(root),
+            binding=root.get("binding") or "early",
+            script=scripts,
+        )
+        self.check_targets(chart)
+        return chart
+
+
+def read_scxml(
+    text: str, file: str = "<memory>", base: str | None = None
+) -> tuple[Chart | None, list[Diagnostic]]:
+    """Parse SCXML text; return the chart (``None`` on errors) and every diagnostic."""
+    root, diagnostics = _parse_xml(text, file)
+    if root is None:
+        return None, diagnostics
+    if root.ns != SCXML_NS or root.tag != "scxml":
+        return None, [
+            Diagnostic(
+                "S602",
+                Severity.ERROR,
+                Location(file, root.line),
+                f"the root element is <{root.tag}>, not <scxml> in the SCXML namespace",
+                f'start the document with <scxml xmlns="{SCXML_NS}" version="1.0">',
+            )
+        ]
+    reader = _Reader(file, Path(base) if base is not None else Path(os.getcwd()))
+    stem = Path(file).stem if file != "<memory>" else "scxml"
+    chart = reader.chart(root, stem)
+    diagnostics = reader.diagnostics
+    if any(d.severity is Severity.ERROR for d in diagnostics):
+        return None, diagnostics
+    return chart, diagnostics
+
+
+def read_scxml_file(path: str) -> Chart:
+    """Read a file; raise :class:`DiagnosticError` with every problem if it has errors."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise DiagnosticError(
+            [
+                Diagnostic(
+                    "S607",
+                    Severity.ERROR,
+                    Location(path),
+                    f"cannot read: {exc.strerror}",
+                    "check the path",
+                )
+            ]
+        ) from exc
+    chart, diagnostics = read_scxml(text, path, str(Path(path).parent))
+    if chart is None:
+        raise DiagnosticError(diagnostics)
+    return chart

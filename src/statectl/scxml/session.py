@@ -1,0 +1,631 @@
+"""The SCXML interpreter: sessions, queues, ``<send>`` on a clock, ``<invoke>``.
+
+The W3C algorithm itself lives in :mod:`statectl.semantics`; a session drives it
+microstep by microstep and performs the executable content it hands over. Rules:
+
+1. A :class:`Session` owns one datamodel, one :class:`~statectl.semantics.Run`
+   (configuration and internal queue) and one external queue. It follows the
+   spec's ``mainEventLoop``: settle (eventless, then internal events), start the
+   invokes of states entered and still active, and only then take one external
+   event, applying ``<finalize>`` and autoforward first.
+2. Errors in executable content end the block and put ``error.execution`` on the
+   internal queue at once; an undeliverable send puts ``error.communication``.
+3. A :class:`Scheduler` runs every session of a document (parent and invoked
+   children) in one thread, round-robin until all are idle, then advances the
+   :class:`Clock` to the next delayed send. A :class:`SimulatedClock` makes a
+   timed run deterministic and instant; :class:`RealClock` really waits.
+4. Send targets: none (own external queue), ``#_internal``, ``#_parent``,
+   ``#_<invokeid>``, ``#_scxml_<sessionid>``; other targets are
+   ``error.execution``, unreachable sessions ``error.communication``.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import re
+import time
+import uuid
+from collections import deque
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Protocol
+
+from statectl.model import (
+    Action,
+    Assign,
+    Block,
+    Cancel,
+    Chart,
+    Content,
+    Foreach,
+    If,
+    InvokeDef,
+    Log,
+    Param,
+    Raise,
+    Script,
+    Send,
+    State,
+    Transition,
+)
+from statectl.scxml.datamodel import (
+    Datamodel,
+    EvaluationError,
+    inline_value,
+    make_datamodel,
+)
+from statectl.scxml.reader import read_scxml
+from statectl.semantics import (
+    Event,
+    Machine,
+    Microstep,
+    Run,
+    enter_initial_states,
+    exit_interpreter,
+    macrostep,
+    process_event,
+)
+
+__all__ = ["SCXML_IO", "Clock", "RealClock", "Scheduler", "Session", "SimulatedClock"]
+
+SCXML_IO = "http://www.w3.org/TR/scxml/#SCXMLEventProcessor"
+SCXML_INVOKE = "http://www.w3.org/TR/scxml/"
+_SCXML_TYPES = frozenset({SCXML_IO, "scxml"})
+_INVOKE_TYPES = frozenset({SCXML_INVOKE, SCXML_INVOKE.rstrip("/"), "scxml"})
+
+
+class Clock(Protocol):
+    def now(self) -> float: ...
+    def sleep_until(self, when: float) -> None: ...
+
+
+class RealClock:
+    """Wall-clock time; ``sleep_until`` really sleeps."""
+
+    def now(self) -> float:
+        return time.monotonic()
+
+    def sleep_until(self, when: float) -> None:
+        delay = when - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+
+
+class SimulatedClock:
+    """Time that moves only when the scheduler waits: timed runs are deterministic."""
+
+    def __init__(self, start: float = 0.0) -> None:
+        self.time = start
+
+    def now(self) -> float:
+        return self.time
+
+    def sleep_until(self, when: float) -> None:
+        self.time = max(self.time, when)
+
+
+class EventData(dict[str, Any]):
+    """``_event.data`` from ``<param>``/``namelist``: a dict that also reads as attributes."""
+
+    def __getattr__(self, name: str) -> Any:
+        try:
+            return self[name]
+        except KeyError as exc:
+            raise AttributeError(name) from exc
+
+
+class SendError(EvaluationError):
+    """A send that cannot be dispatched: ends the block with ``event`` carrying the sendid."""
+
+    def __init__(self, message: str, event: str, sendid: str) -> None:
+        super().__init__(message)
+        self.event = event
+        self.sendid = sendid
+
+
+@dataclass(frozen=True, slots=True)
+class IOProcessor:
+    location: str
+
+
+_DELAY = re.compile(r"^\s*(\d+(?:\.\d*)?|\.\d+)\s*(ms|s|min|h)?\s*$")
+
+
+def parse_delay(text: str) -> float:
+    """A CSS2 time (``'2s'``, ``'500ms'``) in seconds."""
+    match = _DELAY.match(text)
+    if match is None:
+        raise EvaluationError(f"delay {text!r} is not a time such as '1s' or '500ms'")
+    unit = match.group(2) or "s"
+    return float(match.group(1)) * {"ms": 0.001, "s": 1.0, "min": 60.0, "h": 3600.0}[unit]
+
+
+@dataclass(order=True, slots=True)
+class _Timer:
+    due: float
+    seq: int
+    session: Session = field(compare=False)
+    sendid: str = field(compare=False)
+    deliver: Callable[[], None] = field(compare=False)
+    cancelled: bool = field(default=False, compare=False)
+
+
+class Scheduler:
+    """Runs sessions round-robin in one thread and fires delayed sends from a clock."""
+
+    def __init__(
+        self,
+        clock: Clock | None = None,
+        log: Callable[[str], None] | None = None,
+        trace: Callable[[str], None] | None = None,
+    ) -> None:
+        self.clock: Clock = clock or SimulatedClock()
+        self.log = log or (lambda text: None)  # what <log> writes
+        self.trace = trace or (lambda text: None)  # why an error event was raised
+        self.sessions: dict[str, Session] = {}
+        self.timers: list[_Timer] = []
+        self._seq = itertools.count()
+
+    def add_timer(
+        self, session: Session, delay: float, sendid: str, deliver: Callable[[], None]
+    ) -> None:
+        heapq.heappush(
+            self.timers, _Timer(self.clock.now() + delay, next(self._seq), session, sendid, deliver)
+        )
+
+    def cancel_timers(self, session: Session, sendid: str) -> None:
+        for t in self.timers:
+            if t.session is session and t.sendid == sendid:
+                t.cancelled = True
+
+    def run_ready(self) -> bool:
+        """Let every session with work do it; return whether any did."""
+        progressed = False
+        busy = True
+        while busy:
+            busy = False
+            for s in list(self.sessions.values()):
+                if s.ready:
+                    s.run_available()
+                    busy = progressed = True
+        return progressed
+
+    def run(self, root: Session, deadline: float | None = None) -> str | None:
+        """Run until ``root`` stops or nothing can happen before ``deadline`` (clock time)."""
+        while True:
+            self.run_ready()
+            if not root.running:
+                return root.final_state
+            while self.timers and self.timers[0].cancelled:
+                heapq.heappop(self.timers)
+            if not self.timers:
+                return None
+            due = self.timers[0].due
+            if deadline is not None and due > deadline:
+                self.clock.sleep_until(deadline)
+                return None
+            self.clock.sleep_until(due)
+            while self.timers and self.timers[0].due <= self.clock.now():
+                timer = heapq.heappop(self.timers)
+                if not timer.cancelled and timer.session.running:
+                    timer.deliver()
+
+
+class Session:
+    """One running SCXML document; the :class:`~statectl.semantics.Executor` of its run."""
+
+    def __init__(
+        self,
+        chart: Chart,
+        scheduler: Scheduler,
+        *,
+        base: Path | None = None,
+        parent: Session | None = None,
+        invokeid: str = "",
+        initial_data: Mapping[str, Any] | None = None,
+    ) -> None:
+        self.chart = chart
+        self.machine = Machine(chart)
+        self.scheduler = scheduler
+        self.base = base or Path.cwd()
+        self.parent = parent
+        self.invokeid = invokeid
+        self.sessionid = uuid.uuid4().hex
+        self.run = Run(set(), {}, None, {}, executor=self)
+        self.datamodel: Datamodel = make_datamodel(chart.datamodel, self.run.active.__contains__)
+        self.external: deque[Event] = deque()
+        self.running = True
+        self.started = False
+        self.final_state: str | None = None
+        self.microsteps: list[Microstep] = []
+        self.to_invoke: list[str] = []
+        self.invocations: dict[str, tuple[str, InvokeDef, Session | None]] = {}  # id -> state
+        self.bound: set[str] = set()
+        self.initial_data = dict(initial_data or {})
+        self._ids = itertools.count(1)
+        scheduler.sessions[self.sessionid] = self
+
+    # -- the queues -----------------------------------------------------------------------------
+
+    @property
+    def ready(self) -> bool:
+        return self.running and (not self.started or bool(self.external))
+
+    @property
+    def origin(self) -> str:
+        return "#_scxml_" + self.sessionid
+
+    def post(self, event: Event) -> None:
+        """Append an external event (from a send, a child, a parent or the host)."""
+        if self.running:
+            self.external.append(event)
+
+    def error(self, name: str, sendid: str = "", data: Any = None) -> None:
+        self.run.raise_event(Event(name, data, "platform", sendid))
+
+    # -- the main loop --------------------------------------------------------------------------
+
+    def start(self) -> None:
+        """``interpret``: bind data, run the top-level script, enter the initial states."""
+        self.started = True
+        dm = self.datamodel
+        dm.set_system("_sessionid", self.sessionid)
+        dm.set_system("_name", self.chart.name)
+        location = IOProcessor(self.origin)
+        dm.set_system("_ioprocessors", {SCXML_IO: location, "scxml": location})
+        dm.set_system("_event", None)
+        late = self.chart.binding == "late"
+        for item in self.chart.data:
+            self.bind(item.name, item.expr, item.src, item.body)
+        for s in self.chart.states:
+            for item in s.data:
+                if late:
+                    dm.declare(item.name, None)
+                else:
+                    self.bind(item.name, item.expr, item.src, item.body)
+        if not late:
+            self.bound.update(s.name for s in self.chart.states)
+        for script in self.chart.script:
+            self.execute(self.run, (script,))
+        self.microsteps.append(enter_initial_states(self.machine, self.run))
+        self.settle()
+
+    def bind(self, name: str, expr: str | None, src: str | None, body: str | None) -> None:
+        dm = self.datamodel
+        if name in self.initial_data:
+            dm.declare(name, self.initial_data[name])
+            return
+        dm.declare(name, None)
+        try:
+            if expr is not None:
+                dm.declare(name, dm.evaluate(expr))
+            elif src is not None:
+                path = self.base / src.removeprefix("file:")
+                dm.declare(name, inline_value(path.read_text(encoding="utf-8")))
+            elif body is not None:
+                dm.declare(name, inline_value(body))
+        except (EvaluationError, OSError):
+            self.error("error.execution")
+
+    def settle(self) -> None:
+        """The inner loop of ``mainEventLoop``, then the invokes it made due."""
+        while self.running:
+            macrostep(self.machine, self.run, self.microsteps)
+            if self.run.final:
+                self.finish()
+                return
+            states = sorted(set(self.to_invoke), key=self.machine.order.__getitem__)
+            self.to_invoke.clear()
+            for name in states:
+                for definition in self.chart.states[self.machine.order[name]].invokes:
+                    self.invoke(name, definition)
+            if not self.run.internal:
+                return
+
+    def run_available(self) -> None:
+        """Process every queued external event, each to completion."""
+        if not self.started:
+            self.start()
+        while self.running and self.external:
+            event = self.external.popleft()
+            self.datamodel.set_system("_event", event)
+            self.run.current = event
+            entry = self.invocations.get(event.invokeid) if event.invokeid else None
+            if entry is not None and entry[1].finalize:
+                self.execute(self.run, entry[1].finalize)
+            for _state, definition, child in list(self.invocations.values()):
+                if definition.autoforward and child is not None and child.running:
+                    child.post(replace(event))
+            step = process_event(self.machine, self.run, event)
+            if step is not None:
+                self.microsteps.append(step)
+            self.settle()
+
+    def finish(self) -> None:
+        """``exitInterpreter``: exit every state; tell the parent with ``done.invoke``."""
+        final = self.run.final_state
+        data = None
+        if final is not None:
+            data = self.done_data(self.run, self.chart.states[self.machine.order[final]])
+        exit_interpreter(self.machine, self.run)
+        self.running = False
+        self.final_state = final
+        if self.parent is not None and final is not None:
+            self.parent.post(
+                Event(
+                    f"done.invoke.{self.invokeid}",
+                    data,
+                    "external",
+                    "",
+                    self.origin,
+                    SCXML_IO,
+                    self.invokeid,
+                )
+            )
+
+    def cancel(self) -> None:
+        """Stop an invoked session its parent no longer wants (no ``done.invoke``)."""
+        if self.running:
+            self.running = False
+            for _s, _d, child in self.invocations.values():
+                if child is not None:
+                    child.cancel()
+        self.scheduler.sessions.pop(self.sessionid, None)
+
+    # -- the Executor protocol ------------------------------------------------------------------
+
+    def _bind_event(self, run: Run) -> None:
+        self.datamodel.set_system("_event", run.current)
+
+    def condition(self, run: Run, transition: Transition) -> bool:
+        assert transition.guard is not None
+        self._bind_event(run)
+        try:
+            return self.datamodel.condition(transition.guard)
+        except EvaluationError:
+            self.error("error.execution")
+            return False
+
+    def state_entered(self, run: Run, state: State) -> None:
+        self.to_invoke.append(state.name)
+        if state.name not in self.bound:
+            self.bound.add(state.name)
+            for item in state.data:
+                self.bind(item.name, item.expr, item.src, item.body)
+
+    def state_exited(self, run: Run, state: State) -> None:
+        if state.name in self.to_invoke:
+            self.to_invoke = [s for s in self.to_invoke if s != state.name]
+        for invokeid, (owner, _definition, child) in list(self.invocations.items()):
+            if owner == state.name:
+                del self.invocations[invokeid]
+                if child is not None:
+                    child.cancel()
+
+    def done_data(self, run: Run, state: State) -> Any:
+        dd = state.donedata
+        if dd is None:
+            return None
+        self._bind_event(run)
+        try:
+            if dd.content is not None:
+                return self.content_value(dd.content)
+            return self.params_value((), dd.params)
+        except EvaluationError:
+            self.error("error.execution")
+            return None
+
+    def execute(self, run: Run, actions: tuple[Action, ...]) -> None:
+        """Perform one block; the first error ends it with ``error.execution``."""
+        self._bind_event(run)
+        try:
+            for action in actions:
+                self.perform(action)
+        except SendError as exc:
+            self.scheduler.trace(f"{exc.event}: {exc}")
+            self.error(exc.event, exc.sendid)
+        except EvaluationError as exc:
+            self.scheduler.trace(f"error.execution: {exc}")
+            self.error("error.execution")
+
+    # -- executable content ---------------------------------------------------------------------
+
+    def perform(self, action: Action) -> None:
+        dm = self.datamodel
+        if isinstance(action, Block):
+            self.execute(self.run, action.actions)
+        elif isinstance(action, Raise):
+            self.run.raise_event(Event(action.event))
+        elif isinstance(action, Log):
+            value = dm.evaluate(action.expr) if action.expr is not None else action.message
+            text = str(value)
+            self.scheduler.log(
+                f"{action.label}: {text}" if action.label and text else action.label or text
+            )
+        elif isinstance(action, Assign):
+            if action.expr is not None:
+                value = dm.evaluate(action.expr)
+            else:
+                value = inline_value(action.body or "")
+            dm.assign(action.location, value)
+        elif isinstance(action, Script):
+            dm.run_script(action.source)
+        elif isinstance(action, If):
+            for cond, branch in action.branches:
+                if cond is None or dm.condition(cond):
+                    for a in branch:
+                        self.perform(a)
+                    break
+        elif isinstance(action, Foreach):
+            self.foreach(action)
+        elif isinstance(action, Send):
+            self.send(action)
+        elif isinstance(action, Cancel):
+            sendid = (
+                action.sendid
+                if action.sendid is not None
+                else str(dm.evaluate(action.sendidexpr or "''"))
+            )
+            self.scheduler.cancel_timers(self, sendid)
+
+    def foreach(self, action: Foreach) -> None:
+        dm = self.datamodel
+        array = dm.evaluate(action.array)
+        try:
+            items = list(array)
+        except TypeError as exc:
+            raise EvaluationError(f"foreach array {action.array!r} is not iterable") from exc
+        for name in (action.item, action.index):
+            if name is not None and not name.strip().isidentifier():
+                raise EvaluationError(f"foreach item/index {name!r} is not a variable name")
+        for i, item in enumerate(items):
+            self.declare_or_assign(action.item, item)
+            if action.index is not None:
+                self.declare_or_assign(action.index, i)
+            for a in action.actions:
+                self.perform(a)
+
+    def declare_or_assign(self, name: str, value: Any) -> None:
+        if self.datamodel.declared(name.strip()):
+            self.datamodel.assign(name, value)
+        else:
+            self.datamodel.declare(name.strip(), value)
+
+    def content_value(self, content: Content) -> Any:
+        if content.expr is not None:
+            return self.datamodel.evaluate(content.expr)
+        return inline_value(content.body or "")
+
+    def params_value(self, namelist: Iterable[str], params: Iterable[Param]) -> EventData:
+        dm = self.datamodel
+        data = EventData()
+        for name in namelist:
+            if not dm.is_location(name):
+                raise EvaluationError(f"namelist entry {name!r} is not a declared location")
+            data[name] = dm.evaluate(name)
+        for p in params:
+            if p.expr is not None:
+                data[p.name] = dm.evaluate(p.expr)
+            elif p.location is not None:
+                if not dm.is_location(p.location):
+                    raise EvaluationError(f"param location {p.location!r} is not declared")
+                data[p.name] = dm.evaluate(p.location)
+        return data
+
+    def new_id(self, prefix: str) -> str:
+        return f"{prefix}.{self.sessionid[:8]}.{next(self._ids)}"
+
+    def send(self, s: Send) -> None:
+        dm = self.datamodel
+        sendid = s.id or ""
+        if s.idlocation is not None:
+            sendid = self.new_id("send")
+            dm.assign(s.idlocation, sendid)
+        name = s.event if s.eventexpr is None else str(dm.evaluate(s.eventexpr))
+        target = s.target if s.targetexpr is None else str(dm.evaluate(s.targetexpr))
+        kind = s.type if s.typeexpr is None else str(dm.evaluate(s.typeexpr))
+        delay = 0.0
+        if s.delayexpr is not None:
+            delay = parse_delay(str(dm.evaluate(s.delayexpr)))
+        elif s.delay is not None:
+            delay = parse_delay(s.delay)
+        if s.content is not None:
+            data: Any = self.content_value(s.content)
+        elif s.namelist or s.params:
+            data = self.params_value(s.namelist, s.params)
+        else:
+            data = None
+        if kind is not None and kind not in _SCXML_TYPES:
+            raise EvaluationError(f"send type {kind!r} is not supported")
+        if name is None:
+            raise EvaluationError("<send> names no event")
+        event = Event(
+            name,
+            data,
+            "external",
+            sendid,
+            self.origin,
+            SCXML_IO,
+            self.invokeid if target == "#_parent" else "",
+        )
+        deliver = self.route(target, event, sendid)
+        if deliver is None:
+            return
+        if delay > 0:
+            self.scheduler.add_timer(self, delay, sendid, deliver)
+        else:
+            deliver()
+
+    def route(self, target: str | None, event: Event, sendid: str) -> Callable[[], None] | None:
+        """Where a send goes, as a function that delivers it; errors are raised here."""
+        if target is None or target == "":
+            return lambda: self.post(event)
+        if target == "#_internal":
+            return lambda: self.run.raise_event(replace(event, type="internal"))
+        if target == "#_parent":
+            parent = self.parent
+            if parent is None:
+                self.error("error.communication", sendid)
+                return None
+            return lambda: parent.post(event)
+        if target.startswith("#_scxml_"):
+            other = self.scheduler.sessions.get(target.removeprefix("#_scxml_"))
+            if other is None:
+                self.error("error.communication", sendid)
+                return None
+            return lambda: other.post(event)
+        if target.startswith("#_"):
+            invokeid = target.removeprefix("#_")
+
+            def to_child() -> None:
+                entry = self.invocations.get(invokeid)
+                if entry is None or entry[2] is None or not entry[2].running:
+                    self.error("error.communication", sendid)
+                    return
+                entry[2].post(event)
+
+            if invokeid not in self.invocations:
+                self.error("error.communication", sendid)
+                return None
+            return to_child
+        raise SendError(f"send target {target!r} is not supported", "error.execution", sendid)
+
+    # -- invoke ---------------------------------------------------------------------------------
+
+    def invoke(self, state: str, d: InvokeDef) -> None:
+        dm = self.datamodel
+        invokeid = d.id or f"{state}.{self.new_id('invoke')}"
+        try:
+            if d.idlocation is not None:
+                dm.assign(d.idlocation, invokeid)
+            kind = d.type if d.typeexpr is None else str(dm.evaluate(d.typeexpr))
+            if kind is not None and kind not in _INVOKE_TYPES:
+                raise EvaluationError(f"invoke type {kind!r} is not supported")
+            if d.content is not None:
+                text = self.content_value(d.content)
+                base = self.base
+            else:
+                src = d.src if d.srcexpr is None else str(dm.evaluate(d.srcexpr))
+                if src is None:
+                    raise EvaluationError("<invoke> has neither src, srcexpr nor content")
+                path = self.base / src.removeprefix("file:")
+                text = path.read_text(encoding="utf-8")
+                base = path.parent
+            values = self.params_value(d.namelist, d.params)
+        except (EvaluationError, OSError) as exc:
+            self.scheduler.trace(f"invoke failed: {exc}")
+            self.error("error.execution")
+            return
+        if not isinstance(text, str):
+            self.error("error.execution")
+            return
+        chart, _diagnostics = read_scxml(text, f"<invoke {invokeid}>", str(base))
+        if chart is None:
+            self.error("error.execution")
+            return
+        child = Session(
+            chart, self.scheduler, base=base, parent=self, invokeid=invokeid, initial_data=values
+        )
+        self.invocations[invokeid] = (state, d, child)
