@@ -26,6 +26,12 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     "scxml": ("errors", "model", "expr", "semantics", "observers", "runtime"),
     "runtime": ("errors", "model", "expr", "semantics", "observers"),
     "devices": ("errors", "model", "observers", "runtime"),
+    "codegen": ("errors", "model", "expr", "semantics", "observers", "tables", "build"),
+    "cell": ("errors", "model", "expr", "semantics", "observers", "tables", "build"),
+    "explore": (
+        "errors", "model", "expr", "semantics", "observers", "tables", "build", "cell",
+        "runtime", "devices",
+    ),
 }
 THIRD_PARTY_FREE = (*KERNEL, "observers")
 

@@ -1,0 +1,528 @@
+"""The paper's two tables in memory, and the rules every file format shares.
+
+Rules:
+1. A device file holds a device name, a State Definition table, an Event
+   Definition table and optional data (name -> literal initial value).
+2. Columns are those of ``examples/motor/motor.yaml``: states ``component, api,
+   state, control, description, ignore, parent``; events ``event, condition,
+   guard, old, new, kind, api, invoke``. Required: ``state`` in states and
+   ``event``, ``old``, ``new`` in events. Column names are read leniently (case,
+   spaces, ``_``, and the paper's long names such as "old state").
+3. Every cell is text with its surrounding whitespace stripped; empty means absent.
+4. ``control`` and ``ignore`` are lists: a YAML list or one comma-separated cell,
+   so an event name never contains a comma (T111). ``control`` values are read
+   leniently; ``kind`` defaults to ``command``.
+5. Data values are YAML literals: null, booleans, numbers, strings and lists of
+   them (kept as tuples so the tables stay hashable values).
+6. Format readers turn a file into :class:`RawTable` values (cells with their
+   locations); :func:`make_tables` turns those into :class:`DeviceTables` and
+   reports every problem as a T1xx diagnostic, never stopping at the first.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+
+import yaml
+
+from statectl.errors import Diagnostic, Location, Severity
+from statectl.model import ControlKind, EventKind
+
+__all__ = [
+    "CODES",
+    "DATA_COLUMNS",
+    "EVENT_COLUMNS",
+    "NOWHERE",
+    "STATE_COLUMNS",
+    "Bad",
+    "DeviceTables",
+    "EventRow",
+    "RawRow",
+    "RawTable",
+    "StateRow",
+    "check_header",
+    "diag",
+    "format_literal",
+    "make_tables",
+    "parse_literal",
+    "strip_locations",
+    "validate_for_writing",
+]
+
+NOWHERE = Location()
+
+STATE_COLUMNS = ("component", "api", "state", "control", "description", "ignore", "parent")
+EVENT_COLUMNS = ("event", "condition", "guard", "old", "new", "kind", "api", "invoke")
+DATA_COLUMNS = ("name", "value")
+COLUMNS: Mapping[str, tuple[str, ...]] = {
+    "states": STATE_COLUMNS,
+    "events": EVENT_COLUMNS,
+    "data": DATA_COLUMNS,
+}
+REQUIRED: Mapping[str, tuple[str, ...]] = {
+    "states": ("state",),
+    "events": ("event", "old", "new"),
+    "data": ("name",),
+}
+#: The paper's and spreadsheet-friendly names for the columns.
+ALIASES: Mapping[str, str] = {
+    "controls": "control",
+    "required state control": "control",
+    "state control": "control",
+    "component name": "component",
+    "component name/api": "component",
+    "condition for the trigger": "condition",
+    "old state": "old",
+    "new state": "new",
+    "ignored": "ignore",
+    "ignores": "ignore",
+}
+#: Spellings accepted in the ``control`` column, after lowering and collapsing spaces.
+CONTROL_WORDS: Mapping[str, ControlKind] = {
+    "default": ControlKind.DEFAULT,
+    "monitoring required": ControlKind.MONITORING,
+    "monitoring": ControlKind.MONITORING,
+    "monitor": ControlKind.MONITORING,
+    "event trigger required": ControlKind.TRIGGER,
+    "event trigger": ControlKind.TRIGGER,
+    "trigger required": ControlKind.TRIGGER,
+    "trigger": ControlKind.TRIGGER,
+}
+
+#: Every code the tables layer reports (T109 and the B2xx codes come from build).
+CODES: Mapping[str, str] = {
+    "T101": "malformed file (YAML, CSV, XLSX or Markdown syntax)",
+    "T102": "not a device file, or the wrong top-level type",
+    "T103": "unknown column",
+    "T104": "missing required column, key or cell",
+    "T105": "empty table",
+    "T106": "bad control value",
+    "T107": "bad kind value",
+    "T108": "wrong cell type (e.g. a mapping where text is expected)",
+    "T109": "state rows for one state that contradict each other",
+    "T110": "file not found, unreadable or not writable",
+    "T111": "an event name contains a comma",
+    "T112": "bad data entry (name not an identifier, or given twice)",
+}
+
+
+@dataclass(frozen=True, slots=True)
+class StateRow:
+    """One row of the State Definition table (the paper's Table 1)."""
+
+    component: str
+    api: str
+    state: str
+    controls: tuple[ControlKind, ...]
+    description: str
+    ignore: tuple[str, ...]
+    parent: str = ""  # reserved for hierarchy: the compound state this one is in
+    where: Location = NOWHERE
+
+
+@dataclass(frozen=True, slots=True)
+class EventRow:
+    """One row of the Event Definition table (the paper's Table 2)."""
+
+    event: str
+    condition: str
+    guard: str
+    old: str
+    new: str
+    kind: EventKind
+    api: str
+    invoke: str = ""  # explicit invoke name; empty: derived (observers rule 5)
+    where: Location = NOWHERE
+
+
+@dataclass(frozen=True, slots=True)
+class DeviceTables:
+    """A device's tables as read from one file (or one CSV pair)."""
+
+    device: str
+    states: tuple[StateRow, ...]
+    events: tuple[EventRow, ...]
+    data: tuple[tuple[str, object], ...] = ()
+    source: Location = NOWHERE
+
+
+def strip_locations(tables: DeviceTables) -> DeviceTables:
+    """The same tables with every location dropped: what a lossless conversion keeps."""
+    return replace(
+        tables,
+        states=tuple(replace(s, where=NOWHERE) for s in tables.states),
+        events=tuple(replace(e, where=NOWHERE) for e in tables.events),
+        source=NOWHERE,
+    )
+
+
+# --- raw tables, as format readers deliver them ---------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Bad:
+    """A cell of the wrong type (T108): names what was found instead of text."""
+
+    found: str
+
+
+Cell = str | tuple[str, ...] | Bad
+DataValue = object
+
+
+@dataclass(frozen=True, slots=True)
+class RawRow:
+    """A row's cells by normalized column name, each with where it was found."""
+
+    where: Location
+    cells: Mapping[str, tuple[Cell, Location]] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True)
+class RawTable:
+    """A table before checking; ``rows`` of the data table carry ``name`` and ``value``."""
+
+    table: str  # "states" | "events" | "data"
+    where: Location
+    rows: tuple[RawRow, ...]
+
+
+def diag(code: str, where: Location, message: str, hint: str = "") -> Diagnostic:
+    """An error diagnostic; the tables layer only reports errors."""
+    return Diagnostic(code, Severity.ERROR, where, message, hint)
+
+
+def did_you_mean(word: str, choices: Sequence[str]) -> str:
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
+    return f"did you mean {close[0]!r}? " if close else ""
+
+
+def normalize_column(name: str) -> str:
+    key = " ".join(name.strip().lower().replace("_", " ").split())
+    return ALIASES.get(key, key)
+
+
+def unknown_column(table: str, name: str, where: Location) -> Diagnostic:
+    known = COLUMNS[table]
+    return diag(
+        "T103",
+        where,
+        f"unknown column {name!r} in the {table} table",
+        did_you_mean(normalize_column(name), known) + "known columns: " + ", ".join(known),
+    )
+
+
+def check_header(
+    table: str, header: Sequence[tuple[str, Location]], where: Location, diags: list[Diagnostic]
+) -> list[str | None] | None:
+    """Map header cells to column names; ``None`` for the whole table if it is unusable.
+
+    Unknown columns are reported (T103) and their cells dropped; a missing
+    required column (T104) makes every row unreadable, so it is reported once here.
+    """
+    columns: list[str | None] = []
+    seen: set[str] = set()
+    for text, at in header:
+        name = normalize_column(text)
+        if not name:
+            columns.append(None)
+        elif name not in COLUMNS[table]:
+            diags.append(unknown_column(table, text, at))
+            columns.append(None)
+        elif name in seen:
+            diags.append(diag("T101", at, f"column {name!r} appears twice in the {table} header"))
+            columns.append(None)
+        else:
+            seen.add(name)
+            columns.append(name)
+    missing = [c for c in REQUIRED[table] if c not in seen]
+    for c in missing:
+        diags.append(
+            diag(
+                "T104",
+                where,
+                f"the {table} table has no {c!r} column",
+                "columns: " + ", ".join(COLUMNS[table]),
+            )
+        )
+    return None if missing else columns
+
+
+# --- cells ------------------------------------------------------------------------------
+
+
+def _text(row: RawRow, column: str, diags: list[Diagnostic]) -> str:
+    got = row.cells.get(column)
+    if got is None:
+        return ""
+    value, where = got
+    if isinstance(value, Bad):
+        diags.append(diag("T108", where, f"{column!r} must be text (got {value.found})"))
+        return ""
+    if isinstance(value, tuple):
+        diags.append(
+            diag("T108", where, f"{column!r} must be text (got a list)", "write one value")
+        )
+        return ""
+    return value.strip()
+
+
+def _required(row: RawRow, column: str, table: str, diags: list[Diagnostic]) -> str:
+    text = _text(row, column, diags)
+    if not text and not (column in row.cells and isinstance(row.cells[column][0], Bad | tuple)):
+        diags.append(
+            diag(
+                "T104", row.where, f"{table} row has no {column!r}", f"fill in the {column!r} cell"
+            )
+        )
+    return text
+
+
+def _items(row: RawRow, column: str, diags: list[Diagnostic]) -> tuple[tuple[str, ...], Location]:
+    got = row.cells.get(column)
+    if got is None:
+        return (), row.where
+    value, where = got
+    if isinstance(value, Bad):
+        diags.append(diag("T108", where, f"{column!r} must be text or a list (got {value.found})"))
+        return (), where
+    if isinstance(value, str):
+        parts: Sequence[str] = value.split(",")
+    else:
+        parts = value
+        for item in value:
+            if "," in item:
+                diags.append(
+                    diag(
+                        "T111",
+                        where,
+                        f"{column!r} item {item!r} contains a comma",
+                        "event names must not contain commas",
+                    )
+                )
+    return tuple(p.strip() for p in parts if p.strip()), where
+
+
+def _controls(row: RawRow, diags: list[Diagnostic]) -> tuple[ControlKind, ...]:
+    items, where = _items(row, "control", diags)
+    kinds: list[ControlKind] = []
+    for item in items:
+        kind = CONTROL_WORDS.get(" ".join(item.lower().replace("_", " ").replace("-", " ").split()))
+        if kind is None:
+            accepted = [k.value for k in ControlKind]
+            diags.append(
+                diag(
+                    "T106",
+                    where,
+                    f"unknown control {item!r}",
+                    did_you_mean(item.lower(), accepted) + "accepted: " + ", ".join(accepted),
+                )
+            )
+        elif kind not in kinds:
+            kinds.append(kind)
+    return tuple(kinds)
+
+
+def _kind(row: RawRow, diags: list[Diagnostic]) -> EventKind:
+    text = _text(row, "kind", diags).lower()
+    if not text:
+        return EventKind.COMMAND
+    for kind in EventKind:
+        if kind.value == text:
+            return kind
+    accepted = [k.value for k in EventKind]
+    where = row.cells["kind"][1]
+    diags.append(
+        diag(
+            "T107",
+            where,
+            f"unknown event kind {text!r}",
+            did_you_mean(text, accepted) + "accepted: " + ", ".join(accepted),
+        )
+    )
+    return EventKind.COMMAND
+
+
+def _check_keys(table: str, row: RawRow, diags: list[Diagnostic]) -> None:
+    for name, (_, where) in row.cells.items():
+        if name not in COLUMNS[table]:
+            diags.append(unknown_column(table, name, where))
+
+
+def state_row(row: RawRow, diags: list[Diagnostic]) -> StateRow:
+    _check_keys("states", row, diags)
+    return StateRow(
+        component=_text(row, "component", diags),
+        api=_text(row, "api", diags),
+        state=_required(row, "state", "states", diags),
+        controls=_controls(row, diags),
+        description=_text(row, "description", diags),
+        ignore=_items(row, "ignore", diags)[0],
+        parent=_text(row, "parent", diags),
+        where=row.where,
+    )
+
+
+def event_row(row: RawRow, diags: list[Diagnostic]) -> EventRow:
+    _check_keys("events", row, diags)
+    event = _required(row, "event", "events", diags)
+    if "," in event:
+        diags.append(
+            diag(
+                "T111",
+                row.cells["event"][1],
+                f"event name {event!r} contains a comma",
+                "commas separate the names in 'ignore' cells: rename the event",
+            )
+        )
+    return EventRow(
+        event=event,
+        condition=_text(row, "condition", diags),
+        guard=_text(row, "guard", diags),
+        old=_required(row, "old", "events", diags),
+        new=_required(row, "new", "events", diags),
+        kind=_kind(row, diags),
+        api=_text(row, "api", diags),
+        invoke=_text(row, "invoke", diags),
+        where=row.where,
+    )
+
+
+# --- data literals ----------------------------------------------------------------------
+
+
+def normalize_value(value: object) -> object | Bad:
+    """A YAML literal as the tables keep it (lists become tuples), or what is wrong."""
+    if value is None or isinstance(value, bool | int | float | str):
+        return value
+    if isinstance(value, list | tuple):
+        items = [normalize_value(v) for v in value]
+        for item in items:
+            if isinstance(item, Bad):
+                return item
+        return tuple(items)
+    if isinstance(value, dict):
+        return Bad("a mapping")
+    return Bad(f"a {type(value).__name__}")
+
+
+def _plain(value: object) -> object:
+    if isinstance(value, tuple | list):
+        return [_plain(v) for v in value]
+    return value
+
+
+def to_plain(value: object) -> object:
+    """The value as YAML writes it (tuples become lists)."""
+    return _plain(value)
+
+
+def format_literal(value: object) -> str:
+    """One value as a YAML flow literal, for a CSV, XLSX or Markdown cell."""
+    text = yaml.safe_dump(
+        [_plain(value)], default_flow_style=True, allow_unicode=True, width=math.inf
+    ).strip()
+    return text[1:-1].strip()
+
+
+def parse_literal(text: str, where: Location, diags: list[Diagnostic]) -> object | Bad:
+    """Read a YAML literal from a cell; an empty cell is null."""
+    try:
+        value = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        diags.append(
+            diag("T108", where, f"data value {text!r} is not a YAML literal: {exc}".split("\n")[0])
+        )
+        return Bad("malformed literal")
+    return normalize_value(value)
+
+
+def make_data(
+    entries: Sequence[tuple[str, object, Location]], diags: list[Diagnostic]
+) -> tuple[tuple[str, object], ...]:
+    """Check data entries: identifier names, each once, literal values."""
+    data: dict[str, object] = {}
+    for name, value, where in entries:
+        if not name.isidentifier() or name.startswith("_"):
+            diags.append(
+                diag(
+                    "T112",
+                    where,
+                    f"data name {name!r} is not a usable name",
+                    "use a name like speed or target_position (letters, digits, _; "
+                    "not starting with _ or a digit)",
+                )
+            )
+            continue
+        if name in data:
+            diags.append(diag("T112", where, f"data name {name!r} is given twice"))
+            continue
+        if isinstance(value, Bad):
+            diags.append(
+                diag(
+                    "T108",
+                    where,
+                    f"data {name!r} must be a literal (got {value.found})",
+                    "use null, true/false, a number, a string or a list of them",
+                )
+            )
+            continue
+        data[name] = value
+    return tuple(data.items())
+
+
+# --- whole tables -----------------------------------------------------------------------
+
+
+def make_tables(
+    device: str,
+    states: RawTable | None,
+    events: RawTable | None,
+    data: Sequence[tuple[str, object, Location]],
+    source: Location,
+    diags: list[Diagnostic],
+) -> DeviceTables | None:
+    """Check raw tables and build :class:`DeviceTables`; ``None`` if anything is wrong."""
+    start = len(diags)
+    state_rows: list[StateRow] = []
+    event_rows: list[EventRow] = []
+    for raw in (states, events):
+        if raw is not None and not raw.rows:
+            diags.append(
+                diag("T105", raw.where, f"the {raw.table} table is empty", "add at least one row")
+            )
+    if states is not None:
+        state_rows.extend(state_row(r, diags) for r in states.rows)
+    if events is not None:
+        event_rows.extend(event_row(r, diags) for r in events.rows)
+    data_items = make_data(data, diags)
+    if not device.strip():
+        diags.append(diag("T104", source, "the device has no name", "add 'device: NAME'"))
+    if states is None or events is None or any(d.severity is Severity.ERROR for d in diags[start:]):
+        return None
+    return DeviceTables(device.strip(), tuple(state_rows), tuple(event_rows), data_items, source)
+
+
+def validate_for_writing(tables: DeviceTables, where: Location) -> list[Diagnostic]:
+    """What would not survive a round trip through a file: report it instead of writing."""
+    diags: list[Diagnostic] = []
+    if not tables.device or "\n" in tables.device or "\r" in tables.device:
+        diags.append(diag("T104", where, f"device name {tables.device!r} cannot be written"))
+    for e in tables.events:
+        if "," in e.event:
+            diags.append(diag("T111", e.where, f"event name {e.event!r} contains a comma"))
+    for s in tables.states:
+        for item in s.ignore:
+            if "," in item or item != item.strip() or not item:
+                diags.append(diag("T111", s.where, f"ignore item {item!r} cannot be written"))
+    seen: set[str] = set()
+    for name, value in tables.data:
+        if not name.isidentifier() or name in seen:
+            diags.append(diag("T112", where, f"data name {name!r} cannot be written"))
+        seen.add(name)
+        if isinstance(normalize_value(value), Bad):
+            diags.append(diag("T108", where, f"data {name!r} is not a literal: {value!r}"))
+    return diags

@@ -1,0 +1,281 @@
+"""Device tables as one YAML file (the format of ``examples/motor/motor.yaml``).
+
+Rules:
+1. The document is a mapping with ``device``, ``states``, ``events`` and an
+   optional ``data`` mapping; anything else at the top is T102 or T103.
+2. The node tree is composed (not constructed) so every row and cell keeps its
+   1-based line; only ``data`` values are constructed, as YAML literals.
+3. A cell is a scalar (its text as written; ``null`` is empty) or, for the list
+   columns, a sequence of scalars; a mapping anywhere else is T108.
+4. The writer leaves out empty optional cells and writes ``kind`` always, so
+   a written file reads like the hand-written Motor.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import yaml
+
+from statectl.errors import Diagnostic, Location
+from statectl.tables.schema import (
+    Bad,
+    Cell,
+    DeviceTables,
+    RawRow,
+    RawTable,
+    diag,
+    make_tables,
+    normalize_column,
+    normalize_value,
+    to_plain,
+)
+
+__all__ = ["dump_yaml", "read_yaml"]
+
+NULL_TAG = "tag:yaml.org,2002:null"
+TOP_KEYS = ("device", "states", "events", "data")
+
+
+def _at(file: str, node: yaml.Node) -> Location:
+    return Location(file, node.start_mark.line + 1)
+
+
+def _cell(node: yaml.Node) -> Cell:
+    if isinstance(node, yaml.ScalarNode):
+        return "" if node.tag == NULL_TAG else str(node.value)
+    if isinstance(node, yaml.SequenceNode):
+        items: list[str] = []
+        for item in node.value:
+            if not isinstance(item, yaml.ScalarNode):
+                return Bad("a list holding a " + _kind_of(item))
+            items.append("" if item.tag == NULL_TAG else str(item.value))
+        return tuple(items)
+    return Bad("a mapping")
+
+
+def _kind_of(node: yaml.Node) -> str:
+    if isinstance(node, yaml.MappingNode):
+        return "mapping"
+    if isinstance(node, yaml.SequenceNode):
+        return "list"
+    return "scalar"
+
+
+def _pairs(
+    file: str, node: yaml.MappingNode, diags: list[Diagnostic]
+) -> list[tuple[str, yaml.Node, Location]]:
+    """The mapping's (normalized key, value node, key location); duplicate keys are T101."""
+    pairs: list[tuple[str, yaml.Node, Location]] = []
+    seen: set[str] = set()
+    for key, value in node.value:
+        at = _at(file, key)
+        if not isinstance(key, yaml.ScalarNode):
+            diags.append(diag("T108", at, "a key must be text (got a " + _kind_of(key) + ")"))
+            continue
+        name = normalize_column(str(key.value))
+        if name in seen:
+            diags.append(diag("T101", at, f"key {key.value!r} appears twice in one mapping"))
+            continue
+        seen.add(name)
+        pairs.append((name, value, at))
+    return pairs
+
+
+def _table(
+    file: str, table: str, node: yaml.Node, at: Location, diags: list[Diagnostic]
+) -> RawTable | None:
+    if isinstance(node, yaml.ScalarNode) and node.tag == NULL_TAG:
+        return RawTable(table, at, ())
+    if not isinstance(node, yaml.SequenceNode):
+        diags.append(
+            diag(
+                "T108",
+                _at(file, node),
+                f"{table!r} must be a list of rows (got a {_kind_of(node)})",
+                "start each row with '- '",
+            )
+        )
+        return None
+    rows: list[RawRow] = []
+    for item in node.value:
+        if not isinstance(item, yaml.MappingNode):
+            diags.append(
+                diag(
+                    "T108",
+                    _at(file, item),
+                    f"a {table} row must be a mapping of columns (got a {_kind_of(item)})",
+                )
+            )
+            continue
+        cells = {
+            name: (_cell(value), _at(file, value)) for name, value, _ in _pairs(file, item, diags)
+        }
+        rows.append(RawRow(_at(file, item), cells))
+    return RawTable(table, at, tuple(rows))
+
+
+def _data(
+    file: str, node: yaml.Node, diags: list[Diagnostic]
+) -> list[tuple[str, object, Location]]:
+    if isinstance(node, yaml.ScalarNode) and node.tag == NULL_TAG:
+        return []
+    if not isinstance(node, yaml.MappingNode):
+        diags.append(
+            diag("T108", _at(file, node), f"'data' must be a mapping (got a {_kind_of(node)})")
+        )
+        return []
+    entries: list[tuple[str, object, Location]] = []
+    for key, value in node.value:
+        at = _at(file, key)
+        if not isinstance(key, yaml.ScalarNode):
+            diags.append(diag("T108", at, "a data name must be text"))
+            continue
+        constructor = yaml.SafeLoader("")
+        try:
+            literal: object = normalize_value(constructor.construct_object(value, deep=True))
+        except yaml.YAMLError as exc:
+            literal = Bad(f"an unreadable value: {str(exc).splitlines()[0]}")
+        entries.append((str(key.value), literal, at))
+    return entries
+
+
+def read_yaml(text: str, file: str) -> tuple[DeviceTables | None, list[Diagnostic]]:
+    """Read a YAML device file; every problem becomes a diagnostic."""
+    diags: list[Diagnostic] = []
+    source = Location(file, 1)
+    try:
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        line = mark.line + 1 if mark is not None else None
+        problem = exc.problem or exc.context or "malformed YAML"
+        return None, [diag("T101", Location(file, line), f"malformed YAML: {problem}")]
+    except yaml.YAMLError as exc:
+        return None, [diag("T101", source, f"malformed YAML: {exc}")]
+    if root is None:
+        return None, [
+            diag("T102", source, "the file is empty", "write device:, states: and events:")
+        ]
+    if not isinstance(root, yaml.MappingNode):
+        return None, [
+            diag(
+                "T102",
+                _at(file, root),
+                f"not a device file: the top level is a {_kind_of(root)}, not a mapping",
+                "a device file is a mapping with device:, states: and events:",
+            )
+        ]
+    pairs = _pairs(file, root, diags)
+    found = {name: (value, at) for name, value, at in pairs}
+    if not any(k in found for k in ("states", "events")):
+        return None, [
+            diag(
+                "T102",
+                source,
+                "not a device file: it has neither 'states' nor 'events'",
+                "a device file is a mapping with device:, states: and events:",
+            )
+        ]
+    for name, _, at in pairs:
+        if name not in TOP_KEYS:
+            diags.append(
+                diag("T103", at, f"unknown top-level key {name!r}", "known: " + ", ".join(TOP_KEYS))
+            )
+    device = ""
+    if "device" in found:
+        value, at = found["device"]
+        cell = _cell(value)
+        if isinstance(cell, str):
+            device = cell
+        else:
+            diags.append(diag("T108", at, "'device' must be text"))
+            device = "?"
+    tables: dict[str, RawTable | None] = {}
+    for table in ("states", "events"):
+        if table not in found:
+            diags.append(diag("T104", source, f"the file has no {table!r} table"))
+            tables[table] = None
+            continue
+        value, at = found[table]
+        tables[table] = _table(file, table, value, at, diags)
+    data = _data(file, found["data"][0], diags) if "data" in found else []
+    if "device" not in found:
+        diags.append(diag("T104", source, "the file has no 'device' name", "add 'device: NAME'"))
+        device = "?"
+    result = make_tables(device, tables["states"], tables["events"], data, source, diags)
+    return (None if diags else result), diags
+
+
+def _state_doc(tables: DeviceTables) -> list[dict[str, Any]]:
+    rows: list[dict[str, Any]] = []
+    for s in tables.states:
+        row: dict[str, Any] = {}
+        if s.component:
+            row["component"] = s.component
+        if s.api:
+            row["api"] = s.api
+        row["state"] = s.state
+        if len(s.controls) == 1:
+            row["control"] = s.controls[0].value
+        elif s.controls:
+            row["control"] = [c.value for c in s.controls]
+        if s.description:
+            row["description"] = s.description
+        if s.ignore:
+            row["ignore"] = list(s.ignore)
+        if s.parent:
+            row["parent"] = s.parent
+        rows.append(row)
+    return rows
+
+
+def _event_doc(tables: DeviceTables) -> list[dict[str, Any]]:
+    rows: list[dict[str, Any]] = []
+    for e in tables.events:
+        row: dict[str, Any] = {"event": e.event}
+        if e.condition:
+            row["condition"] = e.condition
+        if e.guard:
+            row["guard"] = e.guard
+        row["old"] = e.old
+        row["new"] = e.new
+        row["kind"] = e.kind.value
+        if e.api:
+            row["api"] = e.api
+        if e.invoke:
+            row["invoke"] = e.invoke
+        rows.append(row)
+    return rows
+
+
+class _Dumper(yaml.SafeDumper):
+    """Rows in block style, lists of names in flow style (``ignore: [a, b]``), as people write."""
+
+
+def _represent_list(dumper: yaml.SafeDumper, data: list[Any]) -> yaml.Node:
+    flow = all(not isinstance(item, list | dict) for item in data)
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=flow)
+
+
+_Dumper.add_representer(list, _represent_list)
+
+
+def dump_yaml(tables: DeviceTables) -> str:
+    """The tables as YAML text in the Motor's layout."""
+    doc: dict[str, Any] = {
+        "device": tables.device,
+        "states": _state_doc(tables),
+        "events": _event_doc(tables),
+    }
+    if tables.data:
+        doc["data"] = {name: to_plain(value) for name, value in tables.data}
+    body = yaml.dump(
+        doc,
+        Dumper=_Dumper,
+        sort_keys=False,
+        allow_unicode=True,
+        default_flow_style=False,
+        width=100,
+    )
+    return f"# Device tables of {tables.device} (statectl).\n{body}"

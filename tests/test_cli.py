@@ -1,0 +1,162 @@
+"""The command line: thin wrappers with distinct exit codes (0 ok, 1 problems, 2 usage)."""
+
+from __future__ import annotations
+
+import io
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from statectl.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+MOTOR = str(ROOT / "examples" / "motor" / "motor.yaml")
+
+
+def cli(*argv: str) -> tuple[int, str, str]:
+    out, err = io.StringIO(), io.StringIO()
+    code = main(list(argv), out, err)
+    return code, out.getvalue(), err.getvalue()
+
+
+BROKEN = """device: Motor
+states:
+  - {state: Blocked, control: default}
+events:
+  - {event: Go, old: Blocked, new: Nowhere}
+  - {event: Back, old: Blocked, new: Blocked, guard: "__import__('os')"}
+"""
+
+
+@pytest.mark.parametrize(
+    ("argv", "code"),
+    [
+        (["check", MOTOR], 0),
+        (["check", "--strict", MOTOR], 0),
+        (["check", "no-such-file.yaml"], 2),
+        (["frobnicate"], 2),
+        ([], 2),
+        (["render", MOTOR, "--format", "gif"], 2),
+        (["tables", MOTOR, "--to", "csv"], 2),  # writes files: needs --out
+    ],
+)
+def test_exit_codes(argv: list[str], code: int) -> None:
+    """Each command returns 0 on success, 1 on problems found, 2 on usage errors."""
+    assert cli(*argv)[0] == code
+
+
+def test_check_reports_every_problem_with_lines(tmp_path: Path) -> None:
+    """check prints all diagnostics as file:line: CODE severity: message, and exits 1."""
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(BROKEN, encoding="utf-8")
+    code, out, _ = cli("check", str(bad))
+    assert code == 1
+    lines = [ln for ln in out.splitlines() if re.match(r".+:\d+: [A-Z]\d{3} (error|warning)", ln)]
+    codes = {ln.split(": ")[1].split()[0] for ln in lines}
+    assert {"B201", "X302"} <= codes, out
+    assert "Traceback" not in out
+
+
+def test_check_json_is_machine_readable(tmp_path: Path) -> None:
+    """--json prints a list of diagnostics with code, severity, file and line."""
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(BROKEN, encoding="utf-8")
+    code, out, _ = cli("check", "--json", str(bad))
+    data = json.loads(out)
+    assert code == 1
+    assert all({"code", "severity", "file", "line", "message", "hint"} <= d.keys() for d in data)
+    assert any(d["code"] == "B201" and d["line"] == 5 for d in data)
+
+
+def test_observers_prints_the_invoke_enumeration() -> None:
+    """observers shows the paper's three invokes mapped to the three observer methods."""
+    code, out, _ = cli("observers", MOTOR)
+    assert code == 0
+    for line in ("Moving = 0", "Returning = 1", "Error = 2"):
+        assert line in out
+    for method in ("Movement()", "Initialization()", "Error()"):
+        assert method in out
+    assert "Moving: raises Error" in out
+
+
+def test_observers_json() -> None:
+    """observers --json lists invokes and which events each observer method covers."""
+    code, out, _ = cli("observers", "--json", MOTOR)
+    data = json.loads(out)
+    assert code == 0
+    assert [(i["number"], i["name"], i["method"]) for i in data["invokes"]] == [
+        (0, "Moving", "Movement"), (1, "Returning", "Initialization"), (2, "Error", "Error")]
+    covered = sorted(e for o in data["observers"] for e in o["events"])
+    assert len(covered) == 6
+
+
+def test_render_writes_file_atomically(tmp_path: Path) -> None:
+    """render --out writes the diagram and nothing else next to it."""
+    target = tmp_path / "motor.mmd"
+    code, _, _ = cli("render", MOTOR, "--format", "mermaid", "--out", str(target))
+    assert code == 0
+    assert "stateDiagram" in target.read_text(encoding="utf-8")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["motor.mmd"]
+
+
+def test_tables_converts_and_reloads(tmp_path: Path) -> None:
+    """tables --to md prints Markdown that loads back into an equal chart."""
+    from statectl.build import load_chart
+
+    code, out, _ = cli("tables", MOTOR, "--to", "md")
+    assert code == 0
+    md = tmp_path / "motor.md"
+    md.write_text(out, encoding="utf-8")
+    a, b = load_chart(MOTOR), load_chart(str(md))
+    assert [(t.source, t.events, t.targets, t.guard) for t in a.transitions] == [
+        (t.source, t.events, t.targets, t.guard) for t in b.transitions]
+
+
+def test_malformed_file_is_a_clean_failure(tmp_path: Path) -> None:
+    """A malformed YAML file gives a diagnostic and exit 1, never a traceback, nothing written."""
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("device: [unclosed\n", encoding="utf-8")
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    code, out, err = cli("tables", str(bad), "--to", "csv", "--out", str(out_dir / "x"))
+    assert code == 1
+    assert "T101" in err and "Traceback" not in err + out
+    assert list(out_dir.iterdir()) == []
+
+
+def test_build_shows_transitions() -> None:
+    """build lists every transition as ``src + event [guard] = dst``."""
+    code, out, _ = cli("build", MOTOR)
+    assert code == 0
+    assert "Blocked + Initialization [previous == 'Moving'] = Returning" in out
+    assert out.count(" + ") == 6
+
+
+def test_demo_ends_blocked() -> None:
+    """demo runs the case study and its last state is Blocked."""
+    code, out, _ = cli("demo")
+    assert code == 0
+    assert "Blocked" in out.strip().splitlines()[-1]
+
+
+def test_readme_quick_start_is_two_make_targets_that_exist() -> None:
+    """The README opens with exactly two quick-start commands, both real Makefile targets."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    block = readme.split("## Quick start", 1)[1].split("```sh", 1)[1].split("```", 1)[0]
+    commands = [ln.split("#")[0].strip() for ln in block.strip().splitlines()]
+    assert commands == ["make demo", "make test"]
+    makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
+    for target in ("demo", "test"):
+        assert re.search(rf"^{target}:", makefile, re.M)
+
+
+def test_readme_observers_block_matches_the_real_output() -> None:
+    """The observers output shown in the README is what the command prints."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    shown = readme.split("$ statectl observers examples/motor/motor.yaml\n", 1)[1]
+    block = shown.split("```", 1)[0].splitlines()
+    shown_lines = [ln[3:] for ln in block if ln.strip() not in ("", "...")]
+    _, out, _ = cli("observers", MOTOR)
+    assert [ln.rstrip() for ln in out.splitlines()[: len(shown_lines)]] == shown_lines

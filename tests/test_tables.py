@@ -1,0 +1,319 @@
+"""The device tables: every loader and saver, on the paper's Motor."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from statectl.build import build
+from statectl.errors import Location
+from statectl.model import ControlKind, EventKind
+from statectl.tables import (
+    DeviceTables,
+    Format,
+    dump,
+    dump_csv,
+    format_of,
+    load,
+    save,
+    strip_locations,
+)
+from statectl.tables.md_io import escape, split_row, unescape
+from statectl.tables.schema import format_literal, parse_literal
+
+MOTOR = Path(__file__).resolve().parent.parent / "examples" / "motor"
+MOTOR_YAML = MOTOR / "motor.yaml"
+
+
+def motor() -> DeviceTables:
+    tables, diags = load(MOTOR_YAML)
+    assert tables is not None, diags
+    return tables
+
+
+def test_motor_yaml_loads_without_diagnostics() -> None:
+    """The paper's Motor is a clean device file."""
+    tables, diags = load(MOTOR_YAML)
+    assert diags == []
+    assert tables is not None
+    assert tables.device == "Motor"
+    assert [s.state for s in tables.states] == ["Blocked", "Moving", "Returning"]
+    assert len(tables.events) == 6
+
+
+@pytest.mark.parametrize(
+    ("state", "controls"),
+    [
+        ("Blocked", (ControlKind.DEFAULT,)),
+        ("Moving", (ControlKind.TRIGGER, ControlKind.MONITORING)),
+        ("Returning", (ControlKind.TRIGGER,)),
+    ],
+)
+def test_motor_controls(state: str, controls: tuple[ControlKind, ...]) -> None:
+    """The control column reads one value or a list, in the order written."""
+    row = next(s for s in motor().states if s.state == state)
+    assert row.controls == controls
+
+
+@pytest.mark.parametrize(
+    ("event", "kind", "api", "guard"),
+    [
+        ("Movement", EventKind.COMMAND, "Movement", ""),
+        ("Movement completion", EventKind.COMPLETION, "Movement", ""),
+        ("Initialization", EventKind.COMMAND, "Initialization", "previous == 'Moving'"),
+        ("Error", EventKind.FAULT, "Error", ""),
+    ],
+)
+def test_motor_event_columns(event: str, kind: EventKind, api: str, guard: str) -> None:
+    """Kind, api and guard of an event row are read as written."""
+    row = next(e for e in motor().events if e.event == event)
+    assert (row.kind, row.api, row.guard) == (kind, api, guard)
+
+
+@pytest.mark.parametrize(
+    ("which", "index", "line"),
+    [("states", 0, 9), ("states", 1, 17), ("states", 2, 26), ("events", 0, 35), ("events", 5, 66)],
+)
+def test_yaml_rows_keep_their_line(which: str, index: int, line: int) -> None:
+    """Every YAML row points at the line where its mapping starts."""
+    row = getattr(motor(), which)[index]
+    assert row.where == Location(str(MOTOR_YAML), line)
+
+
+@pytest.mark.parametrize(
+    "path",
+    [
+        "motor.yaml",
+        "motor.states.csv",
+        "motor.events.csv",
+        ".",
+        "motor.xlsx",
+    ],
+)
+def test_shipped_motor_files_equal_the_yaml(path: str) -> None:
+    """The shipped CSV pair and workbook hold exactly the Motor of motor.yaml."""
+    tables, diags = load(MOTOR / path)
+    assert diags == []
+    assert tables is not None
+    assert strip_locations(tables) == strip_locations(motor())
+
+
+@pytest.mark.parametrize("fmt", ["yaml", "csv", "xlsx", "md"])
+def test_save_then_load_is_lossless(tmp_path: Path, fmt: str) -> None:
+    """Each format gives back the tables it was given, locations aside."""
+    target = tmp_path / f"motor.{fmt}"
+    written = save(motor(), target, fmt)
+    assert all(p.exists() for p in written)
+    tables, diags = load(written[0])
+    assert diags == []
+    assert tables is not None
+    assert strip_locations(tables) == strip_locations(motor())
+
+
+@pytest.mark.parametrize("fmt", ["yaml", "csv", "xlsx", "md"])
+def test_motor_builds_the_same_chart_in_every_format(tmp_path: Path, fmt: str) -> None:
+    """Whatever the format, the Motor builds into the same chart (origins aside)."""
+    written = save(motor(), tmp_path / f"motor.{fmt}", fmt)
+    tables, _ = load(written[0])
+    assert tables is not None
+    chart, diags = build(strip_locations(tables))
+    expected, _ = build(strip_locations(motor()))
+    assert diags == []
+    assert chart == expected
+
+
+def test_csv_rows_point_at_their_line() -> None:
+    """CSV locations count the device comment and the header."""
+    tables, _ = load(MOTOR / "motor.states.csv")
+    assert tables is not None
+    assert [s.where.line for s in tables.states] == [3, 4, 5]
+
+
+def test_xlsx_rows_name_sheet_and_row() -> None:
+    """Workbook locations name the sheet and the spreadsheet row."""
+    tables, _ = load(MOTOR / "motor.xlsx")
+    assert tables is not None
+    assert tables.events[0].where == Location(str(MOTOR / "motor.xlsx"), 2, sheet="Events")
+
+
+def test_md_rows_point_at_their_line() -> None:
+    """Markdown locations are the line of the table row."""
+    from statectl.tables.md_io import read_md
+
+    text = dump(motor(), "md")
+    assert isinstance(text, str)
+    tables, _ = read_md(text, "m.md", "m")
+    assert tables is not None
+    line = tables.events[0].where.line
+    assert line is not None
+    assert text.split("\n")[line - 1].startswith("| Movement |")
+
+
+def test_csv_without_device_comment_takes_the_file_name(tmp_path: Path) -> None:
+    """Absent '# device:', the CSV pair's NAME is the device."""
+    states, events, _ = dump_csv(motor())
+    (tmp_path / "arm.states.csv").write_text(states.split("\n", 1)[1])
+    (tmp_path / "arm.events.csv").write_text(events.split("\n", 1)[1])
+    tables, diags = load(tmp_path / "arm.states.csv")
+    assert diags == []
+    assert tables is not None
+    assert tables.device == "arm"
+
+
+def test_csv_columns_in_any_order_and_case(tmp_path: Path) -> None:
+    """CSV headers are matched by name, leniently, in any order."""
+    (tmp_path / "d.states.csv").write_text("State,Control\nIdle,Default\n")
+    (tmp_path / "d.events.csv").write_text("New State,Old State,Event\nIdle,Idle,Tick\n")
+    tables, diags = load(tmp_path)
+    assert diags == []
+    assert tables is not None
+    assert tables.states[0].controls == (ControlKind.DEFAULT,)
+    assert (tables.events[0].old, tables.events[0].new, tables.events[0].kind) == (
+        "Idle",
+        "Idle",
+        EventKind.COMMAND,
+    )
+
+
+def test_data_round_trips_through_every_format(tmp_path: Path) -> None:
+    """Data values keep their YAML type in every format."""
+    data: tuple[tuple[str, object], ...] = (
+        ("speed", 1.5),
+        ("count", 3),
+        ("on", True),
+        ("label", "yes"),
+        ("nothing", None),
+        ("path", (1, "a, b", (2.0,))),
+    )
+    tables = DeviceTables("Arm", motor().states, motor().events, data)
+    for fmt in ("yaml", "csv", "xlsx", "md"):
+        written = save(tables, tmp_path / f"arm.{fmt}", fmt)
+        back, diags = load(written[0])
+        assert diags == [], fmt
+        assert back is not None
+        assert back.data == data, fmt
+
+
+@pytest.mark.parametrize(
+    ("value", "text"),
+    [
+        (1, "1"),
+        ("1", "'1'"),
+        (True, "true"),
+        (None, "null"),
+        ("a, b", "'a, b'"),
+        ((1, 2), "[1, 2]"),
+    ],
+)
+def test_format_literal(value: object, text: str) -> None:
+    """Data cells hold YAML flow literals that read back as the same value."""
+    assert format_literal(value) == text
+    assert parse_literal(text, Location(), []) == value
+
+
+@pytest.mark.parametrize("text", ["a|b", "a\\b", "line\nbreak", "\\|", "x\\n", "cr\rlf"])
+def test_md_escape_round_trips(text: str) -> None:
+    """Pipes, backslashes and line breaks survive a Markdown cell."""
+    cells = split_row("| " + escape(text) + " | z |")
+    assert [unescape(c) for c in cells] == [text, "z"]
+
+
+@pytest.mark.parametrize(
+    ("name", "fmt"),
+    [
+        ("a.yaml", Format.YAML),
+        ("a.YML", Format.YAML),
+        ("a.states.csv", Format.CSV),
+        ("a.xlsx", Format.XLSX),
+        ("a.md", Format.MD),
+        ("a.txt", None),
+    ],
+)
+def test_format_of(name: str, fmt: Format | None) -> None:
+    """The format comes from the file name."""
+    assert format_of(name) is fmt
+
+
+def test_dump_yaml_reads_like_the_motor() -> None:
+    """The YAML writer puts rows in block style and name lists in flow style."""
+    text = dump(motor(), "yaml")
+    assert isinstance(text, str)
+    assert "- event: Movement\n" in text
+    assert "control: [event trigger required, monitoring required]" in text
+
+
+def test_dump_csv_refuses_a_single_text() -> None:
+    """A CSV device is several files, so dump() sends the caller to dump_csv()."""
+    with pytest.raises(ValueError, match="dump_csv"):
+        dump(motor(), "csv")
+
+
+def test_csv_save_to_directory_uses_the_device_name(tmp_path: Path) -> None:
+    """Saving a CSV pair into a directory names the files after the device."""
+    written = save(motor(), tmp_path, "csv")
+    assert sorted(p.name for p in written) == ["Motor.events.csv", "Motor.states.csv"]
+
+
+def test_save_replaces_an_existing_file_and_leaves_no_temporaries(tmp_path: Path) -> None:
+    """An atomic save replaces the old file and leaves only the target behind."""
+    target = tmp_path / "m.yaml"
+    target.write_text("old")
+    save(motor(), target)
+    assert [p.name for p in tmp_path.iterdir()] == ["m.yaml"]
+    assert target.read_text().startswith("# Device tables of Motor")
+
+
+def test_xlsx_text_starting_with_equals_stays_text(tmp_path: Path) -> None:
+    """A cell whose text starts with '=' is stored as text, not as a formula."""
+    m = motor()
+    from dataclasses import replace
+
+    tables = replace(m, events=(replace(m.events[0], condition="=SUM(A1)"), *m.events[1:]))
+    save(tables, tmp_path / "m.xlsx")
+    back, diags = load(tmp_path / "m.xlsx")
+    assert diags == []
+    assert back is not None
+    assert back.events[0].condition == "=SUM(A1)"
+
+
+DOCS = Path(__file__).resolve().parent.parent / "docs" / "tables.md"
+
+
+def doc_blocks(language: str) -> list[str]:
+    text = DOCS.read_text(encoding="utf-8")
+    return [b.split("\n", 1)[1] for b in text.split("```")[1::2] if b.startswith(language + "\n")]
+
+
+def test_docs_yaml_example_loads_as_the_motor(tmp_path: Path) -> None:
+    """The YAML Motor in docs/tables.md is a valid device file with the Motor's states."""
+    path = tmp_path / "doc.yaml"
+    path.write_text(doc_blocks("yaml")[0], encoding="utf-8")
+    tables, diags = load(path)
+    assert diags == []
+    assert tables is not None
+    assert [(s.state, s.controls, s.ignore) for s in tables.states] == [
+        (s.state, s.controls, s.ignore) for s in motor().states
+    ]
+    assert strip_locations(tables).events == strip_locations(motor()).events[:4]
+
+
+def test_docs_csv_example_loads_as_the_motor(tmp_path: Path) -> None:
+    """The CSV pair in docs/tables.md holds the Motor's states and all its events."""
+    states, events = doc_blocks("csv")
+    (tmp_path / "motor.states.csv").write_text(states, encoding="utf-8")
+    (tmp_path / "motor.events.csv").write_text(events, encoding="utf-8")
+    tables, diags = load(tmp_path)
+    assert diags == []
+    assert tables is not None
+    assert strip_locations(tables).events == strip_locations(motor()).events
+    assert [s.state for s in tables.states] == ["Blocked", "Moving", "Returning"]
+
+
+def test_docs_list_every_code() -> None:
+    """Every T1xx and B2xx code the code defines is documented in docs/tables.md."""
+    from statectl.build import CODES as BUILD_CODES
+    from statectl.tables import CODES as TABLE_CODES
+
+    text = DOCS.read_text(encoding="utf-8")
+    assert [c for c in (*TABLE_CODES, *BUILD_CODES) if f"| {c} |" not in text] == []
