@@ -1,12 +1,15 @@
 # One entry point per job; the README's quick start calls these two.
 PY ?= python3
 
-.PHONY: demo test install dev lint types unit
+
+.PHONY: demo test check install dev lint types unit
 
 demo: install
 	$(PY) -m statectl demo
 
-test: dev lint types unit
+test: dev check
+
+check: lint types unit
 
 install:
 	$(PY) -m pip install -q --disable-pip-version-check -e .
