@@ -1,7 +1,6 @@
 # One entry point per job; the README's quick start calls these two.
 PY ?= python3
 
-
 .PHONY: demo test check install dev lint types unit
 
 demo: install
@@ -18,7 +17,7 @@ dev:
 	$(PY) -m pip install -q --disable-pip-version-check -e '.[dev]'
 
 lint:
-	$(PY) -m ruff check src tests bench
+	$(PY) -m ruff check .
 
 types:
 	$(PY) -m mypy
