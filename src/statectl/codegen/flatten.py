@@ -1,0 +1,719 @@
+"""Chart -> flat tables: every reachable snapshot, and per (snapshot, event) what happens.
+
+Generated code must not re-implement the semantics, so the semantics decides everything
+here, at generation time, and the C++ only looks the decision up. Rules:
+
+1. A *configuration* of the generated device is a reachable
+   :class:`~statectl.semantics.Snapshot` (active states, history, previous state).
+   They are found breadth-first from :func:`~statectl.semantics.initial` by
+   :func:`~statectl.semantics.step` for every event the chart knows, and numbered
+   in that order (0 is the start).
+2. A step is an :class:`Outcome`: handled or not (and why not, as the Python
+   Subject says it), the target configuration, and its *effects* in the order the
+   Python runtime reports them, per microstep: states exited, transitions taken,
+   states entered, invoke numbers notified.
+3. A guard that reads no context field (``previous == 'Moving'``, ``In('X')``) is
+   decided here by the semantics itself, because ``previous`` and the active states
+   are part of the configuration. A guard that reads a context field (an ``int``
+   data item the user fills at run time) cannot be; such a step becomes a
+   :class:`Decision` tree: evaluate runtime guard *g*, go to one subtree or the other.
+   The trees are found by re-running the step with an :class:`~statectl.semantics.Executor`
+   that answers those guards from a list of choices, depth first, every choice
+   tried both ways. One guard evaluated twice in one step, in the same
+   configuration, answers the same both times (guards are pure), so impossible
+   paths are never generated.
+4. A runtime guard is specialised to the configuration it is evaluated in:
+   ``previous`` and ``In(...)`` are folded to constants by the Python evaluator,
+   what remains must read only integer context fields with ``+ - *``,
+   comparisons, ``and/or/not`` and ``a if c else b`` (G702 otherwise). Values are
+   64-bit integers in C++, booleans 0 and 1, as in Python.
+5. Whatever the generated code cannot do is a diagnostic, never dropped in silence:
+   G701 executable content other than ``Notify``/``Raise``, G702 a guard that does
+   not translate, G703 a guard reading ``_event``, G704 a context field that is not
+   an integer, G705 a non-``safe`` datamodel, G706 too many configurations or
+   guard paths, G707 a step that does not settle, G708 a ``Log`` the generated code
+   skips (warning), G709 a ``Notify`` of an invoke number the chart does not declare.
+"""
+
+from __future__ import annotations
+
+import ast
+import enum
+from collections import deque
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
+
+from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, StatectlError
+from statectl.expr import FUNCTIONS, Expression, compile_expression
+from statectl.model import (
+    Action,
+    Chart,
+    Log,
+    Notify,
+    Raise,
+    State,
+    Transition,
+)
+from statectl.semantics import (
+    Event,
+    Machine,
+    Microstep,
+    Run,
+    Snapshot,
+    Step,
+    enter_initial_states,
+    initial,
+    macrostep,
+    process_event,
+    step,
+)
+
+__all__ = [
+    "CODES",
+    "MAX_CONFIGURATIONS",
+    "MAX_PATHS",
+    "Configuration",
+    "ContextField",
+    "Decision",
+    "Effect",
+    "EffectKind",
+    "FlatChart",
+    "Outcome",
+    "RuntimeGuard",
+    "Tree",
+    "Unhandled",
+    "flatten",
+]
+
+#: Bound on reachable configurations; beyond it the flat tables would not be small.
+MAX_CONFIGURATIONS = 4096
+#: Bound on guard paths of one step (2**12: twelve independent runtime guards).
+MAX_PATHS = 4096
+
+CODES = {
+    "G701": "executable content the generated code cannot perform (Script, Assign, Send, ...)",
+    "G702": "a guard that does not translate to C++",
+    "G703": "a guard reads _event (event data does not exist in generated code)",
+    "G704": "a guard reads a context field that is not an integer",
+    "G705": "a datamodel other than 'safe'",
+    "G706": "too many configurations or guard paths for flat tables",
+    "G707": "a step that does not settle (livelock) or fails in the semantics",
+    "G708": "a Log action the generated code skips (warning)",
+    "G709": "a Notify of an invoke number the chart does not declare",
+}
+
+
+class EffectKind(enum.Enum):
+    EXIT = "exit"
+    TAKE = "take"
+    ENTER = "enter"
+    INVOKE = "invoke"
+
+
+class Unhandled(enum.Enum):
+    """Why an event changed nothing, in the words of the Python Subject."""
+
+    NONE = ""
+    DECLARED_IGNORED = "declared ignored"
+    GUARD_FALSE = "guard false"
+    NO_TRANSITION = "no transition"
+
+
+@dataclass(frozen=True, slots=True)
+class Effect:
+    """One traced thing a step does; ``index`` is a state, transition or invoke number."""
+
+    kind: EffectKind
+    index: int
+
+
+@dataclass(frozen=True, slots=True)
+class Outcome:
+    handled: bool
+    target: int  # configuration index; the source itself when not handled
+    effects: tuple[Effect, ...]
+    unhandled: Unhandled = Unhandled.NONE
+    final: bool = False  # a top-level final state was reached
+
+
+@dataclass(frozen=True, slots=True)
+class Decision:
+    """Evaluate runtime guard ``guard``; continue in ``if_true`` or ``if_false``."""
+
+    guard: int
+    if_true: Tree
+    if_false: Tree
+
+
+Tree = Outcome | Decision
+
+
+@dataclass(frozen=True, slots=True)
+class Configuration:
+    index: int
+    snapshot: Snapshot
+    active: tuple[str, ...]  # document order
+
+    @property
+    def label(self) -> str:
+        previous = self.snapshot.previous or "-"
+        text = ", ".join(self.active) + f" (previous {previous})"
+        if self.snapshot.history:
+            text += " history " + "; ".join(
+                f"{h}={'+'.join(v)}" for h, v in self.snapshot.history
+            )
+        return text
+
+
+@dataclass(frozen=True, slots=True)
+class RuntimeGuard:
+    """A guard specialised to where it is evaluated; ``cpp`` is its C++ expression."""
+
+    index: int
+    source: str
+    previous: str | None
+    cpp: str
+
+
+@dataclass(frozen=True, slots=True)
+class ContextField:
+    name: str
+    ident: str  # the C++ member name
+    initial: int
+
+
+@dataclass(frozen=True, slots=True)
+class FlatChart:
+    chart: Chart
+    states: tuple[str, ...]  # every chart state, document order
+    events: tuple[str, ...]  # external events, the chart's order
+    transitions: tuple[Transition, ...]
+    configurations: tuple[Configuration, ...]
+    start: Tree
+    dispatch: tuple[tuple[Tree, ...], ...]  # [configuration][event]
+    guards: tuple[RuntimeGuard, ...]
+    context: tuple[ContextField, ...]
+
+
+# -- identifiers -------------------------------------------------------------------------------
+
+_CPP_KEYWORDS = frozenset(
+    (
+        "alignas", "alignof", "and", "and_eq", "asm", "auto", "bitand", "bitor", "bool",
+        "break", "case", "catch", "char", "char16_t", "char32_t", "class", "compl", "const",
+        "constexpr", "const_cast", "continue", "decltype", "default", "delete", "do",
+        "double", "dynamic_cast", "else", "enum", "explicit", "export", "extern", "false",
+        "float", "for", "friend", "goto", "if", "inline", "int", "long", "mutable",
+        "namespace", "new", "noexcept", "not", "not_eq", "nullptr", "operator", "or",
+        "or_eq", "private", "protected", "public", "register", "reinterpret_cast", "return",
+        "short", "signed", "sizeof", "static", "static_assert", "static_cast", "struct",
+        "switch", "template", "this", "thread_local", "throw", "true", "try", "typedef",
+        "typeid", "typename", "union", "unsigned", "using", "virtual", "void", "volatile",
+        "wchar_t", "while", "xor", "xor_eq"
+    )
+)
+
+
+def identifiers(names: Iterable[str], *, lower: bool = False) -> dict[str, str]:
+    """A distinct C++ identifier per name: ``Movement completion`` -> ``MovementCompletion``."""
+    out: dict[str, str] = {}
+    used: set[str] = set()
+    for name in names:
+        words = "".join(c if c.isalnum() else " " for c in name).split()
+        if lower:
+            base = "_".join(w.lower() for w in words) or "x"
+        else:
+            base = "".join(w[:1].upper() + w[1:] for w in words) or "X"
+        if base[0].isdigit() or base in _CPP_KEYWORDS or base.startswith("_"):
+            base = ("s_" if lower else "S") + base
+        ident, n = base, 2
+        while ident in used:
+            ident, n = f"{base}{n}", n + 1
+        used.add(ident)
+        out[name] = ident
+    return out
+
+
+# -- checks before exploring -------------------------------------------------------------------
+
+
+def _walk_actions(actions: Iterable[Action]) -> Iterable[Action]:
+    for a in actions:
+        yield a
+        inner = getattr(a, "actions", None)
+        if isinstance(inner, tuple):
+            yield from _walk_actions(inner)
+
+
+def _check_actions(chart: Chart, where: Location, diags: list[Diagnostic]) -> None:
+    numbers = {i.number for i in chart.invokes}
+    blocks: list[tuple[str, Location, tuple[Action, ...]]] = []
+    for s in chart.states:
+        at = s.origin
+        blocks += [
+            (f"onentry of state {s.name!r}", at, s.on_entry),
+            (f"onexit of state {s.name!r}", at, s.on_exit),
+            (f"initial content of state {s.name!r}", at, s.initial_actions),
+            (f"history content of state {s.name!r}", at, s.history_actions),
+        ]
+        if s.invokes:
+            diags.append(
+                Diagnostic(
+                    "G701", Severity.ERROR, s.invokes[0].origin if s.invokes else at,
+                    f"state {s.name!r} has <invoke>, which generated code cannot start",
+                    "model the child session as its own device",
+                )
+            )
+    for t in chart.transitions:
+        blocks.append((f"transition {t.source} + {t.label}", t.origin, t.actions))
+    blocks.append(("top-level <script>", where, chart.script))
+    for what, at, actions in blocks:
+        for a in actions:
+            if isinstance(a, Raise):
+                continue
+            if isinstance(a, Notify):
+                if a.invoke not in numbers:
+                    diags.append(
+                        Diagnostic(
+                            "G709", Severity.ERROR, at,
+                            f"{what} notifies invoke #{a.invoke} ({a.name}), which the chart "
+                            "does not declare",
+                            "declare the invoke (an API in the Event Definition table)",
+                        )
+                    )
+                continue
+            if isinstance(a, Log):
+                diags.append(
+                    Diagnostic(
+                        "G708", Severity.WARNING, a.origin if a.origin.line else at,
+                        f"{what} has a Log action ({a.label!r}); generated code skips it, "
+                        "as the Python Subject does",
+                        "use a trace hook in C++ to log",
+                    )
+                )
+                continue
+            origin = getattr(a, "origin", None)
+            diags.append(
+                Diagnostic(
+                    "G701", Severity.ERROR,
+                    origin if isinstance(origin, Location) and origin.line else at,
+                    f"{what} has a {type(a).__name__} action, which generated C++ cannot perform",
+                    "keep executable content to Notify and Raise for a C++ target",
+                )
+            )
+
+
+def _context(chart: Chart, diags: list[Diagnostic]) -> tuple[dict[str, Any], list[ContextField]]:
+    """The chart's data items evaluated in order, as the Python Subject does."""
+    values: dict[str, Any] = {}
+    for item in chart.data:
+        value: Any = None
+        if item.expr:
+            expr, problems = compile_expression(item.expr, item.origin, what="data")
+            if expr is None:
+                diags.extend(problems)
+                continue
+            try:
+                value = expr.evaluate(values)
+            except Exception as exc:  # reported, not raised: bad input never gives a traceback
+                diags.append(
+                    Diagnostic(
+                        "G704", Severity.ERROR, item.origin,
+                        f"data item {item.name!r} = {item.expr!r} fails: {exc}",
+                        "give it an integer literal",
+                    )
+                )
+                continue
+        values[item.name] = value
+    fields: list[ContextField] = []
+    idents = identifiers([n for n, v in values.items() if _is_int(v)], lower=True)
+    for name, value in values.items():
+        if _is_int(value):
+            fields.append(ContextField(name, idents[name], int(value)))
+    return values, fields
+
+
+def _is_int(value: object) -> bool:
+    return isinstance(value, int) and -(2**63) <= int(value) < 2**63
+
+
+# -- guard translation -------------------------------------------------------------------------
+
+
+class _Untranslatable(Exception):
+    pass
+
+
+_SAFE: dict[str, Any] = {"__builtins__": {}, **FUNCTIONS}
+_CMP = {ast.Eq: "==", ast.NotEq: "!=", ast.Lt: "<", ast.LtE: "<=", ast.Gt: ">", ast.GtE: ">="}
+_ARITH = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*"}
+
+
+def _names(node: ast.AST) -> set[str]:
+    return {n.id for n in ast.walk(node) if isinstance(n, ast.Name)}
+
+
+def _literal(value: object) -> str:
+    if isinstance(value, bool):
+        return "V(1)" if value else "V(0)"
+    if _is_int(value):
+        return f"V({value})"
+    raise _Untranslatable(f"the constant {value!r} is not an integer or boolean")
+
+
+class _Translator:
+    """Python guard AST -> C++ over ``c`` (the context), with ``previous``/``In`` folded."""
+
+    def __init__(self, fields: dict[str, str], env: dict[str, Any]) -> None:
+        self.fields = fields
+        self.env = env
+
+    def cpp(self, node: ast.expr) -> str:
+        if not (_names(node) & self.fields.keys()):
+            return _literal(self._fold(node))
+        match node:
+            case ast.Name(id=name):
+                return f"c.{self.fields[name]}"
+            case ast.BoolOp(op=op, values=values):
+                return self._boolop(isinstance(op, ast.And), [self.cpp(v) for v in values])
+            case ast.UnaryOp(op=ast.Not(), operand=x):
+                return f"V(!({self.cpp(x)}))"
+            case ast.UnaryOp(op=ast.USub(), operand=x):
+                return f"(-({self.cpp(x)}))"
+            case ast.UnaryOp(op=ast.UAdd(), operand=x):
+                return f"(+({self.cpp(x)}))"
+            case ast.BinOp(op=op, left=left, right=right) if type(op) in _ARITH:
+                return f"(({self.cpp(left)}) {_ARITH[type(op)]} ({self.cpp(right)}))"
+            case ast.Compare(left=left, ops=ops, comparators=comps) if all(
+                type(o) in _CMP for o in ops
+            ):
+                operands = [self.cpp(x) for x in (left, *comps)]
+                parts = [
+                    f"(({a}) {_CMP[type(o)]} ({b}))"
+                    for a, o, b in zip(operands, ops, operands[1:], strict=False)
+                ]
+                return f"V({' && '.join(parts)})"
+            case ast.IfExp(test=test, body=body, orelse=orelse):
+                return f"(({self.cpp(test)}) ? ({self.cpp(body)}) : ({self.cpp(orelse)}))"
+        raise _Untranslatable(f"{ast.unparse(node)!r} ({type(node).__name__}) reads context fields")
+
+    @staticmethod
+    def _boolop(is_and: bool, values: list[str]) -> str:
+        head = values[0]
+        if len(values) == 1:
+            return head
+        rest = _Translator._boolop(is_and, values[1:])
+        if is_and:
+            return f"(({head}) ? ({rest}) : ({head}))"
+        return f"(({head}) ? ({head}) : ({rest}))"
+
+    def _fold(self, node: ast.expr) -> Any:
+        code = compile(ast.fix_missing_locations(ast.Expression(node)), "<guard>", "eval")
+        try:
+            return eval(code, _SAFE, dict(self.env))  # checked by compile_expression already
+        except Exception as exc:
+            raise _Untranslatable(f"{ast.unparse(node)!r} fails when folded: {exc}") from exc
+
+
+# -- exploring ---------------------------------------------------------------------------------
+
+
+class _TooMany(Exception):
+    pass
+
+
+class _Oracle:
+    """An Executor that answers runtime guards from ``choices`` (rule 3) and queues Raise."""
+
+    def __init__(self, flattener: _Flattener, choices: list[bool]) -> None:
+        self.flattener = flattener
+        self.choices = choices
+        self.decisions: list[tuple[int, bool]] = []
+        self.memo: dict[int, bool] = {}
+
+    def condition(self, run: Run, transition: Transition) -> bool:
+        guard = transition.guard
+        assert guard is not None
+        gid = self.flattener.runtime_guard(guard, run)
+        if gid is None:
+            return self.flattener.static_guard(guard, run)
+        if gid in self.memo:
+            return self.memo[gid]
+        pos = len(self.decisions)
+        value = self.choices[pos] if pos < len(self.choices) else False
+        self.decisions.append((gid, value))
+        self.memo[gid] = value
+        return value
+
+    def execute(self, run: Run, actions: tuple[Action, ...]) -> None:
+        for a in actions:
+            if isinstance(a, Raise):
+                run.raise_event(Event(a.event))
+
+    def state_entered(self, run: Run, state: State) -> None:
+        return None
+
+    def state_exited(self, run: Run, state: State) -> None:
+        return None
+
+    def done_data(self, run: Run, state: State) -> Any:
+        return None
+
+
+def _snapshot(run: Run) -> Snapshot:
+    return Snapshot(frozenset(run.active), tuple(sorted(run.history.items())), run.previous)
+
+
+class _Flattener:
+    def __init__(self, chart: Chart, fields: list[ContextField], values: dict[str, Any]) -> None:
+        self.chart = chart
+        self.m = Machine(chart)
+        self.fields = {f.name: f.ident for f in fields}
+        self.values = values  # every data item, integer or not
+        self.order = {s.name: i for i, s in enumerate(chart.states)}
+        self.transition_index = {id(t): i for i, t in enumerate(chart.transitions)}
+        self.exprs: dict[str, Expression] = {}
+        self.trees: dict[str, ast.expr] = {}
+        self.guards: dict[tuple[str, str | None, frozenset[str]], RuntimeGuard] = {}
+        self.diags: list[Diagnostic] = []
+        self.reported: set[tuple[str, str]] = set()
+        self.snapshots: dict[Snapshot, int] = {}
+        self.queue: deque[Snapshot] = deque()
+
+    # guards
+
+    def _expr(self, guard: str) -> Expression:
+        expr = self.exprs.get(guard)
+        if expr is None:
+            compiled, problems = compile_expression(guard, Location())
+            if compiled is None:  # Machine() refuses such charts first; kept for safety
+                raise DiagnosticError(problems)
+            expr = self.exprs[guard] = compiled
+            self.trees[guard] = ast.parse(guard.strip(), mode="eval").body
+        return expr
+
+    def _env(self, run: Run) -> dict[str, Any]:
+        return {"previous": run.previous, "In": run.active.__contains__}
+
+    def static_guard(self, guard: str, run: Run) -> bool:
+        """Decide a guard that reads no context field, as the semantics would."""
+        env = {**self.values, **self._env(run), "_event": {"name": run.event, "data": None}}
+        try:
+            return bool(self._expr(guard).evaluate(env))
+        except Exception:  # a failing guard is false, as in SCXML
+            return False
+
+    def runtime_guard(self, guard: str, run: Run) -> int | None:
+        """The runtime guard id of ``guard`` in this configuration, ``None`` if static."""
+        expr = self._expr(guard)
+        if "_event" in expr.names:
+            self._report(
+                "G703", guard, f"guard {guard!r} reads _event",
+                "event data does not exist in generated code; use a context field",
+            )
+            return None
+        if not (expr.names & self.values.keys()):
+            return None
+        uses_in = any(
+            isinstance(n, ast.Call) and isinstance(n.func, ast.Name) and n.func.id == "In"
+            for n in ast.walk(self.trees[guard])
+        )
+        previous = run.previous if "previous" in expr.names else None
+        active = frozenset(run.active) if uses_in else frozenset()
+        key = (guard, previous, active)
+        found = self.guards.get(key)
+        if found is None:
+            found = RuntimeGuard(len(self.guards), guard, previous, self._translate(guard, run))
+            self.guards[key] = found
+        return found.index
+
+    def _translate(self, guard: str, run: Run) -> str:
+        expr = self.exprs[guard]
+        strange = sorted(n for n in expr.names & self.values.keys() if n not in self.fields)
+        if strange:
+            self._report(
+                "G704", guard,
+                f"guard {guard!r} reads {', '.join(strange)}, which is not an integer "
+                "(C++ context fields are 64-bit integers)",
+                "give the data item an integer or boolean value",
+            )
+            return "false"
+        try:
+            return f"({_Translator(self.fields, self._env(run)).cpp(self.trees[guard])}) != 0"
+        except _Untranslatable as exc:
+            self._report(
+                "G702", guard, f"guard {guard!r} does not translate to C++: {exc}",
+                "over context fields use integers, + - *, comparisons, and/or/not, a if c else b",
+            )
+            return "false"
+
+    def _report(self, code: str, guard: str, message: str, hint: str) -> None:
+        if (code, guard) in self.reported:
+            return
+        self.reported.add((code, guard))
+        where = next((t.origin for t in self.chart.transitions if t.guard == guard), Location())
+        self.diags.append(Diagnostic(code, Severity.ERROR, where, message, hint))
+
+    # snapshots and steps
+
+    def index(self, snap: Snapshot) -> int:
+        found = self.snapshots.get(snap)
+        if found is None:
+            if len(self.snapshots) >= MAX_CONFIGURATIONS:
+                raise _TooMany(f"more than {MAX_CONFIGURATIONS} reachable configurations")
+            found = self.snapshots[snap] = len(self.snapshots)
+            self.queue.append(snap)
+        return found
+
+    def effects(self, microsteps: Iterable[Microstep]) -> tuple[Effect, ...]:
+        out: list[Effect] = []
+        for micro in microsteps:
+            out += [Effect(EffectKind.EXIT, self.order[s]) for s in micro.exited]
+            out += [
+                Effect(EffectKind.TAKE, self.transition_index[id(t)]) for t in micro.transitions
+            ]
+            out += [Effect(EffectKind.ENTER, self.order[s]) for s in micro.entered]
+            out += [Effect(EffectKind.INVOKE, a.invoke) for a in micro.actions
+                    if isinstance(a, Notify)]
+        return tuple(out)
+
+    def unhandled(self, snap: Snapshot, event: str, ignored: bool) -> Unhandled:
+        if ignored:
+            return Unhandled.DECLARED_IGNORED
+        m = self.m
+        if any(m.candidates(s, event) for s in snap.active if m.is_atomic(s)):
+            return Unhandled.GUARD_FALSE
+        return Unhandled.NO_TRANSITION
+
+    def outcome_of(self, source: Snapshot | None, result: Step) -> Outcome:
+        if source is not None and not result.handled:
+            assert result.event is not None
+            reason = self.unhandled(source, result.event, result.ignored)
+            return Outcome(False, self.snapshots[source], (), reason)
+        target = self.index(result.target)
+        return Outcome(True, target, self.effects(result.microsteps), final=result.final)
+
+    def oracle_step(self, source: Snapshot | None, event: str | None, choices: list[bool]
+                    ) -> tuple[list[tuple[int, bool]], Outcome]:
+        """One step with runtime guards answered from ``choices``; mirrors ``step``."""
+        oracle = _Oracle(self, choices)
+        steps: list[Microstep] = []
+        if source is None:
+            run = Run(set(), {}, None, self.values, executor=oracle)
+            steps.append(enter_initial_states(self.m, run))
+            macrostep(self.m, run, steps)
+            handled, ignored = True, False
+        else:
+            assert event is not None
+            run = Run(set(source.active), dict(source.history), source.previous, self.values,
+                      executor=oracle)
+            first = process_event(self.m, run, Event(event, None, "external"))
+            handled = first is not None
+            ignored = False
+            if first is not None:
+                steps.append(first)
+                macrostep(self.m, run, steps)
+            else:
+                ignored = any((s, event) in self.m.ignored for s in source.active)
+        before = source if source is not None else Snapshot(frozenset())
+        after = _snapshot(run) if handled else before
+        result = Step(event, before, after, tuple(steps), handled, ignored, run.final, run.guarded)
+        return oracle.decisions, self.outcome_of(source, result)
+
+    def tree(self, source: Snapshot | None, event: str | None) -> Tree:
+        """Every guard path of one step, depth first (rule 3)."""
+        leaves: list[tuple[list[tuple[int, bool]], Outcome]] = []
+
+        def visit(prefix: list[bool]) -> None:
+            if len(leaves) >= MAX_PATHS:
+                raise _TooMany(f"more than {MAX_PATHS} guard paths in one step")
+            decisions, outcome = self.oracle_step(source, event, prefix)
+            leaves.append((decisions, outcome))
+            for i in range(len(prefix), len(decisions)):
+                visit([d for _, d in decisions[:i]] + [True])
+
+        visit([])
+        return _build_tree(leaves, 0)
+
+    def decide(self, source: Snapshot | None, event: str | None) -> Tree:
+        """The semantics' own step where no guard was consulted, the oracle otherwise."""
+        result = initial(self.m, self.values) if source is None else step(
+            self.m, source, event or "", self.values
+        )
+        if not result.guarded:
+            return self.outcome_of(source, result)
+        return self.tree(source, event)
+
+
+def _build_tree(leaves: list[tuple[list[tuple[int, bool]], Outcome]], depth: int) -> Tree:
+    if len(leaves) == 1 and len(leaves[0][0]) == depth:
+        return leaves[0][1]
+    gid = leaves[0][0][depth][0]
+    yes = [leaf for leaf in leaves if leaf[0][depth][1]]
+    no = [leaf for leaf in leaves if not leaf[0][depth][1]]
+    return Decision(gid, _build_tree(yes, depth + 1), _build_tree(no, depth + 1))
+
+
+def flatten(chart: Chart) -> tuple[FlatChart | None, list[Diagnostic]]:
+    """Explore ``chart`` into flat tables, or say why it cannot be (G7xx)."""
+    where = chart.origin
+    diags: list[Diagnostic] = []
+    if chart.datamodel != "safe":
+        diags.append(
+            Diagnostic(
+                "G705", Severity.ERROR, where,
+                f"datamodel {chart.datamodel!r}: its scripts and conditions cannot run in C++",
+                "use the safe expression language (datamodel 'safe') for a C++ target",
+            )
+        )
+        return None, diags
+    _check_actions(chart, where, diags)
+    values, fields = _context(chart, diags)
+    if any(d.severity is Severity.ERROR for d in diags):
+        return None, diags
+    try:
+        f = _Flattener(chart, fields, values)
+    except DiagnosticError as exc:
+        return None, [*diags, *exc.diagnostics]
+    events = chart.event_names
+    try:
+        start = f.decide(None, None)
+        rows: list[tuple[Tree, ...]] = []
+        while f.queue:
+            snap = f.queue.popleft()
+            rows.append(tuple(f.decide(snap, e) for e in events))
+    except _TooMany as exc:
+        diags.append(
+            Diagnostic(
+                "G706", Severity.ERROR, where, f"chart {chart.name!r}: {exc}",
+                "split the device into several charts or drop history/parallel regions",
+            )
+        )
+        return None, diags
+    except StatectlError as exc:
+        diags.append(
+            Diagnostic(
+                "G707", Severity.ERROR, where, f"chart {chart.name!r} does not settle: {exc}",
+                "look for eventless or raised transitions that loop",
+            )
+        )
+        return None, diags
+    diags += f.diags
+    configs = tuple(
+        Configuration(i, snap, tuple(sorted(snap.active, key=f.order.__getitem__)))
+        for snap, i in f.snapshots.items()
+    )
+    flat = FlatChart(
+        chart,
+        tuple(s.name for s in chart.states),
+        events,
+        chart.transitions,
+        configs,
+        start,
+        tuple(rows),
+        tuple(sorted(f.guards.values(), key=lambda g: g.index)),
+        tuple(fields),
+    )
+    return flat, diags
+
