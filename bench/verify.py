@@ -1,0 +1,138 @@
+"""Benchmark ``statectl verify`` against SPIN on generated cells of N devices.
+
+Usage: python bench/verify.py [--devices 10] [--no-spin] [--max-states N] [--keep DIR]
+
+Each generated device is a station: Idle -> Busy (Begin, a command) -> Done (Begin
+completion) -> Idle (Reset); a Jam in the monitored Busy state makes it Faulted
+until Reset. Station i entering Faulted sends Hold to station i+1, which takes Busy
+back to Idle and ignores it elsewhere. With 10 stations the cell has about a million
+reachable global states. The same composed model is exported to Promela and checked
+by SPIN in the same run (breadth-first, safety only), so the times are comparable.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from statectl.cell import load_cell
+from statectl.explore import Composed, ProgressPrinter, explore, export_promela
+
+STATION = """\
+device: Station
+states:
+  - {state: Idle, control: default, ignore: [Hold, Reset, Begin completion, Jam]}
+  - {state: Busy, control: [event trigger required, monitoring required], ignore: [Begin, Reset]}
+  - {state: Done, control: event trigger required, ignore: [Begin, Hold, Begin completion, Jam]}
+  - {state: Faulted, control: event trigger required, ignore: [Begin, Hold, Begin completion, Jam]}
+events:
+  - {event: Begin, old: Idle, new: Busy, kind: command, api: Work}
+  - {event: Begin completion, old: Busy, new: Done, kind: completion, api: Work}
+  - {event: Reset, old: Done, new: Idle, kind: command, api: Clear}
+  - {event: Reset, old: Faulted, new: Idle, kind: command, api: Clear}
+  - {event: Jam, old: Busy, new: Faulted, kind: fault, api: Clear}
+  - {event: Hold, old: Busy, new: Idle, kind: command, api: Clear}
+"""
+
+
+def make_cell(folder: Path, n: int) -> Path:
+    """Write the station file and a cell of ``n`` stations; return the cell's path."""
+    (folder / "station.yaml").write_text(STATION, encoding="utf-8")
+    lines = [f"cell: stations-{n}", "devices:"]
+    lines += [f"  s{i}: station.yaml" for i in range(n)]
+    lines.append("links:")
+    for i in range(n - 1):
+        lines.append(f"  - {{from: s{i}, enters: Faulted, to: s{i + 1}, send: Hold}}")
+    lines.append("environment:")
+    for i in range(n):
+        lines.append(f"  - {{send: Begin, to: s{i}}}")
+        lines.append(f"  - {{send: Reset, to: s{i}}}")
+        lines.append(f"  - {{fault: Jam, to: s{i}}}")
+    lines.append("invariants:")
+    lines.append("  - name: one-state-each")
+    lines.append("    holds: \"not (In('s0.Idle') and In('s0.Busy'))\"")
+    path = folder / f"stations-{n}.cell.yaml"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+def run_spin(pml: Path, max_states: int) -> dict[str, float | int | str]:
+    """spin -a, gcc and pan (BFS, safety); wall times and pan's state count."""
+    if shutil.which("spin") is None or shutil.which("gcc") is None:
+        return {"skipped": "spin or gcc not installed"}
+    folder = pml.parent
+    t0 = time.perf_counter()
+    subprocess.run(["spin", "-a", pml.name], cwd=folder, check=True, capture_output=True)
+    t1 = time.perf_counter()
+    memlim = 2048
+    subprocess.run(
+        ["gcc", "-O2", "-DBFS", "-DSAFETY", "-DNOREDUCE", f"-DMEMLIM={memlim}", "-o", "pan",
+         "pan.c"],
+        cwd=folder, check=True, capture_output=True,
+    )
+    t2 = time.perf_counter()
+    pan = subprocess.run(["./pan", "-E", "-w24"], cwd=folder, capture_output=True, text=True)
+    t3 = time.perf_counter()
+    stored = 0
+    memory = ""
+    for line in pan.stdout.splitlines():
+        if "states, stored" in line and "nominal" not in line:
+            stored = int(float(line.split()[0]))
+        if "total actual memory usage" in line:
+            memory = line.split()[0]
+    errors = "errors: 0" not in pan.stdout
+    return {"generate_s": t1 - t0, "compile_s": t2 - t1, "pan_s": t3 - t2,
+            "total_s": t3 - t0, "stored": stored, "memory_mb": memory, "errors": int(errors)}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--devices", type=int, default=10)
+    ap.add_argument("--max-states", type=int, default=None)
+    ap.add_argument("--no-spin", action="store_true")
+    ap.add_argument("--keep", type=Path, default=None, help="write the cell and model here")
+    args = ap.parse_args(argv)
+    folder = args.keep or Path(tempfile.mkdtemp(prefix="statectl-bench-"))
+    folder.mkdir(parents=True, exist_ok=True)
+    cell_path = make_cell(folder, args.devices)
+    cell, diags = load_cell(cell_path)
+    if cell is None:
+        for d in diags:
+            print(d, file=sys.stderr)
+        return 1
+    t0 = time.perf_counter()
+    model = Composed(cell)
+    printer = ProgressPrinter(sys.stderr) if sys.stderr.isatty() else None
+    report = explore(cell, max_states=args.max_states, progress=printer, model=model)
+    if printer is not None:
+        printer.done()
+    seconds = time.perf_counter() - t0
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"statectl: {args.devices} devices, {report.states:,} global states, "
+          f"{report.transitions:,} transitions, {seconds:.1f} s, "
+          f"{report.states / seconds:,.0f} states/s, peak RSS {peak:,.0f} MiB, "
+          f"verdict {report.verdict}")
+    if args.no_spin:
+        return 0
+    pml = folder / "cell.pml"
+    pml.write_text(export_promela(model), encoding="utf-8")
+    spin = run_spin(pml, report.states)
+    if "skipped" in spin:
+        print(f"spin: skipped ({spin['skipped']})")
+        return 0
+    print(f"spin:     {spin['stored']:,} states stored, pan {spin['pan_s']:.1f} s, "
+          f"total with spin -a and gcc {spin['total_s']:.1f} s, memory {spin['memory_mb']} MB, "
+          f"errors {spin['errors']}")
+    print(f"ratio:    statectl / spin total = {seconds / float(spin['total_s']):.2f}, "
+          f"statectl / pan only = {seconds / float(spin['pan_s']):.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

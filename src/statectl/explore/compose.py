@@ -1,0 +1,278 @@
+"""The composed model of a cell: global states as packed integers, stimuli and cascades.
+
+Rules:
+1. A global state is the tuple of the devices' local ids, packed into one int
+   (``bits`` per device, device 0 in the low bits); a step replaces one field.
+2. One global step is one *stimulus* (an environment command, a fault in a
+   monitored state, or a device's completion) and everything it causes: the
+   stimulated device steps; every link whose trigger matches that step and
+   whose guard holds in the resulting global state queues its event; queued
+   events are delivered first in, first out, each one a device step that may
+   fire links in turn, until nothing is queued (run-to-completion of the cell).
+3. A stimulus is *enabled* in a global state when its ``when`` holds, it is a
+   fault and the device is in a monitored state (or it is a command or a
+   completion), and the device has a row for it there; it *happens* when some
+   outcome handles it. Free choices give several successors.
+4. An event a link delivers to a device state that neither handles nor ignores
+   it is reported (the event is then dropped, as the runtime drops it). A
+   cascade longer than :data:`MAX_DELIVERIES` is a link livelock.
+5. Global expressions compile to plain functions of the packed state; the
+   source was checked by :func:`statectl.cell.parse_global`, and only ``In()``
+   calls are rewritten into table lookups.
+"""
+
+from __future__ import annotations
+
+import ast
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from statectl.cell import Cell, GlobalExpr, InputKind, Link, Trigger
+from statectl.explore.local import LocalSpace, Outcome, Reaction
+from statectl.model import EventKind
+
+__all__ = ["MAX_DELIVERIES", "Branch", "Composed", "Delivery", "Predicate", "Stimulus"]
+
+MAX_DELIVERIES = 256
+
+Predicate = Callable[[int], bool]
+
+
+@dataclass(frozen=True, slots=True)
+class Stimulus:
+    """Something from outside the cell's links: ``kind`` to ``device`` with ``event``."""
+
+    kind: InputKind
+    device: int
+    event: str
+    when: int = -1  # index of the environment entry whose ``when`` guards it, else -1
+
+    def label(self, names: Sequence[str]) -> str:
+        return f"{self.kind.value}: {names[self.device]}.{self.event}"
+
+
+@dataclass(frozen=True, slots=True)
+class Delivery:
+    """One event reaching one device, and what the device did with it."""
+
+    sender: str  # a device name, or "environment"
+    receiver: str
+    event: str
+    via: str  # "environment", "fault", "completion" or the link's label
+    before: str
+    after: str
+    reaction: Reaction
+    notifies: tuple[str, ...] = ()
+    choices: tuple[tuple[str, bool], ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class Branch:
+    """One way a stimulus can play out: the state reached and what went wrong on the way."""
+
+    state: int
+    deliveries: tuple[Delivery, ...]
+    unhandled: tuple[tuple[int, int, str, int], ...]  # (device, local id, event, link)
+    livelock: bool = False
+
+
+class _InRewriter(ast.NodeTransformer):
+    def __init__(self, model: Composed) -> None:
+        self.model = model
+        self.tables: dict[str, tuple[bool, ...]] = {}
+
+    def visit_Call(self, node: ast.Call) -> ast.AST:
+        arg = node.args[0]
+        assert isinstance(arg, ast.Constant)
+        device, _, state = str(arg.value).partition(".")
+        d = self.model.position[device]
+        table = self.model.padded(d, self.model.spaces[d].states_in(state))
+        key = f"t{len(self.tables)}"
+        self.tables[key] = table
+        lookup = ast.parse(f"{key}[(g >> {self.model.shift[d]}) & {self.model.mask[d]}]",
+                           mode="eval").body
+        return ast.copy_location(lookup, node)
+
+
+class Composed:
+    """The cell compiled for search: local spaces, packing, stimuli and link tables."""
+
+    def __init__(self, cell: Cell) -> None:
+        self.cell = cell
+        self.names: tuple[str, ...] = tuple(d.name for d in cell.devices)
+        self.position = {n: i for i, n in enumerate(self.names)}
+        by_chart: dict[int, LocalSpace] = {}
+        spaces: list[LocalSpace] = []
+        for d in cell.devices:
+            spaces.append(LocalSpace(d.name, d.chart))
+            by_chart[id(d.chart)] = spaces[-1]
+        self.spaces = tuple(spaces)
+        self.bits = tuple(max(1, (len(s.snapshots) - 1).bit_length()) for s in self.spaces)
+        shifts, at = [], 0
+        for b in self.bits:
+            shifts.append(at)
+            at += b
+        self.shift = tuple(shifts)
+        self.mask = tuple((1 << b) - 1 for b in self.bits)
+        self.width = at
+        self.links = cell.links
+        self.link_guard: tuple[Predicate | None, ...] = tuple(
+            self.predicate(k.guard) if k.guard else None for k in cell.links
+        )
+        self.when: tuple[Predicate | None, ...] = tuple(
+            self.predicate(e.when) if e.when else None for e in cell.environment
+        )
+        self._fires: dict[tuple[int, Outcome], tuple[int, ...]] = {}
+        self.stimuli = self._stimuli()
+        self.initial = self._initial()
+
+    # -- packing ---------------------------------------------------------------------------
+
+    def padded(self, d: int, table: tuple[bool, ...]) -> tuple[bool, ...]:
+        return table + (False,) * (self.mask[d] + 1 - len(table))
+
+    def local(self, g: int, d: int) -> int:
+        return (g >> self.shift[d]) & self.mask[d]
+
+    def replace(self, g: int, d: int, lid: int) -> int:
+        return (g & ~(self.mask[d] << self.shift[d])) | (lid << self.shift[d])
+
+    def decode(self, g: int) -> tuple[int, ...]:
+        return tuple(self.local(g, d) for d in range(len(self.names)))
+
+    def labels(self, g: int) -> tuple[str, ...]:
+        return tuple(self.spaces[d].state_of(self.local(g, d)) for d in range(len(self.names)))
+
+    def describe(self, g: int) -> str:
+        return ", ".join(f"{n}={s}" for n, s in zip(self.names, self.labels(g), strict=True))
+
+    def predicate(self, expr: GlobalExpr) -> Predicate:
+        """Compile a checked global expression into a function of the packed state."""
+        tree = ast.parse(expr.source, mode="eval")
+        rewriter = _InRewriter(self)
+        body = rewriter.visit(tree.body)
+        fn = ast.Expression(
+            ast.Lambda(
+                ast.arguments([], [ast.arg("g")], None, [], [], None, []), body
+            )
+        )
+        ast.fix_missing_locations(fn)
+        namespace: dict[str, object] = {"__builtins__": {}, **rewriter.tables}
+        compiled: Predicate = eval(compile(fn, f"<{expr.source}>", "eval"), namespace)
+        return compiled
+
+    # -- stimuli and links -----------------------------------------------------------------
+
+    def _stimuli(self) -> tuple[Stimulus, ...]:
+        out: list[Stimulus] = []
+        for i, e in enumerate(self.cell.environment):
+            out.append(Stimulus(e.kind, self.position[e.device], e.event, i if e.when else -1))
+        if self.cell.completions:
+            for d, space in enumerate(self.spaces):
+                for ev in space.events:
+                    if space.kind[ev] is EventKind.COMPLETION:
+                        out.append(Stimulus(InputKind.COMPLETION, d, ev))
+        return tuple(dict.fromkeys(out))
+
+    def _initial(self) -> tuple[int, ...]:
+        states = [0]
+        for d, space in enumerate(self.spaces):
+            states = [self.replace(g, d, o.target) for g in states for o in space.initial]
+        return tuple(dict.fromkeys(states))
+
+    def enabled_locally(self, s: Stimulus, lid: int) -> bool:
+        """Rule 3 without ``when``: the device side of whether ``s`` can be offered."""
+        space = self.spaces[s.device]
+        if s.kind is InputKind.FAULT and not space.monitored[lid]:
+            return False
+        if s.kind is InputKind.COMPLETION:
+            return any(o.handled for o in space.outcomes(lid, s.event))
+        return True
+
+    def fires(self, d: int, outcome: Outcome) -> tuple[int, ...]:
+        """Indices of the links whose trigger matches device ``d``'s step ``outcome``."""
+        key = (d, outcome)
+        found = self._fires.get(key)
+        if found is None:
+            name = self.names[d]
+            found = tuple(
+                i
+                for i, k in enumerate(self.links)
+                if outcome.handled
+                and k.source == name
+                and (
+                    (k.trigger is Trigger.ENTERS and k.what in outcome.entered)
+                    or (k.trigger is Trigger.RAISES and k.what in outcome.events)
+                )
+            )
+            self._fires[key] = found
+        return found
+
+    def _queue(self, g: int, d: int, outcome: Outcome) -> tuple[tuple[int, str, int], ...]:
+        out: list[tuple[int, str, int]] = []
+        for i in self.fires(d, outcome):
+            guard = self.link_guard[i]
+            if guard is None or guard(g):
+                k: Link = self.links[i]
+                out.append((self.position[k.target], k.event, i))
+        return tuple(out)
+
+    def branches(self, g: int, s: Stimulus, detail: bool = False) -> list[Branch]:
+        """Every way stimulus ``s`` plays out from ``g`` (rule 2); empty if it does not happen."""
+        d = s.device
+        space = self.spaces[d]
+        lid = self.local(g, d)
+        out: list[Branch] = []
+        Work = tuple[int, tuple[tuple[int, str, int], ...], tuple[Delivery, ...],
+                     tuple[tuple[int, int, str, int], ...], int]
+        work: list[Work] = []
+        for o in space.outcomes(lid, s.event):
+            if not o.handled:
+                continue
+            g1 = self.replace(g, d, o.target)
+            log: tuple[Delivery, ...] = ()
+            if detail:
+                sender = self.names[d] if s.kind is InputKind.COMPLETION else "environment"
+                log = (Delivery(sender, self.names[d], s.event, s.kind.value,
+                                space.state_of(lid), space.state_of(o.target), o.reaction,
+                                o.notifies, o.choices),)
+            work.append((g1, self._queue(g1, d, o), log, (), 1))
+        while work:
+            g1, pending, log, bad, count = work.pop()
+            if not pending:
+                out.append(Branch(g1, log, bad))
+                continue
+            if count > MAX_DELIVERIES:
+                out.append(Branch(g1, log, bad, livelock=True))
+                continue
+            (t, event, link), rest = pending[0], pending[1:]
+            tspace = self.spaces[t]
+            tlid = self.local(g1, t)
+            for o in tspace.outcomes(tlid, event):
+                g2 = self.replace(g1, t, o.target) if o.handled else g1
+                more = self._queue(g2, t, o) if o.handled else ()
+                bad2 = (*bad, (t, tlid, event, link)) if o.reaction is Reaction.UNHANDLED else bad
+                log2 = log
+                if detail:
+                    k = self.links[link]
+                    log2 = (*log, Delivery(k.source, k.target, event, k.label,
+                                           tspace.state_of(tlid), tspace.state_of(o.target),
+                                           o.reaction, o.notifies, o.choices))
+                work.append((g2, rest + more, log2, bad2, count + 1))
+        if not detail:
+            return out
+        return list(dict.fromkeys(out))
+
+    def enabled(self, g: int) -> list[Stimulus]:
+        """The stimuli offered in ``g`` (rule 3), in the cell's order."""
+        out = []
+        for s in self.stimuli:
+            lid = self.local(g, s.device)
+            if not self.enabled_locally(s, lid):
+                continue
+            if s.when >= 0:
+                when = self.when[s.when]
+                if when is not None and not when(g):
+                    continue
+            out.append(s)
+        return out

@@ -1,0 +1,254 @@
+"""``statectl run CELL [--replay TRACE]``: a cell live on the runtime, with a readable trace.
+
+Rules:
+1. Each device instance is a :class:`~statectl.runtime.Subject` on one shared
+   simulated clock; the cell's links are performed here, as the explorer composes
+   them: after a device's step, the links its step triggered (in the cell file's
+   order) whose guards hold in the new global state queue their events, and queued
+   events are delivered first in, first out, each run to completion.
+2. With ``--replay`` the stimuli come from a trace file (``statectl verify
+   --traces``: JSON, or YAML with the same ``steps``); without it, a seeded random
+   walk over the stimuli the explorer says are enabled.
+3. After every step the devices' states are compared with what the trace (or the
+   explorer) expects; a difference is reported as a divergence (exit 1). A free
+   choice the runtime cannot make the trace's way shows up there.
+4. Invariants are checked after every step and reported when they fail, so a
+   replayed counterexample shows its failure on the simulated devices.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TextIO
+
+import yaml
+
+from statectl.cell import Cell, InputKind, Trigger, load_cell
+from statectl.errors import Severity, StatectlError
+from statectl.explore.compose import Composed, Stimulus
+from statectl.runtime import (
+    EventIgnored,
+    Record,
+    SimClock,
+    StateEntered,
+    Subject,
+    TraceWriter,
+    TransitionTaken,
+)
+
+__all__ = ["CellRun", "ReplayStep", "load_replay", "run_cell", "run_main"]
+
+OK, PROBLEMS, USAGE = 0, 1, 2
+
+
+@dataclass(frozen=True, slots=True)
+class ReplayStep:
+    kind: InputKind
+    device: str
+    event: str
+    expect: tuple[tuple[str, str], ...] = ()  # (device, state label) after the step
+
+
+def load_replay(path: str | os.PathLike[str]) -> list[ReplayStep]:
+    """The stimuli of a trace file; raises :class:`StatectlError` saying what is wrong."""
+    try:
+        doc: Any = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError) as exc:
+        raise StatectlError(f"{path}: cannot read the trace: {exc}") from exc
+    steps = doc.get("steps") if isinstance(doc, dict) else doc
+    if not isinstance(steps, list):
+        raise StatectlError(f"{path}: a trace is a mapping with 'steps:' (a list)")
+    out: list[ReplayStep] = []
+    kinds = {k.value: k for k in InputKind}
+    for i, s in enumerate(steps, 1):
+        if not isinstance(s, dict) or not {"to", "event"} <= set(s):
+            raise StatectlError(f"{path}: step {i} needs 'to' and 'event'")
+        kind = kinds.get(str(s.get("source", "environment")))
+        if kind is None:
+            raise StatectlError(f"{path}: step {i}: source must be one of {', '.join(kinds)}")
+        state = s.get("state") or {}
+        pairs = state.items() if isinstance(state, dict) else ()
+        expect = tuple((str(k), str(v)) for k, v in pairs)
+        out.append(ReplayStep(kind, str(s["to"]), str(s["event"]), expect))
+    return out
+
+
+@dataclass(frozen=True, slots=True)
+class CellRun:
+    steps: int
+    divergences: tuple[str, ...]
+    violations: tuple[str, ...]
+    unhandled: tuple[str, ...]
+
+    @property
+    def exit_code(self) -> int:
+        return PROBLEMS if self.divergences else OK
+
+
+class _Runner:
+    def __init__(self, cell: Cell, out: TextIO) -> None:
+        self.cell = cell
+        self.model = Composed(cell)
+        self.clock = SimClock()
+        width = max(len(d.name) for d in cell.devices)
+        self.writer = TraceWriter(out, device_width=width)
+        self.out = out
+        self.subjects: dict[str, Subject] = {}
+        self.fired: list[int] = []
+        self.unhandled: list[str] = []
+        self.delivering: tuple[str, str] | None = None
+        for d in cell.devices:
+            s = Subject(d.chart, clock=self.clock, name=d.name)
+            s.listen(self.writer)
+            s.listen(self._watch)
+            self.subjects[d.name] = s
+        for s in self.subjects.values():
+            s.start()
+            s.run_until_idle()
+
+    def _watch(self, r: Record) -> None:
+        for i, k in enumerate(self.cell.links):
+            if k.source != r.device:
+                continue
+            entered = isinstance(r, StateEntered) and r.state == k.what
+            took = isinstance(r, TransitionTaken) and r.event == k.what
+            if (k.trigger is Trigger.ENTERS and entered) or (k.trigger is Trigger.RAISES and took):
+                self.fired.append(i)
+        if (
+            isinstance(r, EventIgnored)
+            and self.delivering == (r.device, r.event)
+            and r.reason in ("no transition", "unknown event")
+        ):
+            self.unhandled.append(f"{r.device} gets {r.event} ({r.reason})")
+
+    def state(self) -> int:
+        """The explorer's packed global state for the subjects' snapshots."""
+        g = 0
+        for d, space in enumerate(self.model.spaces):
+            snap = self.subjects[self.model.names[d]].snapshot
+            lid = space.lookup(snap) if snap is not None else None
+            if lid is None:
+                raise StatectlError(f"{self.model.names[d]} is in a state the explorer never saw")
+            g = self.model.replace(g, d, lid)
+        return g
+
+    def _step(self, device: str, event: str) -> None:
+        self.fired.clear()
+        self.subjects[device].post(event)
+        self.subjects[device].run_until_idle()
+
+    def perform(self, device: str, event: str) -> None:
+        """Rule 1: one stimulus and its cascade of link deliveries."""
+        queue: deque[tuple[str, str]] = deque()
+        self._step(device, event)
+        queue.extend(self._links())
+        count = 0
+        while queue and count < 256:
+            target, ev = queue.popleft()
+            self.delivering = (target, ev)
+            self._step(target, ev)
+            self.delivering = None
+            queue.extend(self._links())
+            count += 1
+
+    def _links(self) -> list[tuple[str, str]]:
+        g = self.state()
+        out = []
+        for i in sorted(set(self.fired)):
+            guard = self.model.link_guard[i]
+            if guard is None or guard(g):
+                k = self.cell.links[i]
+                self.out.write(f"          link: {k.label}\n")
+                out.append((k.target, k.event))
+        return out
+
+
+def run_cell(
+    cell: Cell,
+    out: TextIO,
+    *,
+    replay: Sequence[ReplayStep] | None = None,
+    walk: int = 20,
+    seed: int = 0,
+) -> CellRun:
+    """Run ``cell`` on the runtime (rules 1-4); the trace goes to ``out``."""
+    r = _Runner(cell, out)
+    m = r.model
+    invariants = [(inv.name, m.predicate(inv.expr)) for inv in cell.invariants]
+    rng = random.Random(seed)
+    divergences: list[str] = []
+    violations: list[str] = []
+    plan = list(replay) if replay is not None else None
+    n = len(plan) if plan is not None else walk
+    done = 0
+    for i in range(n):
+        g = r.state()
+        if plan is not None:
+            step = plan[i]
+            if step.device not in r.subjects:
+                divergences.append(f"step {i + 1}: the cell has no device {step.device!r}")
+                break
+            stim = Stimulus(step.kind, m.position[step.device], step.event)
+            offered = {(s.kind, s.device, s.event) for s in m.enabled(g)}
+            if (stim.kind, stim.device, stim.event) not in offered:
+                divergences.append(f"step {i + 1}: {stim.label(m.names)} is not offered in "
+                                   f"{m.describe(g)}")
+        else:
+            choices = [s for s in m.enabled(g) if m.branches(g, s)]
+            if not choices:
+                out.write("--- no stimulus can change the cell: deadlock\n")
+                break
+            stim = rng.choice(choices)
+        out.write(f"--- step {i + 1}: {stim.label(m.names)}\n")
+        expected = {b.state for b in m.branches(g, stim)}
+        r.perform(m.names[stim.device], stim.event)
+        done += 1
+        h = r.state()
+        if plan is not None and plan[i].expect:
+            got = dict(zip(m.names, m.labels(h), strict=True))
+            diff = [f"{d} is {got.get(d)} (trace: {s})" for d, s in plan[i].expect
+                    if got.get(d) != s]
+            if diff:
+                divergences.append(f"step {i + 1}: " + "; ".join(diff))
+        elif expected and h not in expected:
+            divergences.append(f"step {i + 1}: runtime reached {m.describe(h)}, "
+                               "which the explorer does not")
+        for name, fn in invariants:
+            if not fn(h):
+                violations.append(f"step {i + 1}: invariant {name} fails in {m.describe(h)}")
+                out.write(f"--- invariant {name} fails\n")
+    result = CellRun(done, tuple(divergences), tuple(violations), tuple(r.unhandled))
+    for text in result.unhandled:
+        out.write(f"unhandled link event: {text}\n")
+    for text in result.divergences:
+        out.write(f"diverged: {text}\n")
+    out.write(f"{done} step(s); final: {m.describe(r.state())}\n")
+    return result
+
+
+def run_main(cell: str, *, replay: str | None = None, walk: int = 20, seed: int = 0,
+             out: TextIO, err: TextIO) -> int:
+    """The whole ``statectl run CELL [--replay TRACE]`` command; returns the exit code."""
+    if not Path(cell).is_file():
+        err.write(f"statectl run: {cell}: no such file\n")
+        return USAGE
+    if replay is not None and not Path(replay).is_file():
+        err.write(f"statectl run: {replay}: no such trace file\n")
+        return USAGE
+    loaded, diags = load_cell(cell)
+    if loaded is None:
+        for d in diags:
+            if d.severity is not Severity.INFO:
+                err.write(f"{d}\n")
+        return PROBLEMS
+    try:
+        steps = load_replay(replay) if replay is not None else None
+    except StatectlError as exc:
+        err.write(f"statectl run: {exc}\n")
+        return USAGE
+    return run_cell(loaded, out, replay=steps, walk=walk, seed=seed).exit_code
