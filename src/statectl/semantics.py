@@ -16,6 +16,10 @@ parts after it, so the pseudocode can be read beside this file. Rules:
    candidate transitions per (state, event), static transition domains and
    compiled guards. Where no guard was consulted a step depends only on
    ``(snapshot, event)`` and is memoised, so dispatch is close to a lookup.
+   A memoised step of a declared event is also kept as a :class:`Plan` in the
+   plan table of its (interned) source snapshot; a plan points at its target's
+   table, so a host walks from table to table with one dictionary lookup per
+   event. Plans are decisions too: the host still performs them.
 5. A host that runs executable content (the SCXML session) drives the same
    functions one microstep at a time through a :class:`Run` that carries an
    :class:`Executor`. The executor evaluates conditions and performs content at
@@ -28,6 +32,7 @@ parts after it, so the pseudocode can be read beside this file. Rules:
 
 from __future__ import annotations
 
+import threading
 from collections import deque
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -35,7 +40,7 @@ from typing import Any, Protocol
 
 from statectl.errors import DiagnosticError, StatectlError
 from statectl.expr import Expression, compile_expression
-from statectl.model import Action, Chart, Raise, State, StateKind, Transition
+from statectl.model import Action, Chart, Notify, Raise, State, StateKind, Transition
 
 __all__ = [
     "Event",
@@ -43,9 +48,11 @@ __all__ = [
     "LivelockError",
     "Machine",
     "Microstep",
+    "Plan",
     "Run",
     "Snapshot",
     "Step",
+    "compiled",
     "enter_initial_states",
     "exit_interpreter",
     "initial",
@@ -60,6 +67,8 @@ __all__ = [
 
 #: Bound on microsteps in one macrostep; a chart that exceeds it loops forever.
 MAX_MICROSTEPS = 10_000
+#: Bound on memoised steps (and interned snapshots) per machine.
+MEMO_LIMIT = 100_000
 
 History = tuple[tuple[str, tuple[str, ...]], ...]
 
@@ -194,6 +203,27 @@ class Run:
         self.internal.append(event)
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class Plan:
+    """A memoised step of a declared event, compiled for the host that performs it.
+
+    ``target`` is interned and ``table`` is its own plan table (shared, filled as
+    steps are memoised). ``notifies`` is every ``Notify`` of the step in order, each
+    with a machine-wide slot number under which a host may cache what it builds for
+    it (a notification without data, say).
+    """
+
+    step: Step
+    target: Snapshot
+    table: dict[str, Plan]
+    notifies: tuple[tuple[int, Notify], ...]
+    handled: bool
+    final: bool
+
+
+PlanTable = dict[str, Plan]
+
+
 class Machine:
     """A chart compiled for stepping: static tables computed once at load."""
 
@@ -255,6 +285,48 @@ class Machine:
                 self._static_domain[id(t)] = self._domain(t, t.targets)
         self._candidates: dict[tuple[str, str | None], tuple[Transition, ...]] = {}
         self._memo: dict[tuple[Snapshot, str], Step] = {}
+        self._initial: Step | None = None
+        self.event_names: frozenset[str] = frozenset(chart.event_names)
+        # interned snapshots with their plan tables, by value and by identity
+        self._tables: dict[Snapshot, tuple[Snapshot, PlanTable]] = {}
+        self._by_id: dict[int, tuple[Snapshot, PlanTable]] = {}
+        self._slots: dict[int, int] = {}  # id(Notify) -> slot; the chart keeps them alive
+
+    # -- plans ---------------------------------------------------------------------------
+
+    def _entry(self, snapshot: Snapshot) -> tuple[Snapshot, PlanTable]:
+        hit = self._by_id.get(id(snapshot))
+        if hit is not None and hit[0] is snapshot:
+            return hit
+        entry = self._tables.get(snapshot)
+        if entry is None:
+            if len(self._tables) >= MEMO_LIMIT:
+                return snapshot, {}  # not interned: its plans are not kept
+            entry = self._tables.setdefault(snapshot, (snapshot, {}))
+            self._by_id.setdefault(id(entry[0]), entry)
+        return entry
+
+    def intern(self, snapshot: Snapshot) -> Snapshot:
+        """The one kept instance equal to ``snapshot``, so hosts compare and look up by identity."""
+        return self._entry(snapshot)[0]
+
+    def plans(self, snapshot: Snapshot) -> dict[str, Plan]:
+        """The plan table of ``snapshot``: event -> :class:`Plan`, for the steps memoised so far.
+
+        Read it, never write it; :func:`step` fills it.
+        """
+        return self._entry(snapshot)[1]
+
+    def _install(self, snapshot: Snapshot, event: str, result: Step) -> None:
+        table = self._entry(snapshot)[1]
+        target, next_table = self._entry(result.target)
+        slots = self._slots
+        notifies = tuple(
+            (slots.setdefault(id(a), len(slots)), a)
+            for a in result.actions
+            if isinstance(a, Notify)
+        )
+        table[event] = Plan(result, target, next_table, notifies, result.handled, result.final)
 
     # -- structure -------------------------------------------------------------------------
 
@@ -678,12 +750,19 @@ def _snapshot(run: Run) -> Snapshot:
 
 
 def initial(m: Machine, data: Mapping[str, Any] | None = None) -> Step:
-    """Enter the chart's initial configuration and settle it."""
+    """Enter the chart's initial configuration and settle it (memoised when no guard ran)."""
+    cached = m._initial
+    if cached is not None:
+        return cached
     run = Run(set(), {}, None, data or {})
     steps = [enter_initial_states(m, run)]
     macrostep(m, run, steps)
     empty = Snapshot(frozenset())
-    return Step(None, empty, _snapshot(run), tuple(steps), True, False, run.final, run.guarded)
+    target = m.intern(_snapshot(run))
+    result = Step(None, empty, target, tuple(steps), True, False, run.final, run.guarded)
+    if not run.guarded:
+        m._initial = result
+    return result
 
 
 def step(
@@ -694,6 +773,11 @@ def step(
     event_data: Any = None,
 ) -> Step:
     """Process one external event to completion; return what happened, perform nothing."""
+    hit = m._by_id.get(id(snapshot))
+    if hit is not None and hit[0] is snapshot:
+        plan = hit[1].get(event)
+        if plan is not None:
+            return plan.step
     key = (snapshot, event)
     cached = m._memo.get(key)
     if cached is not None:
@@ -711,13 +795,41 @@ def step(
     result = Step(
         event,
         snapshot,
-        _snapshot(run) if handled else snapshot,
+        m.intern(_snapshot(run)) if handled else snapshot,
         tuple(steps),
         handled,
         ignored,
         run.final,
         run.guarded,
     )
-    if not run.guarded and len(m._memo) < 100_000:
+    if not run.guarded and len(m._memo) < MEMO_LIMIT:
         m._memo[key] = result
+        if event in m.event_names:
+            m._install(snapshot, event, result)
     return result
+
+
+_COMPILED: dict[int, tuple[Chart, Machine]] = {}
+_COMPILED_LIMIT = 256
+_compiling = threading.Lock()
+
+
+def compiled(chart: Chart) -> Machine:
+    """The :class:`Machine` of ``chart`` shared by every host that only steps it.
+
+    Compiling is the expensive part of a new instance; a chart is a value, so one
+    compilation (and one memo) serves every instance of it in the process. A host
+    that changes its machine (an explorer swapping guards) builds its own.
+    """
+    hit = _COMPILED.get(id(chart))
+    if hit is not None and hit[0] is chart:
+        return hit[1]
+    with _compiling:
+        hit = _COMPILED.get(id(chart))
+        if hit is not None and hit[0] is chart:
+            return hit[1]
+        m = Machine(chart)
+        if len(_COMPILED) >= _COMPILED_LIMIT:
+            del _COMPILED[next(iter(_COMPILED))]
+        _COMPILED[id(chart)] = (chart, m)
+        return m

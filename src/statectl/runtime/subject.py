@@ -21,6 +21,14 @@ Rules:
    current one, so every listener sees one order.
 5. Work that must run on the owner (a monitor's poll) is queued with
    :meth:`Subject.call_soon`, so records are only ever emitted by the owner.
+6. Speed comes from the kernel's plans, never from a second semantics: while
+   nobody listens, an event with a memoised plan for the current snapshot is
+   performed from the plan (commit its target, issue its notifications in
+   order), which is exactly what performing its :class:`~statectl.semantics.Step`
+   does when no records are built. :meth:`Subject.dispatch` is the synchronous
+   owner-side form of ``post`` + ``run_until_idle``. Instances of one chart share
+   its compiled :class:`~statectl.semantics.Machine`; a Subject allocates its
+   worker's wake-up event and record queue only when they are first needed.
 """
 
 from __future__ import annotations
@@ -30,7 +38,6 @@ import threading
 import traceback
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass
 from typing import Any, Literal, Protocol, cast, runtime_checkable
 
 from statectl.errors import StatectlError, UnhandledEventError
@@ -53,7 +60,7 @@ from statectl.runtime.records import (
     StateExited,
     TransitionTaken,
 )
-from statectl.semantics import Machine, Snapshot, Step, initial, step
+from statectl.semantics import Machine, Plan, Snapshot, Step, compiled, initial, step
 
 __all__ = ["ApiLogging", "Listener", "Policy", "Subject"]
 
@@ -70,13 +77,8 @@ class ApiLogging(Protocol):
     def api_log(self) -> Sequence[ApiCall]: ...
 
 
-@dataclass(frozen=True, slots=True)
-class _Item:
-    """A queued event, or a callable to run on the owner (``event`` is then ``None``)."""
-
-    event: str | None
-    data: Any = None
-    fn: Callable[[], object] | None = None
+#: A queued event ``(name, data, None)``, or ``(None, None, fn)`` to run ``fn`` on the owner.
+_Item = tuple[str | None, Any, Callable[[], object] | None]
 
 
 def _print_error(exc: BaseException) -> None:
@@ -90,6 +92,34 @@ def _describe_invoke(i: Invoke) -> str:
 class Subject:
     """A device's chart running on a clock; observers get the notifications meant for them."""
 
+    __slots__ = (
+        "_busy",
+        "_closed",
+        "_data",
+        "_emitting",
+        "_fast",
+        "_finished",
+        "_known",
+        "_listeners",
+        "_name",
+        "_notes",
+        "_pending",
+        "_queue",
+        "_routes",
+        "_serving",
+        "_snapshot",
+        "_stopping",
+        "_table",
+        "_wake",
+        "_worker",
+        "chart",
+        "clock",
+        "events_processed",
+        "invokes_issued",
+        "machine",
+        "policy",
+    )
+
     def __init__(
         self,
         chart: Chart,
@@ -102,21 +132,26 @@ class Subject:
         if policy not in ("ignore", "error"):
             raise StatectlError(f"policy must be 'ignore' or 'error' (got {policy!r})")
         self.chart = chart
-        self.machine = Machine(chart)
+        self.machine: Machine = compiled(chart)
         self.clock = clock
-        self.name = name or chart.name
+        self._name = name or chart.name
         self.policy: Policy = policy
-        self._data: dict[str, Any] = self._initial_data(chart, data or {})
-        self._known = frozenset(chart.event_names)
-        self._invokes: dict[int, Invoke] = {i.number: i for i in chart.invokes}
-        self._routes: dict[int, Observer] = {}
-        self._logging: dict[int, bool] = {}  # observer keeps an api_log (checked once)
+        self._data: dict[str, Any] = self._initial_data(chart, data) if chart.data else (
+            dict(data) if data else {}
+        )
+        self._known = self.machine.event_names
+        # invoke number -> (observer, it keeps an api_log: checked once at attach)
+        self._routes: dict[int, tuple[Observer, bool]] = {}
+        # plan slot -> (observer or None, its data-less notification); cleared by attach, rename
+        self._notes: dict[int, tuple[Observer | None, Notification]] | None = None
         self._listeners: list[Listener] = []
-        self._pending: deque[Record] = deque()
+        self._pending: deque[Record] | None = None
         self._emitting = False
         self._queue: deque[_Item] = deque()
-        self._wake = threading.Event()
+        self._wake: threading.Event | None = None
         self._snapshot: Snapshot | None = None
+        self._table: dict[str, Plan] = {}  # plans of the current snapshot
+        self._fast = False  # dispatch may take plans: started, nobody listens, no worker
         self._busy = False
         self._finished = False
         self._closed = False
@@ -127,9 +162,9 @@ class Subject:
         self.invokes_issued = 0
 
     @staticmethod
-    def _initial_data(chart: Chart, given: Mapping[str, Any]) -> dict[str, Any]:
+    def _initial_data(chart: Chart, given: Mapping[str, Any] | None) -> dict[str, Any]:
         """The chart's data items in order, each evaluated over the earlier ones."""
-        data = dict(given)
+        data = dict(given or {})
         for item in chart.data:
             if item.name in data:
                 continue
@@ -142,56 +177,84 @@ class Subject:
             data[item.name] = value
         return data
 
+    @property
+    def name(self) -> str:
+        """The device name every record and notification carries."""
+        return self._name
+
+    @name.setter
+    def name(self, value: str) -> None:
+        self._name = value
+        self._notes = None
+
     # -- wiring ----------------------------------------------------------------------------
 
     def attach(self, observer: Observer, invokes: Iterable[int] | None = None) -> None:
         """Register ``observer`` for these invoke numbers (default: every invoke of the chart)."""
-        numbers = tuple(self._invokes) if invokes is None else tuple(invokes)
-        available = ", ".join(_describe_invoke(i) for i in self._invokes.values()) or "none"
-        unknown = [n for n in numbers if n not in self._invokes]
+        by_number = {i.number: i for i in self.chart.invokes}
+        numbers = tuple(by_number) if invokes is None else tuple(invokes)
+        available = ", ".join(_describe_invoke(i) for i in by_number.values()) or "none"
+        unknown = [n for n in numbers if n not in by_number]
         if unknown:
             raise StatectlError(
                 f"{self.name}: no invoke number {unknown} in chart {self.chart.name!r} "
                 f"(available: {available})"
             )
-        taken = [n for n in numbers if n in self._routes and self._routes[n] is not observer]
+        routes = self._routes
+        taken = [n for n in numbers if n in routes and routes[n][0] is not observer]
         if taken:
-            holders = ", ".join(f"#{n} by {type(self._routes[n]).__name__}" for n in taken)
+            holders = ", ".join(f"#{n} by {type(routes[n][0]).__name__}" for n in taken)
             raise StatectlError(
                 f"{self.name}: invoke numbers already claimed ({holders}); a notification "
                 "goes to exactly one observer, so attach each number once"
             )
         logging = isinstance(observer, ApiLogging)
         for n in numbers:
-            self._routes[n] = observer
-            self._logging[n] = logging
+            routes[n] = (observer, logging)
+        self._notes = None
 
     def observer_for(self, invoke: int) -> Observer | None:
-        return self._routes.get(invoke)
+        route = self._routes.get(invoke)
+        return route[0] if route is not None else None
 
     def listen(self, callback: Listener) -> Callable[[], None]:
         """Receive every record from now on; returns a function that stops it."""
         self._listeners.append(callback)
+        self._refresh()
 
         def unlisten() -> None:
             if callback in self._listeners:
                 self._listeners.remove(callback)
+                self._refresh()
 
         return unlisten
 
+    def _refresh(self) -> None:
+        """Recompute whether :meth:`dispatch` may take plans without the queue."""
+        self._fast = (
+            self._snapshot is not None
+            and not self._listeners
+            and self._worker is None
+            and not self._serving
+            and not self._closed
+        )
+
     def emit(self, record: Record) -> None:
         """Deliver ``record`` to every listener, after any record being delivered now."""
-        self._pending.append(record)
+        pending = self._pending
+        if pending is None:
+            pending = self._pending = deque()
+        pending.append(record)
         if self._emitting:
             return
         self._emitting = True
         try:
-            while self._pending:
-                r = self._pending.popleft()
+            while pending:
+                r = pending.popleft()
                 for callback in tuple(self._listeners):
                     callback(r)
         except BaseException:
-            self._pending.clear()
+            pending.clear()
             raise
         finally:
             self._emitting = False
@@ -231,15 +294,32 @@ class Subject:
             raise StatectlError(f"an event name must be a str (got {event!r})")
         if self._closed:
             raise StatectlError(f"{self.name} is closed; event {event!r} cannot be posted")
-        self._queue.append(_Item(event, data))
-        self._wake.set()
+        self._queue.append((event, data, None))
+        wake = self._wake
+        if wake is not None:
+            wake.set()
 
     def call_soon(self, fn: Callable[[], object]) -> None:
         """Run ``fn`` on the owner, in queue order with the events (monitors use this)."""
         if self._closed:
             return
-        self._queue.append(_Item(None, None, fn))
-        self._wake.set()
+        self._queue.append((None, None, fn))
+        wake = self._wake
+        if wake is not None:
+            wake.set()
+
+    def _ensure_wake(self) -> threading.Event:
+        """The worker's wake-up event, made when an owner loop first needs it.
+
+        A post that found no event queued its item first, so a queue that is not
+        empty here sets the new event and nothing posted is slept through.
+        """
+        wake = self._wake
+        if wake is None:
+            wake = self._wake = threading.Event()
+            if self._queue:
+                wake.set()
+        return wake
 
     # -- owning (one thread) -----------------------------------------------------------------
 
@@ -253,7 +333,7 @@ class Subject:
         if listening:
             self.emit(Started(self.name, now))
         first = initial(self.machine, self._data)
-        self._snapshot = first.target
+        self._commit(first.target)
         self._perform(first, None, now, listening)
 
     def run_until_idle(self) -> int:
@@ -267,19 +347,58 @@ class Subject:
                 "(from an observer or listener?); post() the event instead"
             )
         count = 0
+        queue = self._queue
         self._busy = True
         try:
-            while self._queue and not self._stopping:
-                item = self._queue.popleft()
-                if item.fn is not None:
-                    item.fn()
+            while queue and not self._stopping:
+                event, data, fn = queue.popleft()
+                if fn is not None:
+                    fn()
                     continue
-                assert item.event is not None
+                assert event is not None
                 count += 1
-                self._process(item.event, item.data)
+                self._process(event, data)
         finally:
             self._busy = False
         return count
+
+    def dispatch(self, event: str, data: Any = None) -> int:
+        """Process ``event`` now, on the calling thread as the owner, after anything queued.
+
+        The synchronous form of :meth:`post` then :meth:`run_until_idle`: the same
+        records, observer calls and errors; returns how many events ran. While
+        nobody listens and the queue is empty, an event with a plan is performed
+        from it directly.
+        """
+        if self._fast and not self._queue and not self._busy:
+            try:
+                plan = self._table.get(event)
+            except TypeError:  # unhashable: post() says what is wrong with it
+                plan = None
+            if plan is not None and plan.handled:
+                # _follow() inlined: this is the hot path
+                self._busy = True
+                try:
+                    self.events_processed += 1
+                    self._snapshot = plan.target
+                    self._table = plan.table
+                    for slot, action in plan.notifies:
+                        self.invokes_issued += 1
+                        notes = self._notes
+                        call = notes.get(slot) if notes is not None and data is None else None
+                        if call is None:
+                            call = self._call(slot, action, data)
+                        if call[0] is not None:
+                            call[0].update(call[1])
+                    if plan.final:
+                        self._finished = True
+                finally:
+                    self._busy = False
+                if self._queue:  # an observer posted: run-to-completion goes on
+                    return 1 + self.run_until_idle()
+                return 1
+        self.post(event, data)
+        return self.run_until_idle()
 
     def advance(self, seconds: float) -> int:
         """On a :class:`SimClock`: move time on, draining the queue after every timer."""
@@ -293,11 +412,13 @@ class Subject:
         """Be the owner on this thread until :meth:`stop`; errors go to ``on_error``."""
         if self._snapshot is None:
             self.start()
+        wake = self._ensure_wake()
         self._serving = True
+        self._fast = False
         try:
             while not self._stopping:
-                self._wake.wait()
-                self._wake.clear()
+                wake.wait()
+                wake.clear()
                 while self._queue and not self._stopping:
                     try:
                         self.run_until_idle()
@@ -306,12 +427,15 @@ class Subject:
         finally:
             self._serving = False
             self._stopping = False
+            self._refresh()
 
     def start_worker(self, on_error: ErrorHandler = _print_error) -> threading.Thread:
         """Run :meth:`serve_forever` on a daemon thread, which becomes the owner."""
         if self._worker is not None:
             raise StatectlError(f"{self.name} has a worker already")
+        self._ensure_wake()
         self._serving = True  # so a stop() before the thread runs is not lost
+        self._fast = False
         self._worker = threading.Thread(
             target=self.serve_forever, args=(on_error,), name=f"statectl-{self.name}", daemon=True
         )
@@ -322,11 +446,12 @@ class Subject:
         """Stop the owner loop after the event in progress; queued events stay queued."""
         if self._serving:
             self._stopping = True
-            self._wake.set()
+            self._ensure_wake().set()
         worker = self._worker
         if worker is not None and worker is not threading.current_thread():
             worker.join(timeout)
         self._worker = None
+        self._refresh()
 
     def close(self) -> None:
         """Stop the owner, record ``Finished``; later posts are refused."""
@@ -334,6 +459,7 @@ class Subject:
             return
         self.stop()
         self._closed = True
+        self._fast = False
         if not self._finished:
             self._finished = True
             if self._listeners:
@@ -349,7 +475,64 @@ class Subject:
 
     # -- one event -------------------------------------------------------------------------
 
+    def _commit(self, target: Snapshot) -> None:
+        self._snapshot = target
+        self._table = self.machine.plans(target)
+        self._refresh()
+
+    def _follow(self, plan: Plan, data: Any) -> bool:
+        """Perform ``plan`` as :meth:`_perform` would with nobody listening; False: not here.
+
+        An unhandled plan that must be rejected (policy ``error``) is left to the
+        full path, which builds the error.
+        """
+        if not plan.handled:
+            if self.policy == "error" and not plan.step.ignored:
+                return False
+            self.events_processed += 1
+            return True
+        self.events_processed += 1
+        self._snapshot = plan.target
+        self._table = plan.table
+        for slot, action in plan.notifies:
+            self.invokes_issued += 1
+            observer, note = self._call(slot, action, data)
+            if observer is not None:
+                observer.update(note)
+        if plan.final:
+            self._finished = True
+        return True
+
+    def _call(
+        self, slot: int, action: Notify, data: Any
+    ) -> tuple[Observer | None, Notification]:
+        """Who gets ``action`` and what; without data, worked out once per instance and slot."""
+        route = self._routes.get(action.invoke)
+        observer = route[0] if route is not None else None
+        if data is not None:
+            note = Notification(
+                self._name, action.invoke, action.name, action.method, action.event, data
+            )
+            return observer, note
+        notes = self._notes
+        if notes is None:
+            notes = self._notes = {}
+        call = notes.get(slot)
+        if call is None:
+            note = Notification(
+                self._name, action.invoke, action.name, action.method, action.event, None
+            )
+            call = notes[slot] = (observer, note)
+        return call
+
     def _process(self, event: str, data: Any) -> None:
+        if not self._listeners:
+            plan = self._table.get(event)
+            if plan is not None and self._follow(plan, data):
+                return
+        self._process_slow(event, data)
+
+    def _process_slow(self, event: str, data: Any) -> None:
         snapshot = self._snapshot
         assert snapshot is not None
         self.events_processed += 1
@@ -374,7 +557,7 @@ class Subject:
                 reason = "no transition"
             self._unhandled(event, reason, now, snapshot)
             return
-        self._snapshot = decision.target
+        self._commit(decision.target)
         self._perform(decision, data, now, listening)
 
     def _unhandled(self, event: str, reason: IgnoreReason, now: float, snap: Snapshot) -> None:
@@ -415,10 +598,11 @@ class Subject:
         if listening:
             a = action
             self.emit(InvokeIssued(self.name, now, a.invoke, a.name, a.method, a.event))
-        observer = self._routes.get(action.invoke)
-        if observer is None:
+        route = self._routes.get(action.invoke)
+        if route is None:
             return
-        log = cast(ApiLogging, observer).api_log if self._logging[action.invoke] else None
+        observer, logging = route
+        log = cast(ApiLogging, observer).api_log if logging else None
         before = len(log) if log is not None else 0
         observer.update(
             Notification(self.name, action.invoke, action.name, action.method, action.event, data)

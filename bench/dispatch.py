@@ -1,0 +1,609 @@
+"""Dispatch speed and instance cost of statectl against its peers, in one process.
+
+Rules:
+1. Every contender runs the same work: the paper's Motor with one observer
+   attached (the cycle Movement, Movement completion, Movement, Error, Error
+   completion: five events, three notifications), a generated chart of 50 states
+   nested two levels deep (a 50-event cycle through every leaf, half by leaf
+   transitions and the rest by transitions of the parent), and building a new
+   started instance.
+2. One process, interleaved: each round runs every contender once, in an order
+   that rotates from round to round, after warm-up rounds that are thrown away.
+   A figure is the median over the rounds, so a noisy moment hurts one round of
+   everybody instead of one contender.
+3. The peers (transitions, python-statemachine, sismic) are imported only here,
+   from the ``bench`` extra; one that is not installed is skipped with a note.
+4. The hand-written dict baseline is the floor: a dictionary lookup on
+   ``(state, event)`` and a call of the observer, nothing else.
+
+Run: ``python bench/dispatch.py`` (``--quick`` for a smoke run, ``--libs`` to choose).
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import statistics
+import sys
+import time
+import tracemalloc
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+# benchmark the working tree, not whatever copy happens to be installed
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+
+from statectl.build import load_chart
+from statectl.model import Chart, State, StateKind, Transition
+from statectl.runtime import SimClock, Subject
+
+MOTOR_YAML = Path(__file__).resolve().parents[1] / "examples" / "motor" / "motor.yaml"
+MOTOR_CYCLE = ("Movement", "Movement completion", "Movement", "Error", "Error completion")
+MOTOR_NOTIFY = {"Movement": 0, "Error": 2}  # driving events -> invoke number
+MOTOR_ROWS = (  # old, event, new
+    ("Blocked", "Movement", "Moving"),
+    ("Moving", "Movement completion", "Blocked"),
+    ("Moving", "Error", "Returning"),
+    ("Returning", "Error completion", "Blocked"),
+)
+GROUPS, LEAVES = 5, 9  # 5 parents + 45 leaves = 50 states
+LIBS = ("statectl", "dict", "transitions", "python-statemachine", "sismic")
+
+Fire = Callable[[], None]  # runs one cycle of a scenario
+
+
+class Counter:
+    """The one observer: counts notifications, as a cheap device driver would."""
+
+    __slots__ = ("n",)
+
+    def __init__(self) -> None:
+        self.n = 0
+
+    def update(self, notification: object) -> None:
+        self.n += 1
+
+
+def snake(event: str) -> str:
+    return event.lower().replace(" ", "_")
+
+
+# -- the nested chart, one description for every library --------------------------------------
+
+
+def nested_rows() -> tuple[list[tuple[str, str, str]], list[str]]:
+    """(source, event, target) rows and the 50-event cycle that returns to the start.
+
+    ``next`` walks the leaves of a parent and on to the next parent's first leaf
+    (leaving and entering parents); ``skip`` is a transition of the parent, so the
+    leaf inherits it.
+    """
+    rows: list[tuple[str, str, str]] = []
+    for g in range(GROUPS):
+        for i in range(LEAVES):
+            nxt = f"G{g}L{i + 1}" if i + 1 < LEAVES else f"G{(g + 1) % GROUPS}L0"
+            rows.append((f"G{g}L{i}", "next", nxt))
+        rows.append((f"G{g}", "skip", f"G{(g + 1) % GROUPS}"))
+    return rows, ["next"] * (GROUPS * LEAVES) + ["skip"] * GROUPS
+
+
+def nested_chart() -> Chart:
+    rows, _ = nested_rows()
+    states: list[State] = []
+    for g in range(GROUPS):
+        states.append(State(f"G{g}", StateKind.COMPOUND, initial=(f"G{g}L0",)))
+        states.extend(State(f"G{g}L{i}", parent=f"G{g}") for i in range(LEAVES))
+    transitions = tuple(Transition(s, (e,), (t,)) for s, e, t in rows)
+    return Chart("Nested", tuple(states), transitions, ("G0",))
+
+
+# -- contenders: each returns (fire one cycle, events per cycle) or None if unavailable -------
+
+
+def statectl_motor() -> tuple[Fire, int]:
+    subject = Subject(load_chart(MOTOR_YAML), clock=SimClock())
+    subject.attach(Counter())
+    subject.start()
+    dispatch = subject.dispatch
+    cycle = MOTOR_CYCLE
+
+    def fire() -> None:
+        for e in cycle:
+            dispatch(e)
+
+    return fire, len(cycle)
+
+
+def statectl_motor_queued() -> tuple[Fire, int]:
+    subject = Subject(load_chart(MOTOR_YAML), clock=SimClock())
+    subject.attach(Counter())
+    subject.start()
+    post, run = subject.post, subject.run_until_idle
+    cycle = MOTOR_CYCLE
+
+    def fire() -> None:
+        for e in cycle:
+            post(e)
+            run()
+
+    return fire, len(cycle)
+
+
+def statectl_nested() -> tuple[Fire, int]:
+    subject = Subject(nested_chart(), clock=SimClock())
+    subject.start()
+    dispatch = subject.dispatch
+    _, cycle = nested_rows()
+
+    def fire() -> None:
+        for e in cycle:
+            dispatch(e)
+
+    return fire, len(cycle)
+
+
+class DictMachine:
+    """The floor: one dict lookup on (state, event), then the observer if the row notifies."""
+
+    __slots__ = ("observer", "state", "table")
+
+    def __init__(self, table: dict[tuple[str, str], tuple[str, int | None]], state: str) -> None:
+        self.table = table
+        self.state = state
+        self.observer = Counter()
+
+    def dispatch(self, event: str) -> None:
+        new, invoke = self.table[(self.state, event)]
+        self.state = new
+        if invoke is not None:
+            self.observer.update(invoke)
+
+
+MOTOR_TABLE = {(o, e): (n, MOTOR_NOTIFY.get(e)) for o, e, n in MOTOR_ROWS}
+
+
+def dict_motor() -> tuple[Fire, int]:
+    machine = DictMachine(MOTOR_TABLE, "Blocked")
+    dispatch = machine.dispatch
+    cycle = MOTOR_CYCLE
+
+    def fire() -> None:
+        for e in cycle:
+            dispatch(e)
+
+    return fire, len(cycle)
+
+
+def dict_nested() -> tuple[Fire, int]:
+    rows, cycle = nested_rows()
+    table: dict[tuple[str, str], tuple[str, int | None]] = {}
+    for s, e, t in rows:  # flattened by hand: a parent's row copied to its leaves
+        target = t if "L" in t else f"{t}L0"
+        for leaf in [s] if "L" in s else [f"{s}L{i}" for i in range(LEAVES)]:
+            table.setdefault((leaf, e), (target, None))
+    machine = DictMachine(table, "G0L0")
+    dispatch = machine.dispatch
+
+    def fire() -> None:
+        for e in cycle:
+            dispatch(e)
+
+    return fire, len(cycle)
+
+
+def transitions_motor() -> tuple[Fire, int] | None:
+    try:
+        from transitions import Machine
+    except ImportError:
+        return None
+    observer = Counter()
+    model = type("Motor", (), {})()
+    rows = [
+        {"trigger": snake(e), "source": o, "dest": n}
+        | ({"after": (lambda i=MOTOR_NOTIFY[e]: observer.update(i))} if e in MOTOR_NOTIFY else {})
+        for o, e, n in MOTOR_ROWS
+    ]
+    Machine(model=model, states=["Blocked", "Moving", "Returning"], transitions=rows,
+            initial="Blocked", auto_transitions=False)
+    calls = [getattr(model, snake(e)) for e in MOTOR_CYCLE]
+
+    def fire() -> None:
+        for c in calls:
+            c()
+
+    return fire, len(calls)
+
+
+def transitions_nested() -> tuple[Fire, int] | None:
+    try:
+        from transitions.extensions import HierarchicalMachine
+    except ImportError:
+        return None
+    rows, cycle = nested_rows()
+
+    def name(s: str) -> str:
+        return s.replace("L", "_L") if "L" in s else s
+
+    states = [
+        {"name": f"G{g}", "children": [f"L{i}" for i in range(LEAVES)], "initial": "L0"}
+        for g in range(GROUPS)
+    ]
+    model = type("Nested", (), {})()
+    HierarchicalMachine(
+        model=model, states=states, initial="G0", auto_transitions=False,
+        transitions=[{"trigger": e, "source": name(s), "dest": name(t)} for s, e, t in rows],
+    )
+    calls = [getattr(model, e) for e in cycle]
+
+    def fire() -> None:
+        for c in calls:
+            c()
+
+    return fire, len(calls)
+
+
+def _psm_motor_class() -> Any:
+    from statemachine import State as S
+    from statemachine import StateMachine
+
+    states = {n: S(initial=(n == "Blocked")) for n in ("Blocked", "Moving", "Returning")}
+    body: dict[str, Any] = {n.lower(): s for n, s in states.items()}
+    for o, e, n in MOTOR_ROWS:
+        body[snake(e)] = states[o].to(states[n])
+    for e, i in MOTOR_NOTIFY.items():
+        body[f"on_{snake(e)}"] = lambda self, i=i: self.observer.update(i)
+
+    def init(self: Any, observer: Counter) -> None:
+        self.observer = observer
+        StateMachine.__init__(self)
+
+    body["__init__"] = init
+    return type("PsmMotor", (StateMachine,), body)
+
+
+def psm_motor() -> tuple[Fire, int] | None:
+    try:
+        cls = _psm_motor_class()
+    except ImportError:
+        return None
+    machine = cls(Counter())
+    calls = [getattr(machine, snake(e)) for e in MOTOR_CYCLE]
+
+    def fire() -> None:
+        for c in calls:
+            c()
+
+    return fire, len(calls)
+
+
+def psm_nested() -> tuple[Fire, int] | None:
+    try:
+        from statemachine import State as S
+        from statemachine import StateMachine
+    except ImportError:
+        return None
+    rows, cycle = nested_rows()
+    leaves: dict[str, Any] = {}
+    body: dict[str, Any] = {}
+    for g in range(GROUPS):
+        inner = {f"l{i}": S(initial=(i == 0)) for i in range(LEAVES)}
+        leaves.update({f"G{g}L{i}": inner[f"l{i}"] for i in range(LEAVES)})
+        body[f"g{g}"] = type(f"g{g}", (S.Compound,), inner)
+    parents = {f"G{g}": body[f"g{g}"] for g in range(GROUPS)}
+    every = {**leaves, **parents}
+    by_event: dict[str, Any] = {}
+    for s, e, t in rows:
+        tl = every[s].to(every[t])
+        by_event[e] = tl if e not in by_event else by_event[e] | tl
+    body.update(by_event)
+    body["g0"] = body["g0"]
+    cls = type("PsmNested", (StateMachine,), body)
+    cls_initial = cls()
+    calls = [getattr(cls_initial, e) for e in cycle]
+
+    def fire() -> None:
+        for c in calls:
+            c()
+
+    return fire, len(calls)
+
+
+def _sismic_yaml(states: str, initial: str) -> str:
+    return f"statechart:\n  name: b\n  root state:\n    name: root\n    initial: {initial}\n" \
+        f"    states:\n{states}"
+
+
+def _sismic_motor_yaml() -> str:
+    out = []
+    for st in ("Blocked", "Moving", "Returning"):
+        out.append(f"    - name: {st}\n      transitions:\n")
+        for o, e, n in MOTOR_ROWS:
+            if o == st:
+                action = f"\n        action: observer.update({MOTOR_NOTIFY[e]})" \
+                    if e in MOTOR_NOTIFY else ""
+                out.append(f"      - target: {n}\n        event: {e}{action}\n")
+    return _sismic_yaml("".join(out), "Blocked")
+
+
+def _sismic_nested_yaml() -> str:
+    rows, _ = nested_rows()
+    out = []
+    for g in range(GROUPS):
+        out.append(f"    - name: G{g}\n      initial: G{g}L0\n      transitions:\n")
+        out.extend(f"      - target: {t}\n        event: {e}\n" for s, e, t in rows if s == f"G{g}")
+        out.append("      states:\n")
+        for i in range(LEAVES):
+            out.append(f"      - name: G{g}L{i}\n        transitions:\n")
+            out.extend(
+                f"        - target: {t}\n          event: {e}\n"
+                for s, e, t in rows if s == f"G{g}L{i}"
+            )
+    return _sismic_yaml("".join(out), "G0")
+
+
+def _sismic(yaml: str, cycle: Sequence[str]) -> tuple[Fire, int] | None:
+    try:
+        from sismic.interpreter import Interpreter  # type: ignore[import-untyped]  # no stubs
+        from sismic.io import import_from_yaml  # type: ignore[import-untyped]  # no stubs
+    except ImportError:
+        return None
+    interpreter = Interpreter(import_from_yaml(yaml), initial_context={"observer": Counter()})
+    interpreter.execute()
+    queue, execute = interpreter.queue, interpreter.execute
+
+    def fire() -> None:
+        for e in cycle:
+            queue(e)
+            execute()
+
+    return fire, len(cycle)
+
+
+def sismic_motor() -> tuple[Fire, int] | None:
+    return _sismic(_sismic_motor_yaml(), MOTOR_CYCLE)
+
+
+def sismic_nested() -> tuple[Fire, int] | None:
+    return _sismic(_sismic_nested_yaml(), nested_rows()[1])
+
+
+# -- new instances ------------------------------------------------------------------------------
+
+
+def instance_makers() -> dict[str, Callable[[], Callable[[], object]] | None]:
+    """Per library, a factory of the 'new started Motor instance' callable (None: skipped)."""
+
+    def statectl_new() -> Callable[[], object]:
+        chart, clock = load_chart(MOTOR_YAML), SimClock()
+
+        def new() -> object:
+            s = Subject(chart, clock=clock)
+            s.start()
+            return s
+
+        new()  # the chart is compiled once per process, on its first instance
+        return new
+
+    def dict_new() -> Callable[[], object]:
+        return lambda: DictMachine(MOTOR_TABLE, "Blocked")
+
+    def transitions_new() -> Callable[[], object]:
+        from transitions import Machine
+
+        rows = [{"trigger": snake(e), "source": o, "dest": n} for o, e, n in MOTOR_ROWS]
+        kind = type("Motor", (), {})
+
+        def new() -> object:
+            model = kind()
+            Machine(model=model, states=["Blocked", "Moving", "Returning"], transitions=rows,
+                    initial="Blocked", auto_transitions=False)
+            return model
+
+        return new
+
+    def psm_new() -> Callable[[], object]:
+        cls = _psm_motor_class()
+        return lambda: cls(Counter())
+
+    def sismic_new() -> Callable[[], object]:
+        from sismic.interpreter import Interpreter  # type: ignore[import-untyped]  # no stubs
+        from sismic.io import import_from_yaml  # type: ignore[import-untyped]  # no stubs
+
+        chart = import_from_yaml(_sismic_motor_yaml())
+
+        def new() -> object:
+            it = Interpreter(chart, initial_context={"observer": Counter()})
+            it.execute()
+            return it
+
+        return new
+
+    makers: dict[str, Callable[[], Callable[[], object]]] = {
+        "statectl": statectl_new, "dict": dict_new, "transitions": transitions_new,
+        "python-statemachine": psm_new, "sismic": sismic_new,
+    }
+    out: dict[str, Callable[[], Callable[[], object]] | None] = {}
+    for lib, maker in makers.items():
+        try:
+            maker()
+        except ImportError:
+            out[lib] = None
+        else:
+            out[lib] = maker
+    return out
+
+
+def instance_bytes(new: Callable[[], object], count: int) -> float:
+    """Bytes allocated and kept per instance (tracemalloc, ``count`` kept alive)."""
+    gc.collect()
+    tracemalloc.start()
+    base = tracemalloc.get_traced_memory()[0]
+    keep = [new() for _ in range(count)]
+    used = tracemalloc.get_traced_memory()[0] - base
+    tracemalloc.stop()
+    del keep
+    return used / count
+
+
+# -- timing -------------------------------------------------------------------------------------
+
+
+@dataclass(slots=True)
+class Contender:
+    scenario: str
+    lib: str
+    label: str
+    fire: Fire
+    per_call: int  # events (or instances) per fire()
+    loops: int = 1
+    samples: list[float] | None = None
+
+
+def calibrate(c: Contender, budget: float) -> None:
+    """Choose how many cycles one round runs so it takes about ``budget`` seconds."""
+    loops = 1
+    while True:
+        t0 = time.perf_counter()
+        for _ in range(loops):
+            c.fire()
+        took = time.perf_counter() - t0
+        if took >= budget / 10 or loops >= 1 << 20:
+            c.loops = max(1, int(loops * budget / max(took, 1e-9)))
+            return
+        loops *= 4
+
+
+def measure(contenders: list[Contender], rounds: int, warmup: int, budget: float) -> None:
+    for c in contenders:
+        calibrate(c, budget)
+        c.samples = []
+    for r in range(warmup + rounds):
+        shift = r % len(contenders)
+        for c in contenders[shift:] + contenders[:shift]:
+            fire, loops = c.fire, c.loops
+            gc_was = gc.isenabled()
+            gc.disable()
+            t0 = time.perf_counter_ns()
+            for _ in range(loops):
+                fire()
+            took = time.perf_counter_ns() - t0
+            if gc_was:
+                gc.enable()
+            if r >= warmup:
+                assert c.samples is not None
+                c.samples.append(took / (loops * c.per_call))
+
+
+def median(c: Contender) -> float:
+    assert c.samples
+    return statistics.median(c.samples)
+
+
+# -- main ---------------------------------------------------------------------------------------
+
+
+def build(libs: Sequence[str]) -> tuple[list[Contender], list[str]]:
+    table: list[tuple[str, str, str, Callable[[], tuple[Fire, int] | None]]] = [
+        ("motor", "statectl", "statectl dispatch()", statectl_motor),
+        ("motor", "statectl", "statectl post()+run_until_idle()", statectl_motor_queued),
+        ("motor", "dict", "dict baseline", dict_motor),
+        ("motor", "transitions", "transitions", transitions_motor),
+        ("motor", "python-statemachine", "python-statemachine", psm_motor),
+        ("motor", "sismic", "sismic", sismic_motor),
+        ("nested", "statectl", "statectl dispatch()", statectl_nested),
+        ("nested", "dict", "dict baseline (flattened by hand)", dict_nested),
+        ("nested", "transitions", "transitions (HierarchicalMachine)", transitions_nested),
+        ("nested", "python-statemachine", "python-statemachine", psm_nested),
+        ("nested", "sismic", "sismic", sismic_nested),
+    ]
+    out: list[Contender] = []
+    notes: list[str] = []
+    for scenario, lib, label, make in table:
+        if lib not in libs:
+            continue
+        made = make()
+        if made is None:
+            notes.append(f"{lib} not installed: skipped ({scenario}); pip install '.[bench]'")
+            continue
+        out.append(Contender(scenario, lib, label, made[0], made[1]))
+    makers = instance_makers()
+    for lib in libs:
+        maker = makers.get(lib)
+        if maker is None:
+            notes.append(f"{lib} not installed: skipped (new instance)")
+            continue
+        new = maker()
+
+        def fire(new: Callable[[], object] = new) -> None:
+            new()
+
+        out.append(Contender("new", lib, lib, fire, 1))
+    return out, notes
+
+
+def report(contenders: list[Contender], sizes: dict[str, float], notes: list[str]) -> str:
+    lines = []
+    head = "| scenario | library | ns/event | vs dict | transitions / this |"
+    titles = {"motor": "Motor + 1 observer", "nested": "50 states, 2 levels",
+              "new": "new started instance"}
+    for scenario in ("motor", "nested", "new"):
+        rows = [c for c in contenders if c.scenario == scenario]
+        if not rows:
+            continue
+        base = next((median(c) for c in rows if c.lib == "dict"), None)
+        peer = next((median(c) for c in rows if c.lib == "transitions"), None)
+        if scenario == "new":
+            lines.append("")
+            lines.append("| scenario | library | us/instance | bytes/instance | vs dict (time) |")
+            lines.append("|---|---|---:|---:|---:|")
+        elif not lines:
+            lines.append(head)
+            lines.append("|---|---|---:|---:|---:|")
+        for c in rows:
+            t = median(c)
+            vs_dict = f"{t / base:.1f}" if base else "-"
+            if scenario == "new":
+                size = sizes.get(c.lib)
+                size_text = f"{size:,.0f}" if size is not None else "-"
+                cells = (titles[scenario], c.label, f"{t / 1000:,.2f}", size_text, vs_dict)
+                lines.append("| " + " | ".join(cells) + " |")
+            else:
+                vs_peer = f"{peer / t:.1f}" if peer else "-"
+                lines.append(
+                    f"| {titles[scenario]} | {c.label} | {t:,.0f} | {vs_dict} | {vs_peer} |"
+                )
+    lines.extend(f"note: {n}" for n in notes)
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--quick", action="store_true", help="a short smoke run (noisy figures)")
+    parser.add_argument("--libs", default=",".join(LIBS),
+                        help=f"comma-separated subset of {', '.join(LIBS)}")
+    parser.add_argument("--rounds", type=int, default=None, help="measured rounds (default 15)")
+    args = parser.parse_args(argv)
+    libs = [x.strip() for x in args.libs.split(",") if x.strip()]
+    unknown = [x for x in libs if x not in LIBS]
+    if unknown:
+        parser.error(f"unknown library {unknown} (choose from {', '.join(LIBS)})")
+    rounds = args.rounds or (3 if args.quick else 15)
+    warmup = 1 if args.quick else 3
+    budget = 0.002 if args.quick else 0.05
+    contenders, notes = build(libs)
+    measure(contenders, rounds, warmup, budget)
+    sizes: dict[str, float] = {}
+    for c in contenders:
+        if c.scenario == "new":
+            maker = instance_makers()[c.lib]
+            assert maker is not None
+            sizes[c.lib] = instance_bytes(maker(), 50 if args.quick else 500)
+    print(f"python {sys.version.split()[0]}, {rounds} rounds (median), interleaved")
+    print(report(contenders, sizes, notes))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
