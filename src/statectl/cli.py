@@ -182,6 +182,37 @@ def cmd_scxml_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     return OK
 
 
+def cmd_codegen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    from statectl.codegen import run_codegen
+
+    return run_codegen(args.file, args.out, args.target, out, err)
+
+
+def cmd_verify(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    from statectl.explore.verify import verify_main
+
+    return verify_main(
+        args.cell,
+        as_json=args.json,
+        max_states=args.max_states,
+        export=args.export,
+        output=args.output,
+        traces=args.traces,
+        diagrams=args.diagrams,
+        progress=True if args.progress else None,
+        out=out,
+        err=err,
+    )
+
+
+def cmd_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    from statectl.explore.replay import run_main
+
+    return run_main(
+        args.file, replay=args.replay, walk=args.steps, seed=args.seed, out=out, err=err
+    )
+
+
 def _write_atomic(path: Path, text: str) -> None:
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text(text, encoding="utf-8")
@@ -236,6 +267,31 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--to", required=True, choices=("yaml", "csv", "xlsx", "md"))
     s.add_argument("--out", help="output path (a directory or NAME for the CSV pair)")
     s.set_defaults(func=cmd_tables)
+
+    s = sub.add_parser("codegen", help="generate C++17 for a device (no heap, flat tables)")
+    s.add_argument("file", metavar="FILE")
+    s.add_argument("--target", default="cpp", help="code generation target (cpp)")
+    s.add_argument("--out", required=True, help="output directory")
+    s.set_defaults(func=cmd_codegen)
+
+    s = sub.add_parser("verify", help="explore every reachable global state of a cell")
+    s.add_argument("cell", metavar="CELL")
+    s.add_argument("--json", action="store_true", help="one JSON report on standard output")
+    s.add_argument("--max-states", type=int, help="bound the search; the report says incomplete")
+    s.add_argument("--export", choices=("promela",), help="write the composed model instead")
+    s.add_argument("-o", "--output", help="where --export writes (default: standard output)")
+    s.add_argument("--traces", metavar="DIR", help="write each counterexample (json, mmd, puml)")
+    s.add_argument("--diagrams", choices=("mermaid", "plantuml"),
+                   help="print each counterexample as a sequence diagram")
+    s.add_argument("--progress", action="store_true", help="show progress even when piped")
+    s.set_defaults(func=cmd_verify)
+
+    s = sub.add_parser("run", help="run a cell live on simulated devices, or replay a trace")
+    s.add_argument("file", metavar="CELL")
+    s.add_argument("--replay", metavar="TRACE", help="a .trace.json written by verify --traces")
+    s.add_argument("--steps", type=int, default=20, help="random-walk length without --replay")
+    s.add_argument("--seed", type=int, default=0)
+    s.set_defaults(func=cmd_run)
 
     scxml = sub.add_parser("scxml", help="SCXML documents")
     ssub = scxml.add_subparsers(dest="scxml_command", required=True, parser_class=_Parser)
