@@ -32,6 +32,9 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "errors", "model", "expr", "semantics", "observers", "tables", "build", "cell",
         "runtime", "devices",
     ),
+    "scxml_io": (
+        "errors", "model", "expr", "semantics", "observers", "tables", "build", "scxml",
+    ),
     "journal": (
         "errors", "model", "expr", "semantics", "observers", "tables", "build", "runtime",
         "devices",

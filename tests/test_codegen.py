@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from codegen_support import CLANG, FLAGS, GXX, needs_gxx
 from statectl.build import load_chart
 from statectl.codegen import flatten, generate, run_codegen
 from statectl.codegen.flatten import Decision, Outcome, Unhandled, identifiers
@@ -27,7 +28,6 @@ from statectl.model import (
     State,
     Transition,
 )
-from codegen_support import CLANG, FLAGS, GXX, needs_gxx
 
 ROOT = Path(__file__).resolve().parent.parent
 MOTOR = ROOT / "examples" / "motor" / "motor.yaml"

@@ -12,6 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from codegen_support import CppDevice, assert_equivalent, needs_gxx
 from statectl.build import load_chart
 from statectl.model import (
     Chart,
@@ -24,7 +25,6 @@ from statectl.model import (
     StateKind,
     Transition,
 )
-from codegen_support import CppDevice, assert_equivalent, needs_gxx
 
 ROOT = Path(__file__).resolve().parent.parent
 MOTOR = ROOT / "examples" / "motor" / "motor.yaml"

@@ -1,374 +1,44 @@
-"""The pure kernel: what happens when an event meets a configuration.
+"""The W3C SCXML algorithm (Appendix D), one function per step of its pseudocode.
 
-Follows the algorithm of the W3C SCXML recommendation (Appendix D) and names its
-parts after it, so the pseudocode can be read beside this file. Rules:
-
-1. :func:`initial` and :func:`step` return a :class:`Step` that *describes* the
-   exit set, the transitions taken, the entry set and the actions to perform;
-   nothing is performed here (no observer is called, no clock is read).
-2. A step is one macrostep: the external event's microstep, then eventless
-   transitions and internally raised events (``Raise``, ``done.state.*``) until
-   the configuration is stable, which is run-to-completion.
-3. Transition selection is in document order of the active atomic states; a
-   state's own transitions before its ancestors'; conflicts are resolved by
-   :func:`remove_conflicting_transitions` (a descendant's transition preempts).
-4. A chart is compiled once (:class:`Machine`): ancestors, descendants,
-   candidate transitions per (state, event), static transition domains and
-   compiled guards. Where no guard was consulted a step depends only on
-   ``(snapshot, event)`` and is memoised, so dispatch is close to a lookup.
-   A memoised step of a declared event is also kept as a :class:`Plan` in the
-   plan table of its (interned) source snapshot; a plan points at its target's
-   table, so a host walks from table to table with one dictionary lookup per
-   event. Plans are decisions too: the host still performs them.
-5. A host that runs executable content (the SCXML session) drives the same
-   functions one microstep at a time through a :class:`Run` that carries an
-   :class:`Executor`. The executor evaluates conditions and performs content at
-   the spec's points, in order: each exited state's onexit, the transitions'
-   content, then per entered state its onentry, initial and history content, and
-   the ``done.state`` events. Events it raises go straight to the internal queue,
-   so the queue order is the spec's. Without an executor, ``Raise`` is the only
-   content the kernel acts on (it queues the event at once); the rest is returned.
+Every function takes the compiled :class:`~statectl.semantics.machine.Machine`
+and the :class:`~statectl.semantics.records.Run` it works on; :func:`initial`
+and :func:`step` wrap them into pure, memoised decisions for device charts.
 """
 
 from __future__ import annotations
 
-import threading
-from collections import deque
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
-from statectl.errors import DiagnosticError, StatectlError
-from statectl.expr import Expression, compile_expression
-from statectl.model import Action, Chart, Notify, Raise, State, StateKind, Transition
+from statectl.model import Action, Raise, StateKind, Transition
+from statectl.semantics.machine import Machine
+from statectl.semantics.records import (
+    MAX_MICROSTEPS,
+    MEMO_LIMIT,
+    Event,
+    LivelockError,
+    Microstep,
+    Run,
+    Snapshot,
+    Step,
+)
 
 __all__ = [
-    "Event",
-    "Executor",
-    "LivelockError",
-    "Machine",
-    "Microstep",
-    "Plan",
-    "Run",
-    "Snapshot",
-    "Step",
-    "compiled",
+    "compute_entry_set",
+    "compute_exit_set",
+    "condition_match",
     "enter_initial_states",
     "exit_interpreter",
+    "get_transition_domain",
     "initial",
     "macrostep",
     "microstep",
-    "name_match",
     "process_event",
+    "remove_conflicting_transitions",
     "select_eventless_transitions",
     "select_transitions",
     "step",
 ]
-
-#: Bound on microsteps in one macrostep; a chart that exceeds it loops forever.
-MAX_MICROSTEPS = 10_000
-#: Bound on memoised steps (and interned snapshots) per machine.
-MEMO_LIMIT = 100_000
-
-History = tuple[tuple[str, tuple[str, ...]], ...]
-
-
-class LivelockError(StatectlError):
-    """Eventless or raised transitions that never settle."""
-
-
-@dataclass(frozen=True, slots=True)
-class Snapshot:
-    """All the semantics remembers between steps: active states, history, previous state.
-
-    ``previous`` is the atomic state left by the last transition that changed the
-    configuration; device tables use it in guards ("the previous state was Moving").
-    """
-
-    active: frozenset[str]
-    history: History = ()
-    previous: str | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class Microstep:
-    event: str | None
-    transitions: tuple[Transition, ...]
-    exited: tuple[str, ...]
-    entered: tuple[str, ...]
-    actions: tuple[Action, ...]
-
-
-@dataclass(frozen=True, slots=True)
-class Step:
-    """The decision for one external event (or for start-up, ``event=None``)."""
-
-    event: str | None
-    source: Snapshot
-    target: Snapshot
-    microsteps: tuple[Microstep, ...]
-    handled: bool  # a transition was taken for the external event
-    ignored: bool  # unhandled, but declared ignored in an active state
-    final: bool  # a top-level final state was reached
-    guarded: bool = False  # a guard was consulted (the step is not memoised)
-
-    @property
-    def actions(self) -> tuple[Action, ...]:
-        return tuple(a for m in self.microsteps for a in m.actions)
-
-    @property
-    def transitions(self) -> tuple[Transition, ...]:
-        return tuple(t for m in self.microsteps for t in m.transitions)
-
-    @property
-    def exited(self) -> tuple[str, ...]:
-        return tuple(s for m in self.microsteps for s in m.exited)
-
-    @property
-    def entered(self) -> tuple[str, ...]:
-        return tuple(s for m in self.microsteps for s in m.entered)
-
-
-def name_match(descriptors: Iterable[str], event: str) -> bool:
-    """SCXML event matching: ``error`` matches ``error`` and ``error.execution``; ``*`` all."""
-    for d in descriptors:
-        if d == "*" or d == event:
-            return True
-        d = d.removesuffix(".*")
-        if event.startswith(d) and event[len(d) : len(d) + 1] == ".":
-            return True
-    return False
-
-
-@dataclass(frozen=True, slots=True)
-class Event:
-    """An event on a queue, with the fields SCXML's ``_event`` exposes."""
-
-    name: str
-    data: Any = None
-    type: str = "internal"  # "internal", "external" or "platform"
-    sendid: str = ""
-    origin: str = ""
-    origintype: str = ""
-    invokeid: str = ""
-
-
-class Executor(Protocol):
-    """What a host supplies to run executable content at the spec's points."""
-
-    def condition(self, run: Run, transition: Transition) -> bool:
-        """Evaluate ``transition.guard``; a failure is false (and the host's error event)."""
-        ...
-
-    def execute(self, run: Run, actions: tuple[Action, ...]) -> None:
-        """Perform one block of executable content; raise events into ``run.internal``."""
-        ...
-
-    def state_entered(self, run: Run, state: State) -> None:
-        """Called after ``state`` joins the configuration, before its onentry."""
-        ...
-
-    def state_exited(self, run: Run, state: State) -> None:
-        """Called after ``state``'s onexit, before it leaves the configuration."""
-        ...
-
-    def done_data(self, run: Run, state: State) -> Any:
-        """The data of the ``done.state`` event for entering the final ``state``."""
-        ...
-
-
-@dataclass(slots=True)
-class Run:
-    """The mutable state of one interpretation: configuration, history, internal queue.
-
-    :func:`step` makes one per macrostep and never lets it escape; a host with an
-    :class:`Executor` keeps one for a whole session and drives it with
-    :func:`enter_initial_states`, :func:`macrostep` and :func:`process_event`.
-    """
-
-    active: set[str]
-    history: dict[str, tuple[str, ...]]
-    previous: str | None
-    data: Mapping[str, Any]
-    event: str | None = None
-    guarded: bool = False
-    internal: deque[Event] = field(default_factory=deque)
-    final: bool = False  # a top-level final state was entered (the session stops running)
-    final_state: str | None = None
-    current: Event | None = None  # the event being processed: SCXML's ``_event``
-    executor: Executor | None = None
-
-    def raise_event(self, event: Event) -> None:
-        """Append to the internal queue (``<raise>``, ``error.*``, ``done.state.*``)."""
-        self.internal.append(event)
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class Plan:
-    """A memoised step of a declared event, compiled for the host that performs it.
-
-    ``target`` is interned and ``table`` is its own plan table (shared, filled as
-    steps are memoised). ``notifies`` is every ``Notify`` of the step in order, each
-    with a machine-wide slot number under which a host may cache what it builds for
-    it (a notification without data, say).
-    """
-
-    step: Step
-    target: Snapshot
-    table: dict[str, Plan]
-    notifies: tuple[tuple[int, Notify], ...]
-    handled: bool
-    final: bool
-
-
-PlanTable = dict[str, Plan]
-
-
-class Machine:
-    """A chart compiled for stepping: static tables computed once at load."""
-
-    def __init__(self, chart: Chart) -> None:
-        self.chart = chart
-        self.order: dict[str, int] = {s.name: i for i, s in enumerate(chart.states)}
-        self.kind: dict[str, StateKind] = {s.name: s.kind for s in chart.states}
-        self.parent: dict[str, str | None] = {s.name: s.parent for s in chart.states}
-        self.initial_of: dict[str, tuple[str, ...]] = {}
-        self.history_default: dict[str, tuple[str, ...]] = {}
-        children: dict[str | None, list[str]] = {}
-        for s in chart.states:
-            children.setdefault(s.parent, []).append(s.name)
-        self.children: dict[str | None, tuple[str, ...]] = {
-            k: tuple(v) for k, v in children.items()
-        }
-        self.ancestors: dict[str, tuple[str, ...]] = {}
-        for s in chart.states:
-            chain: list[str] = []
-            p = s.parent
-            while p is not None:
-                chain.append(p)
-                p = self.parent[p]
-            self.ancestors[s.name] = tuple(chain)
-        self.descendants: dict[str | None, frozenset[str]] = {None: frozenset(self.order)}
-        for s in chart.states:
-            self.descendants[s.name] = frozenset(
-                d for d in self.order if s.name in self.ancestors[d]
-            )
-        for s in chart.states:
-            if s.kind is StateKind.COMPOUND:
-                kids = [c for c in self.children.get(s.name, ()) if not self.kind[c].is_history]
-                self.initial_of[s.name] = s.initial or (kids[:1] and (kids[0],)) or ()
-            if s.kind.is_history:
-                self.history_default[s.name] = s.history_default
-        self.top_initial: tuple[str, ...] = chart.initial or self.children.get(None, ())[:1]
-        self.transitions_of: dict[str, tuple[Transition, ...]] = {
-            name: tuple(t for t in chart.transitions if t.source == name) for name in self.order
-        }
-        self.histories_of: dict[str, tuple[str, ...]] = {
-            name: tuple(c for c in self.children.get(name, ()) if self.kind[c].is_history)
-            for name in self.order
-        }
-        self.guards: dict[str, Expression] = {}
-        problems = []
-        # other datamodels' conditions are the executor's to evaluate
-        for t in chart.transitions if chart.datamodel == "safe" else ():
-            if t.guard and t.guard not in self.guards:
-                expr, diags = compile_expression(t.guard, t.origin)
-                problems.extend(diags)
-                if expr is not None:
-                    self.guards[t.guard] = expr
-        if problems:
-            raise DiagnosticError(problems)
-        self.ignored = chart.ignored
-        self._static_domain: dict[int, str | None] = {}
-        for t in chart.transitions:
-            if t.targets and not any(self.kind[x].is_history for x in t.targets):
-                self._static_domain[id(t)] = self._domain(t, t.targets)
-        self._candidates: dict[tuple[str, str | None], tuple[Transition, ...]] = {}
-        self._memo: dict[tuple[Snapshot, str], Step] = {}
-        self._initial: Step | None = None
-        self.event_names: frozenset[str] = frozenset(chart.event_names)
-        # interned snapshots with their plan tables, by value and by identity
-        self._tables: dict[Snapshot, tuple[Snapshot, PlanTable]] = {}
-        self._by_id: dict[int, tuple[Snapshot, PlanTable]] = {}
-        self._slots: dict[int, int] = {}  # id(Notify) -> slot; the chart keeps them alive
-
-    # -- plans ---------------------------------------------------------------------------
-
-    def _entry(self, snapshot: Snapshot) -> tuple[Snapshot, PlanTable]:
-        hit = self._by_id.get(id(snapshot))
-        if hit is not None and hit[0] is snapshot:
-            return hit
-        entry = self._tables.get(snapshot)
-        if entry is None:
-            if len(self._tables) >= MEMO_LIMIT:
-                return snapshot, {}  # not interned: its plans are not kept
-            entry = self._tables.setdefault(snapshot, (snapshot, {}))
-            self._by_id.setdefault(id(entry[0]), entry)
-        return entry
-
-    def intern(self, snapshot: Snapshot) -> Snapshot:
-        """The one kept instance equal to ``snapshot``, so hosts compare and look up by identity."""
-        return self._entry(snapshot)[0]
-
-    def plans(self, snapshot: Snapshot) -> dict[str, Plan]:
-        """The plan table of ``snapshot``: event -> :class:`Plan`, for the steps memoised so far.
-
-        Read it, never write it; :func:`step` fills it.
-        """
-        return self._entry(snapshot)[1]
-
-    def _install(self, snapshot: Snapshot, event: str, result: Step) -> None:
-        table = self._entry(snapshot)[1]
-        target, next_table = self._entry(result.target)
-        slots = self._slots
-        notifies = tuple(
-            (slots.setdefault(id(a), len(slots)), a)
-            for a in result.actions
-            if isinstance(a, Notify)
-        )
-        table[event] = Plan(result, target, next_table, notifies, result.handled, result.final)
-
-    # -- structure -------------------------------------------------------------------------
-
-    def is_descendant(self, state: str, ancestor: str | None) -> bool:
-        return ancestor is None or ancestor in self.ancestors[state]
-
-    def is_atomic(self, state: str) -> bool:
-        return self.kind[state] in (StateKind.ATOMIC, StateKind.FINAL)
-
-    def candidates(self, atomic: str, event: str | None) -> tuple[Transition, ...]:
-        """Transitions an atomic state offers for ``event``: its own first, then ancestors'."""
-        key = (atomic, event)
-        found = self._candidates.get(key)
-        if found is None:
-            out: list[Transition] = []
-            for s in (atomic, *self.ancestors[atomic]):
-                for t in self.transitions_of[s]:
-                    eventless = event is None and not t.events
-                    if eventless or (event is not None and name_match(t.events, event)):
-                        out.append(t)
-            found = self._candidates[key] = tuple(out)
-        return found
-
-    def _find_lcca(self, states: list[str]) -> str | None:
-        head, tail = states[0], states[1:]
-        for anc in self.ancestors[head]:
-            if self.kind[anc] is StateKind.COMPOUND and all(
-                self.is_descendant(s, anc) for s in tail
-            ):
-                return anc
-        return None
-
-    def _domain(self, t: Transition, targets: Iterable[str]) -> str | None:
-        tstates = list(targets)
-        if (
-            t.internal
-            and self.kind[t.source] is StateKind.COMPOUND
-            and all(self.is_descendant(s, t.source) for s in tstates)
-        ):
-            return t.source
-        return self._find_lcca([t.source, *tstates])
-
 
 # -- the W3C algorithm ------------------------------------------------------------------------
 
@@ -807,29 +477,3 @@ def step(
         if event in m.event_names:
             m._install(snapshot, event, result)
     return result
-
-
-_COMPILED: dict[int, tuple[Chart, Machine]] = {}
-_COMPILED_LIMIT = 256
-_compiling = threading.Lock()
-
-
-def compiled(chart: Chart) -> Machine:
-    """The :class:`Machine` of ``chart`` shared by every host that only steps it.
-
-    Compiling is the expensive part of a new instance; a chart is a value, so one
-    compilation (and one memo) serves every instance of it in the process. A host
-    that changes its machine (an explorer swapping guards) builds its own.
-    """
-    hit = _COMPILED.get(id(chart))
-    if hit is not None and hit[0] is chart:
-        return hit[1]
-    with _compiling:
-        hit = _COMPILED.get(id(chart))
-        if hit is not None and hit[0] is chart:
-            return hit[1]
-        m = Machine(chart)
-        if len(_COMPILED) >= _COMPILED_LIMIT:
-            del _COMPILED[next(iter(_COMPILED))]
-        _COMPILED[id(chart)] = (chart, m)
-        return m

@@ -1,0 +1,178 @@
+"""The values the kernel passes around: snapshots, steps, plans, queued events.
+
+A :class:`Snapshot` is all the semantics remembers between steps; a :class:`Step`
+is the decision for one event. :class:`Run` is the only mutable record: the
+scratch of one interpretation, which :func:`~statectl.semantics.step` never lets
+escape and an SCXML session keeps for its whole life.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from statectl.errors import StatectlError
+from statectl.model import Action, Notify, State, Transition
+
+__all__ = [
+    "MAX_MICROSTEPS",
+    "MEMO_LIMIT",
+    "Event",
+    "Executor",
+    "LivelockError",
+    "Microstep",
+    "Plan",
+    "PlanTable",
+    "Run",
+    "Snapshot",
+    "Step",
+]
+
+#: Bound on microsteps in one macrostep; a chart that exceeds it loops forever.
+MAX_MICROSTEPS = 10_000
+#: Bound on memoised steps (and interned snapshots) per machine.
+MEMO_LIMIT = 100_000
+
+History = tuple[tuple[str, tuple[str, ...]], ...]
+
+
+class LivelockError(StatectlError):
+    """Eventless or raised transitions that never settle."""
+
+
+@dataclass(frozen=True, slots=True)
+class Snapshot:
+    """All the semantics remembers between steps: active states, history, previous state.
+
+    ``previous`` is the atomic state left by the last transition that changed the
+    configuration; device tables use it in guards ("the previous state was Moving").
+    """
+
+    active: frozenset[str]
+    history: History = ()
+    previous: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Microstep:
+    event: str | None
+    transitions: tuple[Transition, ...]
+    exited: tuple[str, ...]
+    entered: tuple[str, ...]
+    actions: tuple[Action, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Step:
+    """The decision for one external event (or for start-up, ``event=None``)."""
+
+    event: str | None
+    source: Snapshot
+    target: Snapshot
+    microsteps: tuple[Microstep, ...]
+    handled: bool  # a transition was taken for the external event
+    ignored: bool  # unhandled, but declared ignored in an active state
+    final: bool  # a top-level final state was reached
+    guarded: bool = False  # a guard was consulted (the step is not memoised)
+
+    @property
+    def actions(self) -> tuple[Action, ...]:
+        return tuple(a for m in self.microsteps for a in m.actions)
+
+    @property
+    def transitions(self) -> tuple[Transition, ...]:
+        return tuple(t for m in self.microsteps for t in m.transitions)
+
+    @property
+    def exited(self) -> tuple[str, ...]:
+        return tuple(s for m in self.microsteps for s in m.exited)
+
+    @property
+    def entered(self) -> tuple[str, ...]:
+        return tuple(s for m in self.microsteps for s in m.entered)
+
+
+@dataclass(frozen=True, slots=True)
+class Event:
+    """An event on a queue, with the fields SCXML's ``_event`` exposes."""
+
+    name: str
+    data: Any = None
+    type: str = "internal"  # "internal", "external" or "platform"
+    sendid: str = ""
+    origin: str = ""
+    origintype: str = ""
+    invokeid: str = ""
+
+
+class Executor(Protocol):
+    """What a host supplies to run executable content at the spec's points."""
+
+    def condition(self, run: Run, transition: Transition) -> bool:
+        """Evaluate ``transition.guard``; a failure is false (and the host's error event)."""
+        ...
+
+    def execute(self, run: Run, actions: tuple[Action, ...]) -> None:
+        """Perform one block of executable content; raise events into ``run.internal``."""
+        ...
+
+    def state_entered(self, run: Run, state: State) -> None:
+        """Called after ``state`` joins the configuration, before its onentry."""
+        ...
+
+    def state_exited(self, run: Run, state: State) -> None:
+        """Called after ``state``'s onexit, before it leaves the configuration."""
+        ...
+
+    def done_data(self, run: Run, state: State) -> Any:
+        """The data of the ``done.state`` event for entering the final ``state``."""
+        ...
+
+
+@dataclass(slots=True)
+class Run:
+    """The mutable state of one interpretation: configuration, history, internal queue.
+
+    :func:`step` makes one per macrostep and never lets it escape; a host with an
+    :class:`Executor` keeps one for a whole session and drives it with
+    :func:`enter_initial_states`, :func:`macrostep` and :func:`process_event`.
+    """
+
+    active: set[str]
+    history: dict[str, tuple[str, ...]]
+    previous: str | None
+    data: Mapping[str, Any]
+    event: str | None = None
+    guarded: bool = False
+    internal: deque[Event] = field(default_factory=deque)
+    final: bool = False  # a top-level final state was entered (the session stops running)
+    final_state: str | None = None
+    current: Event | None = None  # the event being processed: SCXML's ``_event``
+    executor: Executor | None = None
+
+    def raise_event(self, event: Event) -> None:
+        """Append to the internal queue (``<raise>``, ``error.*``, ``done.state.*``)."""
+        self.internal.append(event)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Plan:
+    """A memoised step of a declared event, compiled for the host that performs it.
+
+    ``target`` is interned and ``table`` is its own plan table (shared, filled as
+    steps are memoised). ``notifies`` is every ``Notify`` of the step in order, each
+    with a machine-wide slot number under which a host may cache what it builds for
+    it (a notification without data, say).
+    """
+
+    step: Step
+    target: Snapshot
+    table: dict[str, Plan]
+    notifies: tuple[tuple[int, Notify], ...]
+    handled: bool
+    final: bool
+
+
+PlanTable = dict[str, Plan]
