@@ -191,10 +191,15 @@ def test_datamodels_evaluate_conditions(datamodel: str, cond: str, expected: str
     assert run(body, datamodel)[0] == expected
 
 
-def test_safe_datamodel_refuses_scripts() -> None:
-    """A <script> in the safe datamodel is an error.execution, never run."""
-    log = logged('<state id="s"><onentry><script>import os</script></onentry></state>', "safe")
-    assert log == ["error.execution"]
+def test_safe_datamodel_refuses_scripts_when_it_loads() -> None:
+    """A <script> in the safe datamodel is refused as the document loads (X302), never run."""
+    text = (
+        f'<scxml xmlns="{SCXML_NS}" version="1.0" datamodel="safe">\n'
+        '<state id="s"><onentry>\n<script>import os</script></onentry></state></scxml>'
+    )
+    chart, diagnostics = read_scxml(text)
+    assert chart is None
+    assert [(d.code, d.where.line) for d in diagnostics] == [("X302", 3)]
 
 
 def test_invoke_child_talks_to_parent() -> None:

@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from statectl.build import build
-from statectl.model import ControlKind, EventKind, Notify
+from statectl.model import ControlKind, EventKind, Notify, StateKind
 from statectl.observers import DRIVING_KINDS
 from statectl.tables import DeviceTables, EventRow, StateRow, load, save, strip_locations
 from statectl.tables.csv_io import dump_csv, read_csv
@@ -61,6 +61,8 @@ state_rows = st.builds(
     description=texts,
     ignore=st.lists(names, max_size=3).map(tuple),
     parent=optional_names,
+    type=st.none() | st.sampled_from(list(StateKind)),
+    default=st.lists(names, max_size=2).map(tuple),
 )
 event_rows = st.builds(
     EventRow,

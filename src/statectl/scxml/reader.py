@@ -15,6 +15,16 @@ Rules:
    ``<onexit>``) handlers keeps each as a ``Block``, so an error ends only one.
 4. Inline ``<content>`` that holds elements (a child ``<scxml>``) is kept as
    serialised XML; ``<data>``/``<content>`` text is kept as text.
+5. The ``statectl`` namespace carries what device tables know and SCXML does not
+   (see :mod:`statectl.scxml.writer`): ``<statectl:event>``, ``<statectl:api>``,
+   ``<statectl:invoke>``, ``<statectl:ignore>``, ``<statectl:notify>`` and the
+   exact event name of a transition (``statectl:event-name``); transitions with a
+   ``statectl:row`` are put back in that order, the chart's own.
+6. A document with ``datamodel="safe"`` is checked as it loads: every condition
+   and expression must be in the safe language and read only declared names,
+   every location must be a declared name, and there is no ``<script>`` (X301-X303,
+   from :mod:`statectl.expr`, with the element's line). ``python`` is explicit
+   trust and is not checked; ``null`` is checked by its own evaluator at run time.
 """
 
 from __future__ import annotations
@@ -27,6 +37,7 @@ from xml.parsers import expat
 from statectl.errors import Diagnostic, DiagnosticError, Location, Severity
 from statectl.model import (
     Action,
+    Api,
     Assign,
     Block,
     Cancel,
@@ -35,8 +46,11 @@ from statectl.model import (
     ControlKind,
     DataItem,
     DoneData,
+    EventDef,
+    EventKind,
     Foreach,
     If,
+    Invoke,
     InvokeDef,
     Log,
     Notify,
@@ -48,6 +62,7 @@ from statectl.model import (
     StateKind,
     Transition,
 )
+from statectl.scxml.safecheck import check_safe
 
 __all__ = ["SCXML_NS", "STATECTL_NS", "read_scxml", "read_scxml_file"]
 
@@ -147,6 +162,8 @@ class _Reader:
         self.ids: set[str] = set()
         self.generated = 0
         self.references: list[tuple[str, tuple[str, ...], Location]] = []  # initial/default
+        self.ignored: set[tuple[str, str]] = set()
+        self.rows: dict[int, int] = {}  # transition index -> statectl:row (the chart's order)
 
     def at(self, node: _Node) -> Location:
         return Location(self.file, node.line)
@@ -362,9 +379,10 @@ class _Reader:
         return frozenset(found)
 
     def transition(self, source: str, t: _Node) -> Transition:
+        exact = t.get("event-name")
         return Transition(
             source=source,
-            events=tuple((t.get("event") or "").split()),
+            events=(exact,) if exact is not None else tuple((t.get("event") or "").split()),
             targets=tuple((t.get("target") or "").split()),
             guard=t.get("cond"),
             condition=t.get("condition") or "",
@@ -378,6 +396,9 @@ class _Reader:
         name = self.state_id(node)
         index = len(self.states)
         self.states.append(State(name))  # placeholder keeps document order
+        for c in node.children:
+            if c.ns == STATECTL_NS and c.tag == "ignore":
+                self.ignored.add((name, self.need(c, "event")))
         children = [c for c in node.scxml_children("state", "parallel", "final", "history")]
         initial: tuple[str, ...] = tuple((node.get("initial") or "").split())
         initial_actions: tuple[Action, ...] = ()
@@ -412,6 +433,9 @@ class _Reader:
         if tag != "history":
             for t in node.scxml_children("transition"):
                 self.transitions.append(self.transition(name, t))
+                row = t.get("row")
+                if row is not None and row.isdigit():
+                    self.rows[len(self.transitions) - 1] = int(row)
         self.states[index] = State(
             name,
             kind,
@@ -475,19 +499,77 @@ class _Reader:
                     )
                 )
 
+    def device_facts(
+        self, root: _Node
+    ) -> tuple[tuple[EventDef, ...], tuple[Api, ...], tuple[Invoke, ...]]:
+        """The ``statectl`` declarations of events, APIs and invoke numbers (rule 5)."""
+        events: list[EventDef] = []
+        apis: list[Api] = []
+        invokes: list[Invoke] = []
+        for c in root.children:
+            if c.ns != STATECTL_NS:
+                continue
+            if c.tag == "event":
+                text = c.get("kind") or "command"
+                try:
+                    kind = EventKind(text)
+                except ValueError:
+                    self.problem(
+                        "S603",
+                        c,
+                        f"unknown event kind {text!r}",
+                        "use " + ", ".join(k.value for k in EventKind),
+                    )
+                    kind = EventKind.COMMAND
+                events.append(
+                    EventDef(
+                        self.need(c, "name"),
+                        kind,
+                        c.get("api"),
+                        c.get("description") or "",
+                        self.at(c),
+                    )
+                )
+            elif c.tag == "api":
+                uses = tuple(
+                    self.need(u, "event")
+                    for u in c.children
+                    if u.ns == STATECTL_NS and u.tag == "uses"
+                )
+                apis.append(Api(self.need(c, "method"), uses, self.at(c)))
+            elif c.tag == "invoke":
+                number = c.get("number") or ""
+                if not number.isdigit():
+                    self.problem("S603", c, f"invoke number {number!r} is not a number", "0, 1")
+                    number = "0"
+                invokes.append(Invoke(int(number), self.need(c, "name"), self.need(c, "method")))
+        return tuple(events), tuple(apis), tuple(invokes)
+
     def chart(self, root: _Node, default_name: str) -> Chart:
         scripts = tuple(
             Script(self.script_source(s), self.at(s)) for s in root.scxml_children("script")
         )
         for c in root.scxml_children("state", "parallel", "final"):
             self.state(c, None)
+        events, apis, invokes = self.device_facts(root)
+        if self.rows:  # stable: transitions without a row keep their place after those with one
+            order = sorted(
+                range(len(self.transitions)),
+                key=lambda i: self.rows.get(i, len(self.transitions) + i),
+            )
+            self.transitions = [self.transitions[i] for i in order]
         chart = Chart(
             name=root.get("name") or default_name,
             states=tuple(self.states),
             transitions=tuple(self.transitions),
             initial=tuple((root.get("initial") or "").split()),
+            events=events,
+            apis=apis,
+            invokes=invokes,
+            ignored=frozenset(self.ignored),
             data=self.data_items(root),
             datamodel=root.get("datamodel") or "null",
+            component=root.get("component") or "",
             origin=self.at(root),
             binding=root.get("binding") or "early",
             script=scripts,
@@ -517,6 +599,8 @@ def read_scxml(
     stem = Path(file).stem if file != "<memory>" else "scxml"
     chart = reader.chart(root, stem)
     diagnostics = reader.diagnostics
+    if chart.datamodel == "safe":
+        diagnostics.extend(check_safe(chart))
     if any(d.severity is Severity.ERROR for d in diagnostics):
         return None, diagnostics
     return chart, diagnostics

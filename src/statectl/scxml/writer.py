@@ -8,6 +8,14 @@ Rules:
    go into attributes and elements of the ``statectl`` namespace, which other
    SCXML processors ignore and :mod:`statectl.scxml.reader` reads back.
 3. Generated state ids (``_state3``) are left out, so they are generated again.
+4. Device charts keep everything the tables gave them: the event declarations
+   (kind, API, description), the observer APIs and invoke numbers, each state's
+   ignored events and the chart's component, as ``statectl`` elements. An event
+   name SCXML cannot hold (one with spaces: "Movement completion") is written with
+   ``_`` for the spaces in ``event`` and exactly in ``statectl:event-name``.
+5. Transitions nest in their source state; when the chart lists them in another
+   order (a device table's row order), each carries its place as ``statectl:row``
+   so the reader restores the chart's order.
 """
 
 from __future__ import annotations
@@ -51,16 +59,27 @@ _TAG = {
 
 def _attrs(**values: str | None) -> str:
     return "".join(
-        f" {k.rstrip('_').replace('__', ':')}={quoteattr(v)}"
+        f" {k.rstrip('_').replace('__', ':').replace('_', '-')}={quoteattr(v)}"
         for k, v in values.items()
         if v is not None
     )
+
+
+def scxml_event(name: str) -> str:
+    """An event name as one SCXML event token: whitespace runs become ``_``."""
+    return "_".join(name.split())
 
 
 class _Writer:
     def __init__(self, chart: Chart) -> None:
         self.chart = chart
         self.lines: list[str] = []
+        self.by_source: dict[str, list[tuple[int, Transition]]] = {}
+        for index, t in enumerate(chart.transitions):
+            self.by_source.setdefault(t.source, []).append((index, t))
+        in_document = [i for s in chart.states for i, _ in self.by_source.get(s.name, [])]
+        #: the chart lists transitions in another order than the states nest them (rule 5)
+        self.reordered = in_document != list(range(len(chart.transitions)))
 
     def emit(self, depth: int, text: str) -> None:
         self.lines.append("  " * depth + text)
@@ -203,13 +222,17 @@ class _Writer:
             )
         self.element(depth, "invoke" + attrs, body)
 
-    def transition(self, depth: int, t: Transition) -> None:
+    def transition(self, depth: int, t: Transition, index: int | None = None) -> None:
+        tokens = [scxml_event(e) for e in t.events]
+        exact = t.events[0] if len(t.events) == 1 and tokens[0] != t.events[0] else None
         attrs = _attrs(
-            event=" ".join(t.events) or None,
+            event=" ".join(tokens) or None,
+            statectl__event_name=exact,
             cond=t.guard,
             target=" ".join(t.targets) or None,
             type="internal" if t.internal else None,
             statectl__condition=t.condition or None,
+            statectl__row=str(index) if index is not None else None,
         )
         self.element(depth, "transition" + attrs, self.sub(self.actions, depth + 1, t.actions))
 
@@ -247,8 +270,10 @@ class _Writer:
         self.datamodel(depth, s.data)
         self.handlers(depth, "onentry", s.on_entry)
         self.handlers(depth, "onexit", s.on_exit)
-        for t in self.chart.transitions_from(s.name):
-            self.transition(depth, t)
+        for event in sorted(e for state, e in self.chart.ignored if state == s.name):
+            self.emit(depth, f"<statectl:ignore{_attrs(event=event)}/>")
+        for index, t in self.by_source.get(s.name, []):
+            self.transition(depth, t, index if self.reordered else None)
         for d in s.invokes:
             self.invoke(depth, d)
         if s.donedata is not None:
@@ -257,6 +282,21 @@ class _Writer:
             self.element(depth, "donedata", inner)
         for child in self.chart.children(s.name):
             self.state(depth, child)
+
+    def device_facts(self, depth: int) -> None:
+        """Event declarations, observer APIs and invoke numbers (rule 4)."""
+        c = self.chart
+        for e in c.events:
+            attrs = _attrs(
+                name=e.name, kind=e.kind.value, api=e.api, description=e.description or None
+            )
+            self.emit(depth, f"<statectl:event{attrs}/>")
+        for a in c.apis:
+            uses = ["  " * (depth + 1) + f"<statectl:uses{_attrs(event=e)}/>" for e in a.events]
+            self.element(depth, "statectl:api" + _attrs(method=a.method), uses)
+        for i in c.invokes:
+            attrs = _attrs(number=str(i.number), name=i.name, method=i.method)
+            self.emit(depth, f"<statectl:invoke{attrs}/>")
 
     def document(self) -> str:
         c = self.chart
@@ -268,9 +308,11 @@ class _Writer:
             initial=" ".join(c.initial) or None,
             datamodel=c.datamodel,
             binding=c.binding if c.binding != "early" else None,
+            statectl__component=c.component or None,
         )
         self.emit(0, '<?xml version="1.0" encoding="UTF-8"?>')
         self.emit(0, f"<scxml{attrs}>")
+        self.device_facts(1)
         self.datamodel(1, c.data)
         for script in c.script:
             self.action(1, script)

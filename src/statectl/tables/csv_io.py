@@ -22,7 +22,6 @@ from statectl.errors import Diagnostic, Location
 from statectl.tables.schema import (
     DATA_COLUMNS,
     EVENT_COLUMNS,
-    STATE_COLUMNS,
     DeviceTables,
     RawRow,
     RawTable,
@@ -31,6 +30,8 @@ from statectl.tables.schema import (
     format_literal,
     make_tables,
     parse_literal,
+    state_cells,
+    state_columns,
 )
 
 __all__ = ["CsvFiles", "csv_paths", "dump_csv", "read_csv"]
@@ -184,20 +185,10 @@ def _write(header: tuple[str, ...], rows: list[list[str]], device: str) -> str:
 
 def dump_csv(tables: DeviceTables) -> tuple[str, str, str | None]:
     """The states, events and (if any data) data files' text."""
+    columns = state_columns(tables)
     states = _write(
-        STATE_COLUMNS,
-        [
-            [
-                s.component,
-                s.api,
-                s.state,
-                ", ".join(c.value for c in s.controls),
-                s.description,
-                ", ".join(s.ignore),
-                s.parent,
-            ]
-            for s in tables.states
-        ],
+        columns,
+        [state_cells(s, columns) for s in tables.states],
         tables.device,
     )
     events = _write(

@@ -19,7 +19,6 @@ from statectl.errors import Diagnostic, Location
 from statectl.tables.schema import (
     DATA_COLUMNS,
     EVENT_COLUMNS,
-    STATE_COLUMNS,
     DeviceTables,
     RawRow,
     RawTable,
@@ -28,6 +27,8 @@ from statectl.tables.schema import (
     format_literal,
     make_tables,
     parse_literal,
+    state_cells,
+    state_columns,
 )
 
 __all__ = ["dump_md", "escape", "read_md", "unescape"]
@@ -192,21 +193,11 @@ def _table(header: tuple[str, ...], rows: list[list[str]]) -> list[str]:
 
 def dump_md(tables: DeviceTables) -> str:
     """The tables as Markdown that :func:`read_md` reads back unchanged."""
+    columns = state_columns(tables)
     lines = [f"# Device: {tables.device}", "", "## States", ""]
     lines += _table(
-        STATE_COLUMNS,
-        [
-            [
-                s.component,
-                s.api,
-                s.state,
-                ", ".join(c.value for c in s.controls),
-                s.description,
-                ", ".join(s.ignore),
-                s.parent,
-            ]
-            for s in tables.states
-        ],
+        columns,
+        [state_cells(s, columns) for s in tables.states],
     )
     lines += ["", "## Events", ""]
     lines += _table(

@@ -4,14 +4,19 @@ Rules:
 1. A device file holds a device name, a State Definition table, an Event
    Definition table and optional data (name -> literal initial value).
 2. Columns are those of ``examples/motor/motor.yaml``: states ``component, api,
-   state, control, description, ignore, parent``; events ``event, condition,
-   guard, old, new, kind, api, invoke``. Required: ``state`` in states and
-   ``event``, ``old``, ``new`` in events. Column names are read leniently (case,
-   spaces, ``_``, and the paper's long names such as "old state").
+   state, control, description, ignore, parent`` plus the optional hierarchy
+   columns ``type`` and ``default``; events ``event, condition, guard, old, new,
+   kind, api, invoke``. Required: ``state`` in states and ``event``, ``old``,
+   ``new`` in events. Column names are read leniently (case, spaces, ``_``, and
+   the paper's long names such as "old state").
 3. Every cell is text with its surrounding whitespace stripped; empty means absent.
-4. ``control`` and ``ignore`` are lists: a YAML list or one comma-separated cell,
-   so an event name never contains a comma (T111). ``control`` values are read
-   leniently; ``kind`` defaults to ``command``.
+4. ``control``, ``ignore`` and ``default`` are lists: a YAML list or one
+   comma-separated cell, so an event name never contains a comma (T111).
+   ``control`` values are read leniently; ``kind`` defaults to ``command``.
+4a. ``type`` is blank (atomic, or compound when other rows name the state as
+   their parent) or one of :data:`TYPE_WORDS` (T113 otherwise); ``default`` names
+   where a history state goes before it has recorded anything. Writers emit the
+   two columns only when some row uses them, so flat tables look as before.
 5. Data values are YAML literals: null, booleans, numbers, strings and lists of
    them (kept as tuples so the tables stay hashable values).
 6. Format readers turn a file into :class:`RawTable` values (cells with their
@@ -29,7 +34,7 @@ from dataclasses import dataclass, field, replace
 import yaml
 
 from statectl.errors import Diagnostic, Location, Severity
-from statectl.model import ControlKind, EventKind
+from statectl.model import ControlKind, EventKind, StateKind
 
 __all__ = [
     "CODES",
@@ -37,6 +42,8 @@ __all__ = [
     "EVENT_COLUMNS",
     "NOWHERE",
     "STATE_COLUMNS",
+    "TYPE_NAMES",
+    "TYPE_WORDS",
     "Bad",
     "DeviceTables",
     "EventRow",
@@ -48,13 +55,27 @@ __all__ = [
     "format_literal",
     "make_tables",
     "parse_literal",
+    "state_cells",
+    "state_columns",
     "strip_locations",
     "validate_for_writing",
 ]
 
 NOWHERE = Location()
 
-STATE_COLUMNS = ("component", "api", "state", "control", "description", "ignore", "parent")
+STATE_COLUMNS = (
+    "component",
+    "api",
+    "state",
+    "control",
+    "description",
+    "ignore",
+    "parent",
+    "type",
+    "default",
+)
+#: The columns every writer emits; ``type`` and ``default`` only when a row uses them.
+FLAT_STATE_COLUMNS = STATE_COLUMNS[:7]
 EVENT_COLUMNS = ("event", "condition", "guard", "old", "new", "kind", "api", "invoke")
 DATA_COLUMNS = ("name", "value")
 COLUMNS: Mapping[str, tuple[str, ...]] = {
@@ -79,6 +100,27 @@ ALIASES: Mapping[str, str] = {
     "new state": "new",
     "ignored": "ignore",
     "ignores": "ignore",
+    "state type": "type",
+    "history default": "default",
+}
+#: Spellings accepted in the ``type`` column, after lowering and collapsing spaces.
+TYPE_WORDS: Mapping[str, StateKind] = {
+    "atomic": StateKind.ATOMIC,
+    "compound": StateKind.COMPOUND,
+    "parallel": StateKind.PARALLEL,
+    "final": StateKind.FINAL,
+    "history": StateKind.HISTORY_SHALLOW,
+    "shallow history": StateKind.HISTORY_SHALLOW,
+    "deep history": StateKind.HISTORY_DEEP,
+}
+#: How writers spell each type (the first spelling above).
+TYPE_NAMES: Mapping[StateKind, str] = {
+    StateKind.ATOMIC: "atomic",
+    StateKind.COMPOUND: "compound",
+    StateKind.PARALLEL: "parallel",
+    StateKind.FINAL: "final",
+    StateKind.HISTORY_SHALLOW: "history",
+    StateKind.HISTORY_DEEP: "deep history",
 }
 #: Spellings accepted in the ``control`` column, after lowering and collapsing spaces.
 CONTROL_WORDS: Mapping[str, ControlKind] = {
@@ -106,6 +148,7 @@ CODES: Mapping[str, str] = {
     "T110": "file not found, unreadable or not writable",
     "T111": "an event name contains a comma",
     "T112": "bad data entry (name not an identifier, or given twice)",
+    "T113": "bad type value (none of atomic, compound, parallel, final, history, deep history)",
 }
 
 
@@ -119,8 +162,15 @@ class StateRow:
     controls: tuple[ControlKind, ...]
     description: str
     ignore: tuple[str, ...]
-    parent: str = ""  # reserved for hierarchy: the compound state this one is in
+    parent: str = ""  # the compound or parallel state this one is in (empty: top level)
     where: Location = NOWHERE
+    type: StateKind | None = None  # None: atomic, or compound when it has children
+    default: tuple[str, ...] = ()  # a history state's targets before it recorded anything
+
+    @property
+    def type_text(self) -> str:
+        """The ``type`` cell as writers spell it (empty for an implied type)."""
+        return TYPE_NAMES[self.type] if self.type is not None else ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -346,6 +396,27 @@ def _kind(row: RawRow, diags: list[Diagnostic]) -> EventKind:
     return EventKind.COMMAND
 
 
+def _type(row: RawRow, diags: list[Diagnostic]) -> StateKind | None:
+    text = " ".join(_text(row, "type", diags).lower().replace("_", " ").replace("-", " ").split())
+    if not text:
+        return None
+    kind = TYPE_WORDS.get(text)
+    if kind is None:
+        accepted = list(TYPE_NAMES.values())
+        diags.append(
+            diag(
+                "T113",
+                row.cells["type"][1],
+                f"unknown state type {text!r}",
+                did_you_mean(text, accepted)
+                + "accepted: "
+                + ", ".join(accepted)
+                + " (or leave it empty)",
+            )
+        )
+    return kind
+
+
 def _check_keys(table: str, row: RawRow, diags: list[Diagnostic]) -> None:
     for name, (_, where) in row.cells.items():
         if name not in COLUMNS[table]:
@@ -363,6 +434,8 @@ def state_row(row: RawRow, diags: list[Diagnostic]) -> StateRow:
         ignore=_items(row, "ignore", diags)[0],
         parent=_text(row, "parent", diags),
         where=row.where,
+        type=_type(row, diags),
+        default=_items(row, "default", diags)[0],
     )
 
 
@@ -506,6 +579,29 @@ def make_tables(
     return DeviceTables(device.strip(), tuple(state_rows), tuple(event_rows), data_items, source)
 
 
+def state_columns(tables: DeviceTables) -> tuple[str, ...]:
+    """The state columns a writer emits: the flat ones, plus ``type``/``default`` if used."""
+    if any(s.type is not None or s.default for s in tables.states):
+        return STATE_COLUMNS
+    return FLAT_STATE_COLUMNS
+
+
+def state_cells(s: StateRow, columns: Sequence[str]) -> list[str]:
+    """One state row as text cells (lists comma-separated) for CSV, XLSX and Markdown."""
+    cells = {
+        "component": s.component,
+        "api": s.api,
+        "state": s.state,
+        "control": ", ".join(c.value for c in s.controls),
+        "description": s.description,
+        "ignore": ", ".join(s.ignore),
+        "parent": s.parent,
+        "type": s.type_text,
+        "default": ", ".join(s.default),
+    }
+    return [cells[c] for c in columns]
+
+
 def validate_for_writing(tables: DeviceTables, where: Location) -> list[Diagnostic]:
     """What would not survive a round trip through a file: report it instead of writing."""
     diags: list[Diagnostic] = []
@@ -518,6 +614,9 @@ def validate_for_writing(tables: DeviceTables, where: Location) -> list[Diagnost
         for item in s.ignore:
             if "," in item or item != item.strip() or not item:
                 diags.append(diag("T111", s.where, f"ignore item {item!r} cannot be written"))
+        for item in s.default:
+            if "," in item or item != item.strip() or not item:
+                diags.append(diag("T111", s.where, f"default item {item!r} cannot be written"))
     seen: set[str] = set()
     for name, value in tables.data:
         if not name.isidentifier() or name in seen:

@@ -31,7 +31,6 @@ from statectl.errors import Diagnostic, Location
 from statectl.tables.schema import (
     DATA_COLUMNS,
     EVENT_COLUMNS,
-    STATE_COLUMNS,
     Bad,
     Cell,
     DeviceTables,
@@ -42,6 +41,8 @@ from statectl.tables.schema import (
     format_literal,
     make_tables,
     parse_literal,
+    state_cells,
+    state_columns,
 )
 
 __all__ = ["dump_xlsx", "read_xlsx"]
@@ -157,25 +158,15 @@ def _fill(ws: Worksheet, header: tuple[str, ...], rows: Iterable[list[str]]) -> 
 
 def dump_xlsx(tables: DeviceTables) -> bytes:
     """The tables as workbook bytes (States, Events, Data if any, Device)."""
+    columns = state_columns(tables)
     wb = openpyxl.Workbook()
     states = wb.active
     assert isinstance(states, Worksheet)
     states.title = SHEETS["states"]
     _fill(
         states,
-        STATE_COLUMNS,
-        (
-            [
-                s.component,
-                s.api,
-                s.state,
-                ", ".join(c.value for c in s.controls),
-                s.description,
-                ", ".join(s.ignore),
-                s.parent,
-            ]
-            for s in tables.states
-        ),
+        columns,
+        (state_cells(s, columns) for s in tables.states),
     )
     _fill(
         wb.create_sheet(SHEETS["events"]),

@@ -226,6 +226,12 @@ def _state_doc(tables: DeviceTables) -> list[dict[str, Any]]:
             row["ignore"] = list(s.ignore)
         if s.parent:
             row["parent"] = s.parent
+        if s.type is not None:
+            row["type"] = s.type_text
+        if len(s.default) == 1:
+            row["default"] = s.default[0]
+        elif s.default:
+            row["default"] = list(s.default)
         rows.append(row)
     return rows
 
