@@ -1,0 +1,54 @@
+"""The journal: every accepted event and every step, durable in SQLite; resume and replay.
+
+See docs/journal.md. :class:`Journal` writes (one thread, group commit),
+:class:`JournalReader` reads, :class:`JournalledDevice` binds a running Subject
+to both, :func:`load_device` reads a device file with its recovery rules.
+"""
+
+from statectl.journal.device import JournalledDevice
+from statectl.journal.read import (
+    DeviceRow,
+    InboxRow,
+    JournalReader,
+    Mismatch,
+    ReplayResult,
+    StepRow,
+    export_jsonl,
+    replay,
+)
+from statectl.journal.recovery import (
+    CODES,
+    DeviceFile,
+    RecoveryRule,
+    check_recovery,
+    load_device,
+    load_recovery,
+    recovery_file,
+)
+from statectl.journal.store import Journal, JournalError, StepKind, Sync, Ticket
+from statectl.journal.subjects import restore_subject
+
+__all__ = [
+    "CODES",
+    "DeviceFile",
+    "DeviceRow",
+    "InboxRow",
+    "Journal",
+    "JournalError",
+    "JournalReader",
+    "JournalledDevice",
+    "Mismatch",
+    "RecoveryRule",
+    "ReplayResult",
+    "StepKind",
+    "StepRow",
+    "Sync",
+    "Ticket",
+    "check_recovery",
+    "export_jsonl",
+    "load_device",
+    "load_recovery",
+    "recovery_file",
+    "replay",
+    "restore_subject",
+]

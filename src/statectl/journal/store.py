@@ -1,0 +1,343 @@
+"""The journal on disk: SQLite in WAL mode, written by one thread with group commit.
+
+Rules:
+1. Two tables hold a run. ``inbox`` is every event accepted from outside (an
+   operator, a script, the dashboard), numbered by ``seq``. ``steps`` is every
+   event a device processed, in order, whatever posted it (inbox, a driver's
+   completion, a monitor's fault, a recovery), with the snapshot it left: the
+   active states, history and previous state. ``start``, ``restore`` and
+   ``recovery`` steps mark how a device came up.
+2. Nothing that posts waits for the disk. :meth:`Journal.accept` and
+   :meth:`Journal.record` append to an in-memory queue and return at once; one
+   writer thread takes everything queued, writes it in one transaction and
+   commits (group commit), so many events share one commit.
+3. An event is *accepted* only once its inbox row is committed: the
+   :class:`Ticket` says so (``durable``, ``wait()``), and the ``deliver``
+   callback that hands it to its device runs only after the commit. So a device
+   never acts on an event the journal could lose.
+4. The guarantee depends on :class:`Sync`. ``NORMAL`` (default): a committed
+   event survives the process being killed (SIGKILL, a crash); after a power
+   loss or OS crash the last commits may be missing. ``FULL``: a committed event
+   also survives power loss (the commit waits for fsync).
+5. Commits are in ``seq`` order, so ``durable_seq`` only grows; a failing write
+   stops the writer, fails every waiting ticket and is raised from
+   :meth:`Journal.flush` and :meth:`Journal.close`.
+"""
+
+from __future__ import annotations
+
+import enum
+import json
+import sqlite3
+import sys
+import threading
+import time
+import traceback
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from statectl.errors import StatectlError
+from statectl.semantics import Snapshot
+
+__all__ = [
+    "SCHEMA_VERSION",
+    "Journal",
+    "JournalError",
+    "StepKind",
+    "Sync",
+    "Ticket",
+    "connect_db",
+    "decode_snapshot",
+    "encode_data",
+    "encode_snapshot",
+]
+
+SCHEMA_VERSION = 1
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS devices (
+    name TEXT PRIMARY KEY, chart TEXT NOT NULL, source TEXT NOT NULL, data TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS inbox (
+    seq INTEGER PRIMARY KEY, device TEXT NOT NULL, wall REAL NOT NULL,
+    event TEXT NOT NULL, data TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS steps (
+    id INTEGER PRIMARY KEY, device TEXT NOT NULL, kind TEXT NOT NULL, inbox INTEGER,
+    wall REAL NOT NULL, time REAL NOT NULL, event TEXT, data TEXT NOT NULL,
+    outcome TEXT NOT NULL, active TEXT NOT NULL, history TEXT NOT NULL, previous TEXT
+);
+CREATE INDEX IF NOT EXISTS steps_device ON steps (device, id);
+CREATE INDEX IF NOT EXISTS steps_inbox ON steps (device, inbox);
+CREATE INDEX IF NOT EXISTS inbox_device ON inbox (device, seq);
+"""
+
+
+class JournalError(StatectlError):
+    """The journal cannot be opened or written."""
+
+
+class Sync(enum.Enum):
+    """How far a commit goes before it counts: see the module's rule 4."""
+
+    NORMAL = "normal"
+    FULL = "full"
+
+
+class StepKind(enum.Enum):
+    START = "start"  # the device entered its initial configuration
+    RESTORE = "restore"  # the device took up its journalled snapshot on --resume
+    RECOVERY = "recovery"  # a declared recovery transition after a restore
+    EVENT = "event"  # an event processed (from the inbox or from inside the run)
+
+
+def encode_data(value: Any) -> str:
+    """Event data as compact JSON; data that JSON cannot hold is misuse."""
+    try:
+        return json.dumps(value, separators=(",", ":"), sort_keys=True, allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        raise StatectlError(
+            f"journalled event data must be JSON (null, numbers, text, lists, mappings); "
+            f"got {value!r} ({exc})"
+        ) from None
+
+
+def encode_snapshot(s: Snapshot) -> tuple[str, str, str | None]:
+    """The ``active``, ``history`` and ``previous`` columns of a snapshot."""
+    history = [[state, list(saved)] for state, saved in s.history]
+    return json.dumps(sorted(s.active)), json.dumps(history), s.previous
+
+
+def decode_snapshot(active: str, history: str, previous: str | None) -> Snapshot:
+    saved = tuple((str(h[0]), tuple(str(x) for x in h[1])) for h in json.loads(history))
+    return Snapshot(frozenset(json.loads(active)), saved, previous)
+
+
+def connect_db(
+    path: str | Path, *, sync: Sync = Sync.NORMAL, create: bool = True
+) -> sqlite3.Connection:
+    """Open ``path`` in WAL mode with the schema in place."""
+    p = Path(path)
+    if not create and not p.exists():
+        raise JournalError(f"no journal at {p}; run with --journal {p} first")
+    try:
+        db = sqlite3.connect(str(p), isolation_level=None, check_same_thread=False)
+        db.execute("PRAGMA journal_mode=WAL")
+        db.execute(f"PRAGMA synchronous={sync.value.upper()}")
+        db.execute("PRAGMA busy_timeout=5000")
+        db.executescript(_SCHEMA)
+        row = db.execute("SELECT value FROM meta WHERE key='version'").fetchone()
+        if row is None:
+            db.execute("INSERT OR IGNORE INTO meta VALUES ('version', ?)", (str(SCHEMA_VERSION),))
+        elif row[0] != str(SCHEMA_VERSION):
+            raise JournalError(
+                f"{p}: journal schema version {row[0]}, this statectl reads {SCHEMA_VERSION}"
+            )
+    except sqlite3.Error as exc:
+        raise JournalError(f"cannot open journal {p}: {exc}") from None
+    return db
+
+
+@dataclass(frozen=True, slots=True)
+class Ticket:
+    """The receipt for one accepted event: it is accepted once ``durable``."""
+
+    seq: int
+    journal: Journal
+
+    @property
+    def durable(self) -> bool:
+        return self.journal.durable_seq >= self.seq
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Block until the event is committed (True) or ``timeout`` passes (False)."""
+        return self.journal.wait_durable(self.seq, timeout)
+
+
+#: One queued write: (sql, parameters, seq or 0, deliver(seq) after the commit or None)
+_Write = tuple[str, tuple[Any, ...], int, Callable[[int], object] | None]
+
+_INSERT_INBOX = "INSERT INTO inbox VALUES (?, ?, ?, ?, ?)"
+_INSERT_STEP = "INSERT INTO steps VALUES (NULL, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)"
+
+
+class Journal:
+    """The writer side: accept events, record steps, commit in groups on one thread."""
+
+    def __init__(self, path: str | Path, *, sync: Sync = Sync.NORMAL, max_batch: int = 20_000):
+        self.path = Path(path)
+        self.sync = sync
+        self.max_batch = max_batch
+        self._db = connect_db(self.path, sync=sync)
+        last = self._db.execute("SELECT max(seq) FROM inbox").fetchone()[0]
+        self._seq = int(last or 0)
+        self.durable_seq = self._seq
+        self._queue: deque[_Write] = deque()
+        self._cond = threading.Condition()
+        self._closing = False
+        self._failure: BaseException | None = None
+        self.commits = 0
+        self.rows = 0
+        self._thread = threading.Thread(target=self._run, name="statectl-journal", daemon=True)
+        self._thread.start()
+
+    # -- any thread ----------------------------------------------------------------------------
+
+    def accept(
+        self,
+        device: str,
+        event: str,
+        data: Any = None,
+        deliver: Callable[[int], object] | None = None,
+    ) -> Ticket:
+        """Queue an inbox row; ``deliver(seq)`` runs on the writer after it is committed."""
+        text = encode_data(data)
+        with self._cond:
+            self._check()
+            self._seq += 1
+            seq = self._seq
+            self._queue.append(
+                (_INSERT_INBOX, (seq, device, time.time(), event, text), seq, deliver)
+            )
+            self._cond.notify()
+        return Ticket(seq, self)
+
+    def record(
+        self,
+        device: str,
+        kind: StepKind,
+        snapshot: Snapshot,
+        *,
+        time_: float,
+        event: str | None = None,
+        data: Any = None,
+        inbox: int | None = None,
+        outcome: str = "",
+    ) -> None:
+        """Queue a step row (what a device did); never blocks."""
+        active, history, previous = encode_snapshot(snapshot)
+        params = (
+            device, kind.value, inbox, time.time(), time_, event, encode_data(data), outcome,
+            active, history, previous,
+        )  # fmt: skip
+        with self._cond:
+            self._check()
+            self._queue.append((_INSERT_STEP, params, 0, None))
+            self._cond.notify()
+
+    def register(self, name: str, chart: str, source: str, data: Any) -> None:
+        """Note which chart (and file) a device runs, for ``journal replay``."""
+        with self._cond:
+            self._check()
+            sql = "INSERT OR REPLACE INTO devices VALUES (?, ?, ?, ?)"
+            self._queue.append((sql, (name, chart, source, encode_data(data)), 0, None))
+            self._cond.notify()
+
+    def wait_durable(self, seq: int, timeout: float | None = None) -> bool:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        with self._cond:
+            while self.durable_seq < seq:
+                if self._failure is not None:
+                    raise JournalError(f"journal write failed: {self._failure}")
+                left = None if deadline is None else deadline - time.monotonic()
+                if left is not None and left <= 0:
+                    return False
+                self._cond.wait(left)
+        return True
+
+    def flush(self, timeout: float | None = None) -> bool:
+        """Wait until everything queued so far is committed."""
+        with self._cond:
+            self._cond.notify()
+        deadline = None if timeout is None else time.monotonic() + timeout
+        with self._cond:
+            while self._queue or self._writing:
+                if self._failure is not None:
+                    raise JournalError(f"journal write failed: {self._failure}")
+                left = None if deadline is None else deadline - time.monotonic()
+                if left is not None and left <= 0:
+                    return False
+                self._cond.wait(left)
+            if self._failure is not None:
+                raise JournalError(f"journal write failed: {self._failure}")
+        return True
+
+    def close(self) -> None:
+        """Commit what is queued, stop the writer and close the database."""
+        with self._cond:
+            if self._closing:
+                return
+            self._closing = True
+            self._cond.notify_all()
+        self._thread.join()
+        self._db.close()
+        if self._failure is not None:
+            raise JournalError(f"journal write failed: {self._failure}")
+
+    @property
+    def queued(self) -> int:
+        return len(self._queue)
+
+    def _check(self) -> None:
+        if self._closing:
+            raise JournalError(f"journal {self.path} is closed")
+        if self._failure is not None:
+            raise JournalError(f"journal write failed: {self._failure}")
+
+    # -- the writer thread -----------------------------------------------------------------------
+
+    _writing = False
+
+    def _run(self) -> None:
+        db = self._db
+        queue = self._queue
+        while True:
+            with self._cond:
+                while not queue and not self._closing:
+                    self._cond.wait()
+                if not queue and self._closing:
+                    return
+                n = min(len(queue), self.max_batch)
+                batch = [queue.popleft() for _ in range(n)]
+                self._writing = True
+            try:
+                db.execute("BEGIN")
+                self._write(db, batch)
+                db.execute("COMMIT")
+            except BaseException as exc:  # the writer must report, never die silently
+                with self._cond:
+                    self._failure = exc
+                    self._writing = False
+                    queue.clear()
+                    self._cond.notify_all()
+                return
+            top = max((w[2] for w in batch), default=0)
+            with self._cond:
+                self.commits += 1
+                self.rows += n
+                if top > self.durable_seq:
+                    self.durable_seq = top
+                self._writing = False
+                self._cond.notify_all()
+            for w in batch:
+                if w[3] is not None:
+                    try:
+                        w[3](w[2])
+                    except Exception:  # a failing delivery must not stop the journal
+                        traceback.print_exc(file=sys.stderr)
+
+    @staticmethod
+    def _write(db: sqlite3.Connection, batch: list[_Write]) -> None:
+        """Insert runs of one statement with ``executemany``, keeping the order."""
+        i = 0
+        while i < len(batch):
+            sql = batch[i][0]
+            j = i
+            while j < len(batch) and batch[j][0] == sql:
+                j += 1
+            db.executemany(sql, [w[1] for w in batch[i:j]])
+            i = j

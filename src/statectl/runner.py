@@ -1,0 +1,529 @@
+"""``statectl run DEVICE`` for real, and ``statectl journal show|replay|export``.
+
+Rules:
+1. A :class:`System` is devices on one clock with one owner: the thread in
+   :meth:`System.serve` (or whoever calls :meth:`System.drain`) processes every
+   device's events, run-to-completion, so devices never race each other.
+2. With a journal every event from outside is accepted through it (durable
+   first, then delivered) and every step is journalled; ``resume`` brings each
+   device back from the journal, through its recovery rules, before the owner
+   takes any new event.
+3. Time: ``--realtime`` runs on a :class:`WallClock`; otherwise a
+   :class:`SimClock`, which a live run (``--dashboard``) moves in step with the
+   wall clock and a batch run (events from a file or stdin) moves only to let
+   each event's consequences settle, so a batch run is deterministic.
+4. Events come as lines ``[DEVICE:] EVENT [DATA]`` (DATA in YAML flow style, e.g.
+   ``Movement {amount: 10}``); ``+SECONDS`` lets simulated time pass; ``#``
+   starts a comment. A bad line is reported with its number and skipped.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as dt
+import os
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TextIO
+
+import yaml
+
+from statectl.devices import DeviceDriver, connect, load_driver_config, make_driver
+from statectl.errors import DiagnosticError, StatectlError
+from statectl.journal import (
+    Journal,
+    JournalError,
+    JournalledDevice,
+    JournalReader,
+    RecoveryRule,
+    Sync,
+    Ticket,
+    export_jsonl,
+    load_device,
+    replay,
+)
+from statectl.model import Chart
+from statectl.runtime import Clock, SimClock, Subject, TraceWriter, WallClock, format_data
+from statectl.runtime.trace import format_record
+
+__all__ = [
+    "DeviceSetup",
+    "System",
+    "journal_export",
+    "journal_replay",
+    "journal_show",
+    "parse_event_line",
+    "parse_time",
+    "run",
+]
+
+OK, PROBLEMS, USAGE = 0, 1, 2
+#: Simulated seconds a batch run lets pass at most for one event to settle.
+SETTLE_LIMIT = 60.0
+_TICK = 0.02
+
+
+@dataclass(frozen=True, slots=True)
+class DeviceSetup:
+    """One device of a run: its chart, recovery rules, file and driver."""
+
+    name: str
+    chart: Chart
+    rules: tuple[RecoveryRule, ...] = ()
+    source: str = ""
+    driver: DeviceDriver | None = None
+
+
+@dataclass(slots=True)
+class System:
+    """Devices on one clock with one owner; optionally journalled (rules 1-2)."""
+
+    setups: Sequence[DeviceSetup]
+    clock: Clock
+    journal: Journal | None = None
+    subjects: dict[str, Subject] = field(default_factory=dict)
+    bound: dict[str, JournalledDevice] = field(default_factory=dict)
+    wake: threading.Event = field(default_factory=threading.Event)
+
+    def __post_init__(self) -> None:
+        for d in self.setups:
+            s = Subject(d.chart, clock=self.clock, name=d.name)
+            self.subjects[d.name] = s
+            if d.driver is not None:
+                connect(s, d.driver)
+            if self.journal is not None:
+                self.bound[d.name] = JournalledDevice(
+                    s, self.journal, source=d.source, wake=self.wake.set
+                )
+
+    def listen(self, callback: Callable[[Any], None]) -> None:
+        for s in self.subjects.values():
+            s.listen(callback)
+
+    def start(self, *, resume: bool = False) -> dict[str, bool]:
+        """Start every device, or resume it from the journal; which ones were resumed."""
+        resumed: dict[str, bool] = {}
+        if resume and self.journal is None:
+            raise StatectlError("--resume needs --journal DB")
+        if resume and self.journal is not None:
+            self.journal.flush()
+            with JournalReader(self.journal.path) as reader:
+                for d in self.setups:
+                    resumed[d.name] = self.bound[d.name].resume(reader, d.rules)
+        else:
+            for d in self.setups:
+                if d.name in self.bound:
+                    self.bound[d.name].start()
+                else:
+                    self.subjects[d.name].start()
+                resumed[d.name] = False
+        self.drain()
+        return resumed
+
+    def device(self, name: str | None) -> str:
+        if name is None:
+            if len(self.subjects) == 1:
+                return next(iter(self.subjects))
+            raise StatectlError(f"name the device: {', '.join(self.subjects)}")
+        if name not in self.subjects:
+            raise StatectlError(f"no device {name!r}; devices: {', '.join(self.subjects)}")
+        return name
+
+    def post(self, device: str | None, event: str, data: Any = None) -> Ticket | None:
+        """Accept an event from outside (any thread); with a journal the ticket says when."""
+        name = self.device(device)
+        bound = self.bound.get(name)
+        if bound is not None:
+            return bound.post(event, data)
+        self.subjects[name].post(event, data)
+        self.wake.set()
+        return None
+
+    def drain(self) -> int:
+        """Be the owner once: process every device's queue until all are empty."""
+        total = 0
+        while True:
+            n = sum(s.run_until_idle() for s in self.subjects.values())
+            total += n
+            if n == 0 and not any(s.queued for s in self.subjects.values()):
+                return total
+
+    def settle(self, limit: float = SETTLE_LIMIT) -> None:
+        """On a SimClock: let time pass until no timer is pending (or ``limit`` seconds)."""
+        clock = self.clock
+        if not isinstance(clock, SimClock):
+            self.drain()
+            return
+        end = clock.now() + limit
+        self.drain()
+        while True:
+            due = clock.next_deadline()
+            if due is None or due > end:
+                break
+            clock.run_until(due, settle=self.drain)
+            self.drain()
+
+    def serve(self, stop: threading.Event, *, paced: bool = True) -> None:
+        """The owner loop until ``stop``: drain, and on a SimClock follow the wall clock."""
+        last = time.monotonic()
+        while not stop.is_set():
+            self.wake.wait(_TICK)
+            self.wake.clear()
+            self.drain()
+            if paced and isinstance(self.clock, SimClock):
+                now = time.monotonic()
+                self.clock.advance(now - last, settle=self.drain)
+                last = now
+
+    def close(self) -> None:
+        for s in self.subjects.values():
+            s.close()
+        if isinstance(self.clock, WallClock):
+            self.clock.stop()
+        if self.journal is not None:
+            self.journal.close()
+
+
+def parse_event_line(line: str) -> tuple[str | None, str, Any] | float | None:
+    """``[DEVICE:] EVENT [DATA]`` -> (device, event, data); ``+S`` -> seconds; blank -> None."""
+    text = line.split("#", 1)[0].strip()
+    if not text:
+        return None
+    if text.startswith("+"):
+        try:
+            return float(text[1:])
+        except ValueError:
+            raise StatectlError(f"'+' needs seconds, e.g. '+1.5' (got {text!r})") from None
+    device = None
+    head, colon, rest = text.partition(":")
+    if colon and "{" not in head and "[" not in head and rest.startswith(" "):
+        device, text = head.strip(), rest.strip()
+    data: Any = None
+    brace = min((i for i in (text.find("{"), text.find("[")) if i >= 0), default=-1)
+    if brace >= 0:
+        try:
+            data = yaml.safe_load(text[brace:])
+        except yaml.YAMLError as exc:
+            raise StatectlError(f"event data is not YAML flow style ({exc})") from None
+        text = text[:brace]
+    event = " ".join(text.split())
+    if not event:
+        raise StatectlError("no event name")
+    return device, event, data
+
+
+def parse_time(text: str) -> float:
+    """Seconds since the epoch, or an ISO 8601 date-time (local time if it has no zone)."""
+    try:
+        return float(text)
+    except ValueError:
+        pass
+    try:
+        return dt.datetime.fromisoformat(text).timestamp()
+    except ValueError:
+        raise StatectlError(
+            f"not a time: {text!r}; give seconds since the epoch or ISO 8601 (2024-05-01T12:00:00)"
+        ) from None
+
+
+def _drivers(
+    names: Sequence[str], driver: str | None, config: str | None
+) -> dict[str, DeviceDriver]:
+    if config is not None:
+        table = load_driver_config(config)
+        missing = [n for n in names if n not in table]
+        if missing:
+            raise StatectlError(f"{config}: no driver for device(s) {missing}")
+        return {n: make_driver(*table[n]) for n in names}
+    if driver is not None:
+        return {n: make_driver(driver) for n in names}
+    return {}
+
+
+def is_cell(path: str) -> bool:
+    """A YAML file with a ``devices`` section and no ``states`` table is a cell file."""
+    if Path(path).suffix.lower() not in (".yaml", ".yml"):
+        return False
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return False
+    return isinstance(data, dict) and "devices" in data and "states" not in data
+
+
+def _feed(system: System, lines: Iterable[str], err: TextIO, *, batch: bool) -> None:
+    """Post each event line; a batch run settles after each (rule 3)."""
+    for number, line in enumerate(lines, 1):
+        try:
+            parsed = parse_event_line(line)
+            if parsed is None:
+                continue
+            if isinstance(parsed, float):
+                if isinstance(system.clock, SimClock) and batch:
+                    system.clock.advance(parsed, settle=system.drain)
+                    system.drain()
+                else:
+                    time.sleep(parsed)
+                continue
+            device, event, data = parsed
+            ticket = system.post(device, event, data)
+            if batch:
+                if ticket is not None:
+                    ticket.wait()
+                    assert system.journal is not None
+                    system.journal.flush()
+                system.settle()
+        except StatectlError as exc:
+            err.write(f"line {number}: {exc}\n")
+
+
+def run(
+    path: str,
+    *,
+    driver: str | None = None,
+    config: str | None = None,
+    dashboard: bool = False,
+    host: str = "127.0.0.1",
+    port: int = 0,
+    token: str | None = None,
+    journal: str | None = None,
+    resume: bool = False,
+    sync: str = "normal",
+    realtime: bool = False,
+    events: TextIO | None = None,
+    out: TextIO = sys.stdout,
+    err: TextIO = sys.stderr,
+    stop: threading.Event | None = None,
+    ready: Callable[[System, str | None], None] | None = None,
+) -> int:
+    """The whole ``statectl run``; returns the exit code (0 ok, 1 problems, 2 usage).
+
+    ``events`` (default: none in a live run, stdin in a batch run) feeds event
+    lines. A live run (``dashboard`` or ``realtime``) serves until ``stop`` is set,
+    stdin ends (without a dashboard) or Ctrl-C. ``ready(system, url)`` is called
+    once everything runs (tests use it to find the dashboard's port).
+    """
+    if resume and journal is None:
+        err.write("statectl run: --resume needs --journal DB\n")
+        return USAGE
+    if not Path(path).exists():
+        err.write(f"statectl run: {path}: no such file\n")
+        return USAGE
+    if is_cell(path):
+        err.write(
+            f"statectl run: {path} is a cell; run it with the cell runner "
+            "(`statectl run CELL`), --dashboard/--journal take device files for now\n"
+        )
+        return USAGE
+    try:
+        mode = Sync(sync.lower())
+    except ValueError:
+        err.write(f"statectl run: --sync must be normal or full (got {sync!r})\n")
+        return USAGE
+    try:
+        device = load_device(path)
+    except DiagnosticError as exc:
+        for d in exc.diagnostics:
+            err.write(f"{d}\n")
+        return PROBLEMS
+    for d in device.warnings:
+        err.write(f"{d}\n")
+    chart = device.chart
+    live = dashboard or realtime
+    system: System | None = None
+    server: Any = None
+    try:
+        drivers = _drivers([chart.name], driver, config)
+        setup = DeviceSetup(
+            chart.name, chart, device.rules, os.path.abspath(path), drivers.get(chart.name)
+        )
+        clock: Clock = WallClock() if realtime else SimClock()
+        store = Journal(journal, sync=mode) if journal is not None else None
+        system = System((setup,), clock, store)
+        width = max(len(n) for n in system.subjects)
+        system.listen(TraceWriter(out, device_width=width))
+        url = None
+        if dashboard:
+            from statectl.web import Dashboard  # the web layer is optional at run time
+
+            server = Dashboard(system.subjects.values(), post=system.post, token=token)
+            url = server.start(host, port)
+        resumed = system.start(resume=resume)
+        for name, bound in system.bound.items():
+            if resumed.get(name):
+                taken = ", ".join(bound.recovered) or "none"
+                out.write(
+                    f"resumed {name} in {', '.join(sorted(system.subjects[name].configuration))}"
+                    f"; recovery: {taken}; {bound.redelivered} accepted event(s) redelivered\n"
+                )
+        if server is not None:
+            out.write(f"dashboard: {url}\ntoken: {server.token}\n")
+        out.flush()
+        if ready is not None:
+            ready(system, url)
+        if not live:
+            _feed(system, events if events is not None else sys.stdin, err, batch=True)
+            if system.journal is not None:
+                system.journal.flush()
+            final = ", ".join(sorted(system.subjects[chart.name].configuration))
+            out.write(f"final state {final}\n")
+            return OK
+        halt = stop or threading.Event()
+        if events is not None:
+            feeder = threading.Thread(
+                target=_feed_then_stop,
+                args=(system, events, err, halt, server is None),
+                daemon=True,
+            )
+            feeder.start()
+        with contextlib.suppress(KeyboardInterrupt):
+            system.serve(halt)
+        return OK
+    except (StatectlError, OSError) as exc:
+        err.write(f"statectl run: {exc}\n")
+        return PROBLEMS
+    finally:
+        if server is not None:
+            server.stop()
+        if system is not None:
+            system.close()
+
+
+def _feed_then_stop(
+    system: System, lines: TextIO, err: TextIO, halt: threading.Event, stop_at_end: bool
+) -> None:
+    _feed(system, lines, err, batch=False)
+    if stop_at_end:
+        halt.set()
+
+
+# -- statectl journal ------------------------------------------------------------------------
+
+
+def _reader(path: str, err: TextIO) -> JournalReader | None:
+    try:
+        return JournalReader(path)
+    except JournalError as exc:
+        err.write(f"statectl journal: {exc}\n")
+        return None
+
+
+def _window(since: str | None, until: str | None) -> tuple[float | None, float | None]:
+    return (
+        parse_time(since) if since is not None else None,
+        parse_time(until) if until is not None else None,
+    )
+
+
+def journal_show(
+    path: str,
+    *,
+    device: str | None = None,
+    since: str | None = None,
+    until: str | None = None,
+    out: TextIO = sys.stdout,
+    err: TextIO = sys.stderr,
+) -> int:
+    """``statectl journal show``: one line per accepted event and step, in order."""
+    reader = _reader(path, err)
+    if reader is None:
+        return USAGE
+    with reader:
+        try:
+            lo, hi = _window(since, until)
+        except StatectlError as exc:
+            err.write(f"statectl journal show: {exc}\n")
+            return USAGE
+        lines: list[tuple[float, int, str]] = []
+        for r in reader.inbox(device, lo, hi):
+            data = "" if r.data is None else " " + format_data(r.data)
+            lines.append((r.wall, 0, f"#{r.seq:<6} {r.device}  accepted  {r.event}{data}"))
+        for s in reader.steps(device, lo, hi):
+            what = s.event or ""
+            if s.data is not None:
+                what += " " + format_data(s.data)
+            via = f" (#{s.inbox})" if s.inbox else ""
+            state = ", ".join(sorted(s.snapshot.active))
+            text = f"step {s.id:<4} {s.device}  {s.kind.value:<8} {what}{via} -> [{state}]"
+            if s.outcome and s.outcome != "handled":
+                text += f"  {s.outcome}"
+            lines.append((s.wall, 1, text))
+        for wall, _, text in sorted(lines, key=lambda x: (x[0], x[1])):
+            stamp = dt.datetime.fromtimestamp(wall).isoformat(timespec="milliseconds")
+            out.write(f"{stamp}  {text}\n")
+    return OK
+
+
+def journal_export(
+    path: str,
+    *,
+    device: str | None = None,
+    since: str | None = None,
+    until: str | None = None,
+    out: TextIO = sys.stdout,
+    err: TextIO = sys.stderr,
+) -> int:
+    """``statectl journal export``: JSON Lines (accepted events, then steps)."""
+    reader = _reader(path, err)
+    if reader is None:
+        return USAGE
+    with reader:
+        try:
+            lo, hi = _window(since, until)
+        except StatectlError as exc:
+            err.write(f"statectl journal export: {exc}\n")
+            return USAGE
+        export_jsonl(reader, out, device=device, since=lo, until=hi)
+    return OK
+
+
+def journal_replay(
+    path: str,
+    *,
+    device: str | None = None,
+    model: Mapping[str, str] | None = None,
+    out: TextIO = sys.stdout,
+    err: TextIO = sys.stderr,
+) -> int:
+    """``statectl journal replay``: rerun the journal on the model; 1 if it disagrees.
+
+    The charts come from the device files the journal names, or ``model``
+    (device -> file) where given.
+    """
+    reader = _reader(path, err)
+    if reader is None:
+        return USAGE
+    with reader:
+        charts: dict[str, Chart] = {}
+        for d in reader.devices():
+            if device is not None and d.name != device:
+                continue
+            source = (model or {}).get(d.name, d.source)
+            try:
+                charts[d.name] = load_device(source).chart
+            except DiagnosticError as exc:
+                err.write(f"statectl journal replay: {d.name}: cannot load {source}\n")
+                for diag in exc.diagnostics:
+                    err.write(f"{diag}\n")
+                return PROBLEMS
+        width = max((len(n) for n in charts), default=0)
+        try:
+            result = replay(
+                reader,
+                charts,
+                device=device,
+                listener=lambda r: print(format_record(r, device_width=width), file=out),
+            )
+        except JournalError as exc:
+            err.write(f"statectl journal replay: {exc}\n")
+            return PROBLEMS
+    for m in result.mismatches:
+        out.write(f"MISMATCH {m}\n")
+    for name, snap in sorted(result.final.items()):
+        out.write(f"final {name}: {', '.join(sorted(snap.active))}\n")
+    out.write(f"{result.steps} step(s) replayed; {len(result.mismatches)} mismatch(es)\n")
+    return OK if result.ok else PROBLEMS

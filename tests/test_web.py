@@ -1,0 +1,161 @@
+"""The dashboard over HTTP: page and assets offline, state, diagrams, SSE, token and origin."""
+
+from __future__ import annotations
+
+import http.client
+import json
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import pytest
+
+from statectl.demo import motor_chart
+from statectl.devices import SimMotor
+from statectl.render.diagram import from_chart
+from statectl.runner import DeviceSetup, System
+from statectl.runtime import SimClock
+from statectl.web import Dashboard, fallback_svg
+
+TOKEN = "test-token"
+
+
+@dataclass
+class Served:
+    system: System
+    dash: Dashboard
+    port: int
+
+    def request(
+        self, method: str, path: str, body: object = None, headers: dict[str, str] | None = None
+    ) -> tuple[int, dict[str, str], bytes]:
+        conn = http.client.HTTPConnection("127.0.0.1", self.port, timeout=10)
+        try:
+            data = json.dumps(body).encode() if body is not None else None
+            conn.request(method, path, body=data, headers=headers or {})
+            reply = conn.getresponse()
+            return reply.status, dict(reply.getheaders()), reply.read()
+        finally:
+            conn.close()
+
+
+@pytest.fixture
+def served() -> Iterator[Served]:
+    chart = motor_chart()
+    system = System((DeviceSetup("Motor", chart, driver=SimMotor()),), SimClock())
+    dash = Dashboard(system.subjects.values(), post=system.post, token=TOKEN)
+    dash.start("127.0.0.1", 0)
+    try:
+        system.start()
+        yield Served(system, dash, dash.port)
+    finally:
+        dash.stop()
+        system.close()
+
+
+POST = {"Content-Type": "application/json", "X-Statectl-Token": TOKEN}
+
+
+@pytest.mark.parametrize(
+    ("path", "ctype", "needle"),
+    [
+        ("/", "text/html", b"/static/app.js"),
+        ("/static/app.js", "text/javascript", b"EventSource"),
+        ("/static/style.css", "text/css", b".active"),
+        ("/api/diagram/Motor.svg", "image/svg+xml", b"<svg"),
+    ],
+)
+def test_the_page_and_its_assets_are_served_from_the_package(
+    served: Served, path: str, ctype: str, needle: bytes
+) -> None:
+    """Everything the page needs comes from this server: no CDN, works offline."""
+    status, headers, body = served.request("GET", path)
+    assert (status, headers["Content-Type"].split(";")[0]) == (200, ctype)
+    assert needle in body
+    assert b"https://" not in body or path.endswith(".svg")
+
+
+def test_state_lists_active_states_invokes_and_monitors(served: Served) -> None:
+    """/api/state: the Motor in Blocked, its invoke numbers with the observer, its monitor."""
+    status, _, body = served.request("GET", "/api/state")
+    motor = json.loads(body)["devices"][0]
+    assert status == 200
+    assert motor["active"] == ["Blocked"]
+    assert [(i["number"], i["method"], i["observer"]) for i in motor["invokes"]] == [
+        (0, "Movement", "SimMotor"),
+        (1, "Initialization", "SimMotor"),
+        (2, "Error", "SimMotor"),
+    ]
+    assert motor["monitors"] == [{"state": "Moving", "status": "idle"}]
+
+
+def test_an_event_with_the_token_reaches_the_device(served: Served) -> None:
+    """POST with the token: accepted; the owner processes it and the state shows Moving."""
+    status, _, body = served.request(
+        "POST", "/api/post", {"device": "Motor", "event": "Movement", "data": {"amount": 5}}, POST
+    )
+    assert (status, json.loads(body)["accepted"]) == (200, True)
+    served.system.drain()
+    motor = json.loads(served.request("GET", "/api/state")[2])["devices"][0]
+    assert (motor["active"], motor["monitors"][0]["status"]) == (["Moving"], "running")
+
+
+@pytest.mark.parametrize(
+    ("headers", "status"),
+    [
+        ({"Content-Type": "application/json"}, 401),
+        ({"Content-Type": "application/json", "X-Statectl-Token": "wrong"}, 401),
+        ({**POST, "Origin": "http://evil.example"}, 403),
+        ({**POST, "Host": "evil.example"}, 403),
+        ({**POST, "Content-Type": "text/plain"}, 415),
+    ],
+)
+def test_posts_without_token_or_from_elsewhere_are_refused(
+    served: Served, headers: dict[str, str], status: int
+) -> None:
+    """No token, a wrong token, a foreign origin or host, a form body: refused, nothing posted."""
+    got, _, _ = served.request("POST", "/api/post", {"event": "Movement"}, headers)
+    assert got == status
+    assert served.system.subjects["Motor"].queued == 0
+
+
+def test_a_same_origin_post_is_accepted(served: Served) -> None:
+    """The page's own origin passes the origin check."""
+    headers = {**POST, "Origin": f"http://127.0.0.1:{served.port}"}
+    assert served.request("POST", "/api/post", {"event": "Movement", "data": {"amount": 1}},
+                          headers)[0] == 200  # fmt: skip
+
+
+def test_the_event_stream_starts_with_a_snapshot_then_records(served: Served) -> None:
+    """SSE: the snapshot, the backlog, then an event's records with the new state."""
+    conn = http.client.HTTPConnection("127.0.0.1", served.port, timeout=10)
+    try:
+        conn.request("GET", "/api/events")
+        reply = conn.getresponse()
+        assert reply.getheader("Content-Type") == "text/event-stream"
+
+        def message() -> dict[str, object]:
+            while True:
+                line = reply.fp.readline().decode()
+                if line.startswith("data: "):
+                    result: dict[str, object] = json.loads(line[6:])
+                    return result
+
+        assert message()["type"] == "snapshot"
+        served.system.post("Motor", "Movement", {"amount": 5})
+        served.system.drain()
+        seen = []
+        while not seen or seen[-1] != "api":
+            m = message()
+            seen.append(m["kind"])
+        assert seen[:2] == ["run", "enter"]  # the backlog: the start
+        assert seen[2:4] == ["event", "exit"]
+        assert m["state"]["active"] == ["Moving"]  # type: ignore[index]
+    finally:
+        conn.close()
+
+
+def test_the_fallback_diagram_marks_nodes_like_graphviz() -> None:
+    """Without Graphviz each state is a g.node with its id as title, names escaped."""
+    svg = fallback_svg(from_chart(motor_chart()))
+    assert svg.count('<g class="node"><title>') == 3
+    assert "<title>Moving</title>" in svg
