@@ -160,3 +160,53 @@ def test_readme_observers_block_matches_the_real_output() -> None:
     shown_lines = [ln[3:] for ln in block if ln.strip() not in ("", "...")]
     _, out, _ = cli("observers", MOTOR)
     assert [ln.rstrip() for ln in out.splitlines()[: len(shown_lines)]] == shown_lines
+
+
+CELLS = ROOT / "examples" / "pick-and-place"
+
+
+@pytest.mark.parametrize(
+    ("argv", "code", "needle"),
+    [
+        (["verify", str(CELLS / "cell.yaml")], 0, "verdict: holds"),
+        (["verify", str(CELLS / "cell-buggy.yaml")], 1, "FAIL invariant"),
+        (["verify", "--max-states", "3", str(CELLS / "cell.yaml")], 1, "incomplete"),
+        (["verify", "missing-cell.yaml"], 2, ""),
+        (["run", str(CELLS / "cell.yaml"), "--steps", "5"], 0, "conveyor"),
+    ],
+)
+def test_cell_commands(argv: list[str], code: int, needle: str) -> None:
+    """verify exits 0 when every property holds, 1 when one fails or the search was cut short."""
+    got, out, err = cli(*argv)
+    assert got == code, out + err
+    assert needle in out + err
+
+
+def test_scxml_export_then_import_gives_the_same_chart(tmp_path: Path) -> None:
+    """A device file exported to SCXML and imported back builds the same transitions."""
+    from statectl.build import load_chart, strip_origins
+
+    doc, back = tmp_path / "motor.scxml", tmp_path / "motor.yaml"
+    assert cli("scxml", "export", MOTOR, "--out", str(doc))[0] == 0
+    assert cli("scxml", "import", str(doc), "--out", str(back))[0] == 0
+    assert strip_origins(load_chart(str(back))) == strip_origins(load_chart(MOTOR))
+
+
+def test_scxml_run_prints_the_final_state(tmp_path: Path) -> None:
+    """scxml run prints 'final: <id>' for the top-level final state it reaches."""
+    doc = tmp_path / "t.scxml"
+    doc.write_text(
+        '<scxml xmlns="http://www.w3.org/2005/07/scxml" version="1.0" initial="a">'
+        '<state id="a"><onentry><raise event="go"/></onentry>'
+        '<transition event="go" target="done"/></state><final id="done"/></scxml>',
+        encoding="utf-8",
+    )
+    code, out, _ = cli("scxml", "run", str(doc), "--timeout", "5")
+    assert (code, out) == (0, "final: done\n")
+
+
+def test_codegen_writes_a_cpp_device(tmp_path: Path) -> None:
+    """codegen --target cpp writes the device header; an unknown target is a usage error."""
+    assert cli("codegen", MOTOR, "--target", "cpp", "--out", str(tmp_path))[0] == 0
+    assert any(p.suffix == ".hpp" for p in tmp_path.rglob("*"))
+    assert cli("codegen", MOTOR, "--target", "rust", "--out", str(tmp_path / "x"))[0] == 2

@@ -206,11 +206,67 @@ def cmd_verify(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
 
 
 def cmd_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
-    from statectl.explore.replay import run_main
+    from statectl.runner import is_cell, run
 
-    return run_main(
-        args.file, replay=args.replay, walk=args.steps, seed=args.seed, out=out, err=err
+    live = args.dashboard or args.journal or args.resume or args.realtime
+    if is_cell(args.file) and not live:
+        from statectl.explore.replay import run_main
+
+        return run_main(
+            args.file, replay=args.replay, walk=args.steps, seed=args.seed, out=out, err=err
+        )
+    if args.replay is not None:
+        err.write("statectl run: --replay takes a cell file (a trace from verify --traces)\n")
+        return USAGE
+    return run(
+        args.file,
+        driver=args.driver,
+        config=args.config,
+        dashboard=args.dashboard,
+        host=args.host,
+        port=args.port,
+        token=args.token,
+        journal=args.journal,
+        resume=args.resume,
+        sync=args.sync,
+        realtime=args.realtime,
+        out=out,
+        err=err,
     )
+
+
+def cmd_journal(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    from statectl.runner import journal_export, journal_replay, journal_show
+
+    if args.journal_command == "replay":
+        return journal_replay(args.db, device=args.device, out=out, err=err)
+    show = journal_show if args.journal_command == "show" else journal_export
+    return show(args.db, device=args.device, since=args.since, until=args.until, out=out, err=err)
+
+
+def cmd_scxml_import(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    from statectl.scxml_io import import_file
+
+    result, diags = import_file(args.file, args.out)
+    if isinstance(result, str):
+        _print_diagnostics(diags, err, False)
+        err.write(f"{args.file}: kept as SCXML (it does not fit the table form); nothing written\n")
+        return OK
+    for p in result:
+        out.write(f"wrote {p}\n")
+    return OK
+
+
+def cmd_scxml_export(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    from statectl.scxml_io import export_file
+
+    text = export_file(args.file)
+    if args.out:
+        _write_atomic(Path(args.out), text)
+        out.write(f"wrote {args.out}\n")
+    else:
+        out.write(text if text.endswith("\n") else text + "\n")
+    return OK
 
 
 def _write_atomic(path: Path, text: str) -> None:
@@ -286,12 +342,44 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--progress", action="store_true", help="show progress even when piped")
     s.set_defaults(func=cmd_verify)
 
-    s = sub.add_parser("run", help="run a cell live on simulated devices, or replay a trace")
-    s.add_argument("file", metavar="CELL")
-    s.add_argument("--replay", metavar="TRACE", help="a .trace.json written by verify --traces")
-    s.add_argument("--steps", type=int, default=20, help="random-walk length without --replay")
-    s.add_argument("--seed", type=int, default=0)
+    s = sub.add_parser(
+        "run",
+        help="run a device (events from stdin, or live with a dashboard) or a cell",
+        description="A device file runs on its drivers; event lines '[DEVICE:] EVENT [DATA]' "
+        "or '+SECONDS' come from stdin on a simulated clock, unless --realtime or --dashboard. "
+        "A cell file runs a random walk, or replays a trace from verify --traces.",
+    )
+    s.add_argument("file", metavar="FILE", help="device file or cell file")
+    s.add_argument("--driver", help="driver for every device (sim-motor, sim-stepper, mod:Class)")
+    s.add_argument("--config", help="driver configuration YAML")
+    s.add_argument("--dashboard", action="store_true", help="serve the live dashboard")
+    s.add_argument("--host", default="127.0.0.1", help="dashboard address (default loopback)")
+    s.add_argument("--port", type=int, default=0, help="dashboard port (default: any free)")
+    s.add_argument("--token", help="token that allows sending events from the dashboard")
+    s.add_argument("--journal", metavar="DB", help="journal every event to this SQLite file")
+    s.add_argument("--resume", action="store_true", help="resume from the journal first")
+    s.add_argument("--sync", default="normal", choices=("normal", "full"),
+                   help="journal durability: normal (process crash) or full (power loss)")
+    s.add_argument("--realtime", action="store_true", help="run on the wall clock")
+    s.add_argument("--replay", metavar="TRACE", help="cells: a .trace.json from verify --traces")
+    s.add_argument("--steps", type=int, default=20, help="cells: random-walk length")
+    s.add_argument("--seed", type=int, default=0, help="cells: random-walk seed")
     s.set_defaults(func=cmd_run)
+
+    journal = sub.add_parser("journal", help="read a run's journal")
+    jsub = journal.add_subparsers(dest="journal_command", required=True, parser_class=_Parser)
+    for name, text in (
+        ("show", "print journalled events and state changes"),
+        ("export", "write the journal as JSON Lines"),
+        ("replay", "rerun the journal on the model; exit 1 if a state disagrees"),
+    ):
+        s = jsub.add_parser(name, help=text)
+        s.add_argument("db", metavar="DB")
+        s.add_argument("--device", help="only this device")
+        if name != "replay":
+            s.add_argument("--since", help="epoch seconds or ISO 8601")
+            s.add_argument("--until", help="epoch seconds or ISO 8601")
+        s.set_defaults(func=cmd_journal)
 
     scxml = sub.add_parser("scxml", help="SCXML documents")
     ssub = scxml.add_subparsers(dest="scxml_command", required=True, parser_class=_Parser)
@@ -299,6 +387,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("file", metavar="FILE")
     s.add_argument("--timeout", type=float, default=10.0)
     s.set_defaults(func=cmd_scxml_run)
+    s = ssub.add_parser("import", help="convert SCXML to a device file when it fits the tables")
+    s.add_argument("file", metavar="FILE")
+    s.add_argument("--out", help="device file to write (.yaml, .md, .xlsx, .csv)")
+    s.set_defaults(func=cmd_scxml_import)
+    s = ssub.add_parser("export", help="write a device file as SCXML")
+    s.add_argument("file", metavar="FILE")
+    s.add_argument("--out", help="write to this file instead of standard output")
+    s.set_defaults(func=cmd_scxml_export)
     return p
 
 
