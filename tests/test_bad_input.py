@@ -274,3 +274,20 @@ def test_unwritable_xlsx_text_writes_nothing(tmp_path: Path) -> None:
         save(bad, tmp_path / "m.xlsx")
     assert [d.code for d in info.value.diagnostics] == ["T108"]
     assert list(tmp_path.iterdir()) == []
+
+
+def test_load_errors_do_not_hide_build_errors(tmp_path: Path) -> None:
+    """One check run reports cell errors (T1xx) and the build's own (B2xx, X30x) together."""
+    from statectl.build import load_and_build
+
+    path = tmp_path / "dev.yaml"
+    path.write_text(
+        "device: M\nstates:\n  - {state: A, control: default, colour: red}\n"
+        "  - {state: B, control: sometimes}\nevents:\n  - {event: go, old: A, new: C, kind: zap}\n"
+        "  - {event: back, old: B, new: A, guard: \"x.__class__\"}\n",
+        encoding="utf-8",
+    )
+    chart, diags = load_and_build(path)
+    assert chart is None
+    assert [(d.code, d.where.line) for d in diags] == [
+        ("T103", 3), ("T106", 4), ("T107", 6), ("B201", 6), ("X302", 7)]

@@ -981,12 +981,17 @@ def chart_to_tables(chart: Chart) -> tuple[DeviceTables | None, list[Diagnostic]
 
 
 def load_and_build(path: str | os.PathLike[str]) -> tuple[Chart | None, list[Diagnostic]]:
-    """Load a device file in any table format and build it; every diagnostic of both steps."""
+    """Load a device file in any table format and build it; every diagnostic of both steps.
+
+    Tables that loaded with errors are still built, so one run reports the
+    problems of both steps; their chart is not returned, since it is not the
+    file's.
+    """
     tables, diags = load(path)
     if tables is None:
         return None, diags
     chart, more = build(tables)
-    return chart, [*diags, *more]
+    return (None if has_errors(diags) else chart), [*diags, *more]
 
 
 def load_chart(path: str | os.PathLike[str]) -> Chart:

@@ -171,7 +171,7 @@ def read_csv(
             assert isinstance(key, str) and isinstance(value, str)  # CSV cells are text
             entries.append((key.strip(), parse_literal(value, where, diags), where))
     result = make_tables(device, state_table, event_table, entries, Location(states[1], 1), diags)
-    return (None if diags else result), diags
+    return result, diags
 
 
 def _write(header: tuple[str, ...], rows: list[list[str]], device: str) -> str:

@@ -181,7 +181,7 @@ def read_md(text: str, file: str, stem: str) -> tuple[DeviceTables | None, list[
         Location(file, 1),
         diags,
     )
-    return (None if diags else result), diags
+    return result, diags
 
 
 def _table(header: tuple[str, ...], rows: list[list[str]]) -> list[str]:

@@ -558,8 +558,14 @@ def make_tables(
     source: Location,
     diags: list[Diagnostic],
 ) -> DeviceTables | None:
-    """Check raw tables and build :class:`DeviceTables`; ``None`` if anything is wrong."""
-    start = len(diags)
+    """Check raw tables and build :class:`DeviceTables`.
+
+    Rows with bad cells are kept as far as they could be read (an unknown control
+    is left out, an unknown kind reads as ``command``) so that the build can still
+    report its own problems in the same run: diagnostics, not first errors. The
+    result is ``None`` only when a table is missing altogether; a caller must
+    check the diagnostics for errors before trusting the tables.
+    """
     state_rows: list[StateRow] = []
     event_rows: list[EventRow] = []
     for raw in (states, events):
@@ -574,7 +580,7 @@ def make_tables(
     data_items = make_data(data, diags)
     if not device.strip():
         diags.append(diag("T104", source, "the device has no name", "add 'device: NAME'"))
-    if states is None or events is None or any(d.severity is Severity.ERROR for d in diags[start:]):
+    if states is None or events is None:
         return None
     return DeviceTables(device.strip(), tuple(state_rows), tuple(event_rows), data_items, source)
 

@@ -140,7 +140,7 @@ def read_xlsx(content: bytes, file: str, stem: str) -> tuple[DeviceTables | None
     finally:
         wb.close()
     result = make_tables(device, tables["states"], tables["events"], entries, source, diags)
-    return (None if diags else result), diags
+    return result, diags
 
 
 def _fill(ws: Worksheet, header: tuple[str, ...], rows: Iterable[list[str]]) -> None:

@@ -204,7 +204,7 @@ def read_yaml(text: str, file: str) -> tuple[DeviceTables | None, list[Diagnosti
         diags.append(diag("T104", source, "the file has no 'device' name", "add 'device: NAME'"))
         device = "?"
     result = make_tables(device, tables["states"], tables["events"], data, source, diags)
-    return (None if diags else result), diags
+    return result, diags
 
 
 def _state_doc(tables: DeviceTables) -> list[dict[str, Any]]:
