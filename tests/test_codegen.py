@@ -211,3 +211,120 @@ def test_example_configures_and_builds_with_cmake(tmp_path: Path) -> None:
         assert done.returncode == 0, done.stdout + done.stderr
     assert (build / "motor_demo").exists()
     assert (build / "generated" / "motor_check").exists()
+
+
+_CONTRACTS = r"""
+#include "motor.hpp"
+
+#include <cstdlib>
+#include <cstring>
+
+namespace {
+
+motor::Motor device;
+
+// Movement(): re-enters dispatch (a contract fault) or posts (the supported path).
+class Api final : public motor::MotorApi {
+ public:
+  bool reenter = false;
+  int calls = 0;
+  void Movement() noexcept override {
+    ++calls;
+    if (reenter) {
+      device.dispatch(motor::Event::Error);
+    } else {
+      static_cast<void>(device.post(motor::Event::Error));
+    }
+  }
+  void Initialization() noexcept override { ++calls; }
+  void Error() noexcept override { ++calls; }
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const char* what = argc > 1 ? argv[1] : "";
+  Api api;
+  device.attach(api, motor::Invoke::Moving);
+  device.attach(api, motor::Invoke::Error);
+  api.reenter = std::strcmp(what, "reenter") == 0;
+  if (std::strcmp(what, "before-start") != 0) {
+    device.start();
+  }
+  if (std::strcmp(what, "start-twice") == 0) {
+    device.start();
+  }
+  if (std::strcmp(what, "out-of-range") == 0) {
+    device.dispatch(static_cast<motor::Event>(motor::kEventCount));
+  }
+  device.dispatch(motor::Event::Movement);
+  const std::size_t ran = device.run_until_idle();
+  std::printf("ok %d %zu %d\n", api.calls, ran, device.in(motor::State::Returning) ? 1 : 0);
+  return 0;
+}
+"""
+
+
+@pytest.fixture(scope="module")
+def contracts_binary(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    if GXX is None:
+        pytest.skip("no g++ on this machine")
+    out = tmp_path_factory.mktemp("contracts")
+    generate(load_chart(MOTOR), out)
+    (out / "contracts.cpp").write_text(_CONTRACTS)
+    binary = out / "contracts"
+    cmd = [GXX, *FLAGS, "-O2", "-DNDEBUG", "-I", str(out), str(out / "contracts.cpp"), "-o",
+           str(binary)]
+    done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    return binary
+
+
+@pytest.mark.parametrize(
+    ("scenario", "stderr"),
+    [
+        ("out-of-range", "statectl contract 101 failed: dispatch: event out of range"),
+        ("reenter", "statectl contract 102 failed: dispatch: re-entered from an observer or "
+                    "hook; post() instead"),
+        ("before-start", "statectl contract 103 failed: dispatch: call start() first"),
+        ("start-twice", "statectl contract 104 failed: start: the device was started already"),
+    ],
+)
+def test_contract_checks_fire_in_release_builds(contracts_binary: Path, scenario: str,
+                                                stderr: str) -> None:
+    """Each folded dispatch check still names its number and reason at -O2 -DNDEBUG."""
+    done = subprocess.run([str(contracts_binary), scenario], capture_output=True, text=True,
+                          check=False)
+    assert done.returncode != 0 and done.stdout == ""
+    assert done.stderr.strip() == stderr
+
+
+def test_post_from_an_observer_runs_after_the_step(contracts_binary: Path) -> None:
+    """post() during dispatch is the supported path: the event runs in run_until_idle()."""
+    done = subprocess.run([str(contracts_binary), "post"], capture_output=True, text=True,
+                          check=True)
+    assert done.stdout == "ok 2 1 1\n"  # Movement() then Error(); one queued event; Returning
+
+
+@needs_gxx
+@pytest.mark.parametrize(
+    "chart",
+    [
+        _two_states(transitions=(Transition("A", ("go",), ("B",), guard="limit > 2"),
+                                 Transition("A", ("go",), ("A",), guard="limit < 0")),
+                    data=(DataItem("limit", "3"),)),
+        _two_states(transitions=(), events=()),
+    ],
+    ids=["runtime-guards", "no-events"],
+)
+def test_release_build_of_edge_charts_is_warning_free(tmp_path: Path, chart: Chart) -> None:
+    """Guard-decision trees and a chart without events build at -O2 with -Werror."""
+    assert GXX is not None
+    generate(chart, tmp_path)
+    binary = tmp_path / "check"
+    cmd = [GXX, *FLAGS, "-O2", "-DNDEBUG", "-I", str(tmp_path), str(tmp_path / "dev_check.cpp"),
+           "-o", str(binary)]
+    done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    out = subprocess.run([str(binary)], capture_output=True, text=True, check=True).stdout
+    assert out.startswith("Dev: configuration")

@@ -4,11 +4,19 @@
 //
 // A single dispatch is far shorter than a clock read, so each sample times a batch of
 // kBatch dispatches and divides; p50/p99/max are over the samples of all repeats,
-// after warm-up. The implementations alternate per batch so that drift hits both.
+// after warm-up. The implementations alternate per batch, and which goes first
+// alternates too, so that drift and cache state hit both alike.
+//
+// Both read the events through a pointer the compiler cannot see through, so neither
+// dispatch is specialised for a known event. `bench --count N` instead runs N dispatches
+// of each in run_generated / run_handwritten (never inlined) and exits: run.py counts
+// their instructions with `valgrind --tool=callgrind --toggle-collect=...`.
 #include <algorithm>
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <vector>
 
 #include "motor.hpp"
@@ -81,20 +89,40 @@ constexpr Event kCycle[] = {
     Event::Movement,
 };
 constexpr std::size_t kCycleLength = sizeof kCycle / sizeof kCycle[0];
+static_assert((kCycleLength & (kCycleLength - 1)) == 0, "the cycle length is a power of two");
 constexpr int kBatch = 1024;
 constexpr int kWarmup = 200;
 constexpr int kSamples = 2000;
 constexpr int kRepeats = 5;
 
+// volatile: the compiler must load the pointer, so it cannot know which events come.
+const Event* volatile g_events = kCycle;
+
+template <typename Device>
+inline void drive(Device& device, const Event* events, int n) {
+  for (int i = 0; i < n; ++i) {
+    device.dispatch(events[static_cast<std::size_t>(i) & (kCycleLength - 1)]);
+  }
+}
+
 template <typename Device>
 double batch(Device& device) {
+  const Event* events = g_events;
   const auto t0 = std::chrono::steady_clock::now();
-  for (int i = 0; i < kBatch; ++i) {
-    device.dispatch(kCycle[static_cast<std::size_t>(i) % kCycleLength]);
-  }
+  drive(device, events, kBatch);
   const auto t1 = std::chrono::steady_clock::now();
   return std::chrono::duration<double, std::nano>(t1 - t0).count() / kBatch;
 }
+
+// The instruction-count entry points: the same loop as batch(), no clock.
+#if defined(__GNUC__) || defined(__clang__)
+#define BENCH_NOINLINE __attribute__((noinline))
+#else
+#define BENCH_NOINLINE
+#endif
+
+BENCH_NOINLINE void run_generated(motor::Motor& device, int n) { drive(device, g_events, n); }
+BENCH_NOINLINE void run_handwritten(hand::Motor& device, int n) { drive(device, g_events, n); }
 
 double percentile(std::vector<double>& v, double p) {
   std::sort(v.begin(), v.end());
@@ -111,7 +139,7 @@ void report(const char* name, std::vector<double>& v) {
 
 }  // namespace
 
-int main() {
+int main(int argc, char** argv) {
   motor::Motor generated;
   hand::Motor handwritten;
   Counter a;
@@ -121,6 +149,13 @@ int main() {
     handwritten.attach(b, static_cast<Invoke>(i));
   }
   generated.start();
+  if (argc == 3 && std::strcmp(argv[1], "--count") == 0) {
+    const int n = std::atoi(argv[2]);
+    run_generated(generated, n);
+    run_handwritten(handwritten, n);
+    std::printf("count %d %s\n", n, a.calls == b.calls ? "same" : "MISMATCH");
+    return a.calls == b.calls ? 0 : 1;
+  }
   std::vector<double> gen_ns;
   std::vector<double> hand_ns;
   gen_ns.reserve(kSamples * kRepeats);

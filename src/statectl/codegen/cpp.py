@@ -2,15 +2,18 @@
 
 Rules:
 1. Everything the semantics decided is data: ``constexpr`` tables with a comment
-   per row (configurations x events -> outcome or guard decision; outcomes ->
-   effects). ``dispatch`` is a table lookup, an optional walk down runtime guards,
-   and a fixed loop over the outcome's effects. Nothing re-implements the semantics.
+   per row (event-major cells -> the case of one switch; outcomes -> effects; guard
+   decisions). ``dispatch`` is one bound check, one ``kCells`` load and one indexed
+   jump; each case is an outcome's effects as straight-line code or a guard-decision
+   tree unrolled at compile time. Nothing re-implements the semantics.
 2. The paper's observer pattern: enums for states, events and invoke numbers; an
    ``Observer`` with ``update(Invoke)``; the device is a ``Subject`` that notifies
    only the observer attached for an invoke number; a generated ``<Device>Api``
    observer maps each invoke number to one pure virtual API method.
 3. No heap, no exceptions, no RTTI; a fixed-capacity lock-free SPSC queue behind
-   ``post()``; numbered contract checks (1xx device, 2xx subject, see the runtime);
+   ``post()``; numbered contract checks (1xx device, 2xx subject, see the runtime),
+   always on: the device's state word carries "not started" and "busy" flags that put
+   the cell index past the table, so the dispatch checks are the lookup's bound check;
    trace calls exist only when ``STATECTL_TRACE`` is 1.
 4. Output is deterministic (no dates, no absolute paths), so regenerating gives
    identical files and a diff shows what a model change did.
@@ -169,7 +172,7 @@ def _header(flat: FlatChart, cls: str, ns: str) -> str:
         f"{len(flat.guards)} runtime guards.")
     add("// Every decision below was made by statectl's semantics at generation time; see")
     add("// docs/codegen.md. Contract checks: 101 event out of range, 102 dispatch re-entered,")
-    add("// 103 dispatch before start, 104 start twice, 105 guard walk too deep.")
+    add("// 103 dispatch before start, 104 start twice, 107 corrupt state word.")
     add(f"#ifndef {guard}")
     add(f"#define {guard}")
     add("")
@@ -289,9 +292,11 @@ def _header(flat: FlatChart, cls: str, ns: str) -> str:
         add(f"    {_c(name)},")
     add("};")
     add("")
-    add("inline constexpr const char* kEventNames[kEventCount] = {")
+    add(f"inline constexpr const char* kEventNames[{max(1, n_events)}] = {{")
     for name in flat.events:
         add(f"    {_c(name)},")
+    if not flat.events:
+        add('    "",  // unused: the chart has no events')
     add("};")
     add("")
     add("inline constexpr const char* kReasons[4] = {")
@@ -360,18 +365,37 @@ def _header(flat: FlatChart, cls: str, ns: str) -> str:
     add("};")
     add("")
     depth = _depth(flat)
-    add(f"inline constexpr int kMaxDepth = {depth};  // longest guard walk of one step")
+    add(f"inline constexpr int kMaxDepth = {depth};  // most guards one step evaluates")
     add(f"inline constexpr std::int16_t kStart = {start};  // entering the initial configuration")
     add("")
-    cells = [c for row in dispatch for c in row]
+    cases, cells = _cells(dispatch, n_configs, n_events)
+    add("// Dispatch cells, event-major: kCells[event * kConfigurationCount + configuration] is")
+    add("// the case of dispatch()'s switch that runs the step (one row per event, columns are")
+    add("// the configurations 0.., see kActive). Cells past the table are contract faults.")
+    add(f"inline constexpr std::size_t kCellCount = {len(cells)};")
+    add(f"inline constexpr std::size_t kCaseCount = {len(cases)};")
+    ctype = "std::uint8_t" if len(cases) <= 256 else "std::uint16_t"
+    add(f"inline constexpr {ctype} kCells[{max(1, len(cells))}] = {{")
     cw = _width(cells)
-    add("// Rows: configurations; columns: events " + ", ".join(
-        f"{i} {e}" for i, e in enumerate(flat.events)) + ".")
-    add(f"inline constexpr std::int16_t kDispatch[kConfigurationCount][{max(1, n_events)}] = {{")
-    for c, row in zip(flat.configurations, dispatch, strict=True):
-        body = ", ".join(f"{x:>{cw}}" for x in row) if row else "0"
-        add(f"    {{{body}}},  // {c.index}: {_comment(c.label)}")
+    for e, name in enumerate(flat.events):
+        row = cells[e * n_configs:(e + 1) * n_configs]
+        for k in range(0, len(row), 24):
+            body = ", ".join(f"{x:>{cw}}" for x in row[k:k + 24])
+            note = f"  // {e}: {_comment(name)}" if k == 0 else ""
+            add(f"    {body},{note}")
+    if not cells:
+        add("    0,  // unused: the chart has no events")
     add("};")
+    add("")
+    add("constexpr bool cells_name_cases() noexcept {")
+    add("  for (std::size_t i = 0; i < sizeof kCells / sizeof kCells[0]; ++i) {")
+    add("    if (kCellCount != 0 && kCells[i] >= kCaseCount) {")
+    add("      return false;")
+    add("    }")
+    add("  }")
+    add("  return true;")
+    add("}")
+    add('static_assert(cells_name_cases(), "every cell names a case of dispatch()");')
     add("")
     add(f"inline constexpr std::uint64_t kActive[kConfigurationCount][{words}] = {{")
     order = {s: i for i, s in enumerate(flat.states)}
@@ -384,7 +408,7 @@ def _header(flat: FlatChart, cls: str, ns: str) -> str:
     add("")
     add("}  // namespace detail")
     add("")
-    add(_device_class(cls, len(tables.outcomes), _rows(flat, dispatch)))
+    add(_device_class(cls, start, _cases(tables, cases), bool(cells)))
     add("")
     add(f"}}  // namespace {ns}")
     add("")
@@ -406,6 +430,9 @@ _DEVICE = """\
 /// The device: run-to-completion dispatch over the flat tables.
 template <typename H = NoHooks>
 class Basic@CLS@ : public statectl::Subject<Invoke, kInvokeCount> {
+  // The state word (see below), first so that it packs with the empty Context and hooks.
+  std::uint32_t state_ = kNew;
+
  public:
 #ifndef @QUEUE_MACRO@
   static constexpr std::size_t kQueueCapacity = 16;
@@ -418,31 +445,20 @@ class Basic@CLS@ : public statectl::Subject<Invoke, kInvokeCount> {
 
   /// Enter the initial configuration.
   void start() noexcept {
-    STATECTL_REQUIRE(104, phase_ == kNew, "start: the device was started already");
+    STATECTL_REQUIRE(104, state_ == kNew, "start: the device was started already");
     STATECTL_TRACE_CALL(tracer_, started(detail::kDevice));
-    phase_ = kBusy;
-    perform(detail::kStart, 0);
-    phase_ = kIdle;
+    state_ = kBusy;  // the initial configuration sets it; hooks that dispatch fault (102)
+    @START@;
   }
 
   /// Process one event to completion; the owner thread only.
+  ///
+  /// One bound check, one load from kCells, one indexed jump. The bound check is every
+  /// contract of the hot path at once: an event out of range (101), a busy device (102,
+  /// bit 31 of the state word) or one not started (103, bit 30) gives a cell past the
+  /// table, and the cold fault() names the contract.
   void dispatch(Event event) noexcept {
-    const auto e = static_cast<std::size_t>(event);
-    STATECTL_REQUIRE(101, e < kEventCount, "dispatch: event out of range");
-    if (phase_ != kIdle) {  // one test on the hot path, the reason on the cold one
-      STATECTL_REQUIRE(102, phase_ != kBusy,
-                       "dispatch: re-entered from an observer or hook; post() instead");
-      STATECTL_REQUIRE(103, false, "dispatch: call start() first");
-    }
-    STATECTL_TRACE_CALL(tracer_, event(detail::kDevice, detail::kEventNames[e]));
-    phase_ = kBusy;
-    // kDispatch as code: per configuration row, per event, the outcome to apply.
-    switch (configuration_) {
-@ROWS@
-      default:
-        STATECTL_REQUIRE(107, false, "dispatch: configuration out of range (corrupt state)");
-    }
-    phase_ = kIdle;
+@DISPATCH@
   }
 
   /// Queue an event from one producer thread (a monitor); false when the queue is full.
@@ -459,36 +475,66 @@ class Basic@CLS@ : public statectl::Subject<Invoke, kInvokeCount> {
     return count;
   }
 
-  /// Is chart state `state` active?
+  /// Is chart state `state` active? (Nothing is before start().)
   bool in(State state) const noexcept {
+    if ((state_ & kNew) != 0) {
+      return false;
+    }
     const auto s = static_cast<std::size_t>(state);
-    return ((detail::kActive[configuration_][s / 64] >> (s % 64)) & 1u) != 0;
+    return ((detail::kActive[state_ & kConfigurationMask][s / 64] >> (s % 64)) & 1u) != 0;
   }
 
-  std::uint16_t configuration() const noexcept { return configuration_; }
-  bool started() const noexcept { return phase_ != kNew; }
+  std::uint16_t configuration() const noexcept {
+    return static_cast<std::uint16_t>(state_ & kConfigurationMask);
+  }
+  bool started() const noexcept { return (state_ & kNew) == 0; }
   bool finished() const noexcept { return finished_; }
 #if STATECTL_TRACE
   void set_tracer(statectl::Tracer* tracer) noexcept { tracer_ = tracer; }
 #endif
 
  private:
-  void perform(std::int16_t code, std::size_t event) noexcept {
-    for (int depth = 0; code < 0; ++depth) {
-      STATECTL_REQUIRE(105, depth < detail::kMaxDepth, "dispatch: guard walk too deep");
-      const detail::Decision& d = detail::kDecisions[~code];
-      code = detail::kGuards[d.guard](context) ? d.if_true : d.if_false;
-    }
-    // One case per outcome: each applies constant table rows, so the compiler emits
-    // straight-line code per outcome and the next configuration is a constant.
-    switch (code) {
-@CASES@
-      default:
-        STATECTL_REQUIRE(106, false, "dispatch: outcome out of range (corrupt tables)");
-    }
-    static_cast<void>(event);
+  // The state word: the configuration in the low 16 bits, plus two flags that put every
+  // cell index past the table (kConfigurationCount * 65536 events < kNew).
+  static constexpr std::uint32_t kConfigurationMask = 0xFFFFu;
+  static constexpr std::uint32_t kNew = 1u << 30;   // start() not called yet
+  static constexpr std::uint32_t kBusy = 1u << 31;  // observers or hooks running
+  static_assert(kConfigurationCount <= kConfigurationMask + 1 &&
+                    kConfigurationCount * 65536u <= kNew,
+                "the state word's flags must lie past every cell");
+
+  [[noreturn]] STATECTL_COLD void fault(std::size_t event) const noexcept {
+    STATECTL_REQUIRE(101, event < kEventCount, "dispatch: event out of range");
+    STATECTL_REQUIRE(102, (state_ & kBusy) == 0,
+                     "dispatch: re-entered from an observer or hook; post() instead");
+    STATECTL_REQUIRE(103, (state_ & kNew) == 0, "dispatch: call start() first");
+    statectl::contract_failed(107, "dispatch: configuration out of range (corrupt state)");
   }
 
+  /// One table cell: trace the event, then its outcome or guard-decision tree.
+  template <int Code>
+  void step([[maybe_unused]] std::size_t event) noexcept {
+    STATECTL_TRACE_CALL(tracer_, event(detail::kDevice, detail::kEventNames[event]));
+    run<Code>(event);
+  }
+
+  /// Code >= 0: apply outcome Code; < 0: decision ~Code, unrolled at compile time, so the
+  /// guards run in the order the semantics consulted them with no loop and no bound.
+  template <int Code>
+  void run([[maybe_unused]] std::size_t event) noexcept {
+    if constexpr (Code >= 0) {
+      apply<static_cast<std::size_t>(Code)>(event);
+    } else {
+      constexpr detail::Decision d = detail::kDecisions[~Code];
+      if (detail::kGuards[d.guard](context)) {
+        run<d.if_true>(event);
+      } else {
+        run<d.if_false>(event);
+      }
+    }
+  }
+
+  /// Outcome K as straight-line code: its effects are constant table rows.
   template <std::size_t K>
   void apply([[maybe_unused]] std::size_t event) noexcept {
     constexpr detail::Outcome o = detail::kOutcomes[K];
@@ -496,9 +542,14 @@ class Basic@CLS@ : public statectl::Subject<Invoke, kInvokeCount> {
       STATECTL_TRACE_CALL(tracer_, ignored(detail::kDevice, detail::kEventNames[event],
                                            detail::kReasons[o.flags >> 2]));
     } else {
-      configuration_ = o.target;
+      // Observers and hooks see the new configuration and the busy bit; with no call
+      // between the two stores the compiler drops the first.
+      state_ = o.target | kBusy;
       effects<o.first>(std::make_index_sequence<o.count>{});
-      finish(o.flags);
+      if constexpr ((o.flags & 2u) != 0) {
+        finish();
+      }
+      state_ = o.target;
     }
   }
 
@@ -527,16 +578,13 @@ class Basic@CLS@ : public statectl::Subject<Invoke, kInvokeCount> {
     }
   }
 
-  void finish(std::uint8_t flags) noexcept {
-    if ((flags & 2u) != 0 && !finished_) {
+  void finish() noexcept {
+    if (!finished_) {
       finished_ = true;
       STATECTL_TRACE_CALL(tracer_, finished(detail::kDevice));
     }
   }
 
-  enum Phase : std::uint8_t { kNew, kIdle, kBusy };
-  std::uint16_t configuration_ = 0;
-  Phase phase_ = kNew;
   bool finished_ = false;
 #if STATECTL_TRACE
   statectl::Tracer* tracer_ = nullptr;
@@ -548,38 +596,61 @@ class Basic@CLS@ : public statectl::Subject<Invoke, kInvokeCount> {
 using @CLS@ = Basic@CLS@<>;"""
 
 
-def _rows(flat: FlatChart, dispatch: list[list[int]]) -> str:
-    """``kDispatch`` as a switch: rows with equal cells share one case body."""
-    bodies: dict[tuple[int, ...], list[int]] = {}
-    for i, cells in enumerate(dispatch):
-        bodies.setdefault(tuple(cells), []).append(i)
+def _cells(dispatch: list[list[int]], n_configs: int,
+           n_events: int) -> tuple[list[int], list[int]]:
+    """The switch's cases (distinct codes, first use) and the event-major cells naming them."""
+    cases: list[int] = []
+    index: dict[int, int] = {}
+    cells: list[int] = []
+    for e in range(n_events):
+        for c in range(n_configs):
+            code = dispatch[c][e]
+            if code not in index:
+                index[code] = len(cases)
+                cases.append(code)
+            cells.append(index[code])
+    return cases, cells
+
+
+def _cases(tables: _Tables, cases: list[int]) -> str:
+    """One case per distinct cell code: an outcome's effects or a guard-decision tree."""
     out: list[str] = []
-    for row, configs in bodies.items():
-        for c in configs:
-            out.append(f"      case {c}:  // {_comment(flat.configurations[c].label)}")
-        out.append("        switch (e) {")
-        for e, code in enumerate(row):
-            call = f"apply<{code}>(e)" if code >= 0 else f"perform({code}, e)"
-            out.append(f"          case {e}:  // {_comment(flat.events[e])}")
-            out.append(f"            {call};")
-            out.append("            break;")
-        out.append("          default:")
-        out.append("            break;")
-        out.append("        }")
+    for k, code in enumerate(cases):
+        if code >= 0:
+            what = f"outcome {code}: {tables.outcomes[code][4]}"
+        else:
+            gid, yes, no = tables.decisions[~code]
+            what = f"decision ~{~code}: guard_{gid} ? {yes} : {no}"
+        out.append(f"      case {k}:  // {_comment(what)}")
+        out.append(f"        step<{code}>(e);")
         out.append("        break;")
     return "\n".join(out)
 
 
-def _device_class(cls: str, outcomes: int, rows: str) -> str:
+_DISPATCH = """\
+    const auto e = static_cast<std::size_t>(event);
+    const std::size_t cell = e * kConfigurationCount + state_;
+    if (STATECTL_UNLIKELY(cell >= detail::kCellCount)) {
+      fault(e);
+    }
+    switch (detail::kCells[cell]) {
+@CASES@
+      default:
+        STATECTL_UNREACHABLE();  // every cell names a case (static_assert on kCells)
+    }"""
+
+_NO_EVENTS = """\
+    fault(static_cast<std::size_t>(event));  // the chart has no events: always 101"""
+
+
+def _device_class(cls: str, start: int, cases: str, has_cells: bool) -> str:
     macro = f"STATECTL_{cls.upper()}_QUEUE_CAPACITY"
-    cases = "\n".join(
-        f"      case {k}:\n        apply<{k}>(event);\n        break;" for k in range(outcomes)
-    )
+    body = _DISPATCH.replace("@CASES@", cases) if has_cells else _NO_EVENTS
     return (
         _DEVICE.replace("@CLS@", cls)
         .replace("@QUEUE_MACRO@", macro)
-        .replace("@CASES@", cases)
-        .replace("@ROWS@", rows)
+        .replace("@START@", f"run<{start}>(0)")
+        .replace("@DISPATCH@", body)
     )
 
 

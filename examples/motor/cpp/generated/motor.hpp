@@ -3,7 +3,7 @@
 // 6 configurations x 6 events, 9 outcomes, 0 runtime guards.
 // Every decision below was made by statectl's semantics at generation time; see
 // docs/codegen.md. Contract checks: 101 event out of range, 102 dispatch re-entered,
-// 103 dispatch before start, 104 start twice, 105 guard walk too deep.
+// 103 dispatch before start, 104 start twice, 107 corrupt state word.
 #ifndef STATECTL_GENERATED_MOTOR_HPP
 #define STATECTL_GENERATED_MOTOR_HPP
 
@@ -129,7 +129,7 @@ inline constexpr const char* kStateNames[kStateCount] = {
     "Returning",
 };
 
-inline constexpr const char* kEventNames[kEventCount] = {
+inline constexpr const char* kEventNames[6] = {
     "Movement",
     "Movement completion",
     "Initialization",
@@ -204,18 +204,32 @@ inline constexpr Decision kDecisions[1] = {
     {0, 0, 0},  // unused: no runtime guards
 };
 
-inline constexpr int kMaxDepth = 0;  // longest guard walk of one step
+inline constexpr int kMaxDepth = 0;  // most guards one step evaluates
 inline constexpr std::int16_t kStart = 0;  // entering the initial configuration
 
-// Rows: configurations; columns: events 0 Movement, 1 Movement completion, 2 Initialization, 3 Initialization completion, 4 Error, 5 Error completion.
-inline constexpr std::int16_t kDispatch[kConfigurationCount][6] = {
-    {1, 2, 3, 2, 2, 2},  // 0: Blocked (previous -)
-    {2, 4, 2, 2, 5, 2},  // 1: Moving (previous Blocked)
-    {1, 2, 6, 2, 2, 2},  // 2: Blocked (previous Moving)
-    {2, 2, 2, 7, 2, 8},  // 3: Returning (previous Moving)
-    {2, 2, 2, 7, 2, 8},  // 4: Returning (previous Blocked)
-    {1, 2, 3, 2, 2, 2},  // 5: Blocked (previous Returning)
+// Dispatch cells, event-major: kCells[event * kConfigurationCount + configuration] is
+// the case of dispatch()'s switch that runs the step (one row per event, columns are
+// the configurations 0.., see kActive). Cells past the table are contract faults.
+inline constexpr std::size_t kCellCount = 36;
+inline constexpr std::size_t kCaseCount = 8;
+inline constexpr std::uint8_t kCells[36] = {
+    0, 1, 0, 1, 1, 0,  // 0: Movement
+    1, 2, 1, 1, 1, 1,  // 1: Movement completion
+    3, 1, 4, 1, 1, 3,  // 2: Initialization
+    1, 1, 1, 5, 5, 1,  // 3: Initialization completion
+    1, 6, 1, 1, 1, 1,  // 4: Error
+    1, 1, 1, 7, 7, 1,  // 5: Error completion
 };
+
+constexpr bool cells_name_cases() noexcept {
+  for (std::size_t i = 0; i < sizeof kCells / sizeof kCells[0]; ++i) {
+    if (kCellCount != 0 && kCells[i] >= kCaseCount) {
+      return false;
+    }
+  }
+  return true;
+}
+static_assert(cells_name_cases(), "every cell names a case of dispatch()");
 
 inline constexpr std::uint64_t kActive[kConfigurationCount][1] = {
     {0x1u},  // 0
@@ -231,6 +245,9 @@ inline constexpr std::uint64_t kActive[kConfigurationCount][1] = {
 /// The device: run-to-completion dispatch over the flat tables.
 template <typename H = NoHooks>
 class BasicMotor : public statectl::Subject<Invoke, kInvokeCount> {
+  // The state word (see below), first so that it packs with the empty Context and hooks.
+  std::uint32_t state_ = kNew;
+
  public:
 #ifndef STATECTL_MOTOR_QUEUE_CAPACITY
   static constexpr std::size_t kQueueCapacity = 16;
@@ -243,128 +260,52 @@ class BasicMotor : public statectl::Subject<Invoke, kInvokeCount> {
 
   /// Enter the initial configuration.
   void start() noexcept {
-    STATECTL_REQUIRE(104, phase_ == kNew, "start: the device was started already");
+    STATECTL_REQUIRE(104, state_ == kNew, "start: the device was started already");
     STATECTL_TRACE_CALL(tracer_, started(detail::kDevice));
-    phase_ = kBusy;
-    perform(detail::kStart, 0);
-    phase_ = kIdle;
+    state_ = kBusy;  // the initial configuration sets it; hooks that dispatch fault (102)
+    run<0>(0);
   }
 
   /// Process one event to completion; the owner thread only.
+  ///
+  /// One bound check, one load from kCells, one indexed jump. The bound check is every
+  /// contract of the hot path at once: an event out of range (101), a busy device (102,
+  /// bit 31 of the state word) or one not started (103, bit 30) gives a cell past the
+  /// table, and the cold fault() names the contract.
   void dispatch(Event event) noexcept {
     const auto e = static_cast<std::size_t>(event);
-    STATECTL_REQUIRE(101, e < kEventCount, "dispatch: event out of range");
-    if (phase_ != kIdle) {  // one test on the hot path, the reason on the cold one
-      STATECTL_REQUIRE(102, phase_ != kBusy,
-                       "dispatch: re-entered from an observer or hook; post() instead");
-      STATECTL_REQUIRE(103, false, "dispatch: call start() first");
+    const std::size_t cell = e * kConfigurationCount + state_;
+    if (STATECTL_UNLIKELY(cell >= detail::kCellCount)) {
+      fault(e);
     }
-    STATECTL_TRACE_CALL(tracer_, event(detail::kDevice, detail::kEventNames[e]));
-    phase_ = kBusy;
-    // kDispatch as code: per configuration row, per event, the outcome to apply.
-    switch (configuration_) {
-      case 0:  // Blocked (previous -)
-      case 5:  // Blocked (previous Returning)
-        switch (e) {
-          case 0:  // Movement
-            apply<1>(e);
-            break;
-          case 1:  // Movement completion
-            apply<2>(e);
-            break;
-          case 2:  // Initialization
-            apply<3>(e);
-            break;
-          case 3:  // Initialization completion
-            apply<2>(e);
-            break;
-          case 4:  // Error
-            apply<2>(e);
-            break;
-          case 5:  // Error completion
-            apply<2>(e);
-            break;
-          default:
-            break;
-        }
+    switch (detail::kCells[cell]) {
+      case 0:  // outcome 1: -> 1 Moving (previous Blocked); exit Blocked; Blocked + Movement = Moving; enter Moving; invoke #0 Moving
+        step<1>(e);
         break;
-      case 1:  // Moving (previous Blocked)
-        switch (e) {
-          case 0:  // Movement
-            apply<2>(e);
-            break;
-          case 1:  // Movement completion
-            apply<4>(e);
-            break;
-          case 2:  // Initialization
-            apply<2>(e);
-            break;
-          case 3:  // Initialization completion
-            apply<2>(e);
-            break;
-          case 4:  // Error
-            apply<5>(e);
-            break;
-          case 5:  // Error completion
-            apply<2>(e);
-            break;
-          default:
-            break;
-        }
+      case 1:  // outcome 2: unhandled: declared ignored
+        step<2>(e);
         break;
-      case 2:  // Blocked (previous Moving)
-        switch (e) {
-          case 0:  // Movement
-            apply<1>(e);
-            break;
-          case 1:  // Movement completion
-            apply<2>(e);
-            break;
-          case 2:  // Initialization
-            apply<6>(e);
-            break;
-          case 3:  // Initialization completion
-            apply<2>(e);
-            break;
-          case 4:  // Error
-            apply<2>(e);
-            break;
-          case 5:  // Error completion
-            apply<2>(e);
-            break;
-          default:
-            break;
-        }
+      case 2:  // outcome 4: -> 2 Blocked (previous Moving); exit Moving; Moving + Movement completion = Blocked; enter Blocked
+        step<4>(e);
         break;
-      case 3:  // Returning (previous Moving)
-      case 4:  // Returning (previous Blocked)
-        switch (e) {
-          case 0:  // Movement
-            apply<2>(e);
-            break;
-          case 1:  // Movement completion
-            apply<2>(e);
-            break;
-          case 2:  // Initialization
-            apply<2>(e);
-            break;
-          case 3:  // Initialization completion
-            apply<7>(e);
-            break;
-          case 4:  // Error
-            apply<2>(e);
-            break;
-          case 5:  // Error completion
-            apply<8>(e);
-            break;
-          default:
-            break;
-        }
+      case 3:  // outcome 3: unhandled: guard false
+        step<3>(e);
+        break;
+      case 4:  // outcome 6: -> 4 Returning (previous Blocked); exit Blocked; Blocked + Initialization [previous == 'Moving'] = Returning; enter Returning; invoke #1 Returning
+        step<6>(e);
+        break;
+      case 5:  // outcome 7: -> 5 Blocked (previous Returning); exit Returning; Returning + Initialization completion = Blocked; enter Blocked
+        step<7>(e);
+        break;
+      case 6:  // outcome 5: -> 3 Returning (previous Moving); exit Moving; Moving + Error = Returning; enter Returning; invoke #2 Error
+        step<5>(e);
+        break;
+      case 7:  // outcome 8: -> 5 Blocked (previous Returning); exit Returning; Returning + Error completion = Blocked; enter Blocked
+        step<8>(e);
         break;
       default:
-        STATECTL_REQUIRE(107, false, "dispatch: configuration out of range (corrupt state)");
+        STATECTL_UNREACHABLE();  // every cell names a case (static_assert on kCells)
     }
-    phase_ = kIdle;
   }
 
   /// Queue an event from one producer thread (a monitor); false when the queue is full.
@@ -381,62 +322,66 @@ class BasicMotor : public statectl::Subject<Invoke, kInvokeCount> {
     return count;
   }
 
-  /// Is chart state `state` active?
+  /// Is chart state `state` active? (Nothing is before start().)
   bool in(State state) const noexcept {
+    if ((state_ & kNew) != 0) {
+      return false;
+    }
     const auto s = static_cast<std::size_t>(state);
-    return ((detail::kActive[configuration_][s / 64] >> (s % 64)) & 1u) != 0;
+    return ((detail::kActive[state_ & kConfigurationMask][s / 64] >> (s % 64)) & 1u) != 0;
   }
 
-  std::uint16_t configuration() const noexcept { return configuration_; }
-  bool started() const noexcept { return phase_ != kNew; }
+  std::uint16_t configuration() const noexcept {
+    return static_cast<std::uint16_t>(state_ & kConfigurationMask);
+  }
+  bool started() const noexcept { return (state_ & kNew) == 0; }
   bool finished() const noexcept { return finished_; }
 #if STATECTL_TRACE
   void set_tracer(statectl::Tracer* tracer) noexcept { tracer_ = tracer; }
 #endif
 
  private:
-  void perform(std::int16_t code, std::size_t event) noexcept {
-    for (int depth = 0; code < 0; ++depth) {
-      STATECTL_REQUIRE(105, depth < detail::kMaxDepth, "dispatch: guard walk too deep");
-      const detail::Decision& d = detail::kDecisions[~code];
-      code = detail::kGuards[d.guard](context) ? d.if_true : d.if_false;
-    }
-    // One case per outcome: each applies constant table rows, so the compiler emits
-    // straight-line code per outcome and the next configuration is a constant.
-    switch (code) {
-      case 0:
-        apply<0>(event);
-        break;
-      case 1:
-        apply<1>(event);
-        break;
-      case 2:
-        apply<2>(event);
-        break;
-      case 3:
-        apply<3>(event);
-        break;
-      case 4:
-        apply<4>(event);
-        break;
-      case 5:
-        apply<5>(event);
-        break;
-      case 6:
-        apply<6>(event);
-        break;
-      case 7:
-        apply<7>(event);
-        break;
-      case 8:
-        apply<8>(event);
-        break;
-      default:
-        STATECTL_REQUIRE(106, false, "dispatch: outcome out of range (corrupt tables)");
-    }
-    static_cast<void>(event);
+  // The state word: the configuration in the low 16 bits, plus two flags that put every
+  // cell index past the table (kConfigurationCount * 65536 events < kNew).
+  static constexpr std::uint32_t kConfigurationMask = 0xFFFFu;
+  static constexpr std::uint32_t kNew = 1u << 30;   // start() not called yet
+  static constexpr std::uint32_t kBusy = 1u << 31;  // observers or hooks running
+  static_assert(kConfigurationCount <= kConfigurationMask + 1 &&
+                    kConfigurationCount * 65536u <= kNew,
+                "the state word's flags must lie past every cell");
+
+  [[noreturn]] STATECTL_COLD void fault(std::size_t event) const noexcept {
+    STATECTL_REQUIRE(101, event < kEventCount, "dispatch: event out of range");
+    STATECTL_REQUIRE(102, (state_ & kBusy) == 0,
+                     "dispatch: re-entered from an observer or hook; post() instead");
+    STATECTL_REQUIRE(103, (state_ & kNew) == 0, "dispatch: call start() first");
+    statectl::contract_failed(107, "dispatch: configuration out of range (corrupt state)");
   }
 
+  /// One table cell: trace the event, then its outcome or guard-decision tree.
+  template <int Code>
+  void step([[maybe_unused]] std::size_t event) noexcept {
+    STATECTL_TRACE_CALL(tracer_, event(detail::kDevice, detail::kEventNames[event]));
+    run<Code>(event);
+  }
+
+  /// Code >= 0: apply outcome Code; < 0: decision ~Code, unrolled at compile time, so the
+  /// guards run in the order the semantics consulted them with no loop and no bound.
+  template <int Code>
+  void run([[maybe_unused]] std::size_t event) noexcept {
+    if constexpr (Code >= 0) {
+      apply<static_cast<std::size_t>(Code)>(event);
+    } else {
+      constexpr detail::Decision d = detail::kDecisions[~Code];
+      if (detail::kGuards[d.guard](context)) {
+        run<d.if_true>(event);
+      } else {
+        run<d.if_false>(event);
+      }
+    }
+  }
+
+  /// Outcome K as straight-line code: its effects are constant table rows.
   template <std::size_t K>
   void apply([[maybe_unused]] std::size_t event) noexcept {
     constexpr detail::Outcome o = detail::kOutcomes[K];
@@ -444,9 +389,14 @@ class BasicMotor : public statectl::Subject<Invoke, kInvokeCount> {
       STATECTL_TRACE_CALL(tracer_, ignored(detail::kDevice, detail::kEventNames[event],
                                            detail::kReasons[o.flags >> 2]));
     } else {
-      configuration_ = o.target;
+      // Observers and hooks see the new configuration and the busy bit; with no call
+      // between the two stores the compiler drops the first.
+      state_ = o.target | kBusy;
       effects<o.first>(std::make_index_sequence<o.count>{});
-      finish(o.flags);
+      if constexpr ((o.flags & 2u) != 0) {
+        finish();
+      }
+      state_ = o.target;
     }
   }
 
@@ -475,16 +425,13 @@ class BasicMotor : public statectl::Subject<Invoke, kInvokeCount> {
     }
   }
 
-  void finish(std::uint8_t flags) noexcept {
-    if ((flags & 2u) != 0 && !finished_) {
+  void finish() noexcept {
+    if (!finished_) {
       finished_ = true;
       STATECTL_TRACE_CALL(tracer_, finished(detail::kDevice));
     }
   }
 
-  enum Phase : std::uint8_t { kNew, kIdle, kBusy };
-  std::uint16_t configuration_ = 0;
-  Phase phase_ = kNew;
   bool finished_ = false;
 #if STATECTL_TRACE
   statectl::Tracer* tracer_ = nullptr;

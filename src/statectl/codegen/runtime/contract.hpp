@@ -9,6 +9,22 @@
 #include <cstdio>
 #include <cstdlib>
 
+// Branch hints for cold paths (C++17 has no [[unlikely]]); plain code elsewhere.
+// STATECTL_UNREACHABLE marks a default the generator proved impossible (static_assert).
+#if defined(__GNUC__) || defined(__clang__)
+#define STATECTL_COLD __attribute__((cold, noinline))
+#define STATECTL_UNLIKELY(x) __builtin_expect(!!(x), 0)
+#define STATECTL_UNREACHABLE() __builtin_unreachable()
+#elif defined(_MSC_VER)
+#define STATECTL_COLD __declspec(noinline)
+#define STATECTL_UNLIKELY(x) (x)
+#define STATECTL_UNREACHABLE() __assume(0)
+#else
+#define STATECTL_COLD
+#define STATECTL_UNLIKELY(x) (x)
+#define STATECTL_UNREACHABLE() std::abort()
+#endif
+
 namespace statectl {
 
 /// Called with the check's number and reason before the program aborts.
@@ -19,7 +35,7 @@ inline ContractHandler& contract_handler() noexcept {
   return handler;
 }
 
-[[noreturn]] inline void contract_failed(int id, const char* reason) noexcept {
+[[noreturn]] STATECTL_COLD inline void contract_failed(int id, const char* reason) noexcept {
   if (ContractHandler handler = contract_handler()) {
     handler(id, reason);
   }
@@ -30,6 +46,6 @@ inline ContractHandler& contract_handler() noexcept {
 }  // namespace statectl
 
 #define STATECTL_REQUIRE(id, cond, reason) \
-  ((cond) ? static_cast<void>(0) : ::statectl::contract_failed((id), (reason)))
+  (STATECTL_UNLIKELY(!(cond)) ? ::statectl::contract_failed((id), (reason)) : static_cast<void>(0))
 
 #endif  // STATECTL_CONTRACT_HPP
