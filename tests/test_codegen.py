@@ -213,6 +213,37 @@ def test_example_configures_and_builds_with_cmake(tmp_path: Path) -> None:
     assert (build / "generated" / "motor_check").exists()
 
 
+@pytest.mark.skipif(shutil.which("cmake") is None or GXX is None, reason="cmake or g++ missing")
+def test_installed_target_is_found_with_find_package(tmp_path: Path) -> None:
+    """The generated target installs, and another project links it with find_package()."""
+    generated, prefix, consumer = tmp_path / "gen", tmp_path / "prefix", tmp_path / "app"
+    generate(load_chart(MOTOR), generated)
+    consumer.mkdir()
+    (consumer / "CMakeLists.txt").write_text(
+        "cmake_minimum_required(VERSION 3.16)\nproject(app LANGUAGES CXX)\n"
+        "find_package(motor CONFIG REQUIRED)\nadd_executable(app main.cpp)\n"
+        "target_link_libraries(app PRIVATE statectl::motor)\n",
+        encoding="utf-8",
+    )
+    (consumer / "main.cpp").write_text(
+        '#include "motor.hpp"\nint main() { motor::Motor device; device.start();\n'
+        "  return device.in(motor::State::Blocked) ? 0 : 1; }\n",
+        encoding="utf-8",
+    )
+    steps = (
+        ["cmake", "-S", str(generated), "-B", str(tmp_path / "b1"),
+         f"-DCMAKE_INSTALL_PREFIX={prefix}", "-DSTATECTL_MOTOR_CHECK=OFF"],
+        ["cmake", "--build", str(tmp_path / "b1")],
+        ["cmake", "--install", str(tmp_path / "b1")],
+        ["cmake", "-S", str(consumer), "-B", str(tmp_path / "b2"), f"-DCMAKE_PREFIX_PATH={prefix}"],
+        ["cmake", "--build", str(tmp_path / "b2")],
+        [str(tmp_path / "b2" / "app")],
+    )
+    for cmd in steps:
+        done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        assert done.returncode == 0, " ".join(cmd) + "\n" + done.stdout + done.stderr
+
+
 _CONTRACTS = r"""
 #include "motor.hpp"
 
