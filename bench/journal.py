@@ -17,10 +17,10 @@ import time
 from pathlib import Path
 
 from statectl.demo import motor_chart
-from statectl.journal import Journal, JournalledDevice, StepKind, Sync
+from statectl.journal import Journal, StepKind, Sync
 from statectl.observers import Notification
 from statectl.runner import DeviceSetup, System
-from statectl.runtime import SimClock, Subject, WallClock
+from statectl.runtime import SimClock, WallClock
 from statectl.semantics import Snapshot
 
 
@@ -88,36 +88,35 @@ class Stamp:
 
 
 def latency(directory: Path, n: int, journalled: bool) -> float:
-    """Median seconds from post to the observer call, one event at a time."""
+    """Median seconds from ``System.post`` to the observer call, one event at a time.
+
+    Both sides are the same runtime with the same threads: a :class:`System` on a
+    wall clock whose owner loop (:meth:`System.serve`) runs on its own thread, and a
+    poster (this thread). With the journal the event also passes the writer, which
+    commits it and, the owner being idle, processes it in the same wake-up.
+    """
     chart = motor_chart()
-    clock = WallClock()
-    subject = Subject(chart, clock=clock)
     stamp = Stamp()
-    subject.attach(stamp)
-    journal = Journal(directory / "latency.db") if journalled else None
-    bound = JournalledDevice(subject, journal) if journal is not None else None
-    if bound is not None:
-        bound.start()
-    else:
-        subject.start()
-    subject.start_worker()
+    journal = Journal(directory / f"latency-{n}.db") if journalled else None
+    system = System((DeviceSetup("Motor", chart),), WallClock(), journal)
+    system.subjects["Motor"].attach(stamp)
+    system.start()
+    halt = threading.Event()
+    owner = threading.Thread(target=system.serve, args=(halt,), daemon=True)
+    owner.start()
     samples = []
     for _ in range(n):
         for event in ("Movement", "Error"):  # each notifies: Movement(), then Error()
             stamp.done.clear()
             t0 = time.perf_counter()
-            if bound is not None:
-                bound.post(event)
-            else:
-                subject.post(event)
+            system.post("Motor", event)
             stamp.done.wait(5)
             samples.append(stamp.at - t0)
-        subject.post("Error completion")  # back to Blocked, no observer call
+        system.post("Motor", "Error completion")  # back to Blocked, no observer call
         time.sleep(0.001)
-    subject.close()
-    clock.stop()
-    if journal is not None:
-        journal.close()
+    halt.set()
+    owner.join()
+    system.close()
     return statistics.median(samples)
 
 

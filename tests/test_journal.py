@@ -109,12 +109,13 @@ def test_resume_takes_the_recovery_transition_and_redelivers_pending_events(
     assert ticket is not None
     ticket.wait(5.0)
     first.drain()  # Moving; the motor is on its way when the "crash" comes
-    late = first.post(None, "Initialization")
-    assert late is not None
-    late.wait(5.0)  # accepted, never processed
     assert first.journal is not None
-    first.journal.flush()
-    first.journal.close()
+    with first.owner:  # the owner is busy when the "crash" comes: accepted, never processed
+        late = first.post(None, "Initialization")
+        assert late is not None
+        late.wait(5.0)
+        first.journal.flush()
+        first.journal.close()
 
     second = make_system(db, device_file)
     try:

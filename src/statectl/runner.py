@@ -1,18 +1,28 @@
 """``statectl run DEVICE`` for real, and ``statectl journal show|replay|export``.
 
 Rules:
-1. A :class:`System` is devices on one clock with one owner: the thread in
-   :meth:`System.serve` (or whoever calls :meth:`System.drain`) processes every
-   device's events, run-to-completion, so devices never race each other.
+1. A :class:`System` is devices on one clock with one owner at a time: whoever
+   holds the owner lock (the thread in :meth:`System.serve`, a caller of
+   :meth:`System.drain`, or the journal's writer) processes every device's
+   events, run-to-completion, so devices never race each other.
 2. With a journal every event from outside is accepted through it (durable
    first, then delivered) and every step is journalled; ``resume`` brings each
    device back from the journal, through its recovery rules, before the owner
-   takes any new event.
+   takes any new event. The writer, right after a commit, delivers the batch's
+   events and, if the owner lock is free, drains the devices itself in the same
+   wake-up (no second thread hop); if another thread owns them it only wakes
+   the serve loop, which picks the events up.
 3. Time: ``--realtime`` runs on a :class:`WallClock`; otherwise a
    :class:`SimClock`, which a live run (``--dashboard``) moves in step with the
    wall clock and a batch run (events from a file or stdin) moves only to let
    each event's consequences settle, so a batch run is deterministic.
-4. Events come as lines ``[DEVICE:] EVENT [DATA]`` (DATA in YAML flow style, e.g.
+4. A cell file runs the same way: one device per instance, on one clock and one
+   owner, and the cell's links (:class:`~statectl.explore.replay.CellLinks`):
+   after a device's step, each link it fired whose guard holds sends its event
+   to the target, through the journal when there is one (so a link event is
+   accepted, durable and redelivered on resume like any other). Each device's
+   queue is first in, first out.
+5. Events come as lines ``[DEVICE:] EVENT [DATA]`` (DATA in YAML flow style, e.g.
    ``Movement {amount: 10}``); ``+SECONDS`` lets simulated time pass; ``#``
    starts a comment. A bad line is reported with its number and skipped.
 """
@@ -26,14 +36,16 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, TextIO
 
 import yaml
 
+from statectl.cell import Cell, load_cell
 from statectl.devices import DeviceDriver, connect, load_driver_config, make_driver
-from statectl.errors import DiagnosticError, StatectlError
+from statectl.errors import Diagnostic, DiagnosticError, Severity, StatectlError
+from statectl.explore.replay import CellLinks
 from statectl.journal import (
     Journal,
     JournalError,
@@ -53,6 +65,8 @@ from statectl.runtime.trace import format_record
 __all__ = [
     "DeviceSetup",
     "System",
+    "cell_setups",
+    "is_cell",
     "journal_export",
     "journal_replay",
     "journal_show",
@@ -85,9 +99,13 @@ class System:
     setups: Sequence[DeviceSetup]
     clock: Clock
     journal: Journal | None = None
+    cell: Cell | None = None
     subjects: dict[str, Subject] = field(default_factory=dict)
     bound: dict[str, JournalledDevice] = field(default_factory=dict)
     wake: threading.Event = field(default_factory=threading.Event)
+    owner: threading.RLock = field(default_factory=threading.RLock)
+    links: CellLinks | None = None
+    _live: bool = False  # started and not closing: the writer may drain
 
     def __post_init__(self) -> None:
         for d in self.setups:
@@ -96,9 +114,39 @@ class System:
             if d.driver is not None:
                 connect(s, d.driver)
             if self.journal is not None:
-                self.bound[d.name] = JournalledDevice(
-                    s, self.journal, source=d.source, wake=self.wake.set
-                )
+                self.bound[d.name] = JournalledDevice(s, self.journal, source=d.source)
+        if self.cell is not None:
+            links = self.links = CellLinks(self.cell, self.subjects)
+            for s in self.subjects.values():
+                s.listen(links.watch)
+                s.on_step(self._link_step)  # after the journal's own step listener
+        if self.journal is not None:
+            self.journal.after_commit(self._committed)
+
+    def _link_step(self, event: str, data: Any, outcome: str) -> None:
+        """Rule 4: on the owner after a device's step, send the links it fired."""
+        assert self.links is not None
+        if not self._live:
+            self.links.fired.clear()  # entering the initial states fires nothing
+            return
+        for link in self.links.due():
+            bound = self.bound.get(link.target)
+            if bound is not None:
+                bound.post(link.event)
+            else:
+                self.subjects[link.target].post(link.event)
+
+    def _committed(self) -> None:
+        """On the writer after a commit (rule 2): drain now if nobody owns the devices."""
+        if not self._live:
+            return
+        if self.owner.acquire(blocking=False):
+            try:
+                self._drain()
+            finally:
+                self.owner.release()
+        else:
+            self.wake.set()
 
     def listen(self, callback: Callable[[Any], None]) -> None:
         for s in self.subjects.values():
@@ -122,6 +170,10 @@ class System:
                     self.subjects[d.name].start()
                 resumed[d.name] = False
         self.drain()
+        if self.links is not None:
+            self.links.fired.clear()
+        self._live = True
+        self.wake.set()  # events delivered before the start are drained by the owner
         return resumed
 
     def device(self, name: str | None) -> str:
@@ -145,6 +197,10 @@ class System:
 
     def drain(self) -> int:
         """Be the owner once: process every device's queue until all are empty."""
+        with self.owner:
+            return self._drain()
+
+    def _drain(self) -> int:
         total = 0
         while True:
             n = sum(s.run_until_idle() for s in self.subjects.values())
@@ -152,40 +208,75 @@ class System:
             if n == 0 and not any(s.queued for s in self.subjects.values()):
                 return total
 
+    def advance(self, seconds: float) -> None:
+        """On a SimClock: let ``seconds`` pass as the owner, draining after every timer."""
+        clock = self.clock
+        if not isinstance(clock, SimClock):
+            raise StatectlError("advance() needs a SimClock; a WallClock moves by itself")
+        with self.owner:  # timers touch the clock and the devices: the owner's work
+            self._drain()
+            clock.advance(seconds, settle=self._drain)
+            self._drain()
+
     def settle(self, limit: float = SETTLE_LIMIT) -> None:
         """On a SimClock: let time pass until no timer is pending (or ``limit`` seconds)."""
         clock = self.clock
-        if not isinstance(clock, SimClock):
-            self.drain()
-            return
-        end = clock.now() + limit
-        self.drain()
+        with self.owner:
+            if not isinstance(clock, SimClock):
+                self._drain()
+                return
+            end = clock.now() + limit
+            self._drain()
+            while True:
+                due = clock.next_deadline()
+                if due is None or due > end:
+                    break
+                clock.run_until(due, settle=self._drain)
+                self._drain()
+
+    def quiesce(self) -> None:
+        """A batch run's pause: settle, and let every accepted event (links too) commit and run."""
         while True:
-            due = clock.next_deadline()
-            if due is None or due > end:
-                break
-            clock.run_until(due, settle=self.drain)
-            self.drain()
+            self.settle()
+            if self.journal is None:
+                return
+            self.journal.flush()
+            with self.owner:
+                if self.journal.queued == 0 and not any(s.queued for s in self.subjects.values()):
+                    return
 
     def serve(self, stop: threading.Event, *, paced: bool = True) -> None:
-        """The owner loop until ``stop``: drain, and on a SimClock follow the wall clock."""
+        """The owner loop until ``stop``: drain when woken; on a SimClock follow the wall clock.
+
+        Events wake it at once; the tick only moves a paced SimClock on and looks at ``stop``.
+        """
         last = time.monotonic()
+        sim = paced and isinstance(self.clock, SimClock)
         while not stop.is_set():
             self.wake.wait(_TICK)
             self.wake.clear()
-            self.drain()
-            if paced and isinstance(self.clock, SimClock):
+            if sim:
                 now = time.monotonic()
-                self.clock.advance(now - last, settle=self.drain)
+                self.advance(now - last)
                 last = now
+            else:
+                self.drain()
 
     def close(self) -> None:
-        for s in self.subjects.values():
-            s.close()
-        if isinstance(self.clock, WallClock):
-            self.clock.stop()
-        if self.journal is not None:
-            self.journal.close()
+        """Commit what the journal holds, then stop the devices and the clock.
+
+        Accepted events not yet processed stay in the journal for ``--resume``.
+        """
+        self._live = False
+        with self.owner:
+            try:
+                if self.journal is not None:
+                    self.journal.close()
+            finally:
+                for s in self.subjects.values():
+                    s.close()
+                if isinstance(self.clock, WallClock):
+                    self.clock.stop()
 
 
 def parse_event_line(line: str) -> tuple[str | None, str, Any] | float | None:
@@ -264,8 +355,8 @@ def _feed(system: System, lines: Iterable[str], err: TextIO, *, batch: bool) -> 
                 continue
             if isinstance(parsed, float):
                 if isinstance(system.clock, SimClock) and batch:
-                    system.clock.advance(parsed, settle=system.drain)
-                    system.drain()
+                    system.advance(parsed)
+                    system.quiesce()
                 else:
                     time.sleep(parsed)
                 continue
@@ -274,11 +365,47 @@ def _feed(system: System, lines: Iterable[str], err: TextIO, *, batch: bool) -> 
             if batch:
                 if ticket is not None:
                     ticket.wait()
-                    assert system.journal is not None
-                    system.journal.flush()
-                system.settle()
+                system.quiesce()
         except StatectlError as exc:
             err.write(f"line {number}: {exc}\n")
+
+
+def cell_setups(cell: Cell, err: TextIO | None = None) -> tuple[DeviceSetup, ...]:
+    """One setup per device instance of ``cell``, with its device file's recovery rules.
+
+    Raises one :class:`DiagnosticError` for every device file whose rules do not
+    load; warnings go to ``err``.
+    """
+    setups: list[DeviceSetup] = []
+    problems: list[Diagnostic] = []
+    for ref in cell.devices:
+        try:
+            dev = load_device(ref.path)
+        except DiagnosticError as exc:
+            problems.extend(exc.diagnostics)
+            continue
+        if err is not None:
+            for d in dev.warnings:
+                err.write(f"{d}\n")
+        setups.append(DeviceSetup(ref.name, ref.chart, dev.rules, ref.path))
+    if problems:
+        raise DiagnosticError(problems)
+    return tuple(setups)
+
+
+def _load_cell(path: str, err: TextIO) -> tuple[Cell, tuple[DeviceSetup, ...]]:
+    cell, diags = load_cell(path)
+    if cell is None:
+        raise DiagnosticError([d for d in diags if d.severity is not Severity.INFO])
+    return cell, cell_setups(cell, err)
+
+
+def _load_device(path: str, err: TextIO) -> tuple[DeviceSetup, ...]:
+    device = load_device(path)
+    for d in device.warnings:
+        err.write(f"{d}\n")
+    chart = device.chart
+    return (DeviceSetup(chart.name, chart, device.rules, os.path.abspath(path)),)
 
 
 def run(
@@ -313,37 +440,30 @@ def run(
     if not Path(path).exists():
         err.write(f"statectl run: {path}: no such file\n")
         return USAGE
-    if is_cell(path):
-        err.write(
-            f"statectl run: {path} is a cell; run it with the cell runner "
-            "(`statectl run CELL`), --dashboard/--journal take device files for now\n"
-        )
-        return USAGE
     try:
         mode = Sync(sync.lower())
     except ValueError:
         err.write(f"statectl run: --sync must be normal or full (got {sync!r})\n")
         return USAGE
+    cell: Cell | None = None
     try:
-        device = load_device(path)
+        if is_cell(path):
+            cell, devices = _load_cell(path, err)
+        else:
+            devices = _load_device(path, err)
     except DiagnosticError as exc:
         for d in exc.diagnostics:
             err.write(f"{d}\n")
         return PROBLEMS
-    for d in device.warnings:
-        err.write(f"{d}\n")
-    chart = device.chart
     live = dashboard or realtime
     system: System | None = None
     server: Any = None
     try:
-        drivers = _drivers([chart.name], driver, config)
-        setup = DeviceSetup(
-            chart.name, chart, device.rules, os.path.abspath(path), drivers.get(chart.name)
-        )
+        drivers = _drivers([d.name for d in devices], driver, config)
+        setups = tuple(replace(d, driver=drivers.get(d.name)) for d in devices)
         clock: Clock = WallClock() if realtime else SimClock()
         store = Journal(journal, sync=mode) if journal is not None else None
-        system = System((setup,), clock, store)
+        system = System(setups, clock, store, cell)
         width = max(len(n) for n in system.subjects)
         system.listen(TraceWriter(out, device_width=width))
         url = None
@@ -367,10 +487,10 @@ def run(
             ready(system, url)
         if not live:
             _feed(system, events if events is not None else sys.stdin, err, batch=True)
-            if system.journal is not None:
-                system.journal.flush()
-            final = ", ".join(sorted(system.subjects[chart.name].configuration))
-            out.write(f"final state {final}\n")
+            system.quiesce()
+            for name, subject in system.subjects.items():
+                final = ", ".join(sorted(subject.configuration))
+                out.write(f"final state {final}\n" if cell is None else f"final {name}: {final}\n")
             return OK
         halt = stop or threading.Event()
         if events is not None:

@@ -14,6 +14,9 @@ Rules:
    choice the runtime cannot make the trace's way shows up there.
 4. Invariants are checked after every step and reported when they fail, so a
    replayed counterexample shows its failure on the simulated devices.
+5. :class:`CellLinks` is rule 1's link part alone, for any host of running
+   Subjects: this runner, and ``statectl run CELL --dashboard/--journal``
+   (:mod:`statectl.runner`).
 """
 
 from __future__ import annotations
@@ -21,14 +24,14 @@ from __future__ import annotations
 import os
 import random
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
 import yaml
 
-from statectl.cell import Cell, InputKind, Trigger, load_cell
+from statectl.cell import Cell, InputKind, Link, Trigger, load_cell
 from statectl.errors import Severity, StatectlError
 from statectl.explore.compose import Composed, Stimulus
 from statectl.runtime import (
@@ -41,7 +44,7 @@ from statectl.runtime import (
     TransitionTaken,
 )
 
-__all__ = ["CellRun", "ReplayStep", "load_replay", "run_cell", "run_main"]
+__all__ = ["CellLinks", "CellRun", "ReplayStep", "load_replay", "run_cell", "run_main"]
 
 OK, PROBLEMS, USAGE = 0, 1, 2
 
@@ -90,28 +93,23 @@ class CellRun:
         return PROBLEMS if self.divergences else OK
 
 
-class _Runner:
-    def __init__(self, cell: Cell, out: TextIO) -> None:
-        self.cell = cell
-        self.model = Composed(cell)
-        self.clock = SimClock()
-        width = max(len(d.name) for d in cell.devices)
-        self.writer = TraceWriter(out, device_width=width)
-        self.out = out
-        self.subjects: dict[str, Subject] = {}
-        self.fired: list[int] = []
-        self.unhandled: list[str] = []
-        self.delivering: tuple[str, str] | None = None
-        for d in cell.devices:
-            s = Subject(d.chart, clock=self.clock, name=d.name)
-            s.listen(self.writer)
-            s.listen(self._watch)
-            self.subjects[d.name] = s
-        for s in self.subjects.values():
-            s.start()
-            s.run_until_idle()
+class CellLinks:
+    """A cell's links over running Subjects: which links a step fired, and whether they hold.
 
-    def _watch(self, r: Record) -> None:
+    Listen with :meth:`watch` on every device; after a device's step, :meth:`due`
+    gives the links that step fired whose guards hold in the global state now, in
+    the cell file's order, and forgets them.
+    """
+
+    def __init__(
+        self, cell: Cell, subjects: Mapping[str, Subject], model: Composed | None = None
+    ) -> None:
+        self.cell = cell
+        self.model = model if model is not None else Composed(cell)
+        self.subjects = subjects
+        self.fired: list[int] = []
+
+    def watch(self, r: Record) -> None:
         for i, k in enumerate(self.cell.links):
             if k.source != r.device:
                 continue
@@ -119,12 +117,6 @@ class _Runner:
             took = isinstance(r, TransitionTaken) and r.event == k.what
             if (k.trigger is Trigger.ENTERS and entered) or (k.trigger is Trigger.RAISES and took):
                 self.fired.append(i)
-        if (
-            isinstance(r, EventIgnored)
-            and self.delivering == (r.device, r.event)
-            and r.reason in ("no transition", "unknown event")
-        ):
-            self.unhandled.append(f"{r.device} gets {r.event} ({r.reason})")
 
     def state(self) -> int:
         """The explorer's packed global state for the subjects' snapshots."""
@@ -137,8 +129,57 @@ class _Runner:
             g = self.model.replace(g, d, lid)
         return g
 
-    def _step(self, device: str, event: str) -> None:
+    def due(self) -> list[Link]:
+        """The links fired since the last call whose guards hold now (rule 1)."""
+        if not self.fired:
+            return []
+        fired = sorted(set(self.fired))
         self.fired.clear()
+        g = self.state()
+        out = []
+        for i in fired:
+            guard = self.model.link_guard[i]
+            if guard is None or guard(g):
+                out.append(self.cell.links[i])
+        return out
+
+
+class _Runner:
+    def __init__(self, cell: Cell, out: TextIO) -> None:
+        self.cell = cell
+        self.model = Composed(cell)
+        self.clock = SimClock()
+        width = max(len(d.name) for d in cell.devices)
+        self.writer = TraceWriter(out, device_width=width)
+        self.out = out
+        self.subjects: dict[str, Subject] = {}
+        self.links = CellLinks(cell, self.subjects, self.model)
+        self.unhandled: list[str] = []
+        self.delivering: tuple[str, str] | None = None
+        for d in cell.devices:
+            s = Subject(d.chart, clock=self.clock, name=d.name)
+            s.listen(self.writer)
+            s.listen(self.links.watch)
+            s.listen(self._watch)
+            self.subjects[d.name] = s
+        for s in self.subjects.values():
+            s.start()
+            s.run_until_idle()
+        self.links.fired.clear()
+
+    def _watch(self, r: Record) -> None:
+        if (
+            isinstance(r, EventIgnored)
+            and self.delivering == (r.device, r.event)
+            and r.reason in ("no transition", "unknown event")
+        ):
+            self.unhandled.append(f"{r.device} gets {r.event} ({r.reason})")
+
+    def state(self) -> int:
+        return self.links.state()
+
+    def _step(self, device: str, event: str) -> None:
+        self.links.fired.clear()
         self.subjects[device].post(event)
         self.subjects[device].run_until_idle()
 
@@ -157,14 +198,10 @@ class _Runner:
             count += 1
 
     def _links(self) -> list[tuple[str, str]]:
-        g = self.state()
         out = []
-        for i in sorted(set(self.fired)):
-            guard = self.model.link_guard[i]
-            if guard is None or guard(g):
-                k = self.cell.links[i]
-                self.out.write(f"          link: {k.label}\n")
-                out.append((k.target, k.event))
+        for k in self.links.due():
+            self.out.write(f"          link: {k.label}\n")
+            out.append((k.target, k.event))
         return out
 
 

@@ -5,10 +5,12 @@ Rules:
    commits the inbox row first and only then posts the event to the Subject, so
    the device acts only on accepted (durable) events.
 2. Every event the Subject processes, whoever posted it, becomes one step row
-   with the snapshot it left. The step of an inbox event carries its ``seq``:
-   the Subject processes its queue in order, so the next ``EventReceived`` that
-   matches the oldest delivered inbox event (same name, the same data object or
-   equal data) is that event. Events that match are interchangeable, so the
+   with the snapshot it left. The rows come from a step listener
+   (:meth:`Subject.on_step`), not from trace records, so journalling keeps the
+   Subject's fast path. The step of an inbox event carries its ``seq``: the
+   Subject processes its queue in order, so the next step whose event matches
+   the oldest delivered inbox event (same name, the same data object or equal
+   data) is that event. Events that match are interchangeable, so the
    attribution cannot change a replay.
 3. On resume the device takes up its last journalled snapshot (``restore``),
    then takes its declared recovery transitions, then gets the accepted events
@@ -30,13 +32,6 @@ from statectl.journal.read import JournalReader
 from statectl.journal.recovery import RecoveryRule
 from statectl.journal.store import Journal, StepKind, Ticket
 from statectl.journal.subjects import restore_subject
-from statectl.runtime.records import (
-    EventIgnored,
-    EventReceived,
-    EventRejected,
-    Record,
-    TransitionTaken,
-)
 from statectl.runtime.subject import Subject
 
 __all__ = ["JournalledDevice", "restore_subject"]
@@ -60,12 +55,11 @@ class JournalledDevice:
         self.journal = journal
         self.name = subject.name
         self._expect: deque[tuple[int, str, Any]] = deque()
-        self._current: tuple[str, Any, int] | None = None
         self._lock = threading.Lock()
         self.recovered: tuple[str, ...] = ()  # recovery events taken on resume
         self.redelivered = 0  # accepted events processed on resume
         journal.register(self.name, subject.chart.name, source, dict(subject.data))
-        self._unlisten = subject.listen(self._on_record)
+        self._unlisten = subject.on_step(self._on_step)
 
     # -- in ------------------------------------------------------------------------------
 
@@ -86,31 +80,17 @@ class JournalledDevice:
 
     # -- out -----------------------------------------------------------------------------
 
-    def _on_record(self, record: Record) -> None:
-        match record:
-            case EventReceived(event=event, data=data):
-                inbox = 0
-                with self._lock:
-                    if self._expect:
-                        seq, e, d = self._expect[0]
-                        if e == event and (d is data or d == data):
-                            self._expect.popleft()
-                            inbox = seq
-                self._current = (event, data, inbox)
-            case TransitionTaken():
-                if self._current is not None:
-                    self._step("handled")
-            case EventIgnored(reason=reason) | EventRejected(reason=reason):
-                if self._current is not None:
-                    self._step(reason)
-            case _:
-                pass
-
-    def _step(self, outcome: str) -> None:
-        current = self._current
-        assert current is not None
-        self._current = None
-        event, data, inbox = current
+    def _on_step(self, event: str, data: Any, outcome: str) -> None:
+        """Rule 2: journal the step the Subject just took, with its inbox ``seq`` if any."""
+        inbox = 0
+        expect = self._expect
+        if expect:
+            with self._lock:
+                if expect:
+                    seq, e, d = expect[0]
+                    if e == event and (d is data or d == data):
+                        expect.popleft()
+                        inbox = seq
         snapshot = self.subject.snapshot
         assert snapshot is not None
         kind = StepKind.RECOVERY if inbox == _RECOVERY else StepKind.EVENT

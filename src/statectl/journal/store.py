@@ -28,12 +28,12 @@ from __future__ import annotations
 
 import enum
 import json
+import queue
 import sqlite3
 import sys
 import threading
 import time
 import traceback
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -163,10 +163,28 @@ _Write = tuple[str, tuple[Any, ...], int, Callable[[int], object] | None]
 
 _INSERT_INBOX = "INSERT INTO inbox VALUES (?, ?, ?, ?, ?)"
 _INSERT_STEP = "INSERT INTO steps VALUES (NULL, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)"
+_STOP = None  # put on the queue by close(): the writer commits what came before and ends
+
+
+def _report(fn: Callable[[], object]) -> None:
+    """Run a callback of the writer; one that fails is reported, never stops the journal."""
+    try:
+        fn()
+    except Exception:
+        traceback.print_exc(file=sys.stderr)
 
 
 class Journal:
-    """The writer side: accept events, record steps, commit in groups on one thread."""
+    """The writer side: accept events, record steps, commit in groups on one thread.
+
+    The hot path (rule 2-3): a post appends to a C-level queue under a plain lock
+    (which keeps ``seq`` order equal to queue order) and the writer, blocked in
+    that queue, wakes at once. It takes everything queued (up to ``max_batch``),
+    writes it in one transaction, commits, hands each accepted event to its
+    ``deliver`` callback, marks the batch durable and then runs the
+    :meth:`after_commit` hooks (a :class:`~statectl.runner.System` drains its
+    devices there when their owner is idle), all in the same wake-up.
+    """
 
     def __init__(self, path: str | Path, *, sync: Sync = Sync.NORMAL, max_batch: int = 20_000):
         self.path = Path(path)
@@ -176,10 +194,15 @@ class Journal:
         last = self._db.execute("SELECT max(seq) FROM inbox").fetchone()[0]
         self._seq = int(last or 0)
         self.durable_seq = self._seq
-        self._queue: deque[_Write] = deque()
-        self._cond = threading.Condition()
+        self._queue: queue.SimpleQueue[_Write | None] = queue.SimpleQueue()
+        self._lock = threading.Lock()  # seq + enqueue, atomically
+        self._cond = threading.Condition()  # waiters for durability and flush
+        self._waiters = 0
+        self._hooks: tuple[Callable[[], object], ...] = ()
         self._closing = False
         self._failure: BaseException | None = None
+        self._enqueued = 0  # writes queued so far
+        self._done = 0  # writes committed and delivered so far
         self.commits = 0
         self.rows = 0
         self._thread = threading.Thread(target=self._run, name="statectl-journal", daemon=True)
@@ -196,14 +219,13 @@ class Journal:
     ) -> Ticket:
         """Queue an inbox row; ``deliver(seq)`` runs on the writer after it is committed."""
         text = encode_data(data)
-        with self._cond:
+        wall = time.time()
+        with self._lock:
             self._check()
             self._seq += 1
             seq = self._seq
-            self._queue.append(
-                (_INSERT_INBOX, (seq, device, time.time(), event, text), seq, deliver)
-            )
-            self._cond.notify()
+            self._enqueued += 1
+            self._queue.put((_INSERT_INBOX, (seq, device, wall, event, text), seq, deliver))
         return Ticket(seq, self)
 
     def record(
@@ -224,55 +246,59 @@ class Journal:
             device, kind.value, inbox, time.time(), time_, event, encode_data(data), outcome,
             active, history, previous,
         )  # fmt: skip
-        with self._cond:
-            self._check()
-            self._queue.append((_INSERT_STEP, params, 0, None))
-            self._cond.notify()
+        self._put((_INSERT_STEP, params, 0, None))
 
     def register(self, name: str, chart: str, source: str, data: Any) -> None:
         """Note which chart (and file) a device runs, for ``journal replay``."""
-        with self._cond:
+        sql = "INSERT OR REPLACE INTO devices VALUES (?, ?, ?, ?)"
+        self._put((sql, (name, chart, source, encode_data(data)), 0, None))
+
+    def after_commit(self, hook: Callable[[], object]) -> None:
+        """Run ``hook()`` on the writer after each commit's deliveries (same wake-up)."""
+        self._hooks = (*self._hooks, hook)
+
+    def _put(self, write: _Write) -> None:
+        with self._lock:
             self._check()
-            sql = "INSERT OR REPLACE INTO devices VALUES (?, ?, ?, ?)"
-            self._queue.append((sql, (name, chart, source, encode_data(data)), 0, None))
-            self._cond.notify()
+            self._enqueued += 1
+            self._queue.put(write)
 
     def wait_durable(self, seq: int, timeout: float | None = None) -> bool:
-        deadline = None if timeout is None else time.monotonic() + timeout
-        with self._cond:
-            while self.durable_seq < seq:
-                if self._failure is not None:
-                    raise JournalError(f"journal write failed: {self._failure}")
-                left = None if deadline is None else deadline - time.monotonic()
-                if left is not None and left <= 0:
-                    return False
-                self._cond.wait(left)
-        return True
+        return self._wait(lambda: self.durable_seq >= seq, timeout)
 
     def flush(self, timeout: float | None = None) -> bool:
-        """Wait until everything queued so far is committed."""
-        with self._cond:
-            self._cond.notify()
+        """Wait until everything queued so far is committed (and its events delivered)."""
+        target = self._enqueued
+        ok = self._wait(lambda: self._done >= target, timeout)
+        if self._failure is not None:
+            raise JournalError(f"journal write failed: {self._failure}")
+        return ok
+
+    def _wait(self, done: Callable[[], bool], timeout: float | None) -> bool:
+        if done():
+            return True
         deadline = None if timeout is None else time.monotonic() + timeout
         with self._cond:
-            while self._queue or self._writing:
-                if self._failure is not None:
-                    raise JournalError(f"journal write failed: {self._failure}")
-                left = None if deadline is None else deadline - time.monotonic()
-                if left is not None and left <= 0:
-                    return False
-                self._cond.wait(left)
-            if self._failure is not None:
-                raise JournalError(f"journal write failed: {self._failure}")
+            self._waiters += 1
+            try:
+                while not done():
+                    if self._failure is not None:
+                        raise JournalError(f"journal write failed: {self._failure}")
+                    left = None if deadline is None else deadline - time.monotonic()
+                    if left is not None and left <= 0:
+                        return False
+                    self._cond.wait(left)
+            finally:
+                self._waiters -= 1
         return True
 
     def close(self) -> None:
         """Commit what is queued, stop the writer and close the database."""
-        with self._cond:
+        with self._lock:
             if self._closing:
                 return
             self._closing = True
-            self._cond.notify_all()
+            self._queue.put(_STOP)
         self._thread.join()
         self._db.close()
         if self._failure is not None:
@@ -280,7 +306,7 @@ class Journal:
 
     @property
     def queued(self) -> int:
-        return len(self._queue)
+        return self._enqueued - self._done
 
     def _check(self) -> None:
         if self._closing:
@@ -290,49 +316,66 @@ class Journal:
 
     # -- the writer thread -----------------------------------------------------------------------
 
-    _writing = False
-
     def _run(self) -> None:
         db = self._db
-        queue = self._queue
+        take = self._queue.get
+        more = self._queue.get_nowait
         while True:
-            with self._cond:
-                while not queue and not self._closing:
-                    self._cond.wait()
-                if not queue and self._closing:
-                    return
-                n = min(len(queue), self.max_batch)
-                batch = [queue.popleft() for _ in range(n)]
-                self._writing = True
-            try:
-                db.execute("BEGIN")
-                self._write(db, batch)
-                db.execute("COMMIT")
-            except BaseException as exc:  # the writer must report, never die silently
-                with self._cond:
-                    self._failure = exc
-                    self._writing = False
-                    queue.clear()
-                    self._cond.notify_all()
+            first = take()
+            stop = first is None
+            batch: list[_Write] = [] if first is None else [first]
+            while not stop and len(batch) < self.max_batch:
+                try:
+                    w = more()
+                except queue.Empty:
+                    break
+                if w is None:
+                    stop = True
+                else:
+                    batch.append(w)
+            if batch and not self._commit(db, batch):
                 return
-            top = max((w[2] for w in batch), default=0)
+            if stop:
+                return
+
+    def _commit(self, db: sqlite3.Connection, batch: list[_Write]) -> bool:
+        """Write, commit, deliver, mark durable, run the hooks; False if the write failed."""
+        try:
+            db.execute("BEGIN")
+            self._write(db, batch)
+            db.execute("COMMIT")
+        except BaseException as exc:  # the writer must report, never die silently
             with self._cond:
-                self.commits += 1
-                self.rows += n
-                if top > self.durable_seq:
-                    self.durable_seq = top
-                self._writing = False
+                self._failure = exc
                 self._cond.notify_all()
-            for w in batch:
-                if w[3] is not None:
+            return False
+        top = 0
+        for _, _, seq, deliver in batch:
+            if seq:
+                top = seq
+                if deliver is not None:
                     try:
-                        w[3](w[2])
+                        deliver(seq)
                     except Exception:  # a failing delivery must not stop the journal
                         traceback.print_exc(file=sys.stderr)
+        self.commits += 1
+        self.rows += len(batch)
+        if top > self.durable_seq:
+            self.durable_seq = top  # seq order is queue order: everything below is in too
+        self._done += len(batch)
+        if self._waiters:
+            with self._cond:
+                self._cond.notify_all()
+        for hook in self._hooks:
+            _report(hook)
+        return True
 
     @staticmethod
     def _write(db: sqlite3.Connection, batch: list[_Write]) -> None:
         """Insert runs of one statement with ``executemany``, keeping the order."""
+        if len(batch) == 1:
+            db.execute(batch[0][0], batch[0][1])
+            return
         i = 0
         while i < len(batch):
             sql = batch[i][0]

@@ -25,7 +25,9 @@ Rules:
    nobody listens, an event with a memoised plan for the current snapshot is
    performed from the plan (commit its target, issue its notifications in
    order), which is exactly what performing its :class:`~statectl.semantics.Step`
-   does when no records are built. :meth:`Subject.dispatch` is the synchronous
+   does when no records are built. A step listener (:meth:`Subject.on_step`,
+   the journal's) hears ``(event, data, outcome)`` after each event without
+   building records, so it keeps that path. :meth:`Subject.dispatch` is the synchronous
    owner-side form of ``post`` + ``run_until_idle``. Instances of one chart share
    its compiled :class:`~statectl.semantics.Machine`; a Subject allocates its
    worker's wake-up event and record queue only when they are first needed.
@@ -62,10 +64,12 @@ from statectl.runtime.records import (
 )
 from statectl.semantics import Machine, Plan, Snapshot, Step, compiled, initial, step
 
-__all__ = ["ApiLogging", "Listener", "Policy", "Subject"]
+__all__ = ["ApiLogging", "Listener", "Policy", "StepListener", "Subject"]
 
 Policy = Literal["ignore", "error"]
 Listener = Callable[[Record], None]
+#: ``(event, data, outcome)`` after an event ran; outcome is ``handled`` or the ignore reason.
+StepListener = Callable[[str, Any, str], None]
 ErrorHandler = Callable[[BaseException], None]
 
 
@@ -108,6 +112,7 @@ class Subject:
         "_routes",
         "_serving",
         "_snapshot",
+        "_steppers",
         "_stopping",
         "_table",
         "_wake",
@@ -145,6 +150,7 @@ class Subject:
         # plan slot -> (observer or None, its data-less notification); cleared by attach, rename
         self._notes: dict[int, tuple[Observer | None, Notification]] | None = None
         self._listeners: list[Listener] = []
+        self._steppers: tuple[StepListener, ...] = ()
         self._pending: deque[Record] | None = None
         self._emitting = False
         self._queue: deque[_Item] = deque()
@@ -229,11 +235,27 @@ class Subject:
 
         return unlisten
 
+    def on_step(self, callback: StepListener) -> Callable[[], None]:
+        """Hear ``(event, data, outcome)`` on the owner after each event; returns the undo.
+
+        Unlike :meth:`listen` it builds no records, so plans stay in use (rule 6).
+        The outcome is ``handled`` or the reason the event changed nothing.
+        """
+        self._steppers = (*self._steppers, callback)
+        self._refresh()
+
+        def off() -> None:
+            self._steppers = tuple(c for c in self._steppers if c is not callback)
+            self._refresh()
+
+        return off
+
     def _refresh(self) -> None:
         """Recompute whether :meth:`dispatch` may take plans without the queue."""
         self._fast = (
             self._snapshot is not None
             and not self._listeners
+            and not self._steppers
             and self._worker is None
             and not self._serving
             and not self._closed
@@ -548,7 +570,14 @@ class Subject:
     def _process(self, event: str, data: Any) -> None:
         if not self._listeners:
             plan = self._table.get(event)
-            if plan is not None and self._follow(plan, data):
+            steppers = self._steppers
+            if not steppers:
+                if plan is not None and self._follow(plan, data):
+                    return
+            elif plan is not None and plan.handled:  # unhandled: the slow path names why
+                self._follow(plan, data)
+                for callback in steppers:
+                    callback(event, data, "handled")
                 return
         self._process_slow(event, data)
 
@@ -561,7 +590,7 @@ class Subject:
         if listening:
             self.emit(EventReceived(self.name, now, event, data))
         if event not in self._known:
-            self._unhandled(event, "unknown event", now, snapshot)
+            self._unhandled(event, data, "unknown event", now, snapshot)
             return
         decision = step(self.machine, snapshot, event, self._data, data)
         if not decision.handled:
@@ -575,12 +604,18 @@ class Subject:
                 reason = "guard false"
             else:
                 reason = "no transition"
-            self._unhandled(event, reason, now, snapshot)
+            self._unhandled(event, data, reason, now, snapshot)
             return
         self._commit(decision.target)
         self._perform(decision, data, now, listening)
+        for callback in self._steppers:
+            callback(event, data, "handled")
 
-    def _unhandled(self, event: str, reason: IgnoreReason, now: float, snap: Snapshot) -> None:
+    def _unhandled(
+        self, event: str, data: Any, reason: IgnoreReason, now: float, snap: Snapshot
+    ) -> None:
+        for callback in self._steppers:
+            callback(event, data, reason)
         if self.policy == "ignore" or reason == "declared ignored":
             if self._listeners:
                 self.emit(EventIgnored(self.name, now, event, reason))
