@@ -172,7 +172,7 @@ CELLS = ROOT / "examples" / "pick-and-place"
         (["verify", str(CELLS / "cell-buggy.yaml")], 1, "FAIL invariant"),
         (["verify", "--max-states", "3", str(CELLS / "cell.yaml")], 1, "incomplete"),
         (["verify", "missing-cell.yaml"], 2, ""),
-        (["run", str(CELLS / "cell.yaml"), "--steps", "5"], 0, "conveyor"),
+        (["run", str(CELLS / "cell.yaml"), "--walk", "5"], 0, "conveyor"),
     ],
 )
 def test_cell_commands(argv: list[str], code: int, needle: str) -> None:

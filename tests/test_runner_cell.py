@@ -106,10 +106,21 @@ def test_an_event_from_the_page_changes_the_cell_and_its_links_follow(live: Live
     )
 
 
+#: Simulated twins everywhere, the arm's so slow that a run stops with it still Moving.
+SLOW_ARM = """devices:
+  conveyor: {driver: sim-twin}
+  arm: {driver: sim-twin, options: {delay: 1000}}
+  gripper: {driver: sim-twin}
+  sensor: {driver: sim-twin}
+"""
+
+
 def batch(path: Path, lines: str, *, resume: bool) -> tuple[int, str]:
     out, err = io.StringIO(), io.StringIO()
-    code = run(str(CELL), journal=str(path), resume=resume, events=io.StringIO(lines),
-               out=out, err=err)  # fmt: skip
+    config = path.with_name("drivers.yaml")
+    config.write_text(SLOW_ARM, encoding="utf-8")
+    code = run(str(CELL), config=str(config), journal=str(path), resume=resume,
+               events=io.StringIO(lines), out=out, err=err)  # fmt: skip
     assert code == 0, err.getvalue()
     return code, out.getvalue()
 

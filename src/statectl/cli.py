@@ -208,16 +208,15 @@ def cmd_verify(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
 def cmd_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     from statectl.runner import is_cell, run
 
-    live = args.dashboard or args.journal or args.resume or args.realtime
-    if is_cell(args.file) and not live:
+    if args.replay is not None or args.walk is not None:
+        if not is_cell(args.file):
+            err.write("statectl run: --replay and --walk take a cell file\n")
+            return USAGE
         from statectl.explore.replay import run_main
 
         return run_main(
-            args.file, replay=args.replay, walk=args.steps, seed=args.seed, out=out, err=err
+            args.file, replay=args.replay, walk=args.walk or 0, seed=args.seed, out=out, err=err
         )
-    if args.replay is not None:
-        err.write("statectl run: --replay takes a cell file (a trace from verify --traces)\n")
-        return USAGE
     return run(
         args.file,
         driver=args.driver,
@@ -345,12 +344,15 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser(
         "run",
         help="run a device (events from stdin, or live with a dashboard) or a cell",
-        description="A device file runs on its drivers; event lines '[DEVICE:] EVENT [DATA]' "
-        "or '+SECONDS' come from stdin on a simulated clock, unless --realtime or --dashboard. "
-        "A cell file runs a random walk, or replays a trace from verify --traces.",
+        description="Runs a device file or a cell file on its drivers (by default a simulated "
+        "twin per device, derived from its tables). Event lines '[DEVICE:] EVENT [DATA]' or "
+        "'+SECONDS' come from stdin, on a simulated clock unless --realtime or --dashboard. "
+        "A cell can instead take a seeded random walk (--walk N) or replay a trace written by "
+        "verify --traces (--replay).",
     )
     s.add_argument("file", metavar="FILE", help="device file or cell file")
-    s.add_argument("--driver", help="driver for every device (sim-motor, sim-stepper, mod:Class)")
+    s.add_argument("--driver", help="driver for every device: sim-twin (the default), sim-motor, "
+                   "sim-stepper or package.module:Class")
     s.add_argument("--config", help="driver configuration YAML")
     s.add_argument("--dashboard", action="store_true", help="serve the live dashboard")
     s.add_argument("--host", default="127.0.0.1", help="dashboard address (default loopback)")
@@ -362,7 +364,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="journal durability: normal (process crash) or full (power loss)")
     s.add_argument("--realtime", action="store_true", help="run on the wall clock")
     s.add_argument("--replay", metavar="TRACE", help="cells: a .trace.json from verify --traces")
-    s.add_argument("--steps", type=int, default=20, help="cells: random-walk length")
+    s.add_argument("--walk", type=int, metavar="N", help="cells: a seeded random walk of N steps")
     s.add_argument("--seed", type=int, default=0, help="cells: random-walk seed")
     s.set_defaults(func=cmd_run)
 

@@ -69,7 +69,7 @@ def run_demo(
         if chart.name not in devices:
             raise StatectlError(f"{config}: no driver for device {chart.name!r}")
         driver, options = devices[chart.name]
-    device = make_driver(driver, options)
+    device = make_driver(driver, options, chart=chart)
     if not isinstance(device, Driver):
         raise StatectlError(f"driver {driver!r} cannot inject faults; the demo needs a twin")
     subject = Subject(chart, clock=SimClock())

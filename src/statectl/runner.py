@@ -24,7 +24,12 @@ Rules:
    queue is first in, first out.
 5. Events come as lines ``[DEVICE:] EVENT [DATA]`` (DATA in YAML flow style, e.g.
    ``Movement {amount: 10}``); ``+SECONDS`` lets simulated time pass; ``#``
-   starts a comment. A bad line is reported with its number and skipped.
+   starts a comment. A bad line is reported with its number and skipped. A
+   batch run reads them from stdin, and so does a live run without a dashboard.
+6. Drivers: a ``--config`` file, else ``--driver`` for every device, else a
+   :class:`~statectl.devices.SimTwin` with defaults for each device, derived
+   from its tables (the banner says so), so every device reports its
+   completions on the clock. A twin's notes appear in the trace as ``twin``.
 """
 
 from __future__ import annotations
@@ -43,7 +48,14 @@ from typing import Any, TextIO
 import yaml
 
 from statectl.cell import Cell, load_cell
-from statectl.devices import DeviceDriver, connect, load_driver_config, make_driver
+from statectl.devices import (
+    DeviceDriver,
+    SimTwin,
+    TwinNote,
+    connect,
+    load_driver_config,
+    make_driver,
+)
 from statectl.errors import Diagnostic, DiagnosticError, Severity, StatectlError
 from statectl.explore.replay import CellLinks
 from statectl.journal import (
@@ -219,7 +231,12 @@ class System:
             self._drain()
 
     def settle(self, limit: float = SETTLE_LIMIT) -> None:
-        """On a SimClock: let time pass until no timer is pending (or ``limit`` seconds)."""
+        """On a SimClock: let time pass until the work in flight is done (or ``limit`` seconds).
+
+        Work is every timer but the background ones: a monitor polls for as long as
+        its state is active, so waiting for it would always run to the limit. Polls
+        that fall due meanwhile still run, in time order.
+        """
         clock = self.clock
         with self.owner:
             if not isinstance(clock, SimClock):
@@ -228,11 +245,22 @@ class System:
             end = clock.now() + limit
             self._drain()
             while True:
-                due = clock.next_deadline()
+                self._commit()
+                due = clock.next_deadline(work_only=True)
                 if due is None or due > end:
                     break
                 clock.run_until(due, settle=self._drain)
                 self._drain()
+
+    def _commit(self) -> None:
+        """As the owner: let accepted events (links) commit and run before time moves on.
+
+        Otherwise a link event would wait in the journal while the clock ran to
+        the settle limit, and a twin's completion would come before it.
+        """
+        while self.journal is not None and self.journal.queued:
+            self.journal.flush()
+            self._drain()
 
     def quiesce(self) -> None:
         """A batch run's pause: settle, and let every accepted event (links too) commit and run."""
@@ -322,17 +350,31 @@ def parse_time(text: str) -> float:
 
 
 def _drivers(
-    names: Sequence[str], driver: str | None, config: str | None
+    devices: Sequence[DeviceSetup], driver: str | None, config: str | None
 ) -> dict[str, DeviceDriver]:
+    """Rule 6: the config file's drivers, else ``driver`` for all, else a twin for each."""
+    names = [d.name for d in devices]
     if config is not None:
         table = load_driver_config(config)
         missing = [n for n in names if n not in table]
         if missing:
             raise StatectlError(f"{config}: no driver for device(s) {missing}")
-        return {n: make_driver(*table[n]) for n in names}
-    if driver is not None:
-        return {n: make_driver(driver) for n in names}
-    return {}
+        return {d.name: make_driver(*table[d.name], chart=d.chart) for d in devices}
+    return {d.name: make_driver(driver or "sim-twin", chart=d.chart) for d in devices}
+
+
+def _show_notes(drivers: Mapping[str, DeviceDriver], out: TextIO, width: int) -> None:
+    """Rule 6: a twin's notes (what it did not report, and why) go into the trace."""
+
+    def writer(name: str) -> Callable[[TwinNote], None]:
+        def write(note: TwinNote) -> None:
+            out.write(f"t={note.time:7.2f}  {name:<{width}}  {'twin':<8} {note}\n")
+
+        return write
+
+    for name, d in drivers.items():
+        if isinstance(d, SimTwin):
+            d.on_note = writer(name)
 
 
 def is_cell(path: str) -> bool:
@@ -370,11 +412,25 @@ def _feed(system: System, lines: Iterable[str], err: TextIO, *, batch: bool) -> 
             err.write(f"line {number}: {exc}\n")
 
 
-def cell_setups(cell: Cell, err: TextIO | None = None) -> tuple[DeviceSetup, ...]:
+#: Recovery warnings matter only when there is a journal to recover from.
+JOURNAL_ONLY_WARNINGS = frozenset({"J606"})
+
+
+def _warn(warnings: Iterable[Diagnostic], err: TextIO | None, journalled: bool) -> None:
+    if err is None:
+        return
+    for d in warnings:
+        if journalled or d.code not in JOURNAL_ONLY_WARNINGS:
+            err.write(f"{d}\n")
+
+
+def cell_setups(
+    cell: Cell, err: TextIO | None = None, *, journalled: bool = True
+) -> tuple[DeviceSetup, ...]:
     """One setup per device instance of ``cell``, with its device file's recovery rules.
 
     Raises one :class:`DiagnosticError` for every device file whose rules do not
-    load; warnings go to ``err``.
+    load; warnings go to ``err`` (recovery warnings only for a ``journalled`` run).
     """
     setups: list[DeviceSetup] = []
     problems: list[Diagnostic] = []
@@ -384,26 +440,25 @@ def cell_setups(cell: Cell, err: TextIO | None = None) -> tuple[DeviceSetup, ...
         except DiagnosticError as exc:
             problems.extend(exc.diagnostics)
             continue
-        if err is not None:
-            for d in dev.warnings:
-                err.write(f"{d}\n")
+        _warn(dev.warnings, err, journalled)
         setups.append(DeviceSetup(ref.name, ref.chart, dev.rules, ref.path))
     if problems:
         raise DiagnosticError(problems)
     return tuple(setups)
 
 
-def _load_cell(path: str, err: TextIO) -> tuple[Cell, tuple[DeviceSetup, ...]]:
+def _load_cell(
+    path: str, err: TextIO, journalled: bool
+) -> tuple[Cell, tuple[DeviceSetup, ...]]:
     cell, diags = load_cell(path)
     if cell is None:
         raise DiagnosticError([d for d in diags if d.severity is not Severity.INFO])
-    return cell, cell_setups(cell, err)
+    return cell, cell_setups(cell, err, journalled=journalled)
 
 
-def _load_device(path: str, err: TextIO) -> tuple[DeviceSetup, ...]:
+def _load_device(path: str, err: TextIO, journalled: bool) -> tuple[DeviceSetup, ...]:
     device = load_device(path)
-    for d in device.warnings:
-        err.write(f"{d}\n")
+    _warn(device.warnings, err, journalled)
     chart = device.chart
     return (DeviceSetup(chart.name, chart, device.rules, os.path.abspath(path)),)
 
@@ -448,9 +503,9 @@ def run(
     cell: Cell | None = None
     try:
         if is_cell(path):
-            cell, devices = _load_cell(path, err)
+            cell, devices = _load_cell(path, err, journal is not None)
         else:
-            devices = _load_device(path, err)
+            devices = _load_device(path, err, journal is not None)
     except DiagnosticError as exc:
         for d in exc.diagnostics:
             err.write(f"{d}\n")
@@ -459,13 +514,16 @@ def run(
     system: System | None = None
     server: Any = None
     try:
-        drivers = _drivers([d.name for d in devices], driver, config)
+        drivers = _drivers(devices, driver, config)
         setups = tuple(replace(d, driver=drivers.get(d.name)) for d in devices)
         clock: Clock = WallClock() if realtime else SimClock()
         store = Journal(journal, sync=mode) if journal is not None else None
         system = System(setups, clock, store, cell)
         width = max(len(n) for n in system.subjects)
+        if driver is None and config is None:
+            out.write(f"no driver configured: simulated twins for {', '.join(drivers)}\n")
         system.listen(TraceWriter(out, device_width=width))
+        _show_notes(drivers, out, width)
         url = None
         if dashboard:
             from statectl.web import Dashboard  # the web layer is optional at run time
@@ -493,6 +551,8 @@ def run(
                 out.write(f"final state {final}\n" if cell is None else f"final {name}: {final}\n")
             return OK
         halt = stop or threading.Event()
+        if events is None and server is None:
+            events = sys.stdin  # rule 5: without a dashboard, stdin is the operator
         if events is not None:
             feeder = threading.Thread(
                 target=_feed_then_stop,

@@ -11,6 +11,7 @@ from statectl.devices.config import (
 from statectl.devices.motor import SimMotor
 from statectl.devices.protocol import ApiCall, DeviceDriver, Report
 from statectl.devices.stepper import SimStepper
+from statectl.devices.twin import SimTwin, TwinNote
 
 __all__ = [
     "DRIVERS",
@@ -21,6 +22,8 @@ __all__ = [
     "Report",
     "SimMotor",
     "SimStepper",
+    "SimTwin",
+    "TwinNote",
     "connect",
     "load_driver_config",
     "make_driver",

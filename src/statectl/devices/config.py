@@ -2,24 +2,29 @@
 
 Rules:
 1. A driver is named by a registry name (:data:`DRIVERS`: ``sim-motor``,
-   ``sim-stepper``) or by an entry string ``package.module:Class``.
+   ``sim-stepper``, ``sim-twin``) or by an entry string ``package.module:Class``.
 2. A driver config file is YAML::
 
        devices:
          Motor: {driver: sim-motor, options: {speed: 10}}
 
    :func:`load_driver_config` reports every problem at once as diagnostics
-   D501-D508 with the file and line, raising one
+   D501-D509 with the file and line, raising one
    :class:`~statectl.errors.DiagnosticError` if any is an error.
 3. Options are checked against the driver's constructor when the file loads,
-   so a misspelt option is a diagnostic, not a ``TypeError`` at start-up.
+   so a misspelt option is a diagnostic, not a ``TypeError`` at start-up; a
+   driver with a ``check_options(options) -> problems`` attribute (``sim-twin``)
+   has its option values checked too (D509).
+4. A driver whose constructor takes ``chart`` is given the device's chart by
+   :func:`make_driver` (a twin derives itself from the tables); ``chart`` is
+   never an option a config file sets.
 """
 
 from __future__ import annotations
 
 import importlib
 import inspect
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -28,10 +33,13 @@ import yaml
 from statectl.devices.motor import SimMotor
 from statectl.devices.protocol import DeviceDriver
 from statectl.devices.stepper import SimStepper
+from statectl.devices.twin import SimTwin, twin_option_problems
 from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, StatectlError
+from statectl.model import Chart
 
 __all__ = [
     "DRIVERS",
+    "OPTION_CHECKS",
     "DriverConfig",
     "load_driver_config",
     "make_driver",
@@ -42,7 +50,16 @@ __all__ = [
 DRIVERS: Mapping[str, Callable[..., DeviceDriver]] = {
     "sim-motor": SimMotor,
     "sim-stepper": SimStepper,
+    "sim-twin": SimTwin,
 }
+
+#: Checks of option values, by driver name: each returns the problems it finds.
+OPTION_CHECKS: Mapping[str, Callable[[Mapping[str, Any]], Sequence[str]]] = {
+    "sim-twin": twin_option_problems,
+}
+
+#: Constructor parameters statectl supplies itself, never a config file.
+SUPPLIED = ("chart",)
 
 #: device -> (driver name, options)
 DriverConfig = dict[str, tuple[str, dict[str, Any]]]
@@ -82,13 +99,32 @@ def resolve_driver(name: str) -> Callable[..., DeviceDriver]:
     return factory
 
 
-def make_driver(name: str, options: Mapping[str, Any] | None = None) -> DeviceDriver:
-    """Create the driver ``name`` with keyword ``options``."""
+def make_driver(
+    name: str, options: Mapping[str, Any] | None = None, *, chart: Chart | None = None
+) -> DeviceDriver:
+    """Create the driver ``name`` with keyword ``options``; ``chart`` if it takes one (rule 4)."""
     factory = resolve_driver(name)
-    problem = _option_problem(factory, options or {})
+    kwargs = dict(options or {})
+    problem = _option_problem(factory, kwargs) or "; ".join(_value_problems(name, kwargs))
     if problem:
         raise StatectlError(f"driver {name!r}: {problem}")
-    return factory(**dict(options or {}))
+    if _takes_chart(factory):
+        if chart is None:
+            raise StatectlError(f"driver {name!r} is derived from the device's chart; pass chart=")
+        kwargs["chart"] = chart
+    return factory(**kwargs)
+
+
+def _takes_chart(factory: Callable[..., Any]) -> bool:
+    try:
+        return "chart" in inspect.signature(factory).parameters
+    except (TypeError, ValueError):
+        return False
+
+
+def _value_problems(name: str, options: Mapping[str, Any]) -> Sequence[str]:
+    check = OPTION_CHECKS.get(name)
+    return check(options) if check is not None else ()
 
 
 def _option_problem(factory: Callable[..., Any], options: Mapping[str, Any]) -> str | None:
@@ -103,6 +139,7 @@ def _option_problem(factory: Callable[..., Any], options: Mapping[str, Any]) -> 
         p.name
         for p in params
         if p.kind in (inspect.Parameter.KEYWORD_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+        and p.name not in SUPPLIED
     ]
     unknown = [k for k in options if k not in accepted]
     if unknown:
@@ -218,6 +255,16 @@ def load_driver_config(path: str | Path) -> DriverConfig:
         problem = _option_problem(factory, options)
         if problem:
             error("D508", line_of(fields["options"][1]), f"device {device!r}: {problem}")
+            continue
+        bad = _value_problems(driver, options)
+        for text in bad:
+            error(
+                "D509",
+                line_of(fields["options"][1]),
+                f"device {device!r}: {text}",
+                "give seconds as numbers >= 0, e.g. {delay: 0.5, faults: {Moving: 0.4}}",
+            )
+        if bad:
             continue
         result[device] = (driver, options)
     if diags:
