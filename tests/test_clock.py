@@ -156,3 +156,15 @@ def test_stopped_wall_clock_refuses_timers() -> None:
     clock.stop()
     with pytest.raises(StatectlError, match="stopped"):
         clock.call_later(0.0, lambda: None)
+
+
+def test_work_only_deadline_skips_background_timers() -> None:
+    """next_deadline(work_only=True) ignores background timers (monitor polls), not work."""
+    clock = SimClock()
+    clock.call_later(0.1, lambda: None, background=True)
+    assert clock.next_deadline() == 0.1
+    assert clock.next_deadline(work_only=True) is None
+    work = clock.call_later(3.0, lambda: None)
+    assert clock.next_deadline(work_only=True) == 3.0
+    work.cancel()
+    assert clock.next_deadline(work_only=True) is None

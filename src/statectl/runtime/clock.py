@@ -33,11 +33,16 @@ __all__ = ["Clock", "SimClock", "Timer", "WallClock"]
 
 @dataclass(eq=False, slots=True)
 class Timer:
-    """A scheduled callback; ``cancel()`` stops it if it has not fired yet."""
+    """A scheduled callback; ``cancel()`` stops it if it has not fired yet.
+
+    A ``background`` timer (a monitor's poll) repeats for as long as its state is
+    active; it is no work in flight, so "wait until the work is done" skips it.
+    """
 
     when: float
     fn: Callable[[], object]
     cancelled: bool = field(default=False)
+    background: bool = False
 
     def cancel(self) -> None:
         self.cancelled = True
@@ -48,7 +53,9 @@ class Clock(Protocol):
 
     def now(self) -> float: ...
 
-    def call_later(self, delay: float, fn: Callable[[], object]) -> Timer: ...
+    def call_later(
+        self, delay: float, fn: Callable[[], object], *, background: bool = False
+    ) -> Timer: ...
 
 
 def _check_delay(delay: float) -> float:
@@ -68,16 +75,24 @@ class SimClock:
     def now(self) -> float:
         return self._now
 
-    def call_later(self, delay: float, fn: Callable[[], object]) -> Timer:
-        timer = Timer(self._now + _check_delay(delay), fn)
+    def call_later(
+        self, delay: float, fn: Callable[[], object], *, background: bool = False
+    ) -> Timer:
+        timer = Timer(self._now + _check_delay(delay), fn, background=background)
         heapq.heappush(self._heap, (timer.when, next(self._seq), timer))
         return timer
 
-    def next_deadline(self) -> float | None:
-        """When the earliest live timer is due, or ``None`` when none is pending."""
+    def next_deadline(self, *, work_only: bool = False) -> float | None:
+        """When the earliest live timer is due, or ``None`` when none is pending.
+
+        With ``work_only``, background timers (monitor polls) do not count.
+        """
         while self._heap and self._heap[0][2].cancelled:
             heapq.heappop(self._heap)
-        return self._heap[0][0] if self._heap else None
+        if not work_only:
+            return self._heap[0][0] if self._heap else None
+        due = [t.when for _, _, t in self._heap if not (t.cancelled or t.background)]
+        return min(due) if due else None
 
     @property
     def pending(self) -> int:
@@ -130,8 +145,10 @@ class WallClock:
     def now(self) -> float:
         return time.monotonic() - self._origin
 
-    def call_later(self, delay: float, fn: Callable[[], object]) -> Timer:
-        timer = Timer(self.now() + _check_delay(delay), fn)
+    def call_later(
+        self, delay: float, fn: Callable[[], object], *, background: bool = False
+    ) -> Timer:
+        timer = Timer(self.now() + _check_delay(delay), fn, background=background)
         with self._cond:
             if self._stopped:
                 raise StatectlError("this WallClock was stopped; create a new one")

@@ -96,7 +96,9 @@ class Monitor:
     def _schedule(self) -> None:
         generation = self._generation
         self._timer = self.subject.clock.call_later(
-            self.period, lambda: self.subject.call_soon(lambda: self._poll(generation))
+            self.period,
+            lambda: self.subject.call_soon(lambda: self._poll(generation)),
+            background=True,
         )
 
     def _poll(self, generation: int) -> None:
