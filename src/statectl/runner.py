@@ -544,6 +544,11 @@ def run(
         if ready is not None:
             ready(system, url)
         if not live:
+            if events is None and sys.stdin.isatty():
+                err.write(
+                    "reading event lines '[DEVICE:] EVENT [DATA]' or '+SECONDS' from the "
+                    "terminal; end with Ctrl-D\n"
+                )
             _feed(system, events if events is not None else sys.stdin, err, batch=True)
             system.quiesce()
             for name, subject in system.subjects.items():
