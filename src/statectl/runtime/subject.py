@@ -62,7 +62,7 @@ from statectl.runtime.records import (
     StateExited,
     TransitionTaken,
 )
-from statectl.semantics import Machine, Plan, Snapshot, Step, compiled, initial, step
+from statectl.semantics import Plan, Snapshot, Step, compiled, initial, step
 
 __all__ = ["ApiLogging", "Listener", "Policy", "StepListener", "Subject"]
 
@@ -81,12 +81,25 @@ class ApiLogging(Protocol):
     def api_log(self) -> Sequence[ApiCall]: ...
 
 
+#: What the plan path calls for a data-less plan: (invokes counted first, callable, argument).
+_Call = tuple[int, Callable[[Any], object], Any]
+#: ``Subject._counts`` holds both counters: events in the low bits, invokes above them.
+_INVOKES = 48
+_EVENTS = (1 << _INVOKES) - 1
+_ONE_INVOKE = 1 << _INVOKES
+#: The plan table of a Subject not started yet: empty, never written.
+_NO_PLANS: dict[str, Plan] = {}
+
 #: A queued event ``(name, data, None)``, or ``(None, None, fn)`` to run ``fn`` on the owner.
 _Item = tuple[str | None, Any, Callable[[], object] | None]
 
 
 def _print_error(exc: BaseException) -> None:
     traceback.print_exception(exc, file=sys.stderr)
+
+
+def _nobody(note: Notification) -> None:
+    """The call for a notification no observer is attached for: it is only counted."""
 
 
 def _describe_invoke(i: Invoke) -> str:
@@ -98,15 +111,15 @@ class Subject:
 
     __slots__ = (
         "_busy",
+        "_calls",
         "_closed",
+        "_counts",
         "_data",
         "_emitting",
         "_fast",
         "_finished",
-        "_known",
         "_listeners",
         "_name",
-        "_notes",
         "_pending",
         "_queue",
         "_routes",
@@ -119,8 +132,6 @@ class Subject:
         "_worker",
         "chart",
         "clock",
-        "events_processed",
-        "invokes_issued",
         "machine",
         "policy",
     )
@@ -134,38 +145,38 @@ class Subject:
         policy: Policy = "ignore",
         data: Mapping[str, Any] | None = None,
     ) -> None:
-        if policy not in ("ignore", "error"):
+        if policy != "ignore" and policy != "error":
             raise StatectlError(f"policy must be 'ignore' or 'error' (got {policy!r})")
         self.chart = chart
-        self.machine: Machine = compiled(chart)
+        self.machine = compiled(chart)
         self.clock = clock
         self._name = name or chart.name
-        self.policy: Policy = policy
-        self._data: dict[str, Any] = self._initial_data(chart, data) if chart.data else (
-            dict(data) if data else {}
-        )
-        self._known = self.machine.event_names
+        self.policy = policy
+        if chart.data:
+            self._data = self._initial_data(chart, data)
+        else:
+            self._data = dict(data) if data else {}
         # invoke number -> (observer, it keeps an api_log: checked once at attach)
         self._routes: dict[int, tuple[Observer, bool]] = {}
-        # plan slot -> (observer or None, its data-less notification); cleared by attach, rename
-        self._notes: dict[int, tuple[Observer | None, Notification]] | None = None
-        self._listeners: list[Listener] = []
+        # plan -> (invokes it counts, callable, argument): what the plan path calls for it;
+        # made as plans are first taken, dropped by attach and rename
+        self._calls: dict[Plan, _Call] | None = None
+        self._listeners: tuple[Listener, ...] = ()
         self._steppers: tuple[StepListener, ...] = ()
         self._pending: deque[Record] | None = None
         self._emitting = False
         self._queue: deque[_Item] = deque()
         self._wake: threading.Event | None = None
         self._snapshot: Snapshot | None = None
-        self._table: dict[str, Plan] = {}  # plans of the current snapshot
-        self._fast = False  # dispatch may take plans: started, nobody listens, no worker
+        self._table: dict[str, Plan] = _NO_PLANS  # plans of the current snapshot
+        self._fast = False  # dispatch may take plans: started, nobody listens, no owner loop
         self._busy = False
         self._finished = False
         self._closed = False
         self._stopping = False
         self._serving = False
         self._worker: threading.Thread | None = None
-        self.events_processed = 0
-        self.invokes_issued = 0
+        self._counts = 0  # events processed + invokes issued << _INVOKES, one add per event
 
     @staticmethod
     def _initial_data(chart: Chart, given: Mapping[str, Any] | None) -> dict[str, Any]:
@@ -184,6 +195,24 @@ class Subject:
         return data
 
     @property
+    def events_processed(self) -> int:
+        """Events taken off the queue (or dispatched) and processed, handled or not."""
+        return self._counts & _EVENTS
+
+    @events_processed.setter
+    def events_processed(self, value: int) -> None:
+        self._counts = (self._counts & ~_EVENTS) | value
+
+    @property
+    def invokes_issued(self) -> int:
+        """Notifications issued (counted whether or not an observer was attached)."""
+        return self._counts >> _INVOKES
+
+    @invokes_issued.setter
+    def invokes_issued(self, value: int) -> None:
+        self._counts = (self._counts & _EVENTS) | (value << _INVOKES)
+
+    @property
     def name(self) -> str:
         """The device name every record and notification carries."""
         return self._name
@@ -191,7 +220,7 @@ class Subject:
     @name.setter
     def name(self, value: str) -> None:
         self._name = value
-        self._notes = None
+        self._calls = None
 
     # -- wiring ----------------------------------------------------------------------------
 
@@ -217,7 +246,7 @@ class Subject:
         logging = isinstance(observer, ApiLogging)
         for n in numbers:
             routes[n] = (observer, logging)
-        self._notes = None
+        self._calls = None
 
     def observer_for(self, invoke: int) -> Observer | None:
         route = self._routes.get(invoke)
@@ -225,12 +254,14 @@ class Subject:
 
     def listen(self, callback: Listener) -> Callable[[], None]:
         """Receive every record from now on; returns a function that stops it."""
-        self._listeners.append(callback)
+        self._listeners = (*self._listeners, callback)
         self._refresh()
 
         def unlisten() -> None:
-            if callback in self._listeners:
-                self._listeners.remove(callback)
+            listeners = self._listeners
+            if callback in listeners:
+                at = listeners.index(callback)
+                self._listeners = listeners[:at] + listeners[at + 1 :]
                 self._refresh()
 
         return unlisten
@@ -251,7 +282,13 @@ class Subject:
         return off
 
     def _refresh(self) -> None:
-        """Recompute whether :meth:`dispatch` may take plans without the queue."""
+        """Recompute whether :meth:`dispatch` may take plans without the queue.
+
+        ``_fast`` is also False while anything is queued: :meth:`post` appends, then
+        clears it; this sets it, then looks at the queue, so whichever thread runs
+        second, a queued item is never overtaken (one flag test on the hot path
+        instead of a queue test before and after).
+        """
         self._fast = (
             self._snapshot is not None
             and not self._listeners
@@ -260,6 +297,8 @@ class Subject:
             and not self._serving
             and not self._closed
         )
+        if self._queue:
+            self._fast = False
 
     def emit(self, record: Record) -> None:
         """Deliver ``record`` to every listener, after any record being delivered now."""
@@ -273,7 +312,7 @@ class Subject:
         try:
             while pending:
                 r = pending.popleft()
-                for callback in tuple(self._listeners):
+                for callback in self._listeners:
                     callback(r)
         except BaseException:
             pending.clear()
@@ -317,6 +356,7 @@ class Subject:
         if self._closed:
             raise StatectlError(f"{self.name} is closed; event {event!r} cannot be posted")
         self._queue.append((event, data, None))
+        self._fast = False  # after the append: see _refresh()
         wake = self._wake
         if wake is not None:
             wake.set()
@@ -326,6 +366,7 @@ class Subject:
         if self._closed:
             return
         self._queue.append((None, None, fn))
+        self._fast = False  # after the append: see _refresh()
         wake = self._wake
         if wake is not None:
             wake.set()
@@ -349,12 +390,23 @@ class Subject:
         """Enter the initial configuration (records ``Started`` and the entered states)."""
         if self._snapshot is not None:
             raise StatectlError(f"{self.name} was started already")
-        self._check_owner()
+        if self._worker is not None:
+            self._check_owner()
+        machine = self.machine
+        if not self._listeners:
+            entry = machine.quiet_start
+            if entry is None:
+                first = initial(machine, self._data)
+                entry = machine.quiet(first)
+            if entry is not None:  # nothing to notify or record: take up the target
+                self._snapshot, self._table = entry
+                self._refresh()
+                return
+        first = initial(machine, self._data)
         now = self.clock.now()
         listening = bool(self._listeners)
         if listening:
             self.emit(Started(self.name, now))
-        first = initial(self.machine, self._data)
         self._commit(first.target)
         self._perform(first, None, now, listening)
 
@@ -402,6 +454,8 @@ class Subject:
                 self._process(event, data)
         finally:
             self._busy = False
+            if not self._fast:
+                self._refresh()
         return count
 
     def dispatch(self, event: str, data: Any = None) -> int:
@@ -412,31 +466,38 @@ class Subject:
         nobody listens and the queue is empty, an event with a plan is performed
         from it directly.
         """
-        if self._fast and not self._queue and not self._busy:
+        if self._fast and not self._busy:  # _fast: nothing is queued either
             try:
                 plan = self._table.get(event)
             except TypeError:  # unhashable: post() says what is wrong with it
                 plan = None
             if plan is not None and plan.handled:
                 # _follow() inlined: this is the hot path
-                self._busy = True
-                try:
-                    self.events_processed += 1
-                    self._snapshot = plan.target
-                    self._table = plan.table
-                    for slot, action in plan.notifies:
-                        self.invokes_issued += 1
-                        notes = self._notes
-                        call = notes.get(slot) if notes is not None and data is None else None
-                        if call is None:
-                            call = self._call(slot, action, data)
-                        if call[0] is not None:
-                            call[0].update(call[1])
-                    if plan.final:
-                        self._finished = True
-                finally:
-                    self._busy = False
-                if self._queue:  # an observer posted: run-to-completion goes on
+                self._snapshot = plan.target
+                self._table = plan.table
+                if plan.notifies and data is None:
+                    try:
+                        counts, call, arg = self._calls[plan]  # type: ignore[index]
+                    except (KeyError, TypeError):  # not made yet, or dropped
+                        counts, call, arg = self._call_for(plan)
+                    self._counts += counts
+                    self._busy = True
+                    try:
+                        call(arg)
+                    finally:
+                        self._busy = False
+                elif plan.notifies:
+                    self._counts += 1
+                    self._busy = True
+                    try:
+                        self._issue(plan, data)
+                    finally:
+                        self._busy = False
+                else:
+                    self._counts += 1
+                if plan.final:
+                    self._finished = True
+                if not self._fast and self._queue:  # posted meanwhile: run-to-completion
                     return 1 + self.run_until_idle()
                 return 1
         self.post(event, data)
@@ -531,41 +592,61 @@ class Subject:
         if not plan.handled:
             if self.policy == "error" and not plan.step.ignored:
                 return False
-            self.events_processed += 1
+            self._counts += 1
             return True
-        self.events_processed += 1
         self._snapshot = plan.target
         self._table = plan.table
-        for slot, action in plan.notifies:
-            self.invokes_issued += 1
-            observer, note = self._call(slot, action, data)
-            if observer is not None:
-                observer.update(note)
+        if plan.notifies and data is None:
+            calls = self._calls
+            entry = calls.get(plan) if calls is not None else None
+            counts, call, arg = entry if entry is not None else self._call_for(plan)
+            self._counts += counts
+            call(arg)
+        else:
+            self._counts += 1
+            if plan.notifies:
+                self._issue(plan, data)
         if plan.final:
             self._finished = True
         return True
 
-    def _call(
-        self, slot: int, action: Notify, data: Any
-    ) -> tuple[Observer | None, Notification]:
-        """Who gets ``action`` and what; without data, worked out once per instance and slot."""
-        route = self._routes.get(action.invoke)
-        observer = route[0] if route is not None else None
-        if data is not None:
-            note = Notification(
-                self._name, action.invoke, action.name, action.method, action.event, data
-            )
-            return observer, note
-        notes = self._notes
-        if notes is None:
-            notes = self._notes = {}
-        call = notes.get(slot)
-        if call is None:
+    def _call_for(self, plan: Plan) -> _Call:
+        """What the plan path calls for ``plan`` without data, worked out once per instance.
+
+        A single notification is prebuilt for the observer routed now (attach and
+        rename drop these); several go through :meth:`_issue`, which looks each route
+        up when it is due, as the full path does (an observer may attach another).
+        """
+        calls = self._calls
+        if calls is None:
+            calls = self._calls = {}
+        entry: _Call
+        if len(plan.notifies) == 1:
+            action = plan.notifies[0][1]
+            route = self._routes.get(action.invoke)
             note = Notification(
                 self._name, action.invoke, action.name, action.method, action.event, None
             )
-            call = notes[slot] = (observer, note)
-        return call
+            entry = (1 + _ONE_INVOKE, route[0].update if route is not None else _nobody, note)
+        else:
+            entry = (1, self._issue_all, plan)
+        calls[plan] = entry
+        return entry
+
+    def _issue_all(self, plan: Plan) -> None:
+        self._issue(plan, None)
+
+    def _issue(self, plan: Plan, data: Any) -> None:
+        """Issue the notifications of ``plan`` in order, as :meth:`_notify` does unheard."""
+        for _, action in plan.notifies:
+            self._counts += _ONE_INVOKE
+            route = self._routes.get(action.invoke)
+            if route is not None:
+                route[0].update(
+                    Notification(
+                        self._name, action.invoke, action.name, action.method, action.event, data
+                    )
+                )
 
     def _process(self, event: str, data: Any) -> None:
         if not self._listeners:
@@ -584,12 +665,12 @@ class Subject:
     def _process_slow(self, event: str, data: Any) -> None:
         snapshot = self._snapshot
         assert snapshot is not None
-        self.events_processed += 1
+        self._counts += 1
         now = self.clock.now()
         listening = bool(self._listeners)
         if listening:
             self.emit(EventReceived(self.name, now, event, data))
-        if event not in self._known:
+        if event not in self.machine.event_names:
             self._unhandled(event, data, "unknown event", now, snapshot)
             return
         decision = step(self.machine, snapshot, event, self._data, data)
@@ -649,7 +730,7 @@ class Subject:
                 self.emit(Finished(name, now))
 
     def _notify(self, action: Notify, data: Any, now: float, listening: bool) -> None:
-        self.invokes_issued += 1
+        self._counts += _ONE_INVOKE
         if listening:
             a = action
             self.emit(InvokeIssued(self.name, now, a.invoke, a.name, a.method, a.event))

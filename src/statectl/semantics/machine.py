@@ -99,6 +99,22 @@ class Machine:
         self._slots: dict[int, int] = {}  # id(Notify) -> slot; the chart keeps them alive
         # one shared machine serves subjects on several threads: slot numbers must be unique
         self._installing = threading.Lock()
+        #: the memoised initial step's (target, plan table) when :meth:`quiet` found it so
+        self.quiet_start: tuple[Snapshot, PlanTable] | None = None
+
+    def quiet(self, result: Step) -> tuple[Snapshot, PlanTable] | None:
+        """``result``'s interned target and plan table if performing it unheard only moves there.
+
+        That is when it issues no notification and reaches no final state, so a host
+        with nobody listening commits the target and is done (a new instance's start).
+        The memoised initial step's answer is kept in :attr:`quiet_start`.
+        """
+        if result.final or any(isinstance(a, Notify) for a in result.actions):
+            return None
+        entry = self._entry(result.target)
+        if result is self._initial:
+            self.quiet_start = entry
+        return entry
 
     # -- plans ---------------------------------------------------------------------------
 
