@@ -210,3 +210,17 @@ def test_codegen_writes_a_cpp_device(tmp_path: Path) -> None:
     assert cli("codegen", MOTOR, "--target", "cpp", "--out", str(tmp_path))[0] == 0
     assert any(p.suffix == ".hpp" for p in tmp_path.rglob("*"))
     assert cli("codegen", MOTOR, "--target", "rust", "--out", str(tmp_path / "x"))[0] == 2
+
+
+def test_scxml_run_without_a_final_state_exits_non_zero(tmp_path: Path) -> None:
+    """scxml run prints no final line and exits 1 when no top-level final state is reached."""
+    doc = tmp_path / "t.scxml"
+    doc.write_text(
+        '<scxml xmlns="http://www.w3.org/2005/07/scxml" version="1.0" initial="a">'
+        '<state id="a"><transition event="never" target="done"/></state>'
+        '<final id="done"/></scxml>',
+        encoding="utf-8",
+    )
+    code, out, err = cli("scxml", "run", str(doc), "--timeout", "1")
+    assert (code, out) == (1, "")
+    assert "no top-level final state" in err
