@@ -271,3 +271,23 @@ def test_bad_cell_prints_diagnostics(tmp_path: Path) -> None:
     err = io.StringIO()
     assert verify_main(str(path), out=io.StringIO(), err=err) == 1
     assert "V815" in err.getvalue()
+
+
+@pytest.mark.parametrize("name", ["cell.yaml", "cell-buggy.yaml"])
+def test_fast_successors_match_branches(name: str) -> None:
+    """The search's fast successors give the same ways, in order, as the detailed branches."""
+    from statectl.explore import Composed
+
+    model = Composed(load_cell_or_raise(PICK / name))
+    seen, frontier, compared = set(model.initial), list(model.initial), 0
+    while frontier:
+        g = frontier.pop()
+        for s in model.stimuli:
+            slow = [(b.state, b.unhandled, b.livelock) for b in model.branches(g, s)]
+            assert model.successors(g, s) == slow
+            compared += 1
+            for h, _, _ in slow:
+                if h not in seen:
+                    seen.add(h)
+                    frontier.append(h)
+    assert len(seen) > 10 and compared > 100

@@ -76,6 +76,11 @@ class Branch:
     livelock: bool = False
 
 
+#: One outcome of a device step: target local id, handled, unhandled (a missed
+#: transition), and the links it fires as (target device, event, link, guard).
+Move = tuple[int, bool, bool, tuple[tuple[int, str, int, Predicate | None], ...]]
+
+
 class _InRewriter(ast.NodeTransformer):
     def __init__(self, model: Composed) -> None:
         self.model = model
@@ -123,6 +128,7 @@ class Composed:
             self.predicate(e.when) if e.when else None for e in cell.environment
         )
         self._fires: dict[tuple[int, Outcome], tuple[int, ...]] = {}
+        self._moves: dict[tuple[int, int, str], tuple[Move, ...]] = {}
         self.stimuli = self._stimuli()
         self.initial = self._initial()
 
@@ -262,6 +268,68 @@ class Composed:
         if not detail:
             return out
         return list(dict.fromkeys(out))
+
+    def moves(self, d: int, lid: int, event: str) -> tuple[Move, ...]:
+        """Device ``d``'s outcomes for ``event`` in ``lid``, with the links each would fire."""
+        key = (d, lid, event)
+        found = self._moves.get(key)
+        if found is None:
+            found = tuple(
+                (
+                    o.target,
+                    o.handled,
+                    o.reaction is Reaction.UNHANDLED,
+                    tuple(
+                        (self.position[self.links[i].target], self.links[i].event, i,
+                         self.link_guard[i])
+                        for i in self.fires(d, o)
+                    ) if o.handled else (),
+                )
+                for o in self.spaces[d].outcomes(lid, event)
+            )
+            self._moves[key] = found
+        return found
+
+    def successors(
+        self, g: int, s: Stimulus
+    ) -> list[tuple[int, tuple[tuple[int, int, str, int], ...], bool]]:
+        """:meth:`branches` without the delivery log, for the search's inner loop.
+
+        The same ways in the same order, each as ``(state, unhandled, livelock)``;
+        every step is a table lookup and integer arithmetic.
+        """
+        shift, mask = self.shift, self.mask
+        d = s.device
+        lid = (g >> shift[d]) & mask[d]
+        out: list[tuple[int, tuple[tuple[int, int, str, int], ...], bool]] = []
+        work: list[tuple[int, tuple[tuple[int, str, int], ...],
+                         tuple[tuple[int, int, str, int], ...], int]] = []
+        for target, handled, _unhandled, fired in self.moves(d, lid, s.event):
+            if handled:
+                g1 = (g & ~(mask[d] << shift[d])) | (target << shift[d])
+                pending = tuple((t, e, i) for t, e, i, guard in fired if guard is None or guard(g1))
+                work.append((g1, pending, (), 1))
+        while work:
+            g1, pending, bad, count = work.pop()
+            if not pending:
+                out.append((g1, bad, False))
+                continue
+            if count > MAX_DELIVERIES:
+                out.append((g1, bad, True))
+                continue
+            (t, event, link), rest = pending[0], pending[1:]
+            tlid = (g1 >> shift[t]) & mask[t]
+            for target, handled, unhandled, fired in self.moves(t, tlid, event):
+                if handled:
+                    g2 = (g1 & ~(mask[t] << shift[t])) | (target << shift[t])
+                    more = tuple(
+                        (u, e, i) for u, e, i, guard in fired if guard is None or guard(g2)
+                    )
+                else:
+                    g2, more = g1, ()
+                bad2 = (*bad, (t, tlid, event, link)) if unhandled else bad
+                work.append((g2, rest + more, bad2, count + 1))
+        return out
 
     def enabled(self, g: int) -> list[Stimulus]:
         """The stimuli offered in ``g`` (rule 3), in the cell's order."""

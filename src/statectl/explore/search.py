@@ -225,16 +225,15 @@ def explore(
                     when = model.when[s.when]
                     if when is not None and not when(g):
                         continue
-                for br in model.branches(g, s):
+                for h, bad, livelock in model.successors(g, s):
                     alive = True
-                    for t, tlid, event, _link in br.unhandled:
+                    for t, tlid, event, _link in bad:
                         key = (t, model.spaces[t].state_of(tlid), event)
                         unhandled_count[key] = unhandled_count.get(key, 0) + 1
                         if key not in unhandled:
-                            unhandled[key] = (head, s, br.state)
-                    if br.livelock and i not in livelocks:
+                            unhandled[key] = (head, s, h)
+                    if livelock and i not in livelocks:
                         livelocks[i] = (head, s)
-                    h = br.state
                     if h == g:
                         continue
                     transitions += 1
