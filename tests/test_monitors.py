@@ -6,7 +6,6 @@ from pathlib import Path
 
 import pytest
 
-from statectl.build import load_chart
 from statectl.errors import StatectlError
 from statectl.model import Chart, ControlKind, EventDef, EventKind, State, Transition
 from statectl.observers import MonitorSpec
@@ -36,10 +35,6 @@ class Device:
         self.polls += 1
         return "overcurrent" if self.polls in self.fault_at else None
 
-
-@pytest.fixture(scope="module")
-def motor() -> Chart:
-    return load_chart(MOTOR)
 
 
 def setup(chart: Chart, device: Device, period: float = 0.1) -> tuple[Subject, list[Record]]:

@@ -9,7 +9,6 @@ from pathlib import Path
 
 import pytest
 
-from statectl.build import load_chart
 from statectl.errors import StatectlError
 from statectl.model import Chart, ControlKind, EventDef, EventKind, State, StateKind, Transition
 from statectl.render import FORMATS, from_chart, render
@@ -22,10 +21,6 @@ MOTOR = Path(__file__).resolve().parent.parent / "examples" / "motor" / "motor.y
 HAS_DOT = shutil.which("dot") is not None
 NEEDS_DOT = pytest.mark.skipif(not HAS_DOT, reason="Graphviz 'dot' is not installed")
 
-
-@pytest.fixture(scope="module")
-def motor() -> Chart:
-    return load_chart(str(MOTOR))
 
 
 def _formats() -> list[object]:

@@ -14,7 +14,6 @@ from hypothesis import strategies as st
 from statectl.build import load_chart
 from statectl.errors import StatectlError, UnhandledEventError
 from statectl.model import Chart, State, StateKind, Transition
-from statectl.observers import Notification
 from statectl.runtime import (
     EventIgnored,
     EventReceived,
@@ -30,6 +29,7 @@ from statectl.runtime import (
     WallClock,
 )
 from statectl.semantics import Machine, initial, step
+from support import Recorder
 
 MOTOR = Path(__file__).parent.parent / "examples" / "motor" / "motor.yaml"
 EVENTS = (
@@ -42,22 +42,6 @@ EVENTS = (
 )
 
 
-@pytest.fixture(scope="module")
-def motor() -> Chart:
-    return load_chart(MOTOR)
-
-
-class Recorder:
-    """An observer that remembers its notifications (and may post back)."""
-
-    def __init__(self, then: Any = None) -> None:
-        self.seen: list[Notification] = []
-        self.then = then
-
-    def update(self, notification: Notification) -> None:
-        self.seen.append(notification)
-        if self.then is not None:
-            self.then(notification)
 
 
 def running(chart: Chart, **kw: Any) -> tuple[Subject, list[Record]]:

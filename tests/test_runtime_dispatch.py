@@ -17,9 +17,9 @@ from statectl.build import load_chart
 from statectl.devices import SimMotor
 from statectl.errors import StatectlError, UnhandledEventError
 from statectl.model import Chart, State, Transition
-from statectl.observers import Notification
 from statectl.runtime import Record, SimClock, Subject
 from statectl.semantics import Machine, Snapshot, compiled, initial, step
+from support import Recorder
 
 MOTOR = Path(__file__).parent.parent / "examples" / "motor" / "motor.yaml"
 EVENTS = (
@@ -33,22 +33,6 @@ EVENTS = (
 )
 
 
-@pytest.fixture(scope="module")
-def motor() -> Chart:
-    return load_chart(MOTOR)
-
-
-class Recorder:
-    """An observer that remembers its notifications and may act on each."""
-
-    def __init__(self, then: Any = None) -> None:
-        self.seen: list[Notification] = []
-        self.then = then
-
-    def update(self, notification: Notification) -> None:
-        self.seen.append(notification)
-        if self.then is not None:
-            self.then(notification)
 
 
 def started(chart: Chart, *, listen: bool, **kw: Any) -> tuple[Subject, Recorder, list[Record]]:
