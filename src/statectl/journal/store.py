@@ -161,6 +161,8 @@ class Ticket:
 #: One queued write: (sql, parameters, seq or 0, deliver(seq) after the commit or None)
 _Write = tuple[str, tuple[Any, ...], int, Callable[[int], object] | None]
 
+#: Bound parameters per statement; SQLite allows 32,766 since 3.32 and 999 before.
+_MAX_VARIABLES = 999
 _INSERT_INBOX = "INSERT INTO inbox VALUES (?, ?, ?, ?, ?)"
 _INSERT_STEP = "INSERT INTO steps VALUES (NULL, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)"
 _STOP = None  # put on the queue by close(): the writer commits what came before and ends
@@ -372,15 +374,29 @@ class Journal:
 
     @staticmethod
     def _write(db: sqlite3.Connection, batch: list[_Write]) -> None:
-        """Insert runs of one statement with ``executemany``, keeping the order."""
-        if len(batch) == 1:
-            db.execute(batch[0][0], batch[0][1])
-            return
+        """Insert runs of one statement as multi-row INSERTs, keeping the order.
+
+        sqlite3 releases the GIL for every statement it steps; while an owner
+        thread keeps the interpreter busy, each release costs the writer a whole
+        switch interval to get it back (a convoy: seconds for a batch of thousands
+        of rows, one statement each). Many rows per statement make that a handful.
+        """
         i = 0
         while i < len(batch):
             sql = batch[i][0]
             j = i
             while j < len(batch) and batch[j][0] == sql:
                 j += 1
-            db.executemany(sql, [w[1] for w in batch[i:j]])
+            rows = [w[1] for w in batch[i:j]]
             i = j
+            head, sep, values = sql.partition(" VALUES ")
+            if len(rows) == 1 or not sep:
+                db.executemany(sql, rows)
+                continue
+            per = max(1, _MAX_VARIABLES // max(1, len(rows[0])))
+            for k in range(0, len(rows), per):
+                chunk = rows[k : k + per]
+                db.execute(
+                    f"{head} VALUES {', '.join([values] * len(chunk))}",
+                    [v for row in chunk for v in row],
+                )
