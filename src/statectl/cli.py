@@ -343,7 +343,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser(
         "run",
-        help="run a device (events from stdin, or live with a dashboard) or a cell",
+        help="run a device or a cell on simulated twins or drivers (events from stdin)",
         description="Runs a device file or a cell file on its drivers (by default a simulated "
         "twin per device, derived from its tables). Event lines '[DEVICE:] EVENT [DATA]' or "
         "'+SECONDS' come from stdin, on a simulated clock unless --realtime or --dashboard. "
