@@ -12,9 +12,12 @@ import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 from statectl.errors import Diagnostic, DiagnosticError, Severity, StatectlError, has_errors
+
+if TYPE_CHECKING:  # the pipeline is imported inside each command, to keep --help fast
+    from statectl.model import Chart
 
 __all__ = ["main"]
 
@@ -44,7 +47,7 @@ def _summary(diags: Sequence[Diagnostic]) -> str:
     return f"{n_err} error(s), {n_warn} warning(s)"
 
 
-def _load_chart(path: str, err: TextIO) -> object | None:
+def _load_chart(path: str, err: TextIO) -> Chart | None:
     """Load and build a device file; print every diagnostic on failure."""
     from statectl.build import load_and_build
 
@@ -94,11 +97,10 @@ def cmd_build(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
 
 
 def cmd_observers(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
-    from statectl.model import Chart
     from statectl.observers import extract
 
     chart = _load_chart(args.file, err)
-    if not isinstance(chart, Chart):
+    if chart is None:
         return PROBLEMS
     model = extract(chart)
     if args.json:
@@ -126,11 +128,10 @@ def cmd_observers(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
 
 
 def cmd_render(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
-    from statectl.model import Chart
     from statectl.render import render
 
     chart = _load_chart(args.file, err)
-    if not isinstance(chart, Chart):
+    if chart is None:
         return PROBLEMS
     text = render(chart, args.format)
     if args.out:
