@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import io
 import json
+import sqlite3
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -12,7 +15,9 @@ from statectl.demo import motor_chart
 from statectl.devices import SimMotor
 from statectl.errors import DiagnosticError
 from statectl.journal import (
+    Guarantee,
     Journal,
+    JournalError,
     JournalReader,
     StepKind,
     Sync,
@@ -29,6 +34,7 @@ from statectl.runner import (
     journal_replay,
     journal_show,
     parse_event_line,
+    run,
 )
 from statectl.runtime import SimClock
 
@@ -48,18 +54,39 @@ def device_file(tmp_path: Path) -> Path:
     return path
 
 
-def make_system(db: Path, device_file: Path, sync: Sync = Sync.NORMAL) -> System:
+GUARANTEES = list(Guarantee)
+
+
+def make_system(
+    db: Path,
+    device_file: Path,
+    sync: Sync = Sync.NORMAL,
+    guarantee: Guarantee = Guarantee.PROMPT,
+) -> System:
     dev = load_device(device_file)
     setup = DeviceSetup("Motor", dev.chart, dev.rules, str(device_file), SimMotor())
-    return System((setup,), SimClock(), Journal(db, sync=sync))
+    return System((setup,), SimClock(), Journal(db, sync=sync, guarantee=guarantee))
+
+
+@contextmanager
+def disk_stalled(db: Path) -> Iterator[None]:
+    """Hold the database's write lock, so the journal's writer cannot commit meanwhile."""
+    other = sqlite3.connect(str(db), isolation_level=None)
+    try:
+        other.execute("BEGIN EXCLUSIVE")
+        yield
+        other.execute("ROLLBACK")
+    finally:
+        other.close()
 
 
 @pytest.mark.parametrize("sync", [Sync.NORMAL, Sync.FULL])
-def test_an_accepted_event_is_durable_before_the_device_sees_it(
-    tmp_path: Path, device_file: Path, sync: Sync
+@pytest.mark.parametrize("guarantee", GUARANTEES)
+def test_an_accepted_event_is_journalled_and_reaches_its_device(
+    tmp_path: Path, device_file: Path, sync: Sync, guarantee: Guarantee
 ) -> None:
-    """The ticket turns durable, the inbox holds the event, then the device acts on it."""
-    system = make_system(tmp_path / "j.db", device_file, sync)
+    """Either guarantee: the ticket turns durable, the inbox holds the event, the device acts."""
+    system = make_system(tmp_path / "j.db", device_file, sync, guarantee)
     try:
         system.start()
         ticket = system.post("Motor", "Movement", {"amount": 10})
@@ -74,9 +101,157 @@ def test_an_accepted_event_is_durable_before_the_device_sees_it(
         system.close()
 
 
-def test_every_step_is_journalled_with_its_snapshot(tmp_path: Path, device_file: Path) -> None:
+@pytest.mark.parametrize(
+    ("guarantee", "while_stalled", "durable_while_stalled"),
+    [
+        (Guarantee.PROMPT, {"Moving"}, False),  # processed at once, durable later
+        (Guarantee.DURABLE_FIRST, {"Blocked"}, False),  # waits for the commit
+    ],
+)
+def test_when_the_device_acts_depends_on_the_guarantee(
+    tmp_path: Path,
+    device_file: Path,
+    guarantee: Guarantee,
+    while_stalled: set[str],
+    durable_while_stalled: bool,
+) -> None:
+    """With the disk stalled, prompt runs the event undurable; durable-first waits for it."""
+    db = tmp_path / "j.db"
+    system = make_system(db, device_file, guarantee=guarantee)
+    try:
+        system.start()
+        assert system.journal is not None
+        system.journal.flush()
+        with disk_stalled(db):
+            ticket = system.post("Motor", "Movement", {"amount": 10})
+            assert ticket is not None
+            system.drain()
+            seen = set(system.subjects["Motor"].configuration)
+            durable = ticket.durable
+        assert ticket.wait(5.0)
+        system.drain()
+        after = set(system.subjects["Motor"].configuration)
+    finally:
+        system.close()
+    assert (seen, durable, after) == (while_stalled, durable_while_stalled, {"Moving"})
+
+
+@pytest.mark.parametrize(
+    ("guarantee", "before_the_crash"),
+    [(Guarantee.PROMPT, {"Moving"}), (Guarantee.DURABLE_FIRST, {"Blocked"})],
+)
+def test_a_crash_before_the_commit_leaves_no_trace_of_the_event(
+    tmp_path: Path, device_file: Path, guarantee: Guarantee, before_the_crash: set[str]
+) -> None:
+    """An event not yet durable at a crash is not in the journal; resume finds the device before it.
+
+    The "crash" is a copy of the database files taken while the writer cannot
+    commit: what the disk holds if the process dies at that moment.
+    """
+    db, crashed = tmp_path / "j.db", tmp_path / "crashed.db"
+    system = make_system(db, device_file, guarantee=guarantee)
+    try:
+        system.start()
+        assert system.journal is not None
+        system.journal.flush()
+        with disk_stalled(db):
+            ticket = system.post("Motor", "Movement", {"amount": 10})
+            assert ticket is not None
+            system.drain()
+            state = set(system.subjects["Motor"].configuration)
+            acknowledged = ticket.durable
+            for suffix in ("", "-wal"):
+                source = Path(f"{db}{suffix}")
+                if source.exists():
+                    Path(f"{crashed}{suffix}").write_bytes(source.read_bytes())
+    finally:
+        system.close()
+    again = make_system(crashed, device_file, guarantee=guarantee)
+    try:
+        came_back = again.start(resume=True)
+        resumed = set(again.subjects["Motor"].configuration)
+        with JournalReader(crashed) as reader:
+            inbox = list(reader.inbox())
+    finally:
+        again.close()
+    assert came_back == {"Motor": True}  # the start step was on disk
+    assert (state, acknowledged, resumed, inbox) == (before_the_crash, False, {"Blocked"}, [])
+
+
+@pytest.mark.parametrize(
+    ("value", "accepted"),
+    [
+        ("prompt", Guarantee.PROMPT),
+        ("durable-first", Guarantee.DURABLE_FIRST),
+        (Guarantee.DURABLE_FIRST, Guarantee.DURABLE_FIRST),
+        ("eventually", None),
+    ],
+)
+def test_the_guarantee_option(tmp_path: Path, value: object, accepted: Guarantee | None) -> None:
+    """A journal takes a guarantee by enum or name; an unknown name is a JournalError."""
+    if accepted is None:
+        with pytest.raises(JournalError, match="prompt or durable-first"):
+            Journal(tmp_path / "j.db", guarantee=value)  # type: ignore[arg-type]
+        return
+    journal = Journal(tmp_path / "j.db", guarantee=value)  # type: ignore[arg-type]
+    try:
+        assert journal.guarantee is accepted
+    finally:
+        journal.close()
+
+
+def test_journal_defaults_to_the_prompt_guarantee(tmp_path: Path) -> None:
+    """Without an option a journal is prompt: devices do not wait for the disk."""
+    journal = Journal(tmp_path / "j.db")
+    try:
+        assert journal.guarantee is Guarantee.PROMPT
+    finally:
+        journal.close()
+
+
+@pytest.mark.parametrize(
+    ("guarantee", "code", "used", "says"),
+    [
+        ("durable-first", 0, Guarantee.DURABLE_FIRST, "final state Blocked"),
+        ("prompt", 0, Guarantee.PROMPT, "final state Blocked"),
+        ("eventually", 2, None, "--guarantee must be prompt or durable-first"),
+    ],
+)
+def test_run_takes_a_guarantee(
+    tmp_path: Path,
+    device_file: Path,
+    guarantee: str,
+    code: int,
+    used: Guarantee | None,
+    says: str,
+) -> None:
+    """``statectl run --journal DB --guarantee G`` runs under G; an unknown G is a usage error."""
+    out, err = io.StringIO(), io.StringIO()
+    seen: list[Guarantee] = []
+
+    def ready(system: System, url: str | None) -> None:
+        assert system.journal is not None
+        seen.append(system.journal.guarantee)
+
+    result = run(
+        str(device_file),
+        journal=str(tmp_path / "j.db"),
+        guarantee=guarantee,
+        events=io.StringIO("Movement {amount: 1}\n"),
+        out=out,
+        err=err,
+        ready=ready,
+    )
+    assert (result, seen) == (code, [used] if used is not None else [])
+    assert says in out.getvalue() + err.getvalue()
+
+
+@pytest.mark.parametrize("guarantee", GUARANTEES)
+def test_every_step_is_journalled_with_its_snapshot(
+    tmp_path: Path, device_file: Path, guarantee: Guarantee
+) -> None:
     """Start, the accepted Movement and the driver's completion each leave one step row."""
-    system = make_system(tmp_path / "j.db", device_file)
+    system = make_system(tmp_path / "j.db", device_file, guarantee=guarantee)
     try:
         system.start()
         ticket = system.post(None, "Movement", {"amount": 10})
@@ -98,12 +273,13 @@ def test_every_step_is_journalled_with_its_snapshot(tmp_path: Path, device_file:
     ]
 
 
+@pytest.mark.parametrize("guarantee", GUARANTEES)
 def test_resume_takes_the_recovery_transition_and_redelivers_pending_events(
-    tmp_path: Path, device_file: Path
+    tmp_path: Path, device_file: Path, guarantee: Guarantee
 ) -> None:
     """A Motor journalled Moving resumes through Error; an accepted, unprocessed event follows."""
     db = tmp_path / "j.db"
-    first = make_system(db, device_file)
+    first = make_system(db, device_file, guarantee=guarantee)
     first.start()
     ticket = first.post(None, "Movement", {"amount": 10})
     assert ticket is not None
@@ -117,7 +293,7 @@ def test_resume_takes_the_recovery_transition_and_redelivers_pending_events(
         first.journal.flush()
         first.journal.close()
 
-    second = make_system(db, device_file)
+    second = make_system(db, device_file, guarantee=guarantee)
     try:
         resumed = second.start(resume=True)
         assert resumed == {"Motor": True}
@@ -138,11 +314,14 @@ def test_resume_takes_the_recovery_transition_and_redelivers_pending_events(
     ]
 
 
-def test_replay_reaches_every_journalled_snapshot(tmp_path: Path, device_file: Path) -> None:
+@pytest.mark.parametrize("guarantee", GUARANTEES)
+def test_replay_reaches_every_journalled_snapshot(
+    tmp_path: Path, device_file: Path, guarantee: Guarantee
+) -> None:
     """Replaying a run with a restart on the SimClock finds no mismatch and the same end state."""
     db = tmp_path / "j.db"
     for resume in (False, True):
-        system = make_system(db, device_file)
+        system = make_system(db, device_file, guarantee=guarantee)
         system.start(resume=resume)
         for line in ("Movement {amount: 3}", "Initialization", "Movement {amount: 4}"):
             parsed = parse_event_line(line)

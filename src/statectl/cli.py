@@ -229,6 +229,7 @@ def cmd_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         journal=args.journal,
         resume=args.resume,
         sync=args.sync,
+        guarantee=args.guarantee,
         realtime=args.realtime,
         out=out,
         err=err,
@@ -363,6 +364,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--resume", action="store_true", help="resume from the journal first")
     s.add_argument("--sync", default="normal", choices=("normal", "full"),
                    help="journal durability: normal (process crash) or full (power loss)")
+    s.add_argument("--guarantee", default="prompt", choices=("prompt", "durable-first"),
+                   help="when a journalled event reaches its device: prompt = at once, "
+                   "acknowledged once durable; durable-first = only after its commit")
     s.add_argument("--realtime", action="store_true", help="run on the wall clock")
     s.add_argument("--replay", metavar="TRACE", help="cells: a .trace.json from verify --traces")
     s.add_argument("--walk", type=int, metavar="N", help="cells: a seeded random walk of N steps")

@@ -5,13 +5,16 @@ Rules:
    holds the owner lock (the thread in :meth:`System.serve`, a caller of
    :meth:`System.drain`, or the journal's writer) processes every device's
    events, run-to-completion, so devices never race each other.
-2. With a journal every event from outside is accepted through it (durable
-   first, then delivered) and every step is journalled; ``resume`` brings each
-   device back from the journal, through its recovery rules, before the owner
-   takes any new event. The writer, right after a commit, delivers the batch's
-   events and, if the owner lock is free, drains the devices itself in the same
-   wake-up (no second thread hop); if another thread owns them it only wakes
-   the serve loop, which picks the events up.
+2. With a journal every event from outside is accepted through it and every
+   step is journalled; ``resume`` brings each device back from the journal,
+   through its recovery rules, before the owner takes any new event. The
+   journal's guarantee says when an accepted event reaches its device. Under
+   ``prompt`` (default) a post queues the inbox row, hands the event to its
+   device and wakes the owner, as without a journal; the ticket turns durable
+   at the next commit. Under ``durable-first`` the writer, right after a
+   commit, delivers the batch's events and, if the owner lock is free, drains
+   the devices itself in the same wake-up (no second thread hop); if another
+   thread owns them it only wakes the serve loop, which picks the events up.
 3. Time: ``--realtime`` runs on a :class:`WallClock`; otherwise a
    :class:`SimClock`, which a live run (``--dashboard``) moves in step with the
    wall clock and a batch run (events from a file or stdin) moves only to let
@@ -59,6 +62,7 @@ from statectl.devices import (
 from statectl.errors import Diagnostic, DiagnosticError, Severity, StatectlError
 from statectl.explore.replay import CellLinks
 from statectl.journal import (
+    Guarantee,
     Journal,
     JournalError,
     JournalledDevice,
@@ -132,7 +136,7 @@ class System:
             for s in self.subjects.values():
                 s.listen(links.watch)
                 s.on_step(self._link_step)  # after the journal's own step listener
-        if self.journal is not None:
+        if self.journal is not None and self.journal.guarantee is Guarantee.DURABLE_FIRST:
             self.journal.after_commit(self._committed)
 
     def _link_step(self, event: str, data: Any, outcome: str) -> None:
@@ -202,7 +206,10 @@ class System:
         name = self.device(device)
         bound = self.bound.get(name)
         if bound is not None:
-            return bound.post(event, data)
+            ticket = bound.post(event, data)
+            if bound.journal.guarantee is Guarantee.PROMPT:
+                self.wake.set()  # the device has it now; durable-first: the writer wakes
+            return ticket
         self.subjects[name].post(event, data)
         self.wake.set()
         return None
@@ -447,9 +454,7 @@ def cell_setups(
     return tuple(setups)
 
 
-def _load_cell(
-    path: str, err: TextIO, journalled: bool
-) -> tuple[Cell, tuple[DeviceSetup, ...]]:
+def _load_cell(path: str, err: TextIO, journalled: bool) -> tuple[Cell, tuple[DeviceSetup, ...]]:
     cell, diags = load_cell(path)
     if cell is None:
         raise DiagnosticError([d for d in diags if d.severity is not Severity.INFO])
@@ -475,6 +480,7 @@ def run(
     journal: str | None = None,
     resume: bool = False,
     sync: str = "normal",
+    guarantee: str = "prompt",
     realtime: bool = False,
     events: TextIO | None = None,
     out: TextIO = sys.stdout,
@@ -488,6 +494,8 @@ def run(
     lines. A live run (``dashboard`` or ``realtime``) serves until ``stop`` is set,
     stdin ends (without a dashboard) or Ctrl-C. ``ready(system, url)`` is called
     once everything runs (tests use it to find the dashboard's port).
+    ``guarantee`` (``--guarantee``) is ``prompt`` or ``durable-first``: when a
+    journalled event reaches its device (docs/journal.md).
     """
     if resume and journal is None:
         err.write("statectl run: --resume needs --journal DB\n")
@@ -499,6 +507,13 @@ def run(
         mode = Sync(sync.lower())
     except ValueError:
         err.write(f"statectl run: --sync must be normal or full (got {sync!r})\n")
+        return USAGE
+    try:
+        promise = Guarantee(guarantee.lower())
+    except ValueError:
+        err.write(
+            f"statectl run: --guarantee must be prompt or durable-first (got {guarantee!r})\n"
+        )
         return USAGE
     cell: Cell | None = None
     try:
@@ -517,7 +532,7 @@ def run(
         drivers = _drivers(devices, driver, config)
         setups = tuple(replace(d, driver=drivers.get(d.name)) for d in devices)
         clock: Clock = WallClock() if realtime else SimClock()
-        store = Journal(journal, sync=mode) if journal is not None else None
+        store = Journal(journal, sync=mode, guarantee=promise) if journal is not None else None
         system = System(setups, clock, store, cell)
         width = max(len(n) for n in system.subjects)
         if driver is None and config is None:

@@ -25,13 +25,14 @@ from statectl.journal.recovery import (
     load_recovery,
     recovery_file,
 )
-from statectl.journal.store import Journal, JournalError, StepKind, Sync, Ticket
+from statectl.journal.store import Guarantee, Journal, JournalError, StepKind, Sync, Ticket
 from statectl.journal.subjects import restore_subject
 
 __all__ = [
     "CODES",
     "DeviceFile",
     "DeviceRow",
+    "Guarantee",
     "InboxRow",
     "Journal",
     "JournalError",

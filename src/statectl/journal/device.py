@@ -1,9 +1,14 @@
 """One running device bound to the journal: accepted events in, every step out, resume.
 
 Rules:
-1. Events from outside go through :meth:`JournalledDevice.post`: the journal
-   commits the inbox row first and only then posts the event to the Subject, so
-   the device acts only on accepted (durable) events.
+1. Events from outside go through :meth:`JournalledDevice.post`, which queues
+   the inbox row and returns its ticket. Under ``Guarantee.PROMPT`` it posts the
+   event to the Subject at once, in the same critical section, so a device's
+   events reach it in ``seq`` order and its step row is queued after its inbox
+   row; the inbox row is held (it does not wake the writer) until the next row
+   is queued, normally that step, or someone asks the ticket. Under
+   ``Guarantee.DURABLE_FIRST`` the journal commits the inbox row first and only
+   then posts the event, so the device acts only on accepted (durable) events.
 2. Every event the Subject processes, whoever posted it, becomes one step row
    with the snapshot it left. The rows come from a step listener
    (:meth:`Subject.on_step`), not from trace records, so journalling keeps the
@@ -15,9 +20,12 @@ Rules:
 3. On resume the device takes up its last journalled snapshot (``restore``),
    then takes its declared recovery transitions, then gets the accepted events
    it had not processed, in ``seq`` order; all before any new event.
-4. Exactly once in the journal, at least once at the device: an event processed
-   but not yet journalled when the process died is processed again on resume,
-   and its API call may repeat. That is what recovery rules are for.
+4. Exactly once in the journal, at least once at the device: an accepted event
+   processed but without a committed step when the process died is processed
+   again on resume, and its API call may repeat. Under ``PROMPT`` an event
+   processed before its inbox row was committed is not in the journal at all
+   (it was never acknowledged); the device resumes from the last committed
+   step. That is what recovery rules are for.
 """
 
 from __future__ import annotations
@@ -30,7 +38,7 @@ from typing import Any
 from statectl.errors import StatectlError
 from statectl.journal.read import JournalReader
 from statectl.journal.recovery import RecoveryRule
-from statectl.journal.store import Journal, StepKind, Ticket
+from statectl.journal.store import Guarantee, Journal, StepKind, Ticket
 from statectl.journal.subjects import restore_subject
 from statectl.runtime.subject import Subject
 
@@ -54,6 +62,9 @@ class JournalledDevice:
         self.wake = wake  # tells the owner an accepted event is queued
         self.journal = journal
         self.name = subject.name
+        # Posters append (under _lock, so seq order is queue order); only the owner
+        # pops, in _on_step, without the lock: deque appends and pops are atomic, and
+        # a poster never waits for the owner's step.
         self._expect: deque[tuple[int, str, Any]] = deque()
         self._lock = threading.Lock()
         self.recovered: tuple[str, ...] = ()  # recovery events taken on resume
@@ -64,12 +75,21 @@ class JournalledDevice:
     # -- in ------------------------------------------------------------------------------
 
     def post(self, event: str, data: Any = None) -> Ticket:
-        """Accept ``event``: it reaches the device once the journal has committed it."""
+        """Accept ``event`` (rule 1); the ticket turns durable once its inbox row is committed."""
         if not isinstance(event, str):
             raise StatectlError(f"an event name must be a str (got {event!r})")
-        return self.journal.accept(
-            self.name, event, data, lambda seq: self._deliver(seq, event, data)
-        )
+        journal = self.journal
+        if journal.guarantee is Guarantee.DURABLE_FIRST:
+            return journal.accept(
+                self.name, event, data, lambda seq: self._deliver(seq, event, data)
+            )
+        with self._lock:  # seq order is this device's queue order: resume relies on it
+            ticket = journal.accept(self.name, event, data, hold=True)
+            self._expect.append((ticket.seq, event, data))
+            self.subject.post(event, data)
+        if self.wake is not None:
+            self.wake()
+        return ticket
 
     def _deliver(self, seq: int, event: str, data: Any) -> None:
         with self._lock:
@@ -85,12 +105,10 @@ class JournalledDevice:
         inbox = 0
         expect = self._expect
         if expect:
-            with self._lock:
-                if expect:
-                    seq, e, d = expect[0]
-                    if e == event and (d is data or d == data):
-                        expect.popleft()
-                        inbox = seq
+            seq, e, d = expect[0]
+            if e == event and (d is data or d == data):
+                expect.popleft()
+                inbox = seq
         snapshot = self.subject.snapshot
         assert snapshot is not None
         kind = StepKind.RECOVERY if inbox == _RECOVERY else StepKind.EVENT
