@@ -612,11 +612,18 @@ def _reader(path: str, err: TextIO) -> JournalReader | None:
         return None
 
 
-def _window(since: str | None, until: str | None) -> tuple[float | None, float | None]:
-    return (
-        parse_time(since) if since is not None else None,
-        parse_time(until) if until is not None else None,
-    )
+def _reader_in_window(
+    command: str, path: str, since: str | None, until: str | None, err: TextIO
+) -> tuple[JournalReader, float | None, float | None] | None:
+    """The journal and the time window a ``journal show|export`` asks for; None: usage error."""
+    try:
+        lo = parse_time(since) if since is not None else None
+        hi = parse_time(until) if until is not None else None
+    except StatectlError as exc:
+        err.write(f"statectl journal {command}: {exc}\n")
+        return None
+    reader = _reader(path, err)
+    return None if reader is None else (reader, lo, hi)
 
 
 def journal_show(
@@ -629,15 +636,11 @@ def journal_show(
     err: TextIO = sys.stderr,
 ) -> int:
     """``statectl journal show``: one line per accepted event and step, in order."""
-    reader = _reader(path, err)
-    if reader is None:
+    opened = _reader_in_window("show", path, since, until, err)
+    if opened is None:
         return USAGE
+    reader, lo, hi = opened
     with reader:
-        try:
-            lo, hi = _window(since, until)
-        except StatectlError as exc:
-            err.write(f"statectl journal show: {exc}\n")
-            return USAGE
         lines: list[tuple[float, int, str]] = []
         for r in reader.inbox(device, lo, hi):
             data = "" if r.data is None else " " + format_data(r.data)
@@ -668,15 +671,11 @@ def journal_export(
     err: TextIO = sys.stderr,
 ) -> int:
     """``statectl journal export``: JSON Lines (accepted events, then steps)."""
-    reader = _reader(path, err)
-    if reader is None:
+    opened = _reader_in_window("export", path, since, until, err)
+    if opened is None:
         return USAGE
+    reader, lo, hi = opened
     with reader:
-        try:
-            lo, hi = _window(since, until)
-        except StatectlError as exc:
-            err.write(f"statectl journal export: {exc}\n")
-            return USAGE
         export_jsonl(reader, out, device=device, since=lo, until=hi)
     return OK
 
