@@ -134,11 +134,7 @@ def cmd_render(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     if chart is None:
         return PROBLEMS
     text = render(chart, args.format)
-    if args.out:
-        _write_atomic(Path(args.out), text)
-        out.write(f"wrote {args.out}\n")
-    else:
-        out.write(text if text.endswith("\n") else text + "\n")
+    _emit(text, args.out, out)
     return OK
 
 
@@ -262,12 +258,17 @@ def cmd_scxml_export(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     from statectl.scxml_io import export_file
 
     text = export_file(args.file)
-    if args.out:
-        _write_atomic(Path(args.out), text)
-        out.write(f"wrote {args.out}\n")
+    _emit(text, args.out, out)
+    return OK
+
+
+def _emit(text: str, path: str | None, out: TextIO) -> None:
+    """Write a command's text to ``path`` atomically, or to standard output."""
+    if path:
+        _write_atomic(Path(path), text)
+        out.write(f"wrote {path}\n")
     else:
         out.write(text if text.endswith("\n") else text + "\n")
-    return OK
 
 
 def _write_atomic(path: Path, text: str) -> None:
