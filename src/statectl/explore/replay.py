@@ -236,13 +236,13 @@ def run_cell(
                 divergences.append(f"step {i + 1}: {stim.label(m.names)} is not offered in "
                                    f"{m.describe(g)}")
         else:
-            choices = [s for s in m.enabled(g) if m.branches(g, s)]
+            choices = [s for s in m.enabled(g) if m.successors(g, s)]
             if not choices:
                 out.write("--- no stimulus can change the cell: deadlock\n")
                 break
             stim = rng.choice(choices)
         out.write(f"--- step {i + 1}: {stim.label(m.names)}\n")
-        expected = {b.state for b in m.branches(g, stim)}
+        expected = {h for h, _, _ in m.successors(g, stim)}
         r.perform(m.names[stim.device], stim.event)
         done += 1
         h = r.state()
