@@ -22,9 +22,11 @@ Rules:
 4. A cell file runs the same way: one device per instance, on one clock and one
    owner, and the cell's links (:class:`~statectl.explore.replay.CellLinks`):
    after a device's step, each link it fired whose guard holds sends its event
-   to the target, through the journal when there is one (so a link event is
-   accepted, durable and redelivered on resume like any other). Each device's
-   queue is first in, first out.
+   to the target, through the journal when there is one: the link events are
+   journalled with the step that fired them, in one commit, so after a crash
+   both are in the journal (the link event is redelivered if its target had not
+   run it) or neither is (the step runs again on resume and fires them again).
+   Each device's queue is first in, first out.
 5. Events come as lines ``[DEVICE:] EVENT [DATA]`` (DATA in YAML flow style, e.g.
    ``Movement {amount: 10}``); ``+SECONDS`` lets simulated time pass; ``#``
    starts a comment. A bad line is reported with its number and skipped. A
@@ -133,9 +135,12 @@ class System:
                 self.bound[d.name] = JournalledDevice(s, self.journal, source=d.source)
         if self.cell is not None:
             links = self.links = CellLinks(self.cell, self.subjects)
-            for s in self.subjects.values():
+            for name, s in self.subjects.items():
                 s.listen(links.watch)
-                s.on_step(self._link_step)  # after the journal's own step listener
+                if name in self.bound:
+                    self.bound[name].sends = self._link_sends  # journalled with the step
+                else:
+                    s.on_step(self._link_step)
         if self.journal is not None and self.journal.guarantee is Guarantee.DURABLE_FIRST:
             self.journal.after_commit(self._committed)
 
@@ -146,11 +151,15 @@ class System:
             self.links.fired.clear()  # entering the initial states fires nothing
             return
         for link in self.links.due():
-            bound = self.bound.get(link.target)
-            if bound is not None:
-                bound.post(link.event)
-            else:
-                self.subjects[link.target].post(link.event)
+            self.subjects[link.target].post(link.event)
+
+    def _link_sends(self) -> list[tuple[JournalledDevice, str]]:
+        """Rule 4 with a journal: the links a device's step fired, to journal with the step."""
+        assert self.links is not None
+        if not self._live:
+            self.links.fired.clear()  # entering the initial states fires nothing
+            return []
+        return [(self.bound[k.target], k.event) for k in self.links.due()]
 
     def _committed(self) -> None:
         """On the writer after a commit (rule 2): drain now if nobody owns the devices."""
@@ -185,10 +194,10 @@ class System:
                 else:
                     self.subjects[d.name].start()
                 resumed[d.name] = False
-        self.drain()
         if self.links is not None:
-            self.links.fired.clear()
+            self.links.fired.clear()  # entering the initial or restored states fires nothing
         self._live = True
+        self.drain()  # recovery transitions, redelivered events: the links they fire are sent
         self.wake.set()  # events delivered before the start are drained by the owner
         return resumed
 

@@ -26,21 +26,28 @@ Rules:
    processed before its inbox row was committed is not in the journal at all
    (it was never acknowledged); the device resumes from the last committed
    step. That is what recovery rules are for.
+5. A step that sends events on (``sends``, a cell's links) is journalled with
+   their inbox rows in one commit (the store's rule 6), so a crash loses both
+   or neither; the events then reach their devices as accepted events do (rule
+   1), with the target devices' locks held so each device still gets its events
+   in ``seq`` order.
 """
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from statectl.errors import StatectlError
 from statectl.journal.read import JournalReader
 from statectl.journal.recovery import RecoveryRule
-from statectl.journal.store import Guarantee, Journal, StepKind, Ticket
+from statectl.journal.store import Guarantee, Journal, Send, StepKind, Ticket
 from statectl.journal.subjects import restore_subject
 from statectl.runtime.subject import Subject
+from statectl.semantics import Snapshot
 
 __all__ = ["JournalledDevice", "restore_subject"]
 
@@ -67,6 +74,8 @@ class JournalledDevice:
         # a poster never waits for the owner's step.
         self._expect: deque[tuple[int, str, Any]] = deque()
         self._lock = threading.Lock()
+        #: The events each step sends on (a cell's links), asked after the step (rule 5).
+        self.sends: Callable[[], Sequence[tuple[JournalledDevice, str]]] | None = None
         self.recovered: tuple[str, ...] = ()  # recovery events taken on resume
         self.redelivered = 0  # accepted events processed on resume
         journal.register(self.name, subject.chart.name, source, dict(subject.data))
@@ -112,16 +121,61 @@ class JournalledDevice:
         snapshot = self.subject.snapshot
         assert snapshot is not None
         kind = StepKind.RECOVERY if inbox == _RECOVERY else StepKind.EVENT
-        self.journal.record(
-            self.name,
-            kind,
-            snapshot,
-            time_=self.subject.clock.now(),
-            event=event,
-            data=data,
-            inbox=inbox if inbox > 0 else None,
-            outcome=outcome,
-        )
+        sends = self.sends() if self.sends is not None else ()
+        if not sends:
+            self.journal.record(
+                self.name,
+                kind,
+                snapshot,
+                time_=self.subject.clock.now(),
+                event=event,
+                data=data,
+                inbox=inbox if inbox > 0 else None,
+                outcome=outcome,
+            )
+            return
+        self._record_sending(sends, kind, snapshot, event, data, inbox, outcome)
+
+    def _record_sending(
+        self,
+        sends: Sequence[tuple[JournalledDevice, str]],
+        kind: StepKind,
+        snapshot: Snapshot,
+        event: str,
+        data: Any,
+        inbox: int,
+        outcome: str,
+    ) -> None:
+        """Rule 5: journal the step with the events it sends, then hand those to their devices."""
+        journal = self.journal
+        prompt = journal.guarantee is Guarantee.PROMPT
+        targets = sorted({d.name: d for d, _ in sends}.items())
+        with contextlib.ExitStack() as locks:
+            for _, d in targets:  # one order for every thread: posters take one device lock
+                locks.enter_context(d._lock)
+            seqs = journal.record(
+                self.name,
+                kind,
+                snapshot,
+                time_=self.subject.clock.now(),
+                event=event,
+                data=data,
+                inbox=inbox if inbox > 0 else None,
+                outcome=outcome,
+                sends=[
+                    Send(d.name, e, None, None if prompt else d._delivery(e)) for d, e in sends
+                ],
+            )
+            if prompt:
+                for (d, e), seq in zip(sends, seqs, strict=True):
+                    d._expect.append((seq, e, None))
+                    d.subject.post(e)
+        for _, d in targets:
+            if prompt and d.wake is not None:
+                d.wake()
+
+    def _delivery(self, event: str) -> Callable[[int], object]:
+        return lambda seq: self._deliver(seq, event, None)
 
     # -- coming up -----------------------------------------------------------------------
 

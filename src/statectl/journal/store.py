@@ -31,6 +31,10 @@ Rules:
 5. Commits are in ``seq`` order, so ``durable_seq`` only grows; a failing write
    stops the writer, fails every waiting ticket and is raised from
    :meth:`Journal.flush` and :meth:`Journal.close`.
+6. A step that sends events on (a cell's links) is one queue item with their
+   inbox rows (:meth:`Journal.record` with ``sends``), and the writer never
+   splits an item between commits: after a crash either the step and the events
+   it sent are in the journal, or neither is and the step runs again on resume.
 """
 
 from __future__ import annotations
@@ -43,7 +47,7 @@ import sys
 import threading
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -56,6 +60,7 @@ __all__ = [
     "Guarantee",
     "Journal",
     "JournalError",
+    "Send",
     "StepKind",
     "Sync",
     "Ticket",
@@ -213,6 +218,17 @@ _MAX_VARIABLES = 32_766 if sqlite3.sqlite_version_info >= (3, 32, 0) else 999
 _INSERT_INBOX = "INSERT INTO inbox VALUES (?, ?, ?, ?, ?)"
 _INSERT_STEP = "INSERT INTO steps VALUES (NULL, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)"
 _STOP = None  # put on the queue by close(): the writer commits what came before and ends
+_GROUP = "group"  # the sql of a queue item whose parameters are writes that commit together
+
+
+@dataclass(frozen=True, slots=True)
+class Send:
+    """An event a step sends to a device (a cell's link), accepted with the step's row."""
+
+    device: str
+    event: str
+    data: Any = None
+    deliver: Callable[[int], object] | None = None  # as for accept(); None under PROMPT
 
 
 def _report(fn: Callable[[], object]) -> None:
@@ -318,14 +334,38 @@ class Journal:
         data: Any = None,
         inbox: int | None = None,
         outcome: str = "",
-    ) -> None:
-        """Queue a step row (what a device did); never blocks."""
+        sends: Sequence[Send] = (),
+    ) -> tuple[int, ...]:
+        """Queue a step row (what a device did); never blocks.
+
+        ``sends`` are events the step sends on (a cell's links): each is accepted
+        with the step, in one queue item, so one commit holds the step and its
+        inbox rows or neither does (rule 6). Returns their ``seq`` numbers.
+        """
         active, history, previous = encode_snapshot(snapshot)
         params = (
             device, kind.value, inbox, time.time(), time_, event, encode_data(data), outcome,
             active, history, previous,
         )  # fmt: skip
-        self._put((_INSERT_STEP, params, 0, None))
+        step: _Write = (_INSERT_STEP, params, 0, None)
+        if not sends:
+            self._put(step)
+            return ()
+        texts = [encode_data(s.data) for s in sends]
+        wall = time.time()
+        with self._lock:
+            self._check()
+            if self._held:
+                self._release()
+            writes: list[_Write] = []
+            for s, text in zip(sends, texts, strict=True):
+                self._seq += 1
+                seq = self._seq
+                writes.append((_INSERT_INBOX, (seq, s.device, wall, s.event, text), seq, s.deliver))
+            writes.append(step)
+            self._enqueued += len(writes)
+            self._queue.put((_GROUP, tuple(writes), 0, None))
+            return tuple(w[2] for w in writes[:-1])
 
     def register(self, name: str, chart: str, source: str, data: Any) -> None:
         """Note which chart (and file) a device runs, for ``journal replay``."""
@@ -431,7 +471,9 @@ class Journal:
             if delay and first is not None:
                 time.sleep(delay)  # the commit window: see __init__
             stop = first is None
-            batch: list[_Write] = [] if first is None else [first]
+            batch: list[_Write] = []
+            if first is not None:
+                self._take(batch, first)
             while not stop and len(batch) < self.max_batch:
                 try:
                     w = more()
@@ -440,11 +482,19 @@ class Journal:
                 if w is None:
                     stop = True
                 else:
-                    batch.append(w)
+                    self._take(batch, w)
             if batch and not self._commit(db, batch):
                 return
             if stop:
                 return
+
+    @staticmethod
+    def _take(batch: list[_Write], w: _Write) -> None:
+        """Add a queue item to the batch; a group's writes all go in (rule 6)."""
+        if w[0] == _GROUP:
+            batch.extend(w[1])
+        else:
+            batch.append(w)
 
     def _commit(self, db: sqlite3.Connection, batch: list[_Write]) -> bool:
         """Write, commit, deliver, mark durable, run the hooks; False if the write failed."""
