@@ -162,9 +162,7 @@ class JournalledDevice:
                 data=data,
                 inbox=inbox if inbox > 0 else None,
                 outcome=outcome,
-                sends=[
-                    Send(d.name, e, None, None if prompt else d._delivery(e)) for d, e in sends
-                ],
+                sends=[Send(d.name, e, None, None if prompt else d._delivery(e)) for d, e in sends],
             )
             if prompt:
                 for (d, e), seq in zip(sends, seqs, strict=True):
