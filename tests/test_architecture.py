@@ -21,7 +21,10 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     "observers": ("errors", "model"),
     "tables": ("errors", "model"),
     "build": ("errors", "model", "expr", "observers", "tables"),
-    "check": ("errors", "model", "expr", "semantics", "observers", "tables", "build"),
+    "recovery": ("errors", "model", "tables"),
+    "check": (
+        "errors", "model", "expr", "semantics", "observers", "tables", "build", "recovery",
+    ),
     "render": ("errors", "model", "observers", "semantics"),
     "scxml": ("errors", "model", "expr", "semantics", "observers", "runtime"),
     "runtime": ("errors", "model", "expr", "semantics", "observers"),
@@ -36,12 +39,12 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "errors", "model", "expr", "semantics", "observers", "tables", "build", "scxml",
     ),
     "journal": (
-        "errors", "model", "expr", "semantics", "observers", "tables", "build", "runtime",
-        "devices",
+        "errors", "model", "expr", "semantics", "observers", "tables", "build", "recovery",
+        "runtime", "devices",
     ),
     "web": (
-        "errors", "model", "expr", "semantics", "observers", "tables", "build", "runtime",
-        "devices", "render", "journal", "cell", "explore",
+        "errors", "model", "expr", "semantics", "observers", "tables", "build", "recovery",
+        "runtime", "devices", "render", "journal", "cell", "explore",
     ),
 }
 THIRD_PARTY_FREE = (*KERNEL, "observers")

@@ -66,7 +66,11 @@ def md_case(old: str, new: str) -> dict[str, str | bytes]:
     return {"d.md": MD_GOOD.replace(old, new)}
 
 
-def workbook(states: list[list[object]], events: list[list[object]]) -> dict[str, str | bytes]:
+def workbook(
+    states: list[list[object]],
+    events: list[list[object]],
+    recovery: list[list[object]] | None = None,
+) -> dict[str, str | bytes]:
     wb = openpyxl.Workbook()
     ws = wb.active
     ws.title = "States"
@@ -75,6 +79,10 @@ def workbook(states: list[list[object]], events: list[list[object]]) -> dict[str
     ws = wb.create_sheet("Events")
     for row in events:
         ws.append(row)
+    if recovery is not None:
+        ws = wb.create_sheet("Recovery")
+        for row in recovery:
+            ws.append(row)
     out = io.BytesIO()
     wb.save(out)
     return {"d.xlsx": out.getvalue()}
@@ -149,6 +157,35 @@ CASES: list[tuple[str, dict[str, str | bytes], str, int | None, str]] = [
     ("yaml-bad-data-name", {"d.yaml": GOOD + "data:\n  2x: 1\n"}, "T112", 12, "name"),
     ("yaml-data-mapping", {"d.yaml": GOOD + "data:\n  x: {a: 1}\n"}, "T108", 12, "literal"),
     ("yaml-data-not-mapping", {"d.yaml": GOOD + "data: [1]\n"}, "T108", 11, "mapping"),
+    ("yaml-recovery-not-list", {"d.yaml": GOOD + "recovery: 3\n"}, "T108", 11, "list"),
+    (
+        "yaml-recovery-row-not-mapping",
+        {"d.yaml": GOOD + "recovery:\n  - B\n"},
+        "T108",
+        12,
+        "mapping",
+    ),
+    (
+        "yaml-recovery-unknown-key",
+        {"d.yaml": GOOD + "recovery:\n  - state: B\n    event: go\n    when: x\n"},
+        "T103",
+        14,
+        "recovery",
+    ),
+    (
+        "yaml-recovery-missing-event",
+        {"d.yaml": GOOD + "recovery:\n  - state: B\n"},
+        "T104",
+        12,
+        "'event'",
+    ),
+    (
+        "yaml-recovery-date-data",
+        {"d.yaml": GOOD + "recovery:\n  - state: B\n    event: go\n    data: 2016-01-01\n"},
+        "T108",
+        14,
+        "date",
+    ),
     ("csv-unclosed-quote", csv_case(events='event,old,new\n"go,A,B\n'), "T101", 2, "CSV"),
     ("csv-too-many-cells", csv_case(events="event,old,new\ngo,A,B,C\n"), "T101", 2, "cells"),
     ("csv-unknown-column", csv_case(events="event,old,nwe\ngo,A,B\n"), "T103", 1, "'new'"),
@@ -158,6 +195,27 @@ CASES: list[tuple[str, dict[str, str | bytes], str, int | None, str]] = [
     ("csv-empty-file", csv_case(events=""), "T105", 1, "no header"),
     ("csv-bad-control", csv_case(states="state,control\nA,dflt\n"), "T106", 2, "accepted"),
     ("csv-missing-events", {"d.states.csv": CSV_STATES}, "T110", None, "not found"),
+    (
+        "csv-recovery-unknown-column",
+        {**csv_case(), "d.recovery.csv": "state,evnt\nB,go\n"},
+        "T103",
+        1,
+        "'event'",
+    ),
+    (
+        "csv-recovery-missing-cell",
+        {**csv_case(), "d.recovery.csv": "state,event\nB,\n"},
+        "T104",
+        2,
+        "'event'",
+    ),
+    (
+        "csv-recovery-malformed-data",
+        {**csv_case(), "d.recovery.csv": 'state,event,data\nB,go,"{a: [1"\n'},
+        "T108",
+        2,
+        "YAML",
+    ),
     ("csv-not-utf8", csv_case(events=b"event,old,new\n\xff,A,B\n"), "T101", None, "UTF-8"),
     ("md-no-tables", {"d.md": "# Device: D\n\nJust prose.\n"}, "T102", 1, "States"),
     ("md-no-separator", md_case("|---|---|---|\n", ""), "T101", 13, "separator"),
@@ -172,6 +230,13 @@ CASES: list[tuple[str, dict[str, str | bytes], str, int | None, str]] = [
         "T107",
         14,
         "kind",
+    ),
+    (
+        "md-recovery-missing-cell",
+        {"d.md": MD_GOOD + "\n## Recovery\n\n| state | event |\n|---|---|\n| B | |\n"},
+        "T104",
+        20,
+        "'event'",
     ),
     ("xlsx-garbage", {"d.xlsx": b"not a zip"}, "T101", None, "XLSX"),
     ("xlsx-empty-sheets", workbook([], []), "T105", 1, "header"),
@@ -189,6 +254,20 @@ CASES: list[tuple[str, dict[str, str | bytes], str, int | None, str]] = [
         "T108",
         2,
         "date",
+    ),
+    (
+        "xlsx-recovery-unknown-column",
+        workbook(XLSX_STATES, XLSX_EVENTS, [["state", "event", "dat"], ["B", "go", "1"]]),
+        "T103",
+        1,
+        "'data'",
+    ),
+    (
+        "xlsx-recovery-mapping-with-number-keys",
+        workbook(XLSX_STATES, XLSX_EVENTS, [["state", "event", "data"], ["B", "go", "{1: a}"]]),
+        "T108",
+        2,
+        "text",
     ),
     ("unknown-suffix", {"d.txt": "device: D\n"}, "T102", None, "format"),
 ]

@@ -20,6 +20,7 @@ from statectl.model import (
     StateKind,
     Transition,
 )
+from statectl.recovery import CODES as RECOVERY_CODES
 
 MOTOR = Path(__file__).resolve().parent.parent / "examples" / "motor" / "motor.yaml"
 
@@ -360,8 +361,60 @@ def test_check_paths_checks_each_built_chart(tmp_path: Path) -> None:
     assert {d.where.file for d in found} == {str(path)}
 
 
+MOTOR_TABLES = MOTOR.read_text(encoding="utf-8").split("\nrecovery:\n")[0] + "\n"
+
+
+@pytest.mark.parametrize(
+    ("recovery", "found"),
+    [
+        ("recovery:\n  - {state: Moving, event: Error}\n", []),
+        ("", [("J606", Severity.INFO)]),
+        (
+            "recovery:\n  - {state: Flying, event: Error}\n",
+            [("J603", Severity.ERROR), ("J606", Severity.INFO)],
+        ),
+        ("recovery:\n  - {state: Moving, event: Movement}\n", [("J604", Severity.ERROR)]),
+        (
+            "recovery:\n  - {state: Moving, event: Error}\n  - {state: Moving, event: Error}\n",
+            [("J605", Severity.ERROR)],
+        ),
+    ],
+)
+def test_check_paths_checks_the_recovery_table(
+    tmp_path: Path, recovery: str, found: list[tuple[str, Severity]]
+) -> None:
+    """J603-J605 are errors; a monitored state without a rule (J606) is only info here."""
+    path = tmp_path / "motor.yaml"
+    path.write_text(MOTOR_TABLES + recovery, encoding="utf-8")
+    diags = [d for d in check_paths([str(path)]) if d.code.startswith("J")]
+    assert [(d.code, d.severity) for d in diags] == found
+
+
+@pytest.mark.parametrize(("flags", "shown"), [((), False), (("-v",), True)])
+def test_cli_check_shows_j606_only_when_verbose(
+    tmp_path: Path, flags: tuple[str, ...], shown: bool
+) -> None:
+    """`statectl check` passes a Motor without a rule; -v shows the J606 info."""
+    import io
+
+    from statectl.cli import main
+
+    path = tmp_path / "motor.yaml"
+    path.write_text(MOTOR_TABLES, encoding="utf-8")
+    out = io.StringIO()
+    assert main(["check", *flags, str(path)], out, io.StringIO()) == 0
+    assert ("J606 info" in out.getvalue()) is shown
+
+
 @pytest.mark.parametrize("code", sorted(CODES))
 def test_docs_explain_every_code(code: str) -> None:
     """docs/check.md has a section for every code the checker reports."""
+    docs = Path(__file__).resolve().parent.parent / "docs" / "check.md"
+    assert f"## {code} — " in docs.read_text(encoding="utf-8")
+
+
+@pytest.mark.parametrize("code", sorted(RECOVERY_CODES))
+def test_docs_explain_every_recovery_code(code: str) -> None:
+    """docs/check.md has a section for every code of the Recovery table's check."""
     docs = Path(__file__).resolve().parent.parent / "docs" / "check.md"
     assert f"## {code} — " in docs.read_text(encoding="utf-8")

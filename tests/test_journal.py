@@ -24,7 +24,6 @@ from statectl.journal import (
     check_recovery,
     export_jsonl,
     load_device,
-    load_recovery,
     replay,
 )
 from statectl.runner import (
@@ -37,20 +36,18 @@ from statectl.runner import (
     run,
 )
 from statectl.runtime import SimClock
+from statectl.tables import load
 
 MOTOR = Path(__file__).parent.parent / "examples" / "motor" / "motor.yaml"
-RECOVERY = """
-recovery:
-  - state: Moving
-    event: Error
-    data: {detail: resumed after a restart}
-"""
+#: The Motor's text without its Recovery table (the paper's two tables only).
+MOTOR_TABLES = MOTOR.read_text(encoding="utf-8").split("\nrecovery:\n")[0] + "\n"
 
 
 @pytest.fixture
 def device_file(tmp_path: Path) -> Path:
+    """A copy of the shipped Motor, whose Recovery table takes Moving through Error."""
     path = tmp_path / "motor.yaml"
-    path.write_text(MOTOR.read_text(encoding="utf-8") + RECOVERY, encoding="utf-8")
+    path.write_text(MOTOR.read_text(encoding="utf-8"), encoding="utf-8")
     return path
 
 
@@ -342,9 +339,11 @@ def test_replay_reaches_every_journalled_snapshot(
     ("text", "codes"),
     [
         ("recovery:\n  - {state: Moving, event: Error}\n", []),
-        ("recovery: 3\n", ["J601", "J606"]),
-        ("recovery:\n  - {state: Moving}\n", ["J602", "J606"]),
-        ("recovery:\n  - {state: Moving, event: Error, when: x}\n", ["J602"]),
+        ("recovery: 3\n", ["T108"]),
+        ("recovery:\n  - Moving\n", ["T108"]),
+        ("recovery:\n  - {state: Moving}\n", ["T104"]),
+        ("recovery:\n  - {state: Moving, event: Error, when: x}\n", ["T103"]),
+        ("recovery:\n  - {state: Moving, event: Error, data: 2016-01-01}\n", ["T108"]),
         ("recovery:\n  - {state: Flying, event: Error}\n", ["J603", "J606"]),
         ("recovery:\n  - {state: Moving, event: Initialization}\n", ["J604"]),
         (
@@ -352,27 +351,52 @@ def test_replay_reaches_every_journalled_snapshot(
             ["J605"],
         ),
         ("recovery: []\n", ["J606"]),
+        ("", ["J606"]),
     ],
 )
 def test_recovery_rules_are_checked(tmp_path: Path, text: str, codes: list[str]) -> None:
-    """Each problem of a recovery section is one diagnostic with its code."""
-    path = tmp_path / "r.yaml"
-    path.write_text(text, encoding="utf-8")
-    rules, diags = load_recovery(path)
-    diags += check_recovery(motor_chart(), rules)
+    """Each problem of a Recovery table is one diagnostic: its shape T1xx, its meaning J60x."""
+    path = tmp_path / "motor.yaml"
+    path.write_text(MOTOR_TABLES + text, encoding="utf-8")
+    tables, diags = load(path)
+    assert tables is not None
+    if not diags:
+        diags = check_recovery(motor_chart(), tables.recovery)
     assert sorted(d.code for d in diags) == sorted(codes)
 
 
-def test_a_device_file_with_a_recovery_section_keeps_its_line_numbers(tmp_path: Path) -> None:
-    """The section is blanked for the table loader, so a later table error names its own line."""
-    text = MOTOR.read_text(encoding="utf-8").replace("device: Motor", RECOVERY + "device: Motor")
+def test_load_device_reports_every_recovery_error_at_its_line(tmp_path: Path) -> None:
+    """A bad rule stops the load with its code and line; a table error later is reported too."""
+    text = MOTOR_TABLES.replace("device: Motor", "recovery:\n  - {state: Moving}\ndevice: Motor")
     text = text.replace("new: Moving", "new: Nowhere", 1)
     path = tmp_path / "bad.yaml"
     path.write_text(text, encoding="utf-8")
     with pytest.raises(DiagnosticError) as caught:
         load_device(path)
-    line = next(i for i, t in enumerate(text.splitlines(), 1) if t == "  - event: Movement")
-    assert any(d.where.line == line for d in caught.value.diagnostics)
+    lines = text.splitlines()
+    rule = lines.index("  - {state: Moving}") + 1
+    row = lines.index("  - event: Movement") + 1
+    found = {(d.code, d.where.line) for d in caught.value.diagnostics}
+    assert ("T104", rule) in found
+    assert any(line == row for _, line in found), found
+
+
+@pytest.mark.parametrize(
+    ("text", "severities"),
+    [
+        ("", {"J606": "warning"}),
+        ("recovery:\n  - {state: Moving, event: Error}\n", {}),
+    ],
+)
+def test_load_device_warns_about_a_monitored_state_without_a_rule(
+    tmp_path: Path, text: str, severities: dict[str, str]
+) -> None:
+    """For a journalled run J606 is a warning (statectl check shows it as info)."""
+    path = tmp_path / "motor.yaml"
+    path.write_text(MOTOR_TABLES + text, encoding="utf-8")
+    dev = load_device(path)
+    assert {d.code: d.severity.value for d in dev.warnings} == severities
+    assert [(r.state, r.event) for r in dev.rules] == [("Moving", "Error")] * bool(text)
 
 
 def test_non_json_event_data_is_refused(tmp_path: Path) -> None:

@@ -12,6 +12,7 @@ from statectl.model import ControlKind, EventKind
 from statectl.tables import (
     DeviceTables,
     Format,
+    RecoveryRow,
     dump,
     dump_csv,
     format_of,
@@ -40,6 +41,15 @@ def test_motor_yaml_loads_without_diagnostics() -> None:
     assert tables.device == "Motor"
     assert [s.state for s in tables.states] == ["Blocked", "Moving", "Returning"]
     assert len(tables.events) == 6
+
+
+def test_motor_yaml_has_its_recovery_row() -> None:
+    """The Motor's Recovery table takes a resumed Moving through Error, with its data."""
+    lines = MOTOR_YAML.read_text(encoding="utf-8").splitlines()
+    line = lines.index("  - state: Moving", lines.index("recovery:")) + 1
+    data = {"detail": "resumed after a restart"}
+    where = Location(str(MOTOR_YAML), line)
+    assert motor().recovery == (RecoveryRow("Moving", "Error", data, where),)
 
 
 @pytest.mark.parametrize(
@@ -87,12 +97,13 @@ def test_yaml_rows_keep_their_line(which: str, index: int, line: int) -> None:
         "motor.yaml",
         "motor.states.csv",
         "motor.events.csv",
+        "motor.recovery.csv",
         ".",
         "motor.xlsx",
     ],
 )
 def test_shipped_motor_files_equal_the_yaml(path: str) -> None:
-    """The shipped CSV pair and workbook hold exactly the Motor of motor.yaml."""
+    """The shipped CSV files and workbook hold exactly the Motor of motor.yaml, recovery too."""
     tables, diags = load(MOTOR / path)
     assert diags == []
     assert tables is not None
@@ -152,7 +163,7 @@ def test_md_rows_point_at_their_line() -> None:
 
 def test_csv_without_device_comment_takes_the_file_name(tmp_path: Path) -> None:
     """Absent '# device:', the CSV pair's NAME is the device."""
-    states, events, _ = dump_csv(motor())
+    states, events, _, _ = dump_csv(motor())
     (tmp_path / "arm.states.csv").write_text(states.split("\n", 1)[1])
     (tmp_path / "arm.events.csv").write_text(events.split("\n", 1)[1])
     tables, diags = load(tmp_path / "arm.states.csv")
@@ -250,9 +261,13 @@ def test_dump_csv_refuses_a_single_text() -> None:
 
 
 def test_csv_save_to_directory_uses_the_device_name(tmp_path: Path) -> None:
-    """Saving a CSV pair into a directory names the files after the device."""
+    """Saving CSV into a directory names the files after the device."""
     written = save(motor(), tmp_path, "csv")
-    assert sorted(p.name for p in written) == ["Motor.events.csv", "Motor.states.csv"]
+    assert sorted(p.name for p in written) == [
+        "Motor.events.csv",
+        "Motor.recovery.csv",
+        "Motor.states.csv",
+    ]
 
 
 def test_save_replaces_an_existing_file_and_leaves_no_temporaries(tmp_path: Path) -> None:
@@ -299,15 +314,29 @@ def test_docs_yaml_example_loads_as_the_motor(tmp_path: Path) -> None:
 
 
 def test_docs_csv_example_loads_as_the_motor(tmp_path: Path) -> None:
-    """The CSV pair in docs/tables.md holds the Motor's states and all its events."""
-    states, events = doc_blocks("csv")
+    """The CSV files in docs/tables.md hold the Motor's states, all its events and recovery."""
+    states, events, recovery = doc_blocks("csv")
     (tmp_path / "motor.states.csv").write_text(states, encoding="utf-8")
     (tmp_path / "motor.events.csv").write_text(events, encoding="utf-8")
+    (tmp_path / "motor.recovery.csv").write_text(recovery, encoding="utf-8")
     tables, diags = load(tmp_path)
     assert diags == []
     assert tables is not None
     assert strip_locations(tables).events == strip_locations(motor()).events
+    assert strip_locations(tables).recovery == strip_locations(motor()).recovery
     assert [s.state for s in tables.states] == ["Blocked", "Moving", "Returning"]
+
+
+def test_docs_recovery_example_is_the_motors(tmp_path: Path) -> None:
+    """The Recovery table in docs/tables.md is the one motor.yaml ships."""
+    block = next(b for b in doc_blocks("yaml") if "\nrecovery:\n" in b)
+    two_tables = MOTOR_YAML.read_text(encoding="utf-8").split("\nrecovery:\n")[0]
+    path = tmp_path / "doc.yaml"
+    path.write_text(two_tables + "\n" + block, encoding="utf-8")
+    tables, diags = load(path)
+    assert diags == []
+    assert tables is not None
+    assert strip_locations(tables).recovery == strip_locations(motor()).recovery
 
 
 def test_docs_list_every_code() -> None:
@@ -317,3 +346,88 @@ def test_docs_list_every_code() -> None:
 
     text = DOCS.read_text(encoding="utf-8")
     assert [c for c in (*TABLE_CODES, *BUILD_CODES) if f"| {c} |" not in text] == []
+
+
+# --- the Recovery table ------------------------------------------------------------------
+
+RECOVERY = (
+    RecoveryRow("Moving", "Error", {"detail": "resumed after a restart", "tries": [1, 2.5]}),
+    RecoveryRow("Returning", "Error completion"),
+    RecoveryRow("Blocked", "Initialization", "a, b | c"),
+)
+
+
+@pytest.mark.parametrize("fmt", ["yaml", "csv", "xlsx", "md"])
+def test_recovery_round_trips_through_every_format(tmp_path: Path, fmt: str) -> None:
+    """Recovery rows keep their order and their data's YAML types in every format."""
+    tables = DeviceTables("Arm", motor().states, motor().events, recovery=RECOVERY)
+    written = save(tables, tmp_path / f"arm.{fmt}", fmt)
+    back, diags = load(written[0])
+    assert diags == []
+    assert back is not None
+    assert strip_locations(back).recovery == RECOVERY
+
+
+@pytest.mark.parametrize(
+    ("fmt", "marker"),
+    [("yaml", "recovery:"), ("csv", "recovery.csv"), ("xlsx", "Recovery"), ("md", "## Recovery")],
+)
+def test_an_empty_recovery_table_is_left_out(tmp_path: Path, fmt: str, marker: str) -> None:
+    """Without recovery rows no format writes a Recovery table (file, sheet or section)."""
+    tables = DeviceTables("Arm", motor().states, motor().events)
+    written = save(tables, tmp_path / f"arm.{fmt}", fmt)
+    if fmt == "xlsx":
+        import openpyxl
+
+        found = " ".join(openpyxl.load_workbook(written[0]).sheetnames)
+    elif fmt == "csv":
+        found = " ".join(p.name for p in tmp_path.iterdir())
+    else:
+        found = written[0].read_text(encoding="utf-8")
+    assert marker not in found
+
+
+def test_csv_save_without_recovery_removes_a_stale_recovery_file(tmp_path: Path) -> None:
+    """Saving tables without recovery rows over CSV files that had them loads back without."""
+    save(motor(), tmp_path / "motor.states.csv")
+    assert (tmp_path / "motor.recovery.csv").exists()
+    tables = DeviceTables("Motor", motor().states, motor().events)
+    save(tables, tmp_path / "motor.states.csv")
+    back, diags = load(tmp_path / "motor.states.csv")
+    assert diags == []
+    assert back is not None
+    assert (back.recovery, (tmp_path / "motor.recovery.csv").exists()) == ((), False)
+
+
+@pytest.mark.parametrize(
+    ("fmt", "where"),
+    [
+        ("yaml", Location("arm.yaml", None)),  # line: found below
+        ("csv", Location("arm.recovery.csv", 4)),  # after the device comment and the header
+        ("xlsx", Location("arm.xlsx", 3, sheet="Recovery")),  # row 1 is the header
+        ("md", Location("arm.md", None)),
+    ],
+)
+def test_recovery_rows_point_at_their_row(tmp_path: Path, fmt: str, where: Location) -> None:
+    """A recovery row's origin is its file and line, or its sheet and row."""
+    tables = DeviceTables("arm", motor().states, motor().events, recovery=RECOVERY)
+    written = save(tables, tmp_path / f"arm.{fmt}", fmt)
+    back, _ = load(written[0])
+    assert back is not None
+    origin = back.recovery[1].origin
+    assert (Path(origin.file).name, origin.sheet) == (where.file, where.sheet)
+    if fmt in ("yaml", "md"):
+        assert origin.line is not None
+        line = written[0].read_text(encoding="utf-8").split("\n")[origin.line - 1]
+        assert "Returning" in line
+    else:
+        assert origin.line == where.line
+
+
+def test_dump_yaml_writes_recovery_last_with_flow_data() -> None:
+    """The YAML writer puts recovery after the events, its data in flow style, as in the Motor."""
+    text = dump(motor(), "yaml")
+    assert isinstance(text, str)
+    assert text.endswith(
+        "recovery:\n- state: Moving\n  event: Error\n  data: {detail: resumed after a restart}\n"
+    )

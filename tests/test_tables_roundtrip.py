@@ -11,7 +11,15 @@ from hypothesis import strategies as st
 from statectl.build import build
 from statectl.model import ControlKind, EventKind, Notify, StateKind
 from statectl.observers import DRIVING_KINDS
-from statectl.tables import DeviceTables, EventRow, StateRow, load, save, strip_locations
+from statectl.tables import (
+    DeviceTables,
+    EventRow,
+    RecoveryRow,
+    StateRow,
+    load,
+    save,
+    strip_locations,
+)
 from statectl.tables.csv_io import dump_csv, read_csv
 from statectl.tables.md_io import dump_md, read_md
 from statectl.tables.xlsx_io import dump_xlsx, read_xlsx
@@ -52,6 +60,15 @@ data = st.dictionaries(
     st.from_regex(r"[a-z][a-z0-9_]{0,8}", fullmatch=True), values, max_size=3
 ).map(lambda d: tuple(d.items()))
 
+# A recovery row's data: an event payload, so mappings (text keys) and lists nest.
+payloads = st.recursive(
+    scalars,
+    lambda inner: st.lists(inner, max_size=3)
+    | st.dictionaries(st.text(TEXT_CHARS, max_size=6), inner, max_size=3),
+    max_leaves=6,
+)
+recovery_rows = st.builds(RecoveryRow, state=names, event=names, data=payloads)
+
 state_rows = st.builds(
     StateRow,
     component=optional_names,
@@ -81,6 +98,7 @@ device_tables = st.builds(
     states=st.lists(state_rows, min_size=1, max_size=4).map(tuple),
     events=st.lists(event_rows, min_size=1, max_size=4).map(tuple),
     data=data,
+    recovery=st.lists(recovery_rows, max_size=3).map(tuple),
 )
 
 
@@ -89,12 +107,13 @@ def via_yaml(t: DeviceTables) -> DeviceTables | None:
 
 
 def via_csv(t: DeviceTables) -> DeviceTables | None:
-    states, events, values_ = dump_csv(t)
+    states, events, values_, recovery = dump_csv(t)
     return read_csv(
         (states, "t.states.csv"),
         (events, "t.events.csv"),
         (values_, "t.data.csv") if values_ is not None else None,
         "t",
+        (recovery, "t.recovery.csv") if recovery is not None else None,
     )[0]
 
 
@@ -109,7 +128,7 @@ def via_md(t: DeviceTables) -> DeviceTables | None:
 @settings(max_examples=150, deadline=None)
 @given(device_tables)
 def test_yaml_csv_xlsx_md_chain_is_lossless(tables: DeviceTables) -> None:
-    """YAML -> CSV -> XLSX -> MD -> YAML gives back the same tables at every step."""
+    """YAML -> CSV -> XLSX -> MD -> YAML gives back the same tables (recovery rows too)."""
     expected = strip_locations(tables)
     current: DeviceTables | None = tables
     for convert in (via_yaml, via_csv, via_xlsx, via_md, via_yaml):

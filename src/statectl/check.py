@@ -20,7 +20,8 @@ C408 warning  A ``fault`` event leaves a state that is not ``monitoring required
               monitor is running there to raise it.
 
 Undefined guard names and other table errors are the builder's (X3xx, T/B codes);
-:func:`check_paths` reports those too, then checks each chart that built.
+:func:`check_paths` reports those too, then checks each chart that built, and its
+Recovery table with :func:`statectl.recovery.check_recovery` (J603-J605 errors, J606 info).
 """
 
 from __future__ import annotations
@@ -31,10 +32,12 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from statectl.build import load_and_build
-from statectl.errors import Diagnostic, DiagnosticError, Location, Severity
+from statectl.build import build
+from statectl.errors import Diagnostic, Location, Severity, has_errors
 from statectl.model import Chart, ControlKind, EventKind, State, StateKind, Transition
+from statectl.recovery import check_recovery
 from statectl.semantics import name_match
+from statectl.tables import load
 
 __all__ = ["CODES", "check_chart", "check_paths", "guards_exclusive"]
 
@@ -608,14 +611,20 @@ def check_chart(chart: Chart) -> Iterator[Diagnostic]:
 
 
 def check_paths(paths: Sequence[str]) -> list[Diagnostic]:
-    """Load and build each file (its diagnostics included), then check each chart that built."""
+    """Load and build each file (its diagnostics included), then check each chart that built.
+
+    The chart's Recovery table is checked too (J603-J605 errors); a monitored
+    state without a rule (J606) is info here, since only a journalled run needs one.
+    """
     out: list[Diagnostic] = []
     for path in paths:
-        try:
-            chart, diagnostics = load_and_build(path)
-        except DiagnosticError as exc:
-            chart, diagnostics = None, list(exc.diagnostics)
+        tables, diagnostics = load(path)
         out.extend(diagnostics)
-        if chart is not None:
+        if tables is None:
+            continue
+        chart, more = build(tables)  # built even after load errors: report both at once
+        out.extend(more)
+        if chart is not None and not has_errors(diagnostics):
             out.extend(check_chart(chart))
+            out.extend(check_recovery(chart, tables.recovery))
     return out

@@ -2,7 +2,7 @@
 
 See docs/journal.md. :class:`Journal` writes (one thread, group commit),
 :class:`JournalReader` reads, :class:`JournalledDevice` binds a running Subject
-to both, :func:`load_device` reads a device file with its recovery rules.
+to both, :func:`load_device` reads a device file with its Recovery table.
 """
 
 from statectl.journal.device import JournalledDevice
@@ -16,15 +16,7 @@ from statectl.journal.read import (
     export_jsonl,
     replay,
 )
-from statectl.journal.recovery import (
-    CODES,
-    DeviceFile,
-    RecoveryRule,
-    check_recovery,
-    load_device,
-    load_recovery,
-    recovery_file,
-)
+from statectl.journal.recovery import CODES, DeviceFile, RecoveryRule, check_recovery, load_device
 from statectl.journal.store import Guarantee, Journal, JournalError, StepKind, Sync, Ticket
 from statectl.journal.subjects import restore_subject
 
@@ -48,8 +40,6 @@ __all__ = [
     "check_recovery",
     "export_jsonl",
     "load_device",
-    "load_recovery",
-    "recovery_file",
     "replay",
     "restore_subject",
 ]

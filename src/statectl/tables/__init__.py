@@ -1,8 +1,10 @@
-"""The paper's State and Event Definition tables: read and write them in four formats.
+"""The paper's State and Event Definition tables (and the Recovery table): four formats.
 
 Rules:
 1. The format comes from the path: ``.yaml``/``.yml``, ``.csv`` (or a directory
-   holding one CSV pair), ``.xlsx``, ``.md``/``.markdown``.
+   holding one CSV pair), ``.xlsx``, ``.md``/``.markdown``. A device's optional
+   tables (data, recovery) sit in the same file, or for CSV in their own files
+   ``NAME.data.csv`` and ``NAME.recovery.csv`` beside the pair.
 2. :func:`load` never raises for bad input: it returns the tables (``None`` if
    there was any error) and every diagnostic found.
 3. Conversion is lossless: ``load(save(t))`` equals ``t`` except for locations
@@ -10,6 +12,9 @@ Rules:
 4. :func:`save` writes atomically: every file goes to a temporary name in its
    directory first and is renamed into place only when all were written, so a
    failed save leaves nothing half-written. It raises :class:`DiagnosticError`.
+   Saving CSV tables without data or recovery rows removes a stale
+   ``NAME.data.csv`` / ``NAME.recovery.csv`` after the renames, so that what was
+   saved is what loads back.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ from statectl.tables.schema import (
     CODES,
     DeviceTables,
     EventRow,
+    RecoveryRow,
     StateRow,
     diag,
     strip_locations,
@@ -40,6 +46,7 @@ __all__ = [
     "DeviceTables",
     "EventRow",
     "Format",
+    "RecoveryRow",
     "StateRow",
     "dump",
     "dump_csv",
@@ -134,14 +141,17 @@ def load(path: str | os.PathLike[str]) -> tuple[DeviceTables | None, list[Diagno
         states = _read_text(files.states, diags)
         events = _read_text(files.events, diags)
         data = _read_text(files.data, diags) if files.data.exists() else None
+        recovery = _read_text(files.recovery, diags) if files.recovery.exists() else None
         if states is None or events is None:
             return None, diags
-        return read_csv(
+        tables, more = read_csv(
             (states, str(files.states)),
             (events, str(files.events)),
             (data, str(files.data)) if data is not None else None,
             files.name,
+            (recovery, str(files.recovery)) if recovery is not None else None,
         )
+        return tables, [*diags, *more]
     if fmt is Format.XLSX:
         try:
             content = p.read_bytes()
@@ -161,7 +171,7 @@ def load(path: str | os.PathLike[str]) -> tuple[DeviceTables | None, list[Diagno
 def dump(tables: DeviceTables, fmt: str | Format) -> str | bytes:
     """One file's content: text for YAML and Markdown, bytes for XLSX.
 
-    A CSV device is two or three files: use :func:`dump_csv` for it.
+    A CSV device is two to four files: use :func:`dump_csv` for it.
     """
     f = fmt if isinstance(fmt, Format) else Format(fmt.lower())
     problems = validate_for_writing(tables, tables.source)
@@ -176,20 +186,24 @@ def dump(tables: DeviceTables, fmt: str | Format) -> str | bytes:
     raise ValueError("a CSV device is several files: use dump_csv() or save()")
 
 
-def _contents(tables: DeviceTables, fmt: Format, path: Path) -> dict[Path, str | bytes]:
+def _contents(
+    tables: DeviceTables, fmt: Format, path: Path
+) -> tuple[dict[Path, str | bytes], tuple[Path, ...]]:
+    """The files to write, and the stale optional CSV files to remove after them."""
     if fmt is Format.CSV:
         files = csv_paths(path, tables.device if path.is_dir() else None)
         assert files is not None  # with a device name a directory always names a pair
-        states, events, data = dump_csv(tables)
+        states, events, data, recovery = dump_csv(tables)
         out: dict[Path, str | bytes] = {files.states: states, files.events: events}
-        if data is not None:
-            out[files.data] = data
-        return out
-    return {path: dump(tables, fmt)}
+        for target, text in zip(files.optional, (data, recovery), strict=True):
+            if text is not None:
+                out[target] = text
+        return out, tuple(p for p in files.optional if p not in out and p.exists())
+    return {path: dump(tables, fmt)}, ()
 
 
-def _write_all(contents: dict[Path, str | bytes]) -> None:
-    """Write every file to a temporary name, then rename all into place."""
+def _write_all(contents: dict[Path, str | bytes], stale: tuple[Path, ...] = ()) -> None:
+    """Write every file to a temporary name, rename all into place, then drop ``stale``."""
     temps: list[tuple[str, Path]] = []
     try:
         for target, content in contents.items():
@@ -201,6 +215,9 @@ def _write_all(contents: dict[Path, str | bytes]) -> None:
                 fh.write(content.encode("utf-8") if isinstance(content, str) else content)
         for temp, target in temps:
             os.replace(temp, target)
+        for old in stale:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(old)
     finally:
         for temp, _ in temps:
             with contextlib.suppress(FileNotFoundError):
@@ -221,7 +238,7 @@ def save(
     if problems:
         raise DiagnosticError(problems)
     try:
-        contents = _contents(tables, f, p)
+        contents, stale = _contents(tables, f, p)
     except DiagnosticError:
         raise
     except Exception as exc:  # e.g. characters a workbook cannot hold
@@ -229,7 +246,7 @@ def save(
             [diag("T108", Location(str(p)), f"the tables cannot be written as {f.value}: {exc}")]
         ) from exc
     try:
-        _write_all(contents)
+        _write_all(contents, stale)
     except OSError as exc:
         raise DiagnosticError(
             [diag("T110", Location(str(p)), f"cannot write: {exc.strerror or exc}")]

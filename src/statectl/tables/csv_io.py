@@ -1,11 +1,13 @@
-"""Device tables as a CSV pair: ``NAME.states.csv`` + ``NAME.events.csv`` (+ ``NAME.data.csv``).
+"""Device tables as CSV: ``NAME.states.csv`` + ``NAME.events.csv`` (+ data, + recovery).
 
 Rules:
 1. Each file has a header row naming its columns (any order, any subset that
    holds the required ones); leading lines starting with ``#`` are comments, and
    ``# device: NAME`` among them names the device (else ``NAME`` from the file name).
 2. List cells (``control``, ``ignore``) are comma-separated inside one cell.
-3. The data file has columns ``name,value``; a value is a YAML literal.
+3. The optional data file ``NAME.data.csv`` has columns ``name,value``; a value
+   is a YAML literal. The optional recovery file ``NAME.recovery.csv`` has
+   columns ``state,event,data``; data is a YAML flow value.
 4. Locations are the CSV line where a record starts (1-based, comments counted).
 5. Quoting is strict: an unclosed quote is T101 at the line the parser reached.
 """
@@ -22,6 +24,7 @@ from statectl.errors import Diagnostic, Location
 from statectl.tables.schema import (
     DATA_COLUMNS,
     EVENT_COLUMNS,
+    RECOVERY_COLUMNS,
     DeviceTables,
     RawRow,
     RawTable,
@@ -30,6 +33,7 @@ from statectl.tables.schema import (
     format_literal,
     make_tables,
     parse_literal,
+    recovery_cells,
     state_cells,
     state_columns,
 )
@@ -37,7 +41,7 @@ from statectl.tables.schema import (
 __all__ = ["CsvFiles", "csv_paths", "dump_csv", "read_csv"]
 
 DEVICE_LINE = re.compile(r"^#\s*device\s*:\s*(.*)$", re.IGNORECASE)
-SUFFIXES = (".states.csv", ".events.csv", ".data.csv")
+SUFFIXES = (".states.csv", ".events.csv", ".data.csv", ".recovery.csv")
 
 
 @dataclass(frozen=True, slots=True)
@@ -48,6 +52,12 @@ class CsvFiles:
     states: Path
     events: Path
     data: Path
+    recovery: Path
+
+    @property
+    def optional(self) -> tuple[Path, ...]:
+        """The files a device may do without (written only when their table has rows)."""
+        return (self.data, self.recovery)
 
 
 def csv_paths(path: Path, device: str | None = None) -> CsvFiles | None:
@@ -77,6 +87,7 @@ def csv_paths(path: Path, device: str | None = None) -> CsvFiles | None:
         base / f"{name}.states.csv",
         base / f"{name}.events.csv",
         base / f"{name}.data.csv",
+        base / f"{name}.recovery.csv",
     )
 
 
@@ -147,8 +158,9 @@ def read_csv(
     events: tuple[str, str],
     data: tuple[str, str] | None,
     name: str,
+    recovery: tuple[str, str] | None = None,
 ) -> tuple[DeviceTables | None, list[Diagnostic]]:
-    """Read the pair (and data file), each given as (text, file name)."""
+    """Read the pair (and the data and recovery files), each given as (text, file name)."""
     diags: list[Diagnostic] = []
     dev_s, state_table = _table("states", states[0], states[1], diags)
     dev_e, event_table = _table("events", events[0], events[1], diags)
@@ -170,7 +182,12 @@ def read_csv(
             value = row.cells.get("value", ("", where))[0]
             assert isinstance(key, str) and isinstance(value, str)  # CSV cells are text
             entries.append((key.strip(), parse_literal(value, where, diags), where))
-    result = make_tables(device, state_table, event_table, entries, Location(states[1], 1), diags)
+    recovery_table = None
+    if recovery is not None:
+        _, recovery_table = _table("recovery", recovery[0], recovery[1], diags)
+    result = make_tables(
+        device, state_table, event_table, entries, Location(states[1], 1), diags, recovery_table
+    )
     return result, diags
 
 
@@ -183,8 +200,8 @@ def _write(header: tuple[str, ...], rows: list[list[str]], device: str) -> str:
     return out.getvalue()
 
 
-def dump_csv(tables: DeviceTables) -> tuple[str, str, str | None]:
-    """The states, events and (if any data) data files' text."""
+def dump_csv(tables: DeviceTables) -> tuple[str, str, str | None, str | None]:
+    """The states, events, data and recovery files' text (``None``: that table is empty)."""
     columns = state_columns(tables)
     states = _write(
         columns,
@@ -206,4 +223,9 @@ def dump_csv(tables: DeviceTables) -> tuple[str, str, str | None]:
             [[name, format_literal(value)] for name, value in tables.data],
             tables.device,
         )
-    return states, events, data
+    recovery = None
+    if tables.recovery:
+        recovery = _write(
+            RECOVERY_COLUMNS, [recovery_cells(r) for r in tables.recovery], tables.device
+        )
+    return states, events, data, recovery

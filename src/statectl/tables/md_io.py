@@ -2,8 +2,8 @@
 
 Rules:
 1. ``# Device: NAME`` names the device (else the file name); ``## States``,
-   ``## Events`` and optional ``## Data`` each introduce the first pipe table
-   after them. Other text is ignored.
+   ``## Events`` and optional ``## Data`` and ``## Recovery`` each introduce the
+   first pipe table after them. Other text is ignored.
 2. A table is a header row, a ``---`` separator row, then rows; columns are
    matched by name as in every format.
 3. In a cell, ``\\|`` is a pipe, ``\\\\`` a backslash, ``\\n`` a line break and
@@ -19,6 +19,7 @@ from statectl.errors import Diagnostic, Location
 from statectl.tables.schema import (
     DATA_COLUMNS,
     EVENT_COLUMNS,
+    RECOVERY_COLUMNS,
     DeviceTables,
     RawRow,
     RawTable,
@@ -27,6 +28,7 @@ from statectl.tables.schema import (
     format_literal,
     make_tables,
     parse_literal,
+    recovery_cells,
     state_cells,
     state_columns,
 )
@@ -34,7 +36,7 @@ from statectl.tables.schema import (
 __all__ = ["dump_md", "escape", "read_md", "unescape"]
 
 DEVICE = re.compile(r"^#\s+device\s*:\s*(.*)$", re.IGNORECASE)
-SECTION = re.compile(r"^##\s+(states|events|data)\s*$", re.IGNORECASE)
+SECTION = re.compile(r"^##\s+(states|events|data|recovery)\s*$", re.IGNORECASE)
 SEPARATOR = re.compile(r"^:?-+:?$")
 UNESCAPE = {"|": "|", "\\": "\\", "n": "\n", "r": "\r"}
 
@@ -157,12 +159,12 @@ def read_md(text: str, file: str, stem: str) -> tuple[DeviceTables | None, list[
             )
         ]
     tables: dict[str, RawTable | None] = {}
-    for table in ("states", "events", "data"):
+    for table in ("states", "events", "data", "recovery"):
         if table in blocks:
             tables[table] = _parse_table(table, blocks[table], file, diags)
         else:
             tables[table] = None
-            if table != "data":
+            if table in ("states", "events"):
                 diags.append(
                     diag("T104", Location(file, 1), f"no '## {table.title()}' table in the file")
                 )
@@ -180,6 +182,7 @@ def read_md(text: str, file: str, stem: str) -> tuple[DeviceTables | None, list[
         entries,
         Location(file, 1),
         diags,
+        tables["recovery"],
     )
     return result, diags
 
@@ -212,4 +215,7 @@ def dump_md(tables: DeviceTables) -> str:
         lines += _table(
             DATA_COLUMNS, [[name, format_literal(value)] for name, value in tables.data]
         )
+    if tables.recovery:
+        lines += ["", "## Recovery", ""]
+        lines += _table(RECOVERY_COLUMNS, [recovery_cells(r) for r in tables.recovery])
     return "\n".join(lines) + "\n"

@@ -2,7 +2,9 @@
 
 Rules:
 1. A device file holds a device name, a State Definition table, an Event
-   Definition table and optional data (name -> literal initial value).
+   Definition table, optional data (name -> literal initial value) and an
+   optional Recovery table (state -> the event to post when a restarted device
+   resumes in that state; checked against the chart by ``statectl.recovery``).
 2. Columns are those of ``examples/motor/motor.yaml``: states ``component, api,
    state, control, description, ignore, parent`` plus the optional hierarchy
    columns ``type`` and ``default``; events ``event, condition, guard, old, new,
@@ -19,6 +21,11 @@ Rules:
    two columns only when some row uses them, so flat tables look as before.
 5. Data values are YAML literals: null, booleans, numbers, strings and lists of
    them (kept as tuples so the tables stay hashable values).
+5a. Recovery rows have columns ``state, event, data`` (``state`` and ``event``
+   required). ``data`` is the event's payload as a YAML flow value such as
+   ``{detail: restarted}``: null, booleans, numbers, strings, lists and mappings
+   with text keys, kept as plain lists and dicts because that is what a running
+   device receives and the journal stores (a row with data is not hashable).
 6. Format readers turn a file into :class:`RawTable` values (cells with their
    locations); :func:`make_tables` turns those into :class:`DeviceTables` and
    reports every problem as a T1xx diagnostic, never stopping at the first.
@@ -41,6 +48,7 @@ __all__ = [
     "DATA_COLUMNS",
     "EVENT_COLUMNS",
     "NOWHERE",
+    "RECOVERY_COLUMNS",
     "STATE_COLUMNS",
     "TYPE_NAMES",
     "TYPE_WORDS",
@@ -49,12 +57,15 @@ __all__ = [
     "EventRow",
     "RawRow",
     "RawTable",
+    "RecoveryRow",
     "StateRow",
     "check_header",
     "diag",
     "format_literal",
     "make_tables",
     "parse_literal",
+    "parse_payload",
+    "recovery_cells",
     "state_cells",
     "state_columns",
     "strip_locations",
@@ -78,15 +89,18 @@ STATE_COLUMNS = (
 FLAT_STATE_COLUMNS = STATE_COLUMNS[:7]
 EVENT_COLUMNS = ("event", "condition", "guard", "old", "new", "kind", "api", "invoke")
 DATA_COLUMNS = ("name", "value")
+RECOVERY_COLUMNS = ("state", "event", "data")
 COLUMNS: Mapping[str, tuple[str, ...]] = {
     "states": STATE_COLUMNS,
     "events": EVENT_COLUMNS,
     "data": DATA_COLUMNS,
+    "recovery": RECOVERY_COLUMNS,
 }
 REQUIRED: Mapping[str, tuple[str, ...]] = {
     "states": ("state",),
     "events": ("event", "old", "new"),
     "data": ("name",),
+    "recovery": ("state", "event"),
 }
 #: The paper's and spreadsheet-friendly names for the columns.
 ALIASES: Mapping[str, str] = {
@@ -189,6 +203,20 @@ class EventRow:
 
 
 @dataclass(frozen=True, slots=True)
+class RecoveryRow:
+    """One row of the Recovery table: on resume in ``state``, post ``event`` with ``data`` first.
+
+    A device that was Moving when the power went away is not moving any more;
+    the row names the transition that brings its chart back in line (rule 5a).
+    """
+
+    state: str
+    event: str
+    data: object = None  # the event's payload: a plain value, lists and dicts (rule 5a)
+    origin: Location = NOWHERE
+
+
+@dataclass(frozen=True, slots=True)
 class DeviceTables:
     """A device's tables as read from one file (or one CSV pair)."""
 
@@ -197,6 +225,7 @@ class DeviceTables:
     events: tuple[EventRow, ...]
     data: tuple[tuple[str, object], ...] = ()
     source: Location = NOWHERE
+    recovery: tuple[RecoveryRow, ...] = ()  # the third table; empty: none (rule 5a)
 
 
 def strip_locations(tables: DeviceTables) -> DeviceTables:
@@ -206,6 +235,7 @@ def strip_locations(tables: DeviceTables) -> DeviceTables:
         states=tuple(replace(s, where=NOWHERE) for s in tables.states),
         events=tuple(replace(e, where=NOWHERE) for e in tables.events),
         source=NOWHERE,
+        recovery=tuple(replace(r, origin=NOWHERE) for r in tables.recovery),
     )
 
 
@@ -235,7 +265,7 @@ class RawRow:
 class RawTable:
     """A table before checking; ``rows`` of the data table carry ``name`` and ``value``."""
 
-    table: str  # "states" | "events" | "data"
+    table: str  # "states" | "events" | "data" | "recovery"
     where: Location
     rows: tuple[RawRow, ...]
 
@@ -482,9 +512,32 @@ def normalize_value(value: object) -> object | Bad:
     return Bad(f"a {type(value).__name__}")
 
 
+def normalize_payload(value: object) -> object | Bad:
+    """A recovery row's data as the tables keep it (plain lists and dicts), or what is wrong."""
+    if value is None or isinstance(value, bool | int | float | str):
+        return value
+    if isinstance(value, list | tuple):
+        items = [normalize_payload(v) for v in value]
+        bad = next((i for i in items if isinstance(i, Bad)), None)
+        return bad if bad is not None else items
+    if isinstance(value, dict):
+        out: dict[str, object] = {}
+        for key, item in value.items():
+            if not isinstance(key, str):
+                return Bad(f"a mapping key {key!r} that is not text")
+            got = normalize_payload(item)
+            if isinstance(got, Bad):
+                return got
+            out[key] = got
+        return out
+    return Bad(f"a {type(value).__name__}")
+
+
 def _plain(value: object) -> object:
     if isinstance(value, tuple | list):
         return [_plain(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
     return value
 
 
@@ -496,7 +549,11 @@ def to_plain(value: object) -> object:
 def format_literal(value: object) -> str:
     """One value as a YAML flow literal, for a CSV, XLSX or Markdown cell."""
     text = yaml.safe_dump(
-        [_plain(value)], default_flow_style=True, allow_unicode=True, width=math.inf
+        [_plain(value)],
+        default_flow_style=True,
+        allow_unicode=True,
+        width=math.inf,
+        sort_keys=False,
     ).strip()
     return text[1:-1].strip()
 
@@ -511,6 +568,15 @@ def parse_literal(text: str, where: Location, diags: list[Diagnostic]) -> object
         )
         return Bad("malformed literal")
     return normalize_value(value)
+
+
+def parse_payload(text: str) -> object | Bad:
+    """Read a recovery row's data cell (a YAML flow value); an empty cell is null."""
+    try:
+        value = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        return Bad("malformed YAML: " + str(exc).split("\n")[0])
+    return normalize_payload(value)
 
 
 def make_data(
@@ -547,6 +613,33 @@ def make_data(
     return tuple(data.items())
 
 
+def recovery_row(row: RawRow, diags: list[Diagnostic]) -> RecoveryRow:
+    """A Recovery row; its data cell is YAML flow text (or :class:`Bad`, T108)."""
+    _check_keys("recovery", row, diags)
+    state = _required(row, "state", "recovery", diags)
+    event = _required(row, "event", "recovery", diags)
+    data: object = None
+    got = row.cells.get("data")
+    if got is not None:
+        cell, where = got
+        if isinstance(cell, str):
+            value = parse_payload(cell)
+        else:  # a list of names cannot come from any reader; a Bad cell stays Bad
+            value = list(cell) if isinstance(cell, tuple) else cell
+        if isinstance(value, Bad):
+            diags.append(
+                diag(
+                    "T108",
+                    where,
+                    f"recovery data must be a plain value (got {value.found})",
+                    "use null, true/false, numbers, text, lists and mappings with text keys",
+                )
+            )
+        else:
+            data = value
+    return RecoveryRow(state, event, data, row.where)
+
+
 # --- whole tables -----------------------------------------------------------------------
 
 
@@ -557,6 +650,7 @@ def make_tables(
     data: Sequence[tuple[str, object, Location]],
     source: Location,
     diags: list[Diagnostic],
+    recovery: RawTable | None = None,
 ) -> DeviceTables | None:
     """Check raw tables and build :class:`DeviceTables`.
 
@@ -578,11 +672,19 @@ def make_tables(
     if events is not None:
         event_rows.extend(event_row(r, diags) for r in events.rows)
     data_items = make_data(data, diags)
+    recovery_rows = tuple(recovery_row(r, diags) for r in recovery.rows) if recovery else ()
     if not device.strip():
         diags.append(diag("T104", source, "the device has no name", "add 'device: NAME'"))
     if states is None or events is None:
         return None
-    return DeviceTables(device.strip(), tuple(state_rows), tuple(event_rows), data_items, source)
+    return DeviceTables(
+        device.strip(),
+        tuple(state_rows),
+        tuple(event_rows),
+        data_items,
+        source,
+        recovery_rows,
+    )
 
 
 def state_columns(tables: DeviceTables) -> tuple[str, ...]:
@@ -608,6 +710,11 @@ def state_cells(s: StateRow, columns: Sequence[str]) -> list[str]:
     return [cells[c] for c in columns]
 
 
+def recovery_cells(r: RecoveryRow) -> list[str]:
+    """One recovery row as text cells (data as a YAML flow value, empty for none)."""
+    return [r.state, r.event, "" if r.data is None else format_literal(r.data)]
+
+
 def validate_for_writing(tables: DeviceTables, where: Location) -> list[Diagnostic]:
     """What would not survive a round trip through a file: report it instead of writing."""
     diags: list[Diagnostic] = []
@@ -630,4 +737,12 @@ def validate_for_writing(tables: DeviceTables, where: Location) -> list[Diagnost
         seen.add(name)
         if isinstance(normalize_value(value), Bad):
             diags.append(diag("T108", where, f"data {name!r} is not a literal: {value!r}"))
+    for r in tables.recovery:
+        for column, text in (("state", r.state), ("event", r.event)):
+            if not text or text != text.strip():
+                diags.append(
+                    diag("T104", r.origin, f"recovery {column} {text!r} cannot be written")
+                )
+        if isinstance(normalize_payload(r.data), Bad):
+            diags.append(diag("T108", r.origin, f"recovery data is not a plain value: {r.data!r}"))
     return diags

@@ -1,8 +1,9 @@
 """Device tables as an Excel workbook (openpyxl).
 
 Rules:
-1. Sheets ``States`` and ``Events`` (and optional ``Data`` with ``name, value``)
-   each have their header in row 1; sheet names are matched without regard to case.
+1. Sheets ``States`` and ``Events`` (and optional ``Data`` with ``name, value``
+   and ``Recovery`` with ``state, event, data``) each have their header in row 1;
+   sheet names are matched without regard to case.
 2. The device name is cell B1 of a sheet ``Device`` whose A1 reads ``device``;
    without that sheet it is the file's name without ``.xlsx``.
 3. Cells are read as text: numbers as written, booleans as ``true``/``false``;
@@ -31,6 +32,7 @@ from statectl.errors import Diagnostic, Location
 from statectl.tables.schema import (
     DATA_COLUMNS,
     EVENT_COLUMNS,
+    RECOVERY_COLUMNS,
     Bad,
     Cell,
     DeviceTables,
@@ -41,13 +43,20 @@ from statectl.tables.schema import (
     format_literal,
     make_tables,
     parse_literal,
+    recovery_cells,
     state_cells,
     state_columns,
 )
 
 __all__ = ["dump_xlsx", "read_xlsx"]
 
-SHEETS = {"states": "States", "events": "Events", "data": "Data", "device": "Device"}
+SHEETS = {
+    "states": "States",
+    "events": "Events",
+    "data": "Data",
+    "recovery": "Recovery",
+    "device": "Device",
+}
 
 
 def _cell(value: Any) -> Cell:
@@ -129,6 +138,9 @@ def read_xlsx(content: bytes, file: str, stem: str) -> tuple[DeviceTables | None
                     parse_literal(value, at, diags) if isinstance(value, str) else value
                 )
                 entries.append((name if isinstance(name, str) else "", literal, row.where))
+        recovery = None
+        if "recovery" in sheets:
+            recovery = _table("recovery", sheets["recovery"], file, diags)
         device = stem
         if "device" in sheets:
             for _, values in _rows(sheets["device"]):
@@ -139,7 +151,9 @@ def read_xlsx(content: bytes, file: str, stem: str) -> tuple[DeviceTables | None
         return None, [*diags, diag("T101", source, f"not a readable XLSX workbook: {exc}")]
     finally:
         wb.close()
-    result = make_tables(device, tables["states"], tables["events"], entries, source, diags)
+    result = make_tables(
+        device, tables["states"], tables["events"], entries, source, diags, recovery
+    )
     return result, diags
 
 
@@ -157,7 +171,7 @@ def _fill(ws: Worksheet, header: tuple[str, ...], rows: Iterable[list[str]]) -> 
 
 
 def dump_xlsx(tables: DeviceTables) -> bytes:
-    """The tables as workbook bytes (States, Events, Data if any, Device)."""
+    """The tables as workbook bytes (States, Events, Data and Recovery if any, Device)."""
     columns = state_columns(tables)
     wb = openpyxl.Workbook()
     states = wb.active
@@ -181,6 +195,12 @@ def dump_xlsx(tables: DeviceTables) -> bytes:
             wb.create_sheet(SHEETS["data"]),
             DATA_COLUMNS,
             ([name, format_literal(value)] for name, value in tables.data),
+        )
+    if tables.recovery:
+        _fill(
+            wb.create_sheet(SHEETS["recovery"]),
+            RECOVERY_COLUMNS,
+            (recovery_cells(r) for r in tables.recovery),
         )
     _fill(wb.create_sheet(SHEETS["device"]), ("device", tables.device), ())
     out = io.BytesIO()

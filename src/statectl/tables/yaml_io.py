@@ -1,14 +1,17 @@
 """Device tables as one YAML file (the format of ``examples/motor/motor.yaml``).
 
 Rules:
-1. The document is a mapping with ``device``, ``states``, ``events`` and an
-   optional ``data`` mapping; anything else at the top is T102 or T103.
+1. The document is a mapping with ``device``, ``states``, ``events``, an
+   optional ``data`` mapping and an optional ``recovery`` list of rows
+   (``state``, ``event``, ``data``); anything else at the top is T102 or T103.
 2. The node tree is composed (not constructed) so every row and cell keeps its
-   1-based line; only ``data`` values are constructed, as YAML literals.
+   1-based line; only ``data`` values and a recovery row's ``data`` are
+   constructed, as YAML values.
 3. A cell is a scalar (its text as written; ``null`` is empty) or, for the list
    columns, a sequence of scalars; a mapping anywhere else is T108.
 4. The writer leaves out empty optional cells and writes ``kind`` always, so
-   a written file reads like the hand-written Motor.
+   a written file reads like the hand-written Motor; ``recovery`` comes last,
+   its ``data`` in flow style (``data: {detail: restarted}``).
 """
 
 from __future__ import annotations
@@ -25,8 +28,10 @@ from statectl.tables.schema import (
     RawRow,
     RawTable,
     diag,
+    format_literal,
     make_tables,
     normalize_column,
+    normalize_payload,
     normalize_value,
     to_plain,
 )
@@ -34,7 +39,7 @@ from statectl.tables.schema import (
 __all__ = ["dump_yaml", "read_yaml"]
 
 NULL_TAG = "tag:yaml.org,2002:null"
-TOP_KEYS = ("device", "states", "events", "data")
+TOP_KEYS = ("device", "states", "events", "data", "recovery")
 
 
 def _at(file: str, node: yaml.Node) -> Location:
@@ -109,10 +114,28 @@ def _table(
             )
             continue
         cells = {
-            name: (_cell(value), _at(file, value)) for name, value, _ in _pairs(file, item, diags)
+            name: (
+                _payload(value) if (table, name) == ("recovery", "data") else _cell(value),
+                _at(file, value),
+            )
+            for name, value, _ in _pairs(file, item, diags)
         }
         rows.append(RawRow(_at(file, item), cells))
     return RawTable(table, at, tuple(rows))
+
+
+def _construct(node: yaml.Node) -> object:
+    """The node as a YAML value, or :class:`Bad` naming why it cannot be one."""
+    try:
+        return yaml.SafeLoader("").construct_object(node, deep=True)
+    except yaml.YAMLError as exc:
+        return Bad(f"an unreadable value: {str(exc).splitlines()[0]}")
+
+
+def _payload(node: yaml.Node) -> Cell:
+    """A recovery row's data as the cell text every format shares (a YAML flow value)."""
+    value = normalize_payload(_construct(node))
+    return value if isinstance(value, Bad) else format_literal(value)
 
 
 def _data(
@@ -131,11 +154,8 @@ def _data(
         if not isinstance(key, yaml.ScalarNode):
             diags.append(diag("T108", at, "a data name must be text"))
             continue
-        constructor = yaml.SafeLoader("")
-        try:
-            literal: object = normalize_value(constructor.construct_object(value, deep=True))
-        except yaml.YAMLError as exc:
-            literal = Bad(f"an unreadable value: {str(exc).splitlines()[0]}")
+        constructed = _construct(value)
+        literal = constructed if isinstance(constructed, Bad) else normalize_value(constructed)
         entries.append((str(key.value), literal, at))
     return entries
 
@@ -200,10 +220,14 @@ def read_yaml(text: str, file: str) -> tuple[DeviceTables | None, list[Diagnosti
         value, at = found[table]
         tables[table] = _table(file, table, value, at, diags)
     data = _data(file, found["data"][0], diags) if "data" in found else []
+    recovery = None
+    if "recovery" in found:
+        value, at = found["recovery"]
+        recovery = _table(file, "recovery", value, at, diags)
     if "device" not in found:
         diags.append(diag("T104", source, "the file has no 'device' name", "add 'device: NAME'"))
         device = "?"
-    result = make_tables(device, tables["states"], tables["events"], data, source, diags)
+    result = make_tables(device, tables["states"], tables["events"], data, source, diags, recovery)
     return result, diags
 
 
@@ -255,6 +279,32 @@ def _event_doc(tables: DeviceTables) -> list[dict[str, Any]]:
     return rows
 
 
+class _Flow(dict[str, Any]):
+    """A recovery row's data: written in flow style, as people write it."""
+
+
+class _FlowList(list[Any]):
+    """A list in a recovery row's data: flow style too."""
+
+
+def _flow(value: object) -> object:
+    if isinstance(value, dict):
+        return _Flow((k, _flow(v)) for k, v in value.items())
+    if isinstance(value, list | tuple):
+        return _FlowList(_flow(v) for v in value)
+    return value
+
+
+def _recovery_doc(tables: DeviceTables) -> list[dict[str, Any]]:
+    rows: list[dict[str, Any]] = []
+    for r in tables.recovery:
+        row: dict[str, Any] = {"state": r.state, "event": r.event}
+        if r.data is not None:
+            row["data"] = _flow(r.data)
+        rows.append(row)
+    return rows
+
+
 class _Dumper(yaml.SafeDumper):
     """Rows in block style, lists of names in flow style (``ignore: [a, b]``), as people write."""
 
@@ -264,7 +314,17 @@ def _represent_list(dumper: yaml.SafeDumper, data: list[Any]) -> yaml.Node:
     return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=flow)
 
 
+def _represent_flow(dumper: yaml.SafeDumper, data: _Flow) -> yaml.Node:
+    return dumper.represent_mapping("tag:yaml.org,2002:map", data, flow_style=True)
+
+
+def _represent_flow_list(dumper: yaml.SafeDumper, data: _FlowList) -> yaml.Node:
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=True)
+
+
 _Dumper.add_representer(list, _represent_list)
+_Dumper.add_representer(_Flow, _represent_flow)
+_Dumper.add_representer(_FlowList, _represent_flow_list)
 
 
 def dump_yaml(tables: DeviceTables) -> str:
@@ -276,6 +336,8 @@ def dump_yaml(tables: DeviceTables) -> str:
     }
     if tables.data:
         doc["data"] = {name: to_plain(value) for name, value in tables.data}
+    if tables.recovery:
+        doc["recovery"] = _recovery_doc(tables)
     body = yaml.dump(
         doc,
         Dumper=_Dumper,
