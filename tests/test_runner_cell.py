@@ -18,7 +18,7 @@ from statectl.runner import System, run
 
 CELL = Path(__file__).parent.parent / "examples" / "pick-and-place" / "cell.yaml"
 DEVICES = ("conveyor", "arm", "gripper", "sensor")
-TOKEN = "cell-token"
+TOKEN = "cell-token-0123456789"
 WAIT = 10.0  # seconds a live run may take to show a change; a bound, not a measurement
 
 

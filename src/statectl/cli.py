@@ -356,11 +356,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("file", metavar="FILE", help="device file or cell file")
     s.add_argument("--driver", help="driver for every device: sim-twin (the default), sim-motor, "
                    "sim-stepper or package.module:Class")
-    s.add_argument("--config", help="driver configuration YAML")
+    s.add_argument("--config", help="run configuration YAML: drivers, dashboard settings")
     s.add_argument("--dashboard", action="store_true", help="serve the live dashboard")
-    s.add_argument("--host", default="127.0.0.1", help="dashboard address (default loopback)")
-    s.add_argument("--port", type=int, default=0, help="dashboard port (default: any free)")
-    s.add_argument("--token", help="token that allows sending events from the dashboard")
+    s.add_argument("--host", help="dashboard address (default: the config's, else loopback)")
+    s.add_argument("--port", type=int, help="dashboard port (default: the config's, else any free)")
+    s.add_argument("--token", help="token that allows sending events from the dashboard "
+                   "(default: $STATECTL_DASHBOARD_TOKEN, the config's, else a new one printed)")
     s.add_argument("--journal", metavar="DB", help="journal every event to this SQLite file")
     s.add_argument("--resume", action="store_true", help="resume from the journal first")
     s.add_argument("--sync", default="normal", choices=("normal", "full"),

@@ -35,6 +35,11 @@ Rules:
    :class:`~statectl.devices.SimTwin` with defaults for each device, derived
    from its tables (the banner says so), so every device reports its
    completions on the clock. A twin's notes appear in the trace as ``twin``.
+7. The dashboard's host, port and token: the flags, else (the token) the
+   ``STATECTL_DASHBOARD_TOKEN`` environment variable, else the config file's
+   ``dashboard:`` section, else loopback, any free port and a new token, which
+   is printed; a token from elsewhere is not echoed. A token shorter than 16
+   characters is refused.
 """
 
 from __future__ import annotations
@@ -54,11 +59,14 @@ import yaml
 
 from statectl.cell import Cell, load_cell
 from statectl.devices import (
+    MIN_TOKEN,
+    DashboardConfig,
     DeviceDriver,
+    RunConfig,
     SimTwin,
     TwinNote,
     connect,
-    load_driver_config,
+    load_run_config,
     make_driver,
 )
 from statectl.errors import Diagnostic, DiagnosticError, Severity, StatectlError
@@ -366,17 +374,44 @@ def parse_time(text: str) -> float:
 
 
 def _drivers(
-    devices: Sequence[DeviceSetup], driver: str | None, config: str | None
+    devices: Sequence[DeviceSetup], driver: str | None, config: str | None, table: RunConfig
 ) -> dict[str, DeviceDriver]:
     """Rule 6: the config file's drivers, else ``driver`` for all, else a twin for each."""
     names = [d.name for d in devices]
-    if config is not None:
-        table = load_driver_config(config)
-        missing = [n for n in names if n not in table]
+    if table.drivers is not None:
+        drivers = table.drivers
+        missing = [n for n in names if n not in drivers]
         if missing:
             raise StatectlError(f"{config}: no driver for device(s) {missing}")
-        return {d.name: make_driver(*table[d.name], chart=d.chart) for d in devices}
+        return {d.name: make_driver(*drivers[d.name], chart=d.chart) for d in devices}
     return {d.name: make_driver(driver or "sim-twin", chart=d.chart) for d in devices}
+
+
+#: The environment variable that may hold the dashboard's token (rule 7).
+TOKEN_VARIABLE = "STATECTL_DASHBOARD_TOKEN"
+
+
+def _dashboard_settings(
+    host: str | None, port: int | None, token: str | None, config: str | None, dash: DashboardConfig
+) -> tuple[str, int, str | None, str]:
+    """Rule 7: flags, then the environment (token), then the config file, then the defaults.
+
+    Returns host, port, token (None: the dashboard makes one) and where the token came from.
+    """
+    where = "--token"
+    if token is None and os.environ.get(TOKEN_VARIABLE):
+        token, where = os.environ[TOKEN_VARIABLE], TOKEN_VARIABLE
+    if token is None and dash.token is not None:
+        token, where = dash.token, str(config)
+    if token is not None and len(token) < MIN_TOKEN:
+        raise StatectlError(
+            f"the dashboard token from {where} is shorter than {MIN_TOKEN} characters, "
+            "so it could be guessed; make one with "
+            "python -c 'import secrets; print(secrets.token_urlsafe(18))'"
+        )
+    host = host if host is not None else dash.host or "127.0.0.1"
+    port = port if port is not None else dash.port or 0
+    return host, port, token, where
 
 
 def _show_notes(drivers: Mapping[str, DeviceDriver], out: TextIO, width: int) -> None:
@@ -483,8 +518,8 @@ def run(
     driver: str | None = None,
     config: str | None = None,
     dashboard: bool = False,
-    host: str = "127.0.0.1",
-    port: int = 0,
+    host: str | None = None,
+    port: int | None = None,
     token: str | None = None,
     journal: str | None = None,
     resume: bool = False,
@@ -538,7 +573,13 @@ def run(
     system: System | None = None
     server: Any = None
     try:
-        drivers = _drivers(devices, driver, config)
+        table = RunConfig(None, DashboardConfig())
+        if config is not None:
+            table = load_run_config(config)
+        drivers = _drivers(devices, driver, config, table)
+        host, port, token, token_from = _dashboard_settings(
+            host, port, token, config, table.dashboard
+        )
         setups = tuple(replace(d, driver=drivers.get(d.name)) for d in devices)
         clock: Clock = WallClock() if realtime else SimClock()
         store = Journal(journal, sync=mode, guarantee=promise) if journal is not None else None
@@ -563,7 +604,8 @@ def run(
                     f"; recovery: {taken}; {bound.redelivered} accepted event(s) redelivered\n"
                 )
         if server is not None:
-            out.write(f"dashboard: {url}\ntoken: {server.token}\n")
+            shown = server.token if token is None else f"(from {token_from})"
+            out.write(f"dashboard: {url}\ntoken: {shown}\n")
         out.flush()
         if ready is not None:
             ready(system, url)

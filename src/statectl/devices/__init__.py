@@ -3,8 +3,12 @@
 from statectl.devices.base import Driver, connect, requested_target
 from statectl.devices.config import (
     DRIVERS,
+    MIN_TOKEN,
+    DashboardConfig,
     DriverConfig,
+    RunConfig,
     load_driver_config,
+    load_run_config,
     make_driver,
     resolve_driver,
 )
@@ -15,17 +19,21 @@ from statectl.devices.twin import SimTwin, TwinNote
 
 __all__ = [
     "DRIVERS",
+    "MIN_TOKEN",
     "ApiCall",
+    "DashboardConfig",
     "DeviceDriver",
     "Driver",
     "DriverConfig",
     "Report",
+    "RunConfig",
     "SimMotor",
     "SimStepper",
     "SimTwin",
     "TwinNote",
     "connect",
     "load_driver_config",
+    "load_run_config",
     "make_driver",
     "requested_target",
     "resolve_driver",

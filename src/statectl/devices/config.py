@@ -9,7 +9,7 @@ Rules:
          Motor: {driver: sim-motor, options: {speed: 10}}
 
    :func:`load_driver_config` reports every problem at once as diagnostics
-   D501-D509 with the file and line, raising one
+   D501-D510 with the file and line, raising one
    :class:`~statectl.errors.DiagnosticError` if any is an error.
 3. Options are checked against the driver's constructor when the file loads,
    so a misspelt option is a diagnostic, not a ``TypeError`` at start-up; a
@@ -18,6 +18,13 @@ Rules:
 4. A driver whose constructor takes ``chart`` is given the device's chart by
    :func:`make_driver` (a twin derives itself from the tables); ``chart`` is
    never an option a config file sets.
+5. The same file may carry the live dashboard's settings, so a token need not
+   be typed on a command line (where ``ps`` shows it)::
+
+       dashboard: {host: 127.0.0.1, port: 8765, token: <16 or more characters>}
+
+   :func:`load_run_config` reads both sections; a file with only ``dashboard``
+   leaves the drivers to ``--driver`` or the twins. Problems there are D510.
 """
 
 from __future__ import annotations
@@ -25,6 +32,7 @@ from __future__ import annotations
 import importlib
 import inspect
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -39,9 +47,13 @@ from statectl.model import Chart
 
 __all__ = [
     "DRIVERS",
+    "MIN_TOKEN",
     "OPTION_CHECKS",
+    "DashboardConfig",
     "DriverConfig",
+    "RunConfig",
     "load_driver_config",
+    "load_run_config",
     "make_driver",
     "resolve_driver",
 ]
@@ -65,6 +77,27 @@ SUPPLIED = ("chart",)
 DriverConfig = dict[str, tuple[str, dict[str, Any]]]
 
 _DEVICE_KEYS = ("driver", "options")
+_DASHBOARD_KEYS = ("host", "port", "token")
+
+#: The shortest dashboard token a config file may set: a short one can be guessed.
+MIN_TOKEN = 16
+
+
+@dataclass(frozen=True, slots=True)
+class DashboardConfig:
+    """The ``dashboard:`` section: each field None where the file says nothing."""
+
+    host: str | None = None
+    port: int | None = None
+    token: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class RunConfig:
+    """A run's configuration file: drivers per device (None: no ``devices`` section)."""
+
+    drivers: DriverConfig | None
+    dashboard: DashboardConfig
 
 
 def _available() -> str:
@@ -149,6 +182,21 @@ def _option_problem(factory: Callable[..., Any], options: Mapping[str, Any]) -> 
 
 def load_driver_config(path: str | Path) -> DriverConfig:
     """Read a driver config file; every problem becomes a D5xx diagnostic."""
+    config = load_run_config(path)
+    if config.drivers is None:
+        diag = Diagnostic(
+            "D503",
+            Severity.ERROR,
+            Location(str(path), 1),
+            "no 'devices' mapping",
+            "add 'devices:' with one entry per device",
+        )
+        raise DiagnosticError([diag])
+    return config.drivers
+
+
+def load_run_config(path: str | Path) -> RunConfig:
+    """Read a run's config file (drivers, dashboard); every problem becomes a D5xx diagnostic."""
     file = str(path)
     diags: list[Diagnostic] = []
 
@@ -179,6 +227,7 @@ def load_driver_config(path: str | Path) -> DriverConfig:
 
     result: DriverConfig = {}
     devices_node: yaml.Node | None = None
+    dashboard_node: yaml.Node | None = None
     if not isinstance(root, yaml.MappingNode):
         error(
             "D503",
@@ -190,16 +239,23 @@ def load_driver_config(path: str | Path) -> DriverConfig:
         for key, val in root.value:
             if value(key) == "devices":
                 devices_node = val
+            elif value(key) == "dashboard":
+                dashboard_node = val
             else:
-                error("D507", line_of(key), f"unknown key {value(key)!r}", "only 'devices' is read")
-        if devices_node is None:
+                error(
+                    "D507",
+                    line_of(key),
+                    f"unknown key {value(key)!r}",
+                    "a run config has 'devices' and 'dashboard'",
+                )
+        if devices_node is None and dashboard_node is None:
             error(
                 "D503",
                 line_of(root),
                 "no 'devices' mapping",
                 "add 'devices:' with one entry per device",
             )
-        elif not isinstance(devices_node, yaml.MappingNode):
+        elif devices_node is not None and not isinstance(devices_node, yaml.MappingNode):
             error("D503", line_of(devices_node), "'devices' must map device names to entries")
             devices_node = None
     for key, entry in devices_node.value if devices_node is not None else ():
@@ -267,6 +323,47 @@ def load_driver_config(path: str | Path) -> DriverConfig:
         if bad:
             continue
         result[device] = (driver, options)
+    dashboard = DashboardConfig()
+    if dashboard_node is not None:
+        dashboard = _dashboard(dashboard_node, value, line_of, error)
     if diags:
         raise DiagnosticError(diags)
-    return result
+    return RunConfig(result if devices_node is not None else None, dashboard)
+
+
+def _dashboard(
+    node: yaml.Node,
+    value: Callable[[yaml.Node], Any],
+    line_of: Callable[[yaml.Node], int],
+    error: Callable[[str, int | None, str, str], None],
+) -> DashboardConfig:
+    """The ``dashboard:`` section (rule 5); every problem is a D510 error."""
+    if not isinstance(node, yaml.MappingNode):
+        error("D510", line_of(node), "'dashboard' must be a mapping",
+              "write 'dashboard: {port: 8765, token: ...}'")  # fmt: skip
+        return DashboardConfig()
+    fields: dict[str, Any] = {}
+    for k, v in node.value:
+        name, val, line = value(k), value(v), line_of(v)
+        if name not in _DASHBOARD_KEYS:
+            error("D510", line_of(k), f"dashboard: unknown key {name!r}",
+                  f"the dashboard has {', '.join(_DASHBOARD_KEYS)}")  # fmt: skip
+        elif name == "host" and not (isinstance(val, str) and val):
+            error("D510", line, f"dashboard: host must be an address (got {val!r})",
+                  "write 'host: 127.0.0.1' (the default, loopback only)")  # fmt: skip
+        elif name == "port" and not (
+            isinstance(val, int) and not isinstance(val, bool) and 0 <= val <= 65535
+        ):
+            error("D510", line, f"dashboard: port must be a number 0-65535 (got {val!r})",
+                  "0 takes any free port")  # fmt: skip
+        elif name == "token" and not (isinstance(val, str) and len(val) >= MIN_TOKEN):
+            shown = "a shorter text" if isinstance(val, str) else repr(val)  # never echo a secret
+            error(
+                "D510",
+                line,
+                f"dashboard: token must be text of {MIN_TOKEN} characters or more (got {shown})",
+                "make one: python -c 'import secrets; print(secrets.token_urlsafe(18))'",
+            )
+        else:
+            fields[name] = val
+    return DashboardConfig(**fields)
