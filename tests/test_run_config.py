@@ -35,8 +35,11 @@ def free_port() -> int:
 
 def test_both_sections_are_read(tmp_path: Path) -> None:
     """A file with devices and dashboard gives both; the drivers loader still reads it."""
-    path = write(tmp_path, f"devices:\n  Motor: {{driver: sim-motor}}\n"
-                           f"dashboard: {{host: 127.0.0.1, port: 8765, token: {SECRET}}}\n")  # fmt: skip
+    text = (
+        "devices:\n  Motor: {driver: sim-motor}\n"
+        f"dashboard: {{host: 127.0.0.1, port: 8765, token: {SECRET}}}\n"
+    )
+    path = write(tmp_path, text)
     config = load_run_config(path)
     assert config.drivers == {"Motor": ("sim-motor", {})}
     assert config.dashboard == DashboardConfig("127.0.0.1", 8765, SECRET)
@@ -104,10 +107,16 @@ class Served:
             self.up.set()
 
         def serve() -> None:
-            self.codes.append(
-                run(str(MOTOR), dashboard=True, out=self.out, err=self.err, stop=self.halt,
-                    ready=ready, **self.kwargs)  # fmt: skip
+            code = run(
+                str(MOTOR),
+                dashboard=True,
+                out=self.out,
+                err=self.err,
+                stop=self.halt,
+                ready=ready,
+                **self.kwargs,
             )
+            self.codes.append(code)
             self.up.set()
 
         self.thread = threading.Thread(target=serve, daemon=True)
