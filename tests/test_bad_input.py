@@ -186,6 +186,27 @@ CASES: list[tuple[str, dict[str, str | bytes], str, int | None, str]] = [
         14,
         "date",
     ),
+    (
+        "yaml-recovery-event-and-redo",
+        {"d.yaml": GOOD + "recovery:\n  - state: B\n    event: go\n    redo: yes\n"},
+        "T114",
+        12,
+        "both",
+    ),
+    (
+        "yaml-recovery-redo-with-data",
+        {"d.yaml": GOOD + "recovery:\n  - state: B\n    redo: yes\n    data: {a: 1}\n"},
+        "T114",
+        14,
+        "no data",
+    ),
+    (
+        "yaml-recovery-redo-no-event",
+        {"d.yaml": GOOD + "recovery:\n  - state: B\n    redo: no\n"},
+        "T104",
+        12,
+        "neither",
+    ),
     ("csv-unclosed-quote", csv_case(events='event,old,new\n"go,A,B\n'), "T101", 2, "CSV"),
     ("csv-too-many-cells", csv_case(events="event,old,new\ngo,A,B,C\n"), "T101", 2, "cells"),
     ("csv-unknown-column", csv_case(events="event,old,nwe\ngo,A,B\n"), "T103", 1, "'new'"),
@@ -216,6 +237,20 @@ CASES: list[tuple[str, dict[str, str | bytes], str, int | None, str]] = [
         2,
         "YAML",
     ),
+    (
+        "csv-recovery-bad-redo",
+        {**csv_case(), "d.recovery.csv": "state,event,redo\nB,,maybe\n"},
+        "T114",
+        2,
+        "yes or no",
+    ),
+    (
+        "csv-recovery-event-and-redo",
+        {**csv_case(), "d.recovery.csv": "state,event,redo\nB,go,true\n"},
+        "T114",
+        2,
+        "both",
+    ),
     ("csv-not-utf8", csv_case(events=b"event,old,new\n\xff,A,B\n"), "T101", None, "UTF-8"),
     ("md-no-tables", {"d.md": "# Device: D\n\nJust prose.\n"}, "T102", 1, "States"),
     ("md-no-separator", md_case("|---|---|---|\n", ""), "T101", 13, "separator"),
@@ -237,6 +272,16 @@ CASES: list[tuple[str, dict[str, str | bytes], str, int | None, str]] = [
         "T104",
         20,
         "'event'",
+    ),
+    (
+        "md-recovery-event-and-redo",
+        {
+            "d.md": MD_GOOD
+            + "\n## Recovery\n\n| state | event | redo |\n|---|---|---|\n| B | go | yes |\n"
+        },
+        "T114",
+        20,
+        "both",
     ),
     ("xlsx-garbage", {"d.xlsx": b"not a zip"}, "T101", None, "XLSX"),
     ("xlsx-empty-sheets", workbook([], []), "T105", 1, "header"),
@@ -268,6 +313,20 @@ CASES: list[tuple[str, dict[str, str | bytes], str, int | None, str]] = [
         "T108",
         2,
         "text",
+    ),
+    (
+        "xlsx-recovery-neither-event-nor-redo",
+        workbook(XLSX_STATES, XLSX_EVENTS, [["state", "event", "redo"], ["B", None, "no"]]),
+        "T104",
+        2,
+        "neither",
+    ),
+    (
+        "xlsx-recovery-redo-and-event",
+        workbook(XLSX_STATES, XLSX_EVENTS, [["state", "event", "redo"], ["B", "go", True]]),
+        "T114",
+        2,
+        "both",
     ),
     ("unknown-suffix", {"d.txt": "device: D\n"}, "T102", None, "format"),
 ]
@@ -363,10 +422,15 @@ def test_load_errors_do_not_hide_build_errors(tmp_path: Path) -> None:
     path.write_text(
         "device: M\nstates:\n  - {state: A, control: default, colour: red}\n"
         "  - {state: B, control: sometimes}\nevents:\n  - {event: go, old: A, new: C, kind: zap}\n"
-        "  - {event: back, old: B, new: A, guard: \"x.__class__\"}\n",
+        '  - {event: back, old: B, new: A, guard: "x.__class__"}\n',
         encoding="utf-8",
     )
     chart, diags = load_and_build(path)
     assert chart is None
     assert [(d.code, d.where.line) for d in diags] == [
-        ("T103", 3), ("T106", 4), ("T107", 6), ("B201", 6), ("X302", 7)]
+        ("T103", 3),
+        ("T106", 4),
+        ("T107", 6),
+        ("B201", 6),
+        ("X302", 7),
+    ]

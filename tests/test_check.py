@@ -362,28 +362,37 @@ def test_check_paths_checks_each_built_chart(tmp_path: Path) -> None:
 
 
 MOTOR_TABLES = MOTOR.read_text(encoding="utf-8").split("\nrecovery:\n")[0] + "\n"
+MOVING = "  - {state: Moving, event: Error}\n"
+RETURNING = "  - {state: Returning, redo: yes}\n"
 
 
 @pytest.mark.parametrize(
     ("recovery", "found"),
     [
-        ("recovery:\n  - {state: Moving, event: Error}\n", []),
-        ("", [("J606", Severity.INFO)]),
+        ("recovery:\n" + MOVING + RETURNING, []),
+        ("recovery:\n" + MOVING, [("J608", Severity.INFO)]),
+        ("", [("J606", Severity.INFO), ("J608", Severity.INFO)]),
         (
-            "recovery:\n  - {state: Flying, event: Error}\n",
+            "recovery:\n  - {state: Flying, event: Error}\n" + RETURNING,
             [("J603", Severity.ERROR), ("J606", Severity.INFO)],
         ),
-        ("recovery:\n  - {state: Moving, event: Movement}\n", [("J604", Severity.ERROR)]),
         (
-            "recovery:\n  - {state: Moving, event: Error}\n  - {state: Moving, event: Error}\n",
-            [("J605", Severity.ERROR)],
+            "recovery:\n  - {state: Moving, event: Movement}\n" + RETURNING,
+            [("J604", Severity.ERROR)],
+        ),
+        ("recovery:\n" + MOVING + MOVING + RETURNING, [("J605", Severity.ERROR)]),
+        ("recovery:\n" + MOVING + RETURNING + RETURNING, [("J605", Severity.ERROR)]),
+        # Blocked is entered only by completions: no device call to issue again
+        (
+            "recovery:\n" + MOVING + RETURNING + "  - {state: Blocked, redo: yes}\n",
+            [("J607", Severity.ERROR)],
         ),
     ],
 )
 def test_check_paths_checks_the_recovery_table(
     tmp_path: Path, recovery: str, found: list[tuple[str, Severity]]
 ) -> None:
-    """J603-J605 are errors; a monitored state without a rule (J606) is only info here."""
+    """J603-J605, J607 are errors; a state without a rule it needs (J606, J608) is info here."""
     path = tmp_path / "motor.yaml"
     path.write_text(MOTOR_TABLES + recovery, encoding="utf-8")
     diags = [d for d in check_paths([str(path)]) if d.code.startswith("J")]

@@ -41,6 +41,8 @@ from statectl.tables import load
 MOTOR = Path(__file__).parent.parent / "examples" / "motor" / "motor.yaml"
 #: The Motor's text without its Recovery table (the paper's two tables only).
 MOTOR_TABLES = MOTOR.read_text(encoding="utf-8").split("\nrecovery:\n")[0] + "\n"
+#: The shipped Motor's redo rule: Returning waits for the motor's completion.
+REDO = "  - {state: Returning, redo: yes}\n"
 
 
 @pytest.fixture
@@ -338,20 +340,28 @@ def test_replay_reaches_every_journalled_snapshot(
 @pytest.mark.parametrize(
     ("text", "codes"),
     [
-        ("recovery:\n  - {state: Moving, event: Error}\n", []),
+        ("recovery:\n  - {state: Moving, event: Error}\n" + REDO, []),
+        ("recovery:\n  - {state: Moving, event: Error}\n", ["J608"]),
         ("recovery: 3\n", ["T108"]),
         ("recovery:\n  - Moving\n", ["T108"]),
         ("recovery:\n  - {state: Moving}\n", ["T104"]),
         ("recovery:\n  - {state: Moving, event: Error, when: x}\n", ["T103"]),
         ("recovery:\n  - {state: Moving, event: Error, data: 2016-01-01}\n", ["T108"]),
-        ("recovery:\n  - {state: Flying, event: Error}\n", ["J603", "J606"]),
-        ("recovery:\n  - {state: Moving, event: Initialization}\n", ["J604"]),
+        ("recovery:\n  - {state: Flying, event: Error}\n" + REDO, ["J603", "J606"]),
+        ("recovery:\n  - {state: Moving, event: Initialization}\n" + REDO, ["J604"]),
         (
-            "recovery:\n  - {state: Moving, event: Error}\n  - {state: Moving, event: Error}\n",
+            "recovery:\n  - {state: Moving, event: Error}\n  - {state: Moving, event: Error}\n"
+            + REDO,
             ["J605"],
         ),
-        ("recovery: []\n", ["J606"]),
-        ("", ["J606"]),
+        (
+            "recovery:\n  - {state: Moving, event: Error}\n  - {state: Blocked, redo: yes}\n"
+            + REDO,
+            ["J607"],
+        ),
+        ("recovery:\n  - {state: Returning, event: Error, redo: yes}\n", ["T114"]),
+        ("recovery: []\n", ["J606", "J608"]),
+        ("", ["J606", "J608"]),
     ],
 )
 def test_recovery_rules_are_checked(tmp_path: Path, text: str, codes: list[str]) -> None:
@@ -384,19 +394,20 @@ def test_load_device_reports_every_recovery_error_at_its_line(tmp_path: Path) ->
 @pytest.mark.parametrize(
     ("text", "severities"),
     [
-        ("", {"J606": "warning"}),
-        ("recovery:\n  - {state: Moving, event: Error}\n", {}),
+        ("", {"J606": "warning", "J608": "warning"}),
+        ("recovery:\n  - {state: Moving, event: Error}\n", {"J608": "warning"}),
+        ("recovery:\n  - {state: Moving, event: Error}\n" + REDO, {}),
     ],
 )
-def test_load_device_warns_about_a_monitored_state_without_a_rule(
+def test_load_device_warns_about_a_state_without_the_rule_it_needs(
     tmp_path: Path, text: str, severities: dict[str, str]
 ) -> None:
-    """For a journalled run J606 is a warning (statectl check shows it as info)."""
+    """For a journalled run J606 and J608 are warnings (statectl check shows them as info)."""
     path = tmp_path / "motor.yaml"
     path.write_text(MOTOR_TABLES + text, encoding="utf-8")
     dev = load_device(path)
     assert {d.code: d.severity.value for d in dev.warnings} == severities
-    assert [(r.state, r.event) for r in dev.rules] == [("Moving", "Error")] * bool(text)
+    assert [(r.state, r.event) for r in dev.rules][:1] == [("Moving", "Error")] * bool(text)
 
 
 def test_non_json_event_data_is_refused(tmp_path: Path) -> None:

@@ -43,13 +43,16 @@ def test_motor_yaml_loads_without_diagnostics() -> None:
     assert len(tables.events) == 6
 
 
-def test_motor_yaml_has_its_recovery_row() -> None:
-    """The Motor's Recovery table takes a resumed Moving through Error, with its data."""
+def test_motor_yaml_has_its_recovery_rows() -> None:
+    """The Motor's Recovery table takes a resumed Moving through Error and redoes Returning."""
     lines = MOTOR_YAML.read_text(encoding="utf-8").splitlines()
-    line = lines.index("  - state: Moving", lines.index("recovery:")) + 1
+    moving = lines.index("  - state: Moving", lines.index("recovery:")) + 1
+    returning = lines.index("  - state: Returning", lines.index("recovery:")) + 1
     data = {"detail": "resumed after a restart"}
-    where = Location(str(MOTOR_YAML), line)
-    assert motor().recovery == (RecoveryRow("Moving", "Error", data, where),)
+    assert motor().recovery == (
+        RecoveryRow("Moving", "Error", data, Location(str(MOTOR_YAML), moving)),
+        RecoveryRow("Returning", origin=Location(str(MOTOR_YAML), returning), redo=True),
+    )
 
 
 @pytest.mark.parametrize(
@@ -354,6 +357,7 @@ RECOVERY = (
     RecoveryRow("Moving", "Error", {"detail": "resumed after a restart", "tries": [1, 2.5]}),
     RecoveryRow("Returning", "Error completion"),
     RecoveryRow("Blocked", "Initialization", "a, b | c"),
+    RecoveryRow("Homing", redo=True),
 )
 
 
@@ -430,4 +434,51 @@ def test_dump_yaml_writes_recovery_last_with_flow_data() -> None:
     assert isinstance(text, str)
     assert text.endswith(
         "recovery:\n- state: Moving\n  event: Error\n  data: {detail: resumed after a restart}\n"
+        "- state: Returning\n  redo: yes\n"
     )
+
+
+@pytest.mark.parametrize(
+    ("fmt", "marker"),
+    [("yaml", "redo:"), ("csv", ",redo"), ("xlsx", "redo"), ("md", "| redo |")],
+)
+@pytest.mark.parametrize("redo", [False, True])
+def test_the_redo_column_is_written_only_when_a_row_uses_it(
+    tmp_path: Path, fmt: str, marker: str, redo: bool
+) -> None:
+    """Event rows alone keep the Recovery table's three columns; a redo row adds ``redo``."""
+    rows = RECOVERY if redo else RECOVERY[:3]
+    tables = DeviceTables("Arm", motor().states, motor().events, recovery=rows)
+    written = save(tables, tmp_path / f"arm.{fmt}", fmt)
+    if fmt == "xlsx":
+        import openpyxl
+
+        sheet = openpyxl.load_workbook(written[0])["Recovery"]
+        found = " ".join(str(c.value) for c in sheet[1])
+    elif fmt == "csv":
+        found = (tmp_path / "arm.recovery.csv").read_text(encoding="utf-8")
+    else:
+        found = written[0].read_text(encoding="utf-8")
+    assert (marker in found) is redo
+
+
+@pytest.mark.parametrize(
+    ("cell", "redo"),
+    [("yes", True), ("Yes", True), ("true", True), ("TRUE", True), ("no", False), ("false", False)],
+)
+def test_redo_cells_read_yes_no_true_false(tmp_path: Path, cell: str, redo: bool) -> None:
+    """The redo column takes yes/no and true/false in any case; no is an event row."""
+    event = "" if redo else "Error"
+    (tmp_path / "m.states.csv").write_text(
+        (MOTOR / "motor.states.csv").read_text(encoding="utf-8"), encoding="utf-8"
+    )
+    (tmp_path / "m.events.csv").write_text(
+        (MOTOR / "motor.events.csv").read_text(encoding="utf-8"), encoding="utf-8"
+    )
+    (tmp_path / "m.recovery.csv").write_text(
+        f"state,event,redo\nMoving,{event},{cell}\n", encoding="utf-8"
+    )
+    tables, diags = load(tmp_path / "m.states.csv")
+    assert diags == []
+    assert tables is not None
+    assert [(r.event, r.redo) for r in tables.recovery] == [(event, redo)]

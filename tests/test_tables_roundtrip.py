@@ -63,11 +63,16 @@ data = st.dictionaries(
 # A recovery row's data: an event payload, so mappings (text keys) and lists nest.
 payloads = st.recursive(
     scalars,
-    lambda inner: st.lists(inner, max_size=3)
-    | st.dictionaries(st.text(TEXT_CHARS, max_size=6), inner, max_size=3),
+    lambda inner: (
+        st.lists(inner, max_size=3)
+        | st.dictionaries(st.text(TEXT_CHARS, max_size=6), inner, max_size=3)
+    ),
     max_leaves=6,
 )
-recovery_rows = st.builds(RecoveryRow, state=names, event=names, data=payloads)
+# A recovery row posts an event (with data) or redoes the entering step (no event, no data).
+recovery_rows = st.builds(RecoveryRow, state=names, event=names, data=payloads) | st.builds(
+    RecoveryRow, state=names, redo=st.just(True)
+)
 
 state_rows = st.builds(
     StateRow,

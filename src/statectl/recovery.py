@@ -2,18 +2,26 @@
 
 A device that was Moving when the power went away is not moving any more; its
 chart says Moving, its motor says nothing. A Recovery row names the transition
-to take before anything else when a journalled device resumes in that state.
-The tables layer reads the rows (shape problems are T1xx there); this module
-judges them against the chart the other two tables built.
+to take before anything else when a journalled device resumes in that state
+(an event row), or says to issue again the device API calls of the step that
+entered the state (a redo row: a Motor that was Returning is not returning any
+more, and only its device's completion can take it out). The tables layer reads
+the rows (shape problems are T1xx there); this module judges them against the
+chart the other two tables built.
 
 Rules:
 J603 error    A row names a state the chart does not have.
-J604 error    A row's event does not leave its state by any transition of the chart.
+J604 error    An event row's event does not leave its state by any transition of the chart.
 J605 error    A second row for one state (the first one counts).
 J606 (given)  A ``monitoring required`` state has no row: after a crash it resumes as
               if nothing happened. Its severity is the caller's: ``statectl check``
               reports it as info (a device that is not journalled needs no rule), the
               journalled runner as a warning.
+J607 error    A redo row for a state that no transition enters with a device API call
+              (a notification): there is nothing to redo.
+J608 (given)  A state left only by ``completion`` events (it waits for its device) has
+              no row: after a crash nobody does that work and the state is never left.
+              Its severity is the caller's, as for J606.
 """
 
 from __future__ import annotations
@@ -21,10 +29,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from statectl.errors import Diagnostic, Severity
-from statectl.model import Chart, ControlKind
+from statectl.model import Action, Block, Chart, ControlKind, EventKind, If, Notify, Transition
 from statectl.tables.schema import RecoveryRow
 
-__all__ = ["CODES", "check_recovery"]
+__all__ = ["CODES", "check_recovery", "redo_sources", "waits_for_device"]
 
 #: Every code this module reports, with a one-line summary (docs/check.md expands them).
 CODES: dict[str, str] = {
@@ -32,7 +40,69 @@ CODES: dict[str, str] = {
     "J604": "a recovery rule's event does not leave its state by any transition",
     "J605": "two recovery rules for one state",
     "J606": "a monitored state has no recovery rule",
+    "J607": "a redo rule for a state no transition enters with a device API call",
+    "J608": "a state left only by completion events has no recovery rule",
 }
+
+
+def _notifies(actions: tuple[Action, ...]) -> bool:
+    """Whether ``actions`` issue a notification (a device API call), nested content too."""
+    for a in actions:
+        if isinstance(a, Notify):
+            return True
+        if isinstance(a, Block) and _notifies(a.actions):
+            return True
+        if isinstance(a, If) and any(_notifies(body) for _, body in a.branches):
+            return True
+    return False
+
+
+def _entered(chart: Chart, t: Transition) -> set[str]:
+    """States taking ``t`` enters: its targets, their ancestors and default descendants."""
+    out: set[str] = set()
+    todo = list(t.targets)
+    while todo:
+        name = todo.pop()
+        if name in out or not chart.has_state(name):
+            continue
+        out.add(name)
+        state = chart.state(name)
+        todo.extend(state.initial)
+        parent = state.parent
+        while parent is not None and parent not in out:
+            out.add(parent)
+            parent = chart.state(parent).parent
+    return out
+
+
+def _leaving(chart: Chart, name: str) -> list[Transition]:
+    """Transitions that leave ``name``: its own and its ancestors'."""
+    found: list[Transition] = []
+    current: str | None = name
+    while current is not None:
+        found.extend(chart.transitions_from(current))
+        current = chart.state(current).parent
+    return found
+
+
+def redo_sources(chart: Chart, state: str) -> tuple[Transition, ...]:
+    """The transitions whose step enters ``state`` with a device API call (what a redo redoes)."""
+    return tuple(
+        t for t in chart.transitions if _notifies(t.actions) and state in _entered(chart, t)
+    )
+
+
+def waits_for_device(chart: Chart, state: str) -> bool:
+    """Whether ``state`` is left only by ``completion`` events: only its device takes it out."""
+    leaving = _leaving(chart, state)
+    kinds = set()
+    for t in leaving:
+        if not t.events:
+            return False  # an eventless transition leaves by itself
+        for e in t.events:
+            d = chart.event(e)
+            kinds.add(d.kind if d is not None else None)
+    return bool(leaving) and kinds == {EventKind.COMPLETION}
 
 
 def check_recovery(
@@ -66,6 +136,20 @@ def check_recovery(
             )
             continue
         seen[r.state] = r
+        if r.redo:
+            if not redo_sources(chart, r.state):
+                diags.append(
+                    Diagnostic(
+                        "J607",
+                        Severity.ERROR,
+                        r.origin,
+                        f"redo rule for {r.state!r}, but no transition enters it with a "
+                        "device API call: there is nothing to redo",
+                        "give the entering event an api (a command or fault event), or "
+                        "name an event that leaves the state instead of redo",
+                    )
+                )
+            continue
         if not any(t.source == r.state and r.event in t.events for t in chart.transitions):
             here = sorted({e for t in chart.transitions_from(r.state) for e in t.events})
             diags.append(
@@ -87,6 +171,19 @@ def check_recovery(
                     f"monitored state {s.name!r} has no recovery rule; after a "
                     "crash it resumes as if nothing happened",
                     f"add '- {{state: {s.name}, event: <fault event>}}' under recovery:",
+                )
+            )
+        elif s.name not in seen and not s.kind.is_history and waits_for_device(chart, s.name):
+            diags.append(
+                Diagnostic(
+                    "J608",
+                    unruled,
+                    s.origin,
+                    f"state {s.name!r} is left only by completion events and has no "
+                    "recovery rule; after a crash nobody does its device's work, so it is "
+                    "never left",
+                    f"add '- {{state: {s.name}, redo: yes}}' under recovery: to redo the "
+                    "device calls of the step that entered it",
                 )
             )
     return diags

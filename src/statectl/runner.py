@@ -464,7 +464,7 @@ def _feed(system: System, lines: Iterable[str], err: TextIO, *, batch: bool) -> 
 
 
 #: Recovery warnings matter only when there is a journal to recover from.
-JOURNAL_ONLY_WARNINGS = frozenset({"J606"})
+JOURNAL_ONLY_WARNINGS = frozenset({"J606", "J608"})
 
 
 def _warn(warnings: Iterable[Diagnostic], err: TextIO | None, journalled: bool) -> None:

@@ -7,6 +7,7 @@ to both, :func:`load_device` reads a device file with its Recovery table.
 
 from statectl.journal.device import JournalledDevice
 from statectl.journal.read import (
+    REDO,
     DeviceRow,
     InboxRow,
     JournalReader,
@@ -22,6 +23,7 @@ from statectl.journal.subjects import restore_subject
 
 __all__ = [
     "CODES",
+    "REDO",
     "DeviceFile",
     "DeviceRow",
     "Guarantee",

@@ -18,8 +18,17 @@ Rules:
    data) is that event. Events that match are interchangeable, so the
    attribution cannot change a replay.
 3. On resume the device takes up its last journalled snapshot (``restore``),
-   then takes its declared recovery transitions, then gets the accepted events
-   it had not processed, in ``seq`` order; all before any new event.
+   then takes its declared recovery rules, in the table's order, then gets the
+   accepted events it had not processed, in ``seq`` order; all before any new
+   event. An event rule posts its event. A redo rule finds the journalled step
+   that entered its state (:meth:`JournalReader.entering_step`), recomputes it
+   purely from the snapshot before it with :func:`statectl.semantics.step` (the
+   datamodel from the ``devices`` row), checks that it enters the state, and
+   has the Subject issue only that step's notifications again
+   (:meth:`Subject.reissue`, on the owner, in queue order), journalled as a
+   ``recovery`` step with outcome ``redo`` and the redone event. Without an
+   entering step (the device started in the state, or the journal begins after
+   it) the rule is skipped and :attr:`JournalledDevice.recovered` says so.
 4. Exactly once in the journal, at least once at the device: an accepted event
    processed but without a committed step when the process died is processed
    again on resume, and its API call may repeat. Under ``PROMPT`` an event
@@ -36,18 +45,20 @@ Rules:
 from __future__ import annotations
 
 import contextlib
+import functools
 import threading
 from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Any
 
 from statectl.errors import StatectlError
-from statectl.journal.read import JournalReader
+from statectl.journal.read import REDO, JournalReader, StepRow
 from statectl.journal.recovery import RecoveryRule
 from statectl.journal.store import Guarantee, Journal, Send, StepKind, Ticket
 from statectl.journal.subjects import restore_subject
+from statectl.model import Notify
 from statectl.runtime.subject import Subject
-from statectl.semantics import Snapshot
+from statectl.semantics import Step, step
 
 __all__ = ["JournalledDevice", "restore_subject"]
 
@@ -76,7 +87,9 @@ class JournalledDevice:
         self._lock = threading.Lock()
         #: The events each step sends on (a cell's links), asked after the step (rule 5).
         self.sends: Callable[[], Sequence[tuple[JournalledDevice, str]]] | None = None
-        self.recovered: tuple[str, ...] = ()  # recovery events taken on resume
+        #: What resume's recovery rules did: event names, "redo Error()" for a redo,
+        #: "redo S: nothing to redo" for a redo rule skipped (rule 3).
+        self.recovered: tuple[str, ...] = ()
         self.redelivered = 0  # accepted events processed on resume
         journal.register(self.name, subject.chart.name, source, dict(subject.data))
         self._unlisten = subject.on_step(self._on_step)
@@ -122,47 +135,35 @@ class JournalledDevice:
         assert snapshot is not None
         kind = StepKind.RECOVERY if inbox == _RECOVERY else StepKind.EVENT
         sends = self.sends() if self.sends is not None else ()
-        if not sends:
-            self.journal.record(
-                self.name,
-                kind,
-                snapshot,
-                time_=self.subject.clock.now(),
-                event=event,
-                data=data,
-                inbox=inbox if inbox > 0 else None,
-                outcome=outcome,
-            )
-            return
-        self._record_sending(sends, kind, snapshot, event, data, inbox, outcome)
+        record = functools.partial(
+            self.journal.record,
+            self.name,
+            kind,
+            snapshot,
+            time_=self.subject.clock.now(),
+            event=event,
+            data=data,
+            inbox=inbox if inbox > 0 else None,
+            outcome=outcome,
+        )
+        if sends:
+            self._record_sending(sends, record)
+        else:
+            record()
 
     def _record_sending(
         self,
         sends: Sequence[tuple[JournalledDevice, str]],
-        kind: StepKind,
-        snapshot: Snapshot,
-        event: str,
-        data: Any,
-        inbox: int,
-        outcome: str,
+        record: Callable[..., tuple[int, ...]],
     ) -> None:
         """Rule 5: journal the step with the events it sends, then hand those to their devices."""
-        journal = self.journal
-        prompt = journal.guarantee is Guarantee.PROMPT
+        prompt = self.journal.guarantee is Guarantee.PROMPT
         targets = sorted({d.name: d for d, _ in sends}.items())
         with contextlib.ExitStack() as locks:
             for _, d in targets:  # one order for every thread: posters take one device lock
                 locks.enter_context(d._lock)
-            seqs = journal.record(
-                self.name,
-                kind,
-                snapshot,
-                time_=self.subject.clock.now(),
-                event=event,
-                data=data,
-                inbox=inbox if inbox > 0 else None,
-                outcome=outcome,
-                sends=[Send(d.name, e, None, None if prompt else d._delivery(e)) for d, e in sends],
+            seqs = record(
+                sends=[Send(d.name, e, None, None if prompt else d._delivery(e)) for d, e in sends]
             )
             if prompt:
                 for (d, e), seq in zip(sends, seqs, strict=True):
@@ -198,16 +199,61 @@ class JournalledDevice:
             active = self.subject.configuration
             taken = []
             for rule in rules:
-                if rule.state in active:
-                    with self._lock:
-                        self._expect.append((_RECOVERY, rule.event, rule.data))
-                        self.subject.post(rule.event, rule.data)
-                    taken.append(rule.event)
+                if rule.state not in active:
+                    continue
+                if rule.redo:
+                    taken.append(self._redo(reader, rule.state, last.id))
+                    continue
+                with self._lock:
+                    self._expect.append((_RECOVERY, rule.event, rule.data))
+                    self.subject.post(rule.event, rule.data)
+                taken.append(rule.event)
             self.recovered = tuple(taken)
         for row in pending:
             self._deliver(row.seq, row.event, row.data)
         self.redelivered = len(pending)
         return last is not None
+
+    def _redo(self, reader: JournalReader, state: str, upto: int) -> str:
+        """Rule 3's redo: queue the entering step's notifications; what ``recovered`` says."""
+        found = reader.entering_step(self.name, state, upto)
+        if found is None:
+            return f"redo {state}: nothing to redo"
+        before, entering = found
+        assert entering.event is not None  # entering_step returns handled event steps
+        row = reader.device(self.name)
+        datamodel = row.data if row is not None and isinstance(row.data, dict) else {}
+        decision = step(
+            self.subject.machine, before.snapshot, entering.event, datamodel, entering.data
+        )
+        if state not in decision.entered:
+            return f"redo {state}: step {entering.id} ({entering.event}) does not enter it"
+        notifies = tuple(a for a in decision.actions if isinstance(a, Notify))
+        if not notifies:
+            return f"redo {state}: nothing to redo"
+        self.subject.call_soon(lambda: self._reissue(state, decision, entering))
+        return "redo " + ", ".join(f"{a.method}()" for a in notifies)
+
+    def _reissue(self, state: str, decision: Step, entering: StepRow) -> None:
+        """On the owner: issue the entering step's notifications again and journal it.
+
+        An earlier rule's event may have left ``state`` meanwhile: then there is
+        nothing to redo.
+        """
+        if state not in self.subject.configuration:
+            return
+        self.subject.reissue(decision, entering.data)
+        snapshot = self.subject.snapshot
+        assert snapshot is not None
+        self.journal.record(
+            self.name,
+            StepKind.RECOVERY,
+            snapshot,
+            time_=self.subject.clock.now(),
+            event=entering.event,
+            data=entering.data,
+            outcome=REDO,
+        )
 
     def _record_now(self, kind: StepKind) -> None:
         snapshot = self.subject.snapshot

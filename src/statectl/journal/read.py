@@ -8,11 +8,19 @@ Rules:
 3. Replay runs the recorded events against the model on a :class:`SimClock`:
    each device starts fresh, time follows the
    journalled device clock (shifted so that no restart goes back in time), and
-   each event and recovery step is posted and processed. The
-   snapshot the model reaches must equal the journalled one after every step,
-   and a ``restore`` must find the device where the run before it left it;
-   every difference is reported as a :class:`Mismatch`. No driver is attached,
-   so a replay never moves hardware.
+   each event and recovery step is posted and processed, except a recovery
+   ``redo`` step (:data:`REDO`): it re-issued device calls and changed no state,
+   so it is not posted. The
+   snapshot the model reaches must equal the journalled one after every step
+   (for a redo: the one before it), and a ``restore`` must find the device where
+   the run before it left it; every difference is reported as a
+   :class:`Mismatch`. No driver is attached, so a replay never moves hardware.
+4. The step that entered a state (:meth:`JournalReader.entering_step`) is found
+   by walking a device's steps back from the newest while the state is active:
+   restores, redo steps and steps that did not leave the state are passed over;
+   the entering step is the handled event step (from the inbox, or a recovery
+   event) whose predecessor's snapshot did not have the state active. A start
+   in the state, or a journal that begins inside it, has none.
 """
 
 from __future__ import annotations
@@ -32,6 +40,7 @@ from statectl.runtime.subject import Listener, Subject
 from statectl.semantics import Snapshot
 
 __all__ = [
+    "REDO",
     "DeviceRow",
     "InboxRow",
     "JournalReader",
@@ -41,6 +50,10 @@ __all__ = [
     "export_jsonl",
     "replay",
 ]
+
+
+#: The outcome of a recovery step that re-issued device calls and changed no state.
+REDO = "redo"
 
 
 @dataclass(frozen=True, slots=True)
@@ -150,6 +163,40 @@ class JournalReader:
     def devices(self) -> tuple[DeviceRow, ...]:
         rows = self._db.execute("SELECT name, chart, source, data FROM devices ORDER BY name")
         return tuple(DeviceRow(n, c, s, json.loads(d)) for n, c, s, d in rows)
+
+    def device(self, name: str) -> DeviceRow | None:
+        """The ``devices`` row of ``name`` (its chart, file and datamodel), if it ran."""
+        row = self._db.execute(
+            "SELECT name, chart, source, data FROM devices WHERE name = ?", (name,)
+        ).fetchone()
+        return DeviceRow(row[0], row[1], row[2], json.loads(row[3])) if row is not None else None
+
+    def entering_step(
+        self, device: str, state: str, upto: int | None = None
+    ) -> tuple[StepRow, StepRow] | None:
+        """``(before, entering)``: the step that entered ``state`` and the one before it.
+
+        Walks back from the newest step (or ``upto``) per rule 4; ``None`` when
+        ``state`` is not active there, or nothing journalled entered it.
+        """
+        sql = "SELECT * FROM steps WHERE device = ?"
+        args: list[Any] = [device]
+        if upto is not None:
+            sql += " AND id <= ?"
+            args.append(upto)
+        later: StepRow | None = None
+        for raw in self._db.execute(sql + " ORDER BY id DESC", args):
+            row = _step(raw)
+            if state not in row.snapshot.active:
+                if later is None or later.outcome != "handled" or later.event is None:
+                    return None  # not active at the newest step, or entered by a restore
+                if later.kind in (StepKind.EVENT, StepKind.RECOVERY):
+                    return row, later
+                return None
+            if row.kind is StepKind.START:
+                return None  # the device started in the state
+            later = row
+        return None  # the journal begins inside the state
 
     def steps(
         self,
@@ -289,7 +336,7 @@ def replay(
             else:  # the window starts mid-run: take the journal's word for the first state
                 restore_subject(subject, row.snapshot)
             subjects[row.device] = subject
-        if row.kind in (StepKind.EVENT, StepKind.RECOVERY):
+        if row.kind is StepKind.EVENT or (row.kind is StepKind.RECOVERY and row.outcome != REDO):
             assert row.event is not None
             subject.post(row.event, row.data)
             subject.run_until_idle()

@@ -1,22 +1,28 @@
 """A device file loaded for a journalled run: its chart and its Recovery table.
 
 The Recovery table is the device file's third table (docs/tables.md): per state,
-the event to post first when a device resumes there, because a state such as
-Moving cannot be trusted after the power went away::
+what a device does first when it resumes there, because a state such as Moving
+cannot be trusted after the power went away, and a state such as Returning waits
+for device work that nobody does any more::
 
     recovery:
       - state: Moving
         event: Error
         data: {detail: resumed after a restart}
+      - state: Returning
+        redo: yes
 
 Rules:
 1. The rows are read by the tables layer like the other two tables, in every
    format (shape problems are T1xx); :func:`statectl.recovery.check_recovery`
-   judges them against the chart (J603-J605 errors).
-2. A monitored state without a rule (J606) is a warning here: with a journal
-   there is something to recover from. ``statectl check`` shows it as info.
+   judges them against the chart (J603-J605 and J607 errors).
+2. A monitored state without a rule (J606) and a state left only by completion
+   events without one (J608) are warnings here: with a journal there is
+   something to recover from. ``statectl check`` shows them as info.
 3. On resume, after the journalled snapshot is restored, each rule whose state is
-   active posts its event first, in the table's order; the step is journalled
+   active acts first, in the table's order: an event rule posts its event, a
+   redo rule issues the entering step's device calls again
+   (:class:`~statectl.journal.device.JournalledDevice`); either is journalled
    as kind ``recovery``. A state without a rule resumes as it was.
 """
 
@@ -34,7 +40,7 @@ from statectl.tables import load as load_tables
 
 __all__ = ["CODES", "DeviceFile", "RecoveryRule", "check_recovery", "load_device"]
 
-#: On resume in ``state``, post ``event`` with ``data`` before any other event.
+#: On resume in ``state``, post ``event`` with ``data`` (or redo) before any other event.
 RecoveryRule = RecoveryRow
 
 

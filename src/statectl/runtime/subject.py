@@ -31,6 +31,9 @@ Rules:
    owner-side form of ``post`` + ``run_until_idle``. Instances of one chart share
    its compiled :class:`~statectl.semantics.Machine`; a Subject allocates its
    worker's wake-up event and record queue only when they are first needed.
+7. :meth:`Subject.reissue` performs only the notifications of a step already
+   taken, with the usual records and no state change: a restarted device's
+   recovery ``redo`` gives it the device work of the step that entered its state.
 """
 
 from __future__ import annotations
@@ -44,7 +47,7 @@ from typing import Any, Literal, Protocol, cast, runtime_checkable
 
 from statectl.errors import StatectlError, UnhandledEventError
 from statectl.expr import compile_expression
-from statectl.model import Chart, Invoke, Notify
+from statectl.model import Action, Chart, Invoke, Notify
 from statectl.observers import Notification, Observer
 from statectl.runtime.clock import Clock, SimClock
 from statectl.runtime.records import (
@@ -429,6 +432,32 @@ class Subject:
             self.emit(Started(self.name, now))
             for state in sorted(snapshot.active, key=order.__getitem__):
                 self.emit(StateEntered(self.name, now, state))
+
+    def reissue(self, actions: Step | Iterable[Action], data: Any = None) -> tuple[Notify, ...]:
+        """Issue the notifications of a step again, changing no state; returns those issued.
+
+        A device restarted in a state whose device work was cut short (a Motor
+        Returning when the power went away) gets that work again: a recovery
+        ``redo`` hands the step that entered the state. Only its ``Notify``
+        actions are performed, each as a step performs it (an ``InvokeIssued``
+        record, the observer's call, ``ObserverCalled``); the configuration,
+        history and previous state stay as they are. Call it as the owner.
+        """
+        self._check_owner()
+        if self._snapshot is None:
+            raise StatectlError(f"{self.name}: start() or restore() before reissue()")
+        found = actions.actions if isinstance(actions, Step) else tuple(actions)
+        notifies = tuple(a for a in found if isinstance(a, Notify))
+        now = self.clock.now()
+        listening = bool(self._listeners)
+        busy = self._busy
+        self._busy = True  # an observer must post(), not process, as during a step
+        try:
+            for action in notifies:
+                self._notify(action, data, now, listening)
+        finally:
+            self._busy = busy
+        return notifies
 
     def run_until_idle(self) -> int:
         """Process queued events until the queue is empty; returns how many events ran."""

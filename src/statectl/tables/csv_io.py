@@ -7,7 +7,7 @@ Rules:
 2. List cells (``control``, ``ignore``) are comma-separated inside one cell.
 3. The optional data file ``NAME.data.csv`` has columns ``name,value``; a value
    is a YAML literal. The optional recovery file ``NAME.recovery.csv`` has
-   columns ``state,event,data``; data is a YAML flow value.
+   columns ``state,event,data`` (and ``redo``: yes, or empty); data is a YAML flow value.
 4. Locations are the CSV line where a record starts (1-based, comments counted).
 5. Quoting is strict: an unclosed quote is T101 at the line the parser reached.
 """
@@ -24,7 +24,6 @@ from statectl.errors import Diagnostic, Location
 from statectl.tables.schema import (
     DATA_COLUMNS,
     EVENT_COLUMNS,
-    RECOVERY_COLUMNS,
     DeviceTables,
     RawRow,
     RawTable,
@@ -34,6 +33,7 @@ from statectl.tables.schema import (
     make_tables,
     parse_literal,
     recovery_cells,
+    recovery_columns,
     state_cells,
     state_columns,
 )
@@ -225,7 +225,6 @@ def dump_csv(tables: DeviceTables) -> tuple[str, str, str | None, str | None]:
         )
     recovery = None
     if tables.recovery:
-        recovery = _write(
-            RECOVERY_COLUMNS, [recovery_cells(r) for r in tables.recovery], tables.device
-        )
+        rcols = recovery_columns(tables)
+        recovery = _write(rcols, [recovery_cells(r, rcols) for r in tables.recovery], tables.device)
     return states, events, data, recovery

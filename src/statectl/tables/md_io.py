@@ -19,7 +19,6 @@ from statectl.errors import Diagnostic, Location
 from statectl.tables.schema import (
     DATA_COLUMNS,
     EVENT_COLUMNS,
-    RECOVERY_COLUMNS,
     DeviceTables,
     RawRow,
     RawTable,
@@ -29,6 +28,7 @@ from statectl.tables.schema import (
     make_tables,
     parse_literal,
     recovery_cells,
+    recovery_columns,
     state_cells,
     state_columns,
 )
@@ -217,5 +217,6 @@ def dump_md(tables: DeviceTables) -> str:
         )
     if tables.recovery:
         lines += ["", "## Recovery", ""]
-        lines += _table(RECOVERY_COLUMNS, [recovery_cells(r) for r in tables.recovery])
+        rcols = recovery_columns(tables)
+        lines += _table(rcols, [recovery_cells(r, rcols) for r in tables.recovery])
     return "\n".join(lines) + "\n"

@@ -3,7 +3,7 @@
 Rules:
 1. A device file holds a device name, a State Definition table, an Event
    Definition table, optional data (name -> literal initial value) and an
-   optional Recovery table (state -> the event to post when a restarted device
+   optional Recovery table (state -> what a restarted device does first when it
    resumes in that state; checked against the chart by ``statectl.recovery``).
 2. Columns are those of ``examples/motor/motor.yaml``: states ``component, api,
    state, control, description, ignore, parent`` plus the optional hierarchy
@@ -21,11 +21,16 @@ Rules:
    two columns only when some row uses them, so flat tables look as before.
 5. Data values are YAML literals: null, booleans, numbers, strings and lists of
    them (kept as tuples so the tables stay hashable values).
-5a. Recovery rows have columns ``state, event, data`` (``state`` and ``event``
-   required). ``data`` is the event's payload as a YAML flow value such as
+5a. Recovery rows have columns ``state, event, data, redo`` (``state`` required).
+   A row either posts an event (``event``, optional ``data``) or redoes the
+   device work of the step that entered the state (``redo: yes``; no event, no
+   data): exactly one of the two, else T104 (neither) or T114 (both, data on a
+   redo row, or a ``redo`` that is none of yes/no/true/false; empty is no).
+   ``data`` is the event's payload as a YAML flow value such as
    ``{detail: restarted}``: null, booleans, numbers, strings, lists and mappings
    with text keys, kept as plain lists and dicts because that is what a running
    device receives and the journal stores (a row with data is not hashable).
+   Writers emit the ``redo`` column only when some row uses it.
 6. Format readers turn a file into :class:`RawTable` values (cells with their
    locations); :func:`make_tables` turns those into :class:`DeviceTables` and
    reports every problem as a T1xx diagnostic, never stopping at the first.
@@ -66,6 +71,7 @@ __all__ = [
     "parse_literal",
     "parse_payload",
     "recovery_cells",
+    "recovery_columns",
     "state_cells",
     "state_columns",
     "strip_locations",
@@ -89,7 +95,11 @@ STATE_COLUMNS = (
 FLAT_STATE_COLUMNS = STATE_COLUMNS[:7]
 EVENT_COLUMNS = ("event", "condition", "guard", "old", "new", "kind", "api", "invoke")
 DATA_COLUMNS = ("name", "value")
-RECOVERY_COLUMNS = ("state", "event", "data")
+RECOVERY_COLUMNS = ("state", "event", "data", "redo")
+#: The recovery columns every writer emits; ``redo`` only when a row uses it.
+FLAT_RECOVERY_COLUMNS = RECOVERY_COLUMNS[:3]
+#: Spellings accepted in the ``redo`` column, after lowering (empty: no).
+REDO_WORDS: Mapping[str, bool] = {"yes": True, "true": True, "no": False, "false": False}
 COLUMNS: Mapping[str, tuple[str, ...]] = {
     "states": STATE_COLUMNS,
     "events": EVENT_COLUMNS,
@@ -100,7 +110,7 @@ REQUIRED: Mapping[str, tuple[str, ...]] = {
     "states": ("state",),
     "events": ("event", "old", "new"),
     "data": ("name",),
-    "recovery": ("state", "event"),
+    "recovery": ("state",),  # and per row an event or redo: yes (rule 5a)
 }
 #: The paper's and spreadsheet-friendly names for the columns.
 ALIASES: Mapping[str, str] = {
@@ -163,6 +173,7 @@ CODES: Mapping[str, str] = {
     "T111": "an event name contains a comma",
     "T112": "bad data entry (name not an identifier, or given twice)",
     "T113": "bad type value (none of atomic, compound, parallel, final, history, deep history)",
+    "T114": "bad recovery row (both an event and redo, data on a redo row, or a bad redo value)",
 }
 
 
@@ -204,16 +215,19 @@ class EventRow:
 
 @dataclass(frozen=True, slots=True)
 class RecoveryRow:
-    """One row of the Recovery table: on resume in ``state``, post ``event`` with ``data`` first.
+    """One row of the Recovery table: what a device resuming in ``state`` does first.
 
-    A device that was Moving when the power went away is not moving any more;
-    the row names the transition that brings its chart back in line (rule 5a).
+    Either it posts ``event`` with ``data`` (a Motor that was Moving is not moving
+    any more: Error brings its chart back in line), or, with ``redo``, it issues
+    again the device API calls of the step that entered ``state`` (a Motor that
+    was Returning must be told to return again, or its completion never comes).
     """
 
     state: str
-    event: str
+    event: str = ""  # empty on a redo row
     data: object = None  # the event's payload: a plain value, lists and dicts (rule 5a)
     origin: Location = NOWHERE
+    redo: bool = False  # re-issue the entering step's notifications instead of an event
 
 
 @dataclass(frozen=True, slots=True)
@@ -613,11 +627,54 @@ def make_data(
     return tuple(data.items())
 
 
+def _unreadable(row: RawRow, column: str) -> bool:
+    """The cell is there but not text (already reported as T108)."""
+    got = row.cells.get(column)
+    return got is not None and isinstance(got[0], Bad | tuple)
+
+
+def _redo(row: RawRow, diags: list[Diagnostic]) -> bool:
+    text = _text(row, "redo", diags).lower()
+    if not text:
+        return False
+    value = REDO_WORDS.get(text)
+    if value is None:
+        diags.append(
+            diag(
+                "T114",
+                row.cells["redo"][1],
+                f"recovery 'redo' must be yes or no (got {text!r})",
+                "write redo: yes to redo the entering step's device calls; leave it empty for no",
+            )
+        )
+        return False
+    return value
+
+
 def recovery_row(row: RawRow, diags: list[Diagnostic]) -> RecoveryRow:
-    """A Recovery row; its data cell is YAML flow text (or :class:`Bad`, T108)."""
+    """A Recovery row: an event (data a YAML flow value) or ``redo: yes`` (rule 5a)."""
     _check_keys("recovery", row, diags)
     state = _required(row, "state", "recovery", diags)
-    event = _required(row, "event", "recovery", diags)
+    event = _text(row, "event", diags)
+    redo = _redo(row, diags)
+    if redo and event:
+        diags.append(
+            diag(
+                "T114",
+                row.where,
+                f"recovery row for {state!r} has both an event ({event!r}) and redo: yes",
+                "a row either posts an event or redoes the entering step: keep one",
+            )
+        )
+    elif not redo and not event and not _unreadable(row, "event"):
+        diags.append(
+            diag(
+                "T104",
+                row.where,
+                f"recovery row for {state!r} has neither an 'event' nor redo: yes",
+                "name the event to post on resume, or write redo: yes",
+            )
+        )
     data: object = None
     got = row.cells.get("data")
     if got is not None:
@@ -637,7 +694,17 @@ def recovery_row(row: RawRow, diags: list[Diagnostic]) -> RecoveryRow:
             )
         else:
             data = value
-    return RecoveryRow(state, event, data, row.where)
+        if redo and data is not None:
+            diags.append(
+                diag(
+                    "T114",
+                    where,
+                    f"recovery row for {state!r} redoes its entering step and takes no data",
+                    "the redone calls get the data of the step that entered the state: "
+                    "delete the data cell",
+                )
+            )
+    return RecoveryRow(state, event, data, row.where, redo)
 
 
 # --- whole tables -----------------------------------------------------------------------
@@ -710,9 +777,20 @@ def state_cells(s: StateRow, columns: Sequence[str]) -> list[str]:
     return [cells[c] for c in columns]
 
 
-def recovery_cells(r: RecoveryRow) -> list[str]:
-    """One recovery row as text cells (data as a YAML flow value, empty for none)."""
-    return [r.state, r.event, "" if r.data is None else format_literal(r.data)]
+def recovery_columns(tables: DeviceTables) -> tuple[str, ...]:
+    """The recovery columns a writer emits: the flat ones, plus ``redo`` if a row uses it."""
+    return RECOVERY_COLUMNS if any(r.redo for r in tables.recovery) else FLAT_RECOVERY_COLUMNS
+
+
+def recovery_cells(r: RecoveryRow, columns: Sequence[str] = FLAT_RECOVERY_COLUMNS) -> list[str]:
+    """One recovery row as text cells (data as a YAML flow value, empty for none; redo yes/"")."""
+    cells = {
+        "state": r.state,
+        "event": r.event,
+        "data": "" if r.data is None else format_literal(r.data),
+        "redo": "yes" if r.redo else "",
+    }
+    return [cells[c] for c in columns]
 
 
 def validate_for_writing(tables: DeviceTables, where: Location) -> list[Diagnostic]:
@@ -738,11 +816,16 @@ def validate_for_writing(tables: DeviceTables, where: Location) -> list[Diagnost
         if isinstance(normalize_value(value), Bad):
             diags.append(diag("T108", where, f"data {name!r} is not a literal: {value!r}"))
     for r in tables.recovery:
-        for column, text in (("state", r.state), ("event", r.event)):
+        texts = (("state", r.state),) if r.redo else (("state", r.state), ("event", r.event))
+        for column, text in texts:
             if not text or text != text.strip():
                 diags.append(
                     diag("T104", r.origin, f"recovery {column} {text!r} cannot be written")
                 )
+        if r.redo and (r.event or r.data is not None):
+            diags.append(
+                diag("T114", r.origin, f"recovery row for {r.state!r}: redo with an event or data")
+            )
         if isinstance(normalize_payload(r.data), Bad):
             diags.append(diag("T108", r.origin, f"recovery data is not a plain value: {r.data!r}"))
     return diags

@@ -2,7 +2,7 @@
 
 Rules:
 1. Sheets ``States`` and ``Events`` (and optional ``Data`` with ``name, value``
-   and ``Recovery`` with ``state, event, data``) each have their header in row 1;
+   and ``Recovery`` with ``state, event, data, redo``) each have their header in row 1;
    sheet names are matched without regard to case.
 2. The device name is cell B1 of a sheet ``Device`` whose A1 reads ``device``;
    without that sheet it is the file's name without ``.xlsx``.
@@ -32,7 +32,6 @@ from statectl.errors import Diagnostic, Location
 from statectl.tables.schema import (
     DATA_COLUMNS,
     EVENT_COLUMNS,
-    RECOVERY_COLUMNS,
     Bad,
     Cell,
     DeviceTables,
@@ -44,6 +43,7 @@ from statectl.tables.schema import (
     make_tables,
     parse_literal,
     recovery_cells,
+    recovery_columns,
     state_cells,
     state_columns,
 )
@@ -199,8 +199,8 @@ def dump_xlsx(tables: DeviceTables) -> bytes:
     if tables.recovery:
         _fill(
             wb.create_sheet(SHEETS["recovery"]),
-            RECOVERY_COLUMNS,
-            (recovery_cells(r) for r in tables.recovery),
+            recovery_columns(tables),
+            (recovery_cells(r, recovery_columns(tables)) for r in tables.recovery),
         )
     _fill(wb.create_sheet(SHEETS["device"]), ("device", tables.device), ())
     out = io.BytesIO()

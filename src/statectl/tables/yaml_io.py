@@ -3,7 +3,8 @@
 Rules:
 1. The document is a mapping with ``device``, ``states``, ``events``, an
    optional ``data`` mapping and an optional ``recovery`` list of rows
-   (``state``, ``event``, ``data``); anything else at the top is T102 or T103.
+   (``state`` with ``event`` and ``data``, or ``redo: yes``); anything else at
+   the top is T102 or T103.
 2. The node tree is composed (not constructed) so every row and cell keeps its
    1-based line; only ``data`` values and a recovery row's ``data`` are
    constructed, as YAML values.
@@ -11,7 +12,8 @@ Rules:
    columns, a sequence of scalars; a mapping anywhere else is T108.
 4. The writer leaves out empty optional cells and writes ``kind`` always, so
    a written file reads like the hand-written Motor; ``recovery`` comes last,
-   its ``data`` in flow style (``data: {detail: restarted}``).
+   its ``data`` in flow style (``data: {detail: restarted}``), a redo row as
+   ``redo: yes``.
 """
 
 from __future__ import annotations
@@ -295,10 +297,18 @@ def _flow(value: object) -> object:
     return value
 
 
+class _Yes:
+    """The ``redo`` cell of a redo row: written ``yes``, as people write it."""
+
+
 def _recovery_doc(tables: DeviceTables) -> list[dict[str, Any]]:
     rows: list[dict[str, Any]] = []
     for r in tables.recovery:
-        row: dict[str, Any] = {"state": r.state, "event": r.event}
+        row: dict[str, Any] = {"state": r.state}
+        if r.redo:
+            row["redo"] = _Yes()
+        else:
+            row["event"] = r.event
         if r.data is not None:
             row["data"] = _flow(r.data)
         rows.append(row)
@@ -322,7 +332,12 @@ def _represent_flow_list(dumper: yaml.SafeDumper, data: _FlowList) -> yaml.Node:
     return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=True)
 
 
+def _represent_yes(dumper: yaml.SafeDumper, data: _Yes) -> yaml.Node:
+    return dumper.represent_scalar("tag:yaml.org,2002:bool", "yes")
+
+
 _Dumper.add_representer(list, _represent_list)
+_Dumper.add_representer(_Yes, _represent_yes)
 _Dumper.add_representer(_Flow, _represent_flow)
 _Dumper.add_representer(_FlowList, _represent_flow_list)
 
