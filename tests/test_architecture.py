@@ -22,8 +22,10 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     "tables": ("errors", "model"),
     "build": ("errors", "model", "expr", "observers", "tables"),
     "recovery": ("errors", "model", "tables"),
+    "guards": (),
     "check": (
         "errors", "model", "expr", "semantics", "observers", "tables", "build", "recovery",
+        "guards",
     ),
     "render": ("errors", "model", "observers", "semantics"),
     "scxml": ("errors", "model", "expr", "semantics", "observers", "runtime"),
@@ -47,7 +49,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "runtime", "devices", "render", "journal", "cell", "explore",
     ),
 }
-THIRD_PARTY_FREE = (*KERNEL, "observers")
+THIRD_PARTY_FREE = (*KERNEL, "observers", "guards")
 
 
 def layer_of(path: Path) -> str:
