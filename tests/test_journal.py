@@ -466,3 +466,28 @@ def test_export_filters_by_device_and_time(tmp_path: Path) -> None:
             export_jsonl(reader, io.StringIO(), since=4e9),
         ]
     assert counts == [1, 0, 0]
+
+
+def test_show_interleaves_accepted_events_and_steps_in_time_order(
+    tmp_path: Path, device_file: Path
+) -> None:
+    """Each accepted event is shown before the step that processed it, all in wall order."""
+    db = tmp_path / "j.db"
+    system = make_system(db, device_file)
+    system.start()
+    for event, data in (("Movement", {"amount": 1}), ("Error", None), ("Movement", None)):
+        system.post(None, event, data)  # the last is ignored in Returning, still a step
+        system.drain()
+    system.close()
+    shown = io.StringIO()
+    assert journal_show(str(db), out=shown, err=io.StringIO()) == 0
+    lines = shown.getvalue().splitlines()
+    stamps = [line.split("  ", 1)[0] for line in lines]
+    assert stamps == sorted(stamps)
+    order = [line.split("  ", 1)[1].split()[0][:1] for line in lines]  # '#' accepted, 's' step
+    assert order[0] == "s"  # the start step comes first
+    for i, mark in enumerate(order):
+        if mark == "#":
+            seq = lines[i].split("  ", 1)[1].split()[0]
+            later = [x for x in lines[i + 1 :] if f"({seq})" in x]
+            assert later, f"no step after accepted {seq}"

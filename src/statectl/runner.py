@@ -46,11 +46,12 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
+import heapq
 import os
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, TextIO
@@ -691,11 +692,13 @@ def journal_show(
     if opened is None:
         return USAGE
     reader, lo, hi = opened
-    with reader:
-        lines: list[tuple[float, int, str]] = []
+
+    def accepted() -> Iterator[tuple[float, int, str]]:
         for r in reader.inbox(device, lo, hi):
             data = "" if r.data is None else " " + format_data(r.data)
-            lines.append((r.wall, 0, f"#{r.seq:<6} {r.device}  accepted  {r.event}{data}"))
+            yield r.wall, 0, f"#{r.seq:<6} {r.device}  accepted  {r.event}{data}"
+
+    def steps() -> Iterator[tuple[float, int, str]]:
         for s in reader.steps(device, lo, hi):
             what = s.event or ""
             if s.data is not None:
@@ -705,8 +708,12 @@ def journal_show(
             text = f"step {s.id:<4} {s.device}  {s.kind.value:<8} {what}{via} -> [{state}]"
             if s.outcome and s.outcome != "handled":
                 text += f"  {s.outcome}"
-            lines.append((s.wall, 1, text))
-        for wall, _, text in sorted(lines, key=lambda x: (x[0], x[1])):
+            yield s.wall, 1, text
+
+    with reader:
+        # Both come in journal order, which is wall-clock order: merged as they stream, so
+        # a journal of millions of rows is shown without being held in memory.
+        for wall, _, text in heapq.merge(accepted(), steps(), key=lambda x: (x[0], x[1])):
             stamp = dt.datetime.fromtimestamp(wall).isoformat(timespec="milliseconds")
             out.write(f"{stamp}  {text}\n")
     return OK
