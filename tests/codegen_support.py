@@ -8,6 +8,7 @@ the last event of a sequence, ``config S1, S2`` (active states in document order
 
 from __future__ import annotations
 
+import difflib
 import shutil
 import subprocess
 from collections.abc import Mapping, Sequence
@@ -16,8 +17,9 @@ from typing import Any
 
 import pytest
 
-from statectl.codegen.cpp import generate
-from statectl.codegen.flatten import identifiers
+from statectl.codegen.cpp import render, runtime_files
+from statectl.codegen.flatten import flatten, identifiers
+from statectl.errors import Diagnostic, Severity, has_errors
 from statectl.model import Chart
 from statectl.observers import Notification
 from statectl.runtime import SimClock, Subject
@@ -157,8 +159,8 @@ int main() {
       device.dispatch(static_cast<@NS@::Event>(e));
       p = end;
     }
-    std::printf("config");
-    const char* sep = " ";
+    std::printf("config ");
+    const char* sep = "";
     for (std::size_t s = 0; s < @NS@::kStateCount; ++s) {
       if (device.in(static_cast<@NS@::State>(s))) {
         std::printf("%s%s", sep, @NS@::detail::kStateNames[s]);
@@ -193,17 +195,30 @@ def driver_source(chart: Chart, fields: Sequence[str], field_idents: Mapping[str
     )
 
 
+class Refused(Exception):
+    """The generator refused the chart; ``diagnostics`` say why (G7xx errors)."""
+
+    def __init__(self, diagnostics: Sequence[Diagnostic]) -> None:
+        super().__init__("; ".join(str(d) for d in diagnostics))
+        self.diagnostics = tuple(diagnostics)
+
+
 class CppDevice:
-    """A chart generated and compiled once, run over many sequences in one process."""
+    """A chart generated and compiled once, run over many sequences in one process.
+
+    Raises :class:`Refused` when the generator reports an error, so a caller can
+    tell a refusal (a diagnostic) from a crash (any other exception).
+    """
 
     def __init__(self, chart: Chart, workdir: Path, compiler: str | None = None) -> None:
-        from statectl.codegen.flatten import flatten
-
         self.chart = chart
-        written, diags = generate(chart, workdir)
-        assert written, [str(d) for d in diags]
-        flat, _ = flatten(chart)
-        assert flat is not None
+        flat, diags = flatten(chart)  # once: generating re-flattens otherwise
+        if flat is None or has_errors(diags):
+            raise Refused([d for d in diags if d.severity is Severity.ERROR])
+        for rel, text in {**render(flat), **runtime_files()}.items():
+            path = workdir / rel
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(text, encoding="utf-8")
         self.fields = [f.name for f in flat.context]
         idents = {f.name: f.ident for f in flat.context}
         self.events = list(flat.events)
@@ -235,4 +250,6 @@ def assert_equivalent(device: CppDevice, sequences: Sequence[Sequence_]) -> None
     for (context, events), got in zip(sequences, cpp, strict=True):
         full = {f: context.get(f, 0) for f in device.fields}
         expected = python_trace(chart, full, events)
-        assert got == expected, (dict(context), list(events))
+        if got != expected:
+            diff = difflib.unified_diff(expected, got, "python", "c++", lineterm="", n=2)
+            raise AssertionError(f"{dict(context)} {list(events)}\n" + "\n".join(diff))
