@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from statectl.model import Chart, Notify, Raise, State, StateKind, Transition
+from statectl.model import Chart, EventDef, Notify, Raise, State, StateKind, Transition
 from statectl.semantics import LivelockError, Machine, Snapshot, initial, name_match, step
 
 A, CP, P, F = StateKind.ATOMIC, StateKind.COMPOUND, StateKind.PARALLEL, StateKind.FINAL
@@ -261,3 +261,33 @@ def test_notify_actions_are_returned_not_performed() -> None:
 def test_name_match(descriptors: tuple[str, ...], event: str, expected: bool) -> None:
     """SCXML event descriptors match by dotted prefix token, or '*'."""
     assert name_match(descriptors, event) is expected
+
+
+@pytest.mark.parametrize(
+    ("parent_kind", "entered"),
+    [
+        (StateKind.COMPOUND, {"P", "A"}),  # the compound's initial state
+        (StateKind.PARALLEL, {"P", "A", "B"}),  # every region of the parallel state
+    ],
+)
+def test_a_history_without_default_enters_what_its_parent_enters(
+    parent_kind: StateKind, entered: set[str]
+) -> None:
+    """W3C requires a default transition on <history>; without one, the first entry of the
+    history state enters the parent's default instead of no child at all."""
+    chart = Chart(
+        "H",
+        (
+            State("P", parent_kind, None, ("A",) if parent_kind is StateKind.COMPOUND else ()),
+            State("A", parent="P"),
+            State("B", parent="P"),
+            State("H", StateKind.HISTORY_SHALLOW, "P"),
+            State("Q"),
+        ),
+        (Transition("Q", ("go",), ("H",)),),
+        ("Q",),
+        events=(EventDef("go"),),
+    )
+    m = Machine(chart)
+    after = step(m, initial(m, {}).target, "go", {}, None)
+    assert set(after.target.active) == entered

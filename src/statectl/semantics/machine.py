@@ -63,8 +63,9 @@ class Machine:
             if s.kind is StateKind.COMPOUND:
                 kids = [c for c in self.children.get(s.name, ()) if not self.kind[c].is_history]
                 self.initial_of[s.name] = s.initial or (kids[:1] and (kids[0],)) or ()
+        for s in chart.states:
             if s.kind.is_history:
-                self.history_default[s.name] = s.history_default
+                self.history_default[s.name] = s.history_default or self._parent_default(s.name)
         self.top_initial: tuple[str, ...] = chart.initial or self.children.get(None, ())[:1]
         self.transitions_of: dict[str, tuple[Transition, ...]] = {
             name: tuple(t for t in chart.transitions if t.source == name) for name in self.order
@@ -102,6 +103,18 @@ class Machine:
         #: the memoised initial step's (target, plan table) when :meth:`quiet` found it so
         self.quiet_start: tuple[Snapshot, PlanTable] | None = None
 
+
+    def _parent_default(self, history: str) -> tuple[str, ...]:
+        """A history state without a default transition (W3C requires one) enters what its
+        parent enters by default: a compound's initial state, a parallel's regions. Without
+        this, entering it before anything was recorded would enter no child at all.
+        """
+        parent = self.parent[history]
+        if parent is None:
+            return ()
+        if self.kind[parent] is StateKind.COMPOUND:
+            return self.initial_of.get(parent, ())
+        return tuple(c for c in self.children.get(parent, ()) if not self.kind[c].is_history)
     def quiet(self, result: Step) -> tuple[Snapshot, PlanTable] | None:
         """``result``'s interned target and plan table if performing it unheard only moves there.
 
