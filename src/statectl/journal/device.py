@@ -44,8 +44,6 @@ Rules:
 
 from __future__ import annotations
 
-import contextlib
-import functools
 import threading
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -135,43 +133,44 @@ class JournalledDevice:
         assert snapshot is not None
         kind = StepKind.RECOVERY if inbox == _RECOVERY else StepKind.EVENT
         sends = self.sends() if self.sends is not None else ()
-        record = functools.partial(
-            self.journal.record,
-            self.name,
-            kind,
-            snapshot,
-            time_=self.subject.clock.now(),
-            event=event,
-            data=data,
-            inbox=inbox if inbox > 0 else None,
-            outcome=outcome,
-        )
-        if sends:
-            self._record_sending(sends, record)
-        else:
-            record()
-
-    def _record_sending(
-        self,
-        sends: Sequence[tuple[JournalledDevice, str]],
-        record: Callable[..., tuple[int, ...]],
-    ) -> None:
-        """Rule 5: journal the step with the events it sends, then hand those to their devices."""
-        prompt = self.journal.guarantee is Guarantee.PROMPT
-        targets = sorted({d.name: d for d, _ in sends}.items())
-        with contextlib.ExitStack() as locks:
-            for _, d in targets:  # one order for every thread: posters take one device lock
-                locks.enter_context(d._lock)
-            seqs = record(
-                sends=[Send(d.name, e, None, None if prompt else d._delivery(e)) for d, e in sends]
+        targets = self._lock_targets(sends) if sends else ()  # rule 5
+        hand_over = bool(sends) and self.journal.guarantee is Guarantee.PROMPT
+        try:
+            seqs = self.journal.record(
+                self.name,
+                kind,
+                snapshot,
+                time_=self.subject.clock.now(),
+                event=event,
+                data=data,
+                inbox=inbox if inbox > 0 else None,
+                outcome=outcome,
+                sends=self._sends(sends) if sends else (),
             )
-            if prompt:
+            if hand_over:  # under DURABLE_FIRST the writer delivers them after the commit
                 for (d, e), seq in zip(sends, seqs, strict=True):
                     d._expect.append((seq, e, None))
                     d.subject.post(e)
-        for _, d in targets:
-            if prompt and d.wake is not None:
+        finally:
+            for d in targets:
+                d._lock.release()
+        for d in targets if hand_over else ():
+            if d.wake is not None:
                 d.wake()
+
+    @staticmethod
+    def _lock_targets(sends: Sequence[tuple[JournalledDevice, str]]) -> list[JournalledDevice]:
+        """Rule 5: hold the target devices' locks, in one order for every thread (by name),
+        so each gets the events sent to it in ``seq`` order; posters take one lock each."""
+        targets = [d for _, d in sorted({d.name: d for d, _ in sends}.items())]
+        for d in targets:
+            d._lock.acquire()
+        return targets
+
+    def _sends(self, sends: Sequence[tuple[JournalledDevice, str]]) -> list[Send]:
+        """The journal's Send records; under DURABLE_FIRST each delivers after the commit."""
+        prompt = self.journal.guarantee is Guarantee.PROMPT
+        return [Send(d.name, e, None, None if prompt else d._delivery(e)) for d, e in sends]
 
     def _delivery(self, event: str) -> Callable[[int], object]:
         return lambda seq: self._deliver(seq, event, None)
