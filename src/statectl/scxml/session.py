@@ -235,6 +235,9 @@ class Session:
         self.sessionid = uuid.uuid4().hex
         self.run = Run(set(), {}, None, {}, executor=self)
         self.datamodel: Datamodel = make_datamodel(chart.datamodel, self.run.active.__contains__)
+        # A python document is trusted by whoever runs it; its children inherit that,
+        # nobody else's does (a safe parent's python child is refused in ``invoke``).
+        self.trusted: bool = chart.datamodel == "python" and (parent is None or parent.trusted)
         self.external: deque[Event] = deque()
         self.running = True
         self.started = False
@@ -623,6 +626,15 @@ class Session:
             return
         chart, _diagnostics = read_scxml(text, f"<invoke {invokeid}>", str(base))
         if chart is None:
+            self.error("error.execution")
+            return
+        if chart.datamodel == "python" and not self.trusted:
+            # Trust is never gained: only a document that is itself trusted (python)
+            # may start a python child; a safe or null parent gets error.execution.
+            self.scheduler.trace(
+                f"invoke {invokeid!r} refused: a {self.chart.datamodel!r} document "
+                "cannot invoke a 'python' datamodel child (trust is never gained)"
+            )
             self.error("error.execution")
             return
         child = Session(
