@@ -1,20 +1,28 @@
 """Dispatch speed and instance cost of statectl against its peers, in one process.
 
 Rules:
-1. Every contender runs the same work: the paper's Motor with one observer
-   attached (the cycle Movement, Movement completion, Movement, Error, Error
-   completion: five events, three notifications), a generated chart of 50 states
-   nested two levels deep (a 50-event cycle through every leaf, half by leaf
+1. Every contender runs the same work: the paper's whole Motor cycle with one
+   observer attached (Movement, Movement completion, Initialization [previous ==
+   'Moving'], Initialization completion, Movement, Error, Error completion: seven
+   events, the guarded one included, four notifications), a generated chart of 50
+   states nested two levels deep (a 50-event cycle through every leaf, half by leaf
    transitions and the rest by transitions of the parent), and building a new
    started instance.
-2. One process, interleaved: each round runs every contender once, in an order
+2. statectl is also measured the way users wire it, each a row of its own: with the
+   Moving monitor, with the simulated motor connected as ``statectl demo`` connects
+   it (driver + monitor), with a journal (SQLite, default guarantee), with the trace
+   writer, and through ``post()``. The worst row is reported beside the best.
+3. One process, interleaved: each round runs every contender once, in an order
    that rotates from round to round, after warm-up rounds that are thrown away.
    A figure is the median over the rounds, so a noisy moment hurts one round of
    everybody instead of one contender.
-3. The peers (transitions, python-statemachine, sismic) are imported only here,
-   from the ``bench`` extra; one that is not installed is skipped with a note.
-4. The hand-written dict baseline is the floor: a dictionary lookup on
-   ``(state, event)`` and a call of the observer, nothing else.
+4. The peers (transitions, python-statemachine, sismic) are imported only here,
+   from the ``bench`` extra; one that is not installed is skipped with a note. Each
+   implements the guard its own way (the previous state kept by a callback).
+5. The hand-written dict baseline is the floor: a dictionary lookup on
+   ``(state, event)``, the guard when the row has one, and a call of the observer.
+6. Many devices: 1,000 Motors on one ``System`` (one owner thread), fed the paper
+   cycle by 4 posting threads; the figure is events processed per second, end to end.
 
 Run: ``python bench/dispatch.py`` (``--quick`` for a smoke run, ``--libs`` to choose).
 """
@@ -23,8 +31,11 @@ from __future__ import annotations
 
 import argparse
 import gc
+import io
 import statistics
 import sys
+import tempfile
+import threading
 import time
 import tracemalloc
 from collections.abc import Callable, Sequence
@@ -36,18 +47,37 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
 from statectl.build import load_chart
+from statectl.devices import connect, make_driver
+from statectl.journal import Journal
+from statectl.journal.device import JournalledDevice
 from statectl.model import Chart, State, StateKind, Transition
-from statectl.runtime import SimClock, Subject
+from statectl.runner import DeviceSetup, System
+from statectl.runtime import SimClock, Subject, TraceWriter
+from statectl.runtime.monitors import attach_monitors
 
 MOTOR_YAML = Path(__file__).resolve().parents[1] / "examples" / "motor" / "motor.yaml"
-MOTOR_CYCLE = ("Movement", "Movement completion", "Movement", "Error", "Error completion")
-MOTOR_NOTIFY = {"Movement": 0, "Error": 2}  # driving events -> invoke number
+MOTOR_CYCLE = (
+    "Movement",
+    "Movement completion",
+    "Initialization",  # guarded: previous == 'Moving'
+    "Initialization completion",
+    "Movement",
+    "Error",
+    "Error completion",
+)
+MOTOR_NOTIFY = {"Movement": 0, "Initialization": 1, "Error": 2}  # driving events -> invoke
 MOTOR_ROWS = (  # old, event, new
     ("Blocked", "Movement", "Moving"),
     ("Moving", "Movement completion", "Blocked"),
+    ("Blocked", "Initialization", "Returning"),  # [previous == 'Moving']
+    ("Returning", "Initialization completion", "Blocked"),
     ("Moving", "Error", "Returning"),
     ("Returning", "Error completion", "Blocked"),
 )
+GUARDED = "Initialization"  # the one row with a guard: the previous state was Moving
+#: Event data the demo gives: a Movement carries its amount.
+MOTOR_DATA: dict[str, Any] = {"Movement": {"amount": 10}}
+SYSTEM_DEVICES, SYSTEM_THREADS, SYSTEM_CYCLES = 1000, 4, 20
 GROUPS, LEAVES = 5, 9  # 5 parents + 45 leaves = 50 states
 LIBS = ("statectl", "dict", "transitions", "python-statemachine", "sismic")
 
@@ -102,33 +132,114 @@ def nested_chart() -> Chart:
 # -- contenders: each returns (fire one cycle, events per cycle) or None if unavailable -------
 
 
-def statectl_motor() -> tuple[Fire, int]:
-    subject = Subject(load_chart(MOTOR_YAML), clock=SimClock())
-    subject.attach(Counter())
-    subject.start()
-    dispatch = subject.dispatch
-    cycle = MOTOR_CYCLE
+class QuietDevice:
+    """A fault source that never faults: the Moving monitor polls it and finds nothing."""
 
-    def fire() -> None:
-        for e in cycle:
-            dispatch(e)
+    def poll_fault(self) -> str | None:
+        return None
 
-    return fire, len(cycle)
+
+#: Where journals and traces of the wired rows go; removed when the run ends.
+SCRATCH = tempfile.TemporaryDirectory(prefix="statectl-bench-")
+
+
+def _motor_subject(wiring: str) -> tuple[Subject, JournalledDevice | None]:
+    """A started Motor wired as ``wiring`` says (bare, monitor, demo, journal, trace)."""
+    chart = load_chart(MOTOR_YAML)
+    subject = Subject(chart, clock=SimClock())
+    journalled = None
+    if wiring == "bare":
+        subject.attach(Counter())
+    elif wiring == "monitor":
+        subject.attach(Counter())
+        attach_monitors(subject, QuietDevice())
+    else:  # as `statectl demo` wires it: the simulated motor's API and its monitors
+        connect(subject, make_driver("sim-motor", {}, chart=chart))
+        if wiring == "trace":
+            subject.listen(TraceWriter(io.StringIO(), device_width=len(subject.name)))
+        elif wiring == "journal":
+            path = Path(SCRATCH.name) / f"journal-{id(subject)}.db"
+            journalled = JournalledDevice(subject, Journal(path))
+    if journalled is not None:
+        journalled.start()
+    else:
+        subject.start()
+    return subject, journalled
+
+
+def statectl_paper(wiring: str) -> Callable[[], tuple[Fire, int]]:
+    """The paper cycle through ``dispatch()`` (or the journal's ``post()``), wired so."""
+
+    def make() -> tuple[Fire, int]:
+        subject, journalled = _motor_subject(wiring)
+        cycle = [(e, MOTOR_DATA.get(e)) for e in MOTOR_CYCLE]
+        if journalled is not None:
+            post, run = journalled.post, subject.run_until_idle
+
+            def fire() -> None:
+                for e, d in cycle:
+                    post(e, d)
+                    run()
+
+            return fire, len(cycle)
+        dispatch = subject.dispatch
+
+        def fire() -> None:
+            for e, d in cycle:
+                dispatch(e, d)
+
+        return fire, len(cycle)
+
+    return make
 
 
 def statectl_motor_queued() -> tuple[Fire, int]:
-    subject = Subject(load_chart(MOTOR_YAML), clock=SimClock())
-    subject.attach(Counter())
-    subject.start()
+    subject, _ = _motor_subject("bare")
     post, run = subject.post, subject.run_until_idle
-    cycle = MOTOR_CYCLE
+    cycle = [(e, MOTOR_DATA.get(e)) for e in MOTOR_CYCLE]
 
     def fire() -> None:
-        for e in cycle:
-            post(e)
+        for e, d in cycle:
+            post(e, d)
             run()
 
     return fire, len(cycle)
+
+
+def system_rate(devices: int, threads: int, cycles: int) -> tuple[float, int]:
+    """Events/s for ``devices`` Motors on one System, fed by ``threads`` posters."""
+    chart = load_chart(MOTOR_YAML)
+    setups = tuple(DeviceSetup(f"M{i}", chart) for i in range(devices))
+    system = System(setups, SimClock())
+    for s in system.subjects.values():
+        s.attach(Counter())
+    system.start()
+    names = list(system.subjects)
+    total = devices * cycles * len(MOTOR_CYCLE)
+    stop = threading.Event()
+    owner = threading.Thread(target=system.serve, args=(stop,), kwargs={"paced": False})
+
+    def feed(mine: list[str]) -> None:
+        for _ in range(cycles):
+            for name in mine:
+                for e in MOTOR_CYCLE:
+                    system.post(name, e, MOTOR_DATA.get(e))
+
+    posters = [threading.Thread(target=feed, args=(names[k::threads],)) for k in range(threads)]
+    t0 = time.perf_counter()
+    owner.start()
+    for p in posters:
+        p.start()
+    for p in posters:
+        p.join()
+    done = lambda: sum(s.events_processed for s in system.subjects.values())  # noqa: E731
+    while done() < total:
+        time.sleep(0.001)
+    took = time.perf_counter() - t0
+    stop.set()
+    owner.join()
+    system.close()
+    return total / took, done()
 
 
 def statectl_nested() -> tuple[Fire, int]:
@@ -144,24 +255,33 @@ def statectl_nested() -> tuple[Fire, int]:
     return fire, len(cycle)
 
 
+Row = tuple[str, int | None, str | None]  # new state, invoke, previous state required
+
+
 class DictMachine:
-    """The floor: one dict lookup on (state, event), then the observer if the row notifies."""
+    """The floor: one dict lookup on (state, event), the guard if any, then the observer."""
 
-    __slots__ = ("observer", "state", "table")
+    __slots__ = ("observer", "previous", "state", "table")
 
-    def __init__(self, table: dict[tuple[str, str], tuple[str, int | None]], state: str) -> None:
+    def __init__(self, table: dict[tuple[str, str], Row], state: str) -> None:
         self.table = table
         self.state = state
+        self.previous = ""
         self.observer = Counter()
 
     def dispatch(self, event: str) -> None:
-        new, invoke = self.table[(self.state, event)]
+        new, invoke, needs = self.table[(self.state, event)]
+        if needs is not None and self.previous != needs:
+            return
+        self.previous = self.state
         self.state = new
         if invoke is not None:
             self.observer.update(invoke)
 
 
-MOTOR_TABLE = {(o, e): (n, MOTOR_NOTIFY.get(e)) for o, e, n in MOTOR_ROWS}
+MOTOR_TABLE: dict[tuple[str, str], Row] = {
+    (o, e): (n, MOTOR_NOTIFY.get(e), "Moving" if e == GUARDED else None) for o, e, n in MOTOR_ROWS
+}
 
 
 def dict_motor() -> tuple[Fire, int]:
@@ -178,11 +298,11 @@ def dict_motor() -> tuple[Fire, int]:
 
 def dict_nested() -> tuple[Fire, int]:
     rows, cycle = nested_rows()
-    table: dict[tuple[str, str], tuple[str, int | None]] = {}
+    table: dict[tuple[str, str], Row] = {}
     for s, e, t in rows:  # flattened by hand: a parent's row copied to its leaves
         target = t if "L" in t else f"{t}L0"
         for leaf in [s] if "L" in s else [f"{s}L{i}" for i in range(LEAVES)]:
-            table.setdefault((leaf, e), (target, None))
+            table.setdefault((leaf, e), (target, None, None))
     machine = DictMachine(table, "G0L0")
     dispatch = machine.dispatch
 
@@ -193,20 +313,46 @@ def dict_nested() -> tuple[Fire, int]:
     return fire, len(cycle)
 
 
+def _transitions_rows(model: Any, observer: Counter) -> list[dict[str, Any]]:
+    """The Motor's rows for transitions: the guard as a condition, the previous state
+    kept by a ``before`` callback, the observer called ``after``."""
+
+    def row(o: str, e: str, n: str) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "trigger": snake(e),
+            "source": o,
+            "dest": n,
+            "before": lambda o=o: setattr(model, "previous", o),
+        }
+        if e == GUARDED:
+            out["conditions"] = lambda: model.previous == "Moving"
+        if e in MOTOR_NOTIFY:
+            out["after"] = lambda i=MOTOR_NOTIFY[e]: observer.update(i)
+        return out
+
+    return [row(o, e, n) for o, e, n in MOTOR_ROWS]
+
+
+def _transitions_model(observer: Counter) -> Any:
+    """A transitions Motor (its ``Machine`` built on a fresh model) calling ``observer``."""
+    from transitions import Machine
+
+    model = type("Motor", (), {"previous": ""})()
+    Machine(
+        model=model,
+        states=["Blocked", "Moving", "Returning"],
+        transitions=_transitions_rows(model, observer),
+        initial="Blocked",
+        auto_transitions=False,
+    )
+    return model
+
+
 def transitions_motor() -> tuple[Fire, int] | None:
     try:
-        from transitions import Machine
+        model = _transitions_model(Counter())
     except ImportError:
         return None
-    observer = Counter()
-    model = type("Motor", (), {})()
-    rows = [
-        {"trigger": snake(e), "source": o, "dest": n}
-        | ({"after": (lambda i=MOTOR_NOTIFY[e]: observer.update(i))} if e in MOTOR_NOTIFY else {})
-        for o, e, n in MOTOR_ROWS
-    ]
-    Machine(model=model, states=["Blocked", "Moving", "Returning"], transitions=rows,
-            initial="Blocked", auto_transitions=False)
     calls = [getattr(model, snake(e)) for e in MOTOR_CYCLE]
 
     def fire() -> None:
@@ -232,7 +378,10 @@ def transitions_nested() -> tuple[Fire, int] | None:
     ]
     model = type("Nested", (), {})()
     HierarchicalMachine(
-        model=model, states=states, initial="G0", auto_transitions=False,
+        model=model,
+        states=states,
+        initial="G0",
+        auto_transitions=False,
         transitions=[{"trigger": e, "source": name(s), "dest": name(t)} for s, e, t in rows],
     )
     calls = [getattr(model, e) for e in cycle]
@@ -251,12 +400,20 @@ def _psm_motor_class() -> Any:
     states = {n: S(initial=(n == "Blocked")) for n in ("Blocked", "Moving", "Returning")}
     body: dict[str, Any] = {n.lower(): s for n, s in states.items()}
     for o, e, n in MOTOR_ROWS:
-        body[snake(e)] = states[o].to(states[n])
+        guard = {"cond": "was_moving"} if e == GUARDED else {}
+        body[snake(e)] = states[o].to(states[n], **guard)
     for e, i in MOTOR_NOTIFY.items():
         body[f"on_{snake(e)}"] = lambda self, i=i: self.observer.update(i)
+    body["was_moving"] = lambda self: self.previous == "moving"
+
+    def before_transition(self: Any, source: Any) -> None:
+        self.previous = source.id
+
+    body["before_transition"] = before_transition
 
     def init(self: Any, observer: Counter) -> None:
         self.observer = observer
+        self.previous = ""
         StateMachine.__init__(self)
 
     body["__init__"] = init
@@ -311,8 +468,10 @@ def psm_nested() -> tuple[Fire, int] | None:
 
 
 def _sismic_yaml(states: str, initial: str) -> str:
-    return f"statechart:\n  name: b\n  root state:\n    name: root\n    initial: {initial}\n" \
+    return (
+        f"statechart:\n  name: b\n  root state:\n    name: root\n    initial: {initial}\n"
         f"    states:\n{states}"
+    )
 
 
 def _sismic_motor_yaml() -> str:
@@ -321,9 +480,12 @@ def _sismic_motor_yaml() -> str:
         out.append(f"    - name: {st}\n      transitions:\n")
         for o, e, n in MOTOR_ROWS:
             if o == st:
-                action = f"\n        action: observer.update({MOTOR_NOTIFY[e]})" \
-                    if e in MOTOR_NOTIFY else ""
-                out.append(f"      - target: {n}\n        event: {e}{action}\n")
+                call = f"; observer.update({MOTOR_NOTIFY[e]})" if e in MOTOR_NOTIFY else ""
+                guard = "\n        guard: previous == 'Moving'" if e == GUARDED else ""
+                out.append(
+                    f"      - target: {n}\n        event: {e}{guard}\n"
+                    f"        action: previous = '{o}'{call}\n"
+                )
     return _sismic_yaml("".join(out), "Blocked")
 
 
@@ -338,7 +500,8 @@ def _sismic_nested_yaml() -> str:
             out.append(f"      - name: G{g}L{i}\n        transitions:\n")
             out.extend(
                 f"        - target: {t}\n          event: {e}\n"
-                for s, e, t in rows if s == f"G{g}L{i}"
+                for s, e, t in rows
+                if s == f"G{g}L{i}"
             )
     return _sismic_yaml("".join(out), "G0")
 
@@ -349,7 +512,8 @@ def _sismic(yaml: str, cycle: Sequence[str]) -> tuple[Fire, int] | None:
         from sismic.io import import_from_yaml  # type: ignore[import-untyped]  # no stubs
     except ImportError:
         return None
-    interpreter = Interpreter(import_from_yaml(yaml), initial_context={"observer": Counter()})
+    context = {"observer": Counter(), "previous": ""}
+    interpreter = Interpreter(import_from_yaml(yaml), initial_context=context)
     interpreter.execute()
     queue, execute = interpreter.queue, interpreter.execute
 
@@ -390,18 +554,9 @@ def instance_makers() -> dict[str, Callable[[], Callable[[], object]] | None]:
         return lambda: DictMachine(MOTOR_TABLE, "Blocked")
 
     def transitions_new() -> Callable[[], object]:
-        from transitions import Machine
+        import transitions  # noqa: F401  # skipped when not installed
 
-        rows = [{"trigger": snake(e), "source": o, "dest": n} for o, e, n in MOTOR_ROWS]
-        kind = type("Motor", (), {})
-
-        def new() -> object:
-            model = kind()
-            Machine(model=model, states=["Blocked", "Moving", "Returning"], transitions=rows,
-                    initial="Blocked", auto_transitions=False)
-            return model
-
-        return new
+        return lambda: _transitions_model(Counter())
 
     def psm_new() -> Callable[[], object]:
         cls = _psm_motor_class()
@@ -414,15 +569,18 @@ def instance_makers() -> dict[str, Callable[[], Callable[[], object]] | None]:
         chart = import_from_yaml(_sismic_motor_yaml())
 
         def new() -> object:
-            it = Interpreter(chart, initial_context={"observer": Counter()})
+            it = Interpreter(chart, initial_context={"observer": Counter(), "previous": ""})
             it.execute()
             return it
 
         return new
 
     makers: dict[str, Callable[[], Callable[[], object]]] = {
-        "statectl": statectl_new, "dict": dict_new, "transitions": transitions_new,
-        "python-statemachine": psm_new, "sismic": sismic_new,
+        "statectl": statectl_new,
+        "dict": dict_new,
+        "transitions": transitions_new,
+        "python-statemachine": psm_new,
+        "sismic": sismic_new,
     }
     out: dict[str, Callable[[], Callable[[], object]] | None] = {}
     for lib, maker in makers.items():
@@ -506,8 +664,17 @@ def median(c: Contender) -> float:
 
 def build(libs: Sequence[str]) -> tuple[list[Contender], list[str]]:
     table: list[tuple[str, str, str, Callable[[], tuple[Fire, int] | None]]] = [
-        ("motor", "statectl", "statectl dispatch()", statectl_motor),
-        ("motor", "statectl", "statectl post()+run_until_idle()", statectl_motor_queued),
+        ("motor", "statectl", "statectl bare dispatch()", statectl_paper("bare")),
+        ("motor", "statectl", "statectl + Moving monitor", statectl_paper("monitor")),
+        (
+            "motor",
+            "statectl",
+            "statectl wired as the demo (driver + monitor)",
+            statectl_paper("demo"),
+        ),
+        ("motor", "statectl", "statectl demo wiring + journal", statectl_paper("journal")),
+        ("motor", "statectl", "statectl demo wiring + trace", statectl_paper("trace")),
+        ("motor", "statectl", "statectl bare post()+run_until_idle()", statectl_motor_queued),
         ("motor", "dict", "dict baseline", dict_motor),
         ("motor", "transitions", "transitions", transitions_motor),
         ("motor", "python-statemachine", "python-statemachine", psm_motor),
@@ -546,8 +713,11 @@ def build(libs: Sequence[str]) -> tuple[list[Contender], list[str]]:
 def report(contenders: list[Contender], sizes: dict[str, float], notes: list[str]) -> str:
     lines = []
     head = "| scenario | library | ns/event | vs dict | transitions / this |"
-    titles = {"motor": "Motor + 1 observer", "nested": "50 states, 2 levels",
-              "new": "new started instance"}
+    titles = {
+        "motor": "paper cycle",
+        "nested": "50 states, 2 levels",
+        "new": "new started instance",
+    }
     for scenario in ("motor", "nested", "new"):
         rows = [c for c in contenders if c.scenario == scenario]
         if not rows:
@@ -581,8 +751,9 @@ def report(contenders: list[Contender], sizes: dict[str, float], notes: list[str
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="a short smoke run (noisy figures)")
-    parser.add_argument("--libs", default=",".join(LIBS),
-                        help=f"comma-separated subset of {', '.join(LIBS)}")
+    parser.add_argument(
+        "--libs", default=",".join(LIBS), help=f"comma-separated subset of {', '.join(LIBS)}"
+    )
     parser.add_argument("--rounds", type=int, default=None, help="measured rounds (default 15)")
     args = parser.parse_args(argv)
     libs = [x.strip() for x in args.libs.split(",") if x.strip()]
@@ -592,6 +763,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     rounds = args.rounds or (3 if args.quick else 15)
     warmup = 1 if args.quick else 3
     budget = 0.002 if args.quick else 0.05
+    same_work(libs)
     contenders, notes = build(libs)
     measure(contenders, rounds, warmup, budget)
     sizes: dict[str, float] = {}
@@ -602,7 +774,63 @@ def main(argv: Sequence[str] | None = None) -> int:
             sizes[c.lib] = instance_bytes(maker(), 50 if args.quick else 500)
     print(f"python {sys.version.split()[0]}, {rounds} rounds (median), interleaved")
     print(report(contenders, sizes, notes))
+    print(summary(contenders))
+    if "statectl" in libs:
+        devices = 100 if args.quick else SYSTEM_DEVICES
+        cycles = 2 if args.quick else SYSTEM_CYCLES
+        rate, processed = system_rate(devices, SYSTEM_THREADS, cycles)
+        print(
+            f"\n{devices:,} Motors on one System, {SYSTEM_THREADS} posting threads, "
+            f"paper cycle x {cycles}: {rate:,.0f} events/s ({processed:,} events processed)"
+        )
     return 0
+
+
+def same_work(libs: Sequence[str]) -> None:
+    """Fail loudly unless every contender ends one paper cycle Blocked with 4 notifications.
+
+    A peer whose guard never held (or always held) would be timing other work.
+    """
+    ends: dict[str, tuple[str, int]] = {}
+    if "statectl" in libs:
+        subject, _ = _motor_subject("bare")
+        for e in MOTOR_CYCLE:
+            subject.dispatch(e, MOTOR_DATA.get(e))
+        ends["statectl"] = (",".join(sorted(subject.configuration)), subject.invokes_issued)
+    if "dict" in libs:
+        machine = DictMachine(MOTOR_TABLE, "Blocked")
+        for e in MOTOR_CYCLE:
+            machine.dispatch(e)
+        ends["dict"] = (machine.state, machine.observer.n)
+    try:
+        observer = Counter()
+        model = _transitions_model(observer)
+    except ImportError:
+        pass
+    else:
+        if "transitions" in libs:
+            for e in MOTOR_CYCLE:
+                getattr(model, snake(e))()
+            ends["transitions"] = (model.state, observer.n)
+    wrong = {lib: end for lib, end in ends.items() if end != ("Blocked", 4)}
+    if wrong:
+        raise SystemExit(f"contenders do different work (want Blocked, 4 notifications): {wrong}")
+
+
+def summary(contenders: list[Contender]) -> str:
+    """The best and the worst statectl row of the paper cycle, against transitions."""
+    rows = [c for c in contenders if c.scenario == "motor" and c.lib == "statectl"]
+    peer = next(
+        (median(c) for c in contenders if c.scenario == "motor" and c.lib == "transitions"), None
+    )
+    if not rows:
+        return ""
+    best, worst = min(rows, key=median), max(rows, key=median)
+    out = []
+    for tag, c in (("best", best), ("worst", worst)):
+        vs = f", {peer / median(c):.1f}x transitions" if peer else ""
+        out.append(f"statectl {tag}: {c.label} {median(c):,.0f} ns/event{vs}")
+    return "\n" + "\n".join(out)
 
 
 if __name__ == "__main__":

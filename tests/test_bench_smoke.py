@@ -20,7 +20,11 @@ BENCH = ROOT / "bench" / "dispatch.py"
 def output() -> str:
     done = subprocess.run(
         [sys.executable, str(BENCH), "--quick", "--rounds", "1", "--libs", "statectl,dict"],
-        capture_output=True, text=True, timeout=300, cwd=ROOT, check=False,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=ROOT,
+        check=False,
     )
     assert done.returncode == 0, done.stderr
     return done.stdout
@@ -29,9 +33,13 @@ def output() -> str:
 @pytest.mark.parametrize(
     "row",
     [
-        "| Motor + 1 observer | statectl dispatch() |",
-        "| Motor + 1 observer | statectl post()+run_until_idle() |",
-        "| Motor + 1 observer | dict baseline |",
+        "| paper cycle | statectl bare dispatch() |",
+        "| paper cycle | statectl + Moving monitor |",
+        "| paper cycle | statectl wired as the demo (driver + monitor) |",
+        "| paper cycle | statectl demo wiring + journal |",
+        "| paper cycle | statectl demo wiring + trace |",
+        "| paper cycle | statectl bare post()+run_until_idle() |",
+        "| paper cycle | dict baseline |",
         "| 50 states, 2 levels | statectl dispatch() |",
         "| 50 states, 2 levels | dict baseline (flattened by hand) |",
         "| new started instance | statectl |",
@@ -47,3 +55,17 @@ def test_quick_run_leaves_out_the_peers_not_asked_for(output: str) -> None:
     """--libs limits the run: no transitions row and no 'not installed' note."""
     assert "transitions" not in output.replace("transitions / this", "")
     assert "not installed" not in output
+
+
+def test_quick_run_reports_the_worst_row_beside_the_best(output: str) -> None:
+    """The summary names statectl's slowest wiring as well as its fastest."""
+    lines = output.splitlines()
+    assert any(line.startswith("statectl best: ") for line in lines)
+    assert any(line.startswith("statectl worst: ") for line in lines)
+
+
+def test_quick_run_reports_many_devices_on_one_system(output: str) -> None:
+    """The System row counts every event it was fed as processed."""
+    line = next(x for x in output.splitlines() if "Motors on one System" in x)
+    fed = line.split("(")[1].split()[0]
+    assert int(fed.replace(",", "")) == 100 * 2 * 7  # devices x cycles x events
