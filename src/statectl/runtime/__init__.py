@@ -20,7 +20,7 @@ from statectl.runtime.records import (
     StateExited,
     TransitionTaken,
 )
-from statectl.runtime.subject import ApiLogging, Listener, Policy, Subject
+from statectl.runtime.subject import ApiLogging, Listener, Policy, StateWatcher, Subject
 from statectl.runtime.trace import TraceWriter, format_data, format_record
 
 __all__ = [
@@ -47,6 +47,7 @@ __all__ = [
     "Started",
     "StateEntered",
     "StateExited",
+    "StateWatcher",
     "Subject",
     "Timer",
     "TraceWriter",

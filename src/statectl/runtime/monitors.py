@@ -2,9 +2,11 @@
 
 Rules:
 1. Each ``MonitorSpec`` of :func:`statectl.observers.extract` becomes a
-   :class:`Monitor` that runs only while its state is active: it starts on
-   ``StateEntered`` and stops on ``StateExited`` (or when the run finishes),
-   recording ``MonitorStarted`` / ``MonitorStopped``.
+   :class:`Monitor` that runs only while its state is active: a
+   :class:`~statectl.runtime.subject.StateWatcher` of that state, it starts when
+   the step enters it and stops when a step exits it (or the run finishes). It
+   hooks the step, not the record stream, so a monitored device keeps the plan
+   path; ``MonitorStarted`` / ``MonitorStopped`` are recorded for listeners.
 2. While running it polls the device every ``period`` seconds on the Subject's
    clock. The poll itself runs on the Subject's owner (queued with
    ``call_soon``), so it never races the events the owner processes.
@@ -22,15 +24,7 @@ from typing import Protocol
 from statectl.errors import StatectlError
 from statectl.observers import MonitorSpec, extract
 from statectl.runtime.clock import Timer
-from statectl.runtime.records import (
-    FaultDetected,
-    Finished,
-    MonitorStarted,
-    MonitorStopped,
-    Record,
-    StateEntered,
-    StateExited,
-)
+from statectl.runtime.records import FaultDetected, MonitorStarted, MonitorStopped
 from statectl.runtime.subject import Subject
 
 __all__ = ["DEFAULT_PERIOD", "FaultSource", "Monitor", "attach_monitors"]
@@ -64,22 +58,23 @@ class Monitor:
         self._timer: Timer | None = None
         self._generation = 0  # a poll queued before a stop must not run after it
 
-    def __call__(self, record: Record) -> None:
-        if isinstance(record, StateEntered) and record.state == self.spec.state:
-            self._start()
-        elif isinstance(record, StateExited) and record.state == self.spec.state:
-            self._stop(record=True)
-        elif isinstance(record, Finished):
-            self._stop(record=False)
+    # -- StateWatcher: called by the subject's step, on the owner
 
-    def _start(self) -> None:
+    def entered(self, state: str) -> None:
         if self.active:
             return
         self.active = True
         self._generation += 1
         s = self.subject
-        s.emit(MonitorStarted(s.name, s.clock.now(), self.spec.state))
+        if s.listening:
+            s.emit(MonitorStarted(s.name, s.clock.now(), self.spec.state))
         self._schedule()
+
+    def exited(self, state: str) -> None:
+        self._stop(record=True)
+
+    def finished(self) -> None:
+        self._stop(record=False)
 
     def _stop(self, *, record: bool) -> None:
         if not self.active:
@@ -89,8 +84,8 @@ class Monitor:
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
-        if record:
-            s = self.subject
+        s = self.subject
+        if record and s.listening:
             s.emit(MonitorStopped(s.name, s.clock.now(), self.spec.state))
 
     def _schedule(self) -> None:
@@ -109,7 +104,8 @@ class Monitor:
         if detail is not None:
             s = self.subject
             event = self.spec.raises[0]
-            s.emit(FaultDetected(s.name, s.clock.now(), self.spec.state, event, detail))
+            if s.listening:
+                s.emit(FaultDetected(s.name, s.clock.now(), self.spec.state, event, detail))
             s.post(event, {"detail": detail})
         self._schedule()
 
@@ -127,5 +123,5 @@ def attach_monitors(
         if spec.raises
     )
     for m in monitors:
-        subject.listen(m)
+        subject.watch((m.spec.state,), m)
     return monitors

@@ -17,20 +17,24 @@ Rules:
    :class:`~statectl.errors.UnhandledEventError` under policy ``error`` (raised
    from ``run_until_idle``; a worker hands it to its error callback and goes on).
 4. Records are built only when someone listens; a record emitted while
-   listeners run (a monitor starting on ``StateEntered``) is delivered after the
-   current one, so every listener sees one order.
+   listeners run is delivered after the current one, so every listener sees one
+   order. Those who need less than records hook the step itself: a
+   :class:`StateWatcher` (monitors) hears the states it watches entered and
+   exited, a step listener (the journal) hears each event's outcome; neither
+   builds a record.
 5. Work that must run on the owner (a monitor's poll) is queued with
    :meth:`Subject.call_soon`, so records are only ever emitted by the owner.
-6. Speed comes from the kernel's plans, never from a second semantics: while
-   nobody listens, an event with a memoised plan for the current snapshot is
-   performed from the plan (commit its target, issue its notifications in
-   order), which is exactly what performing its :class:`~statectl.semantics.Step`
-   does when no records are built. A step listener (:meth:`Subject.on_step`,
-   the journal's) hears ``(event, data, outcome)`` after each event without
-   building records, so it keeps that path. :meth:`Subject.dispatch` is the synchronous
-   owner-side form of ``post`` + ``run_until_idle``. Instances of one chart share
-   its compiled :class:`~statectl.semantics.Machine`; a Subject allocates its
-   worker's wake-up event and record queue only when they are first needed.
+6. One path, fast because it is the only one: every event (from
+   :meth:`Subject.dispatch`, :meth:`Subject.run_until_idle` or a worker) goes
+   through ``_process``, which takes the kernel's memoised plan for the current
+   snapshot when there is one (commit its target, then perform its step: the
+   watchers, the notifications in order, records only for listeners) and asks
+   :func:`statectl.semantics.step` only for a step it has not planned yet. What
+   the plan path calls for a plan is worked out once per plan and instance.
+   :meth:`Subject.dispatch` is the synchronous owner-side form of ``post`` +
+   ``run_until_idle``. Instances of one chart share its compiled
+   :class:`~statectl.semantics.Machine`; a Subject allocates its worker's wake-up
+   event and record queue only when they are first needed.
 7. :meth:`Subject.reissue` performs only the notifications of a step already
    taken, with the usual records and no state change: a restarted device's
    recovery ``redo`` gives it the device work of the step that entered its state.
@@ -67,13 +71,25 @@ from statectl.runtime.records import (
 )
 from statectl.semantics import Plan, Snapshot, Step, compiled, initial, step
 
-__all__ = ["ApiLogging", "Listener", "Policy", "StepListener", "Subject"]
+__all__ = ["ApiLogging", "Listener", "Policy", "StateWatcher", "StepListener", "Subject"]
 
 Policy = Literal["ignore", "error"]
 Listener = Callable[[Record], None]
 #: ``(event, data, outcome)`` after an event ran; outcome is ``handled`` or the ignore reason.
 StepListener = Callable[[str, Any, str], None]
 ErrorHandler = Callable[[BaseException], None]
+
+
+class StateWatcher(Protocol):
+    """Hears the states it watches entered and exited, and the end of the run; no records.
+
+    A monitor is one: it polls its device only while its state is active. Calls
+    come on the owner, inside the step, in the order a trace would show them.
+    """
+
+    def entered(self, state: str) -> None: ...
+    def exited(self, state: str) -> None: ...
+    def finished(self) -> None: ...
 
 
 @runtime_checkable
@@ -84,8 +100,8 @@ class ApiLogging(Protocol):
     def api_log(self) -> Sequence[ApiCall]: ...
 
 
-#: What the plan path calls for a data-less plan: (invokes counted first, callable, argument).
-_Call = tuple[int, Callable[[Any], object], Any]
+#: What the plan path calls for a data-less plan: (counted first, callable or None, argument).
+_Call = tuple[int, Callable[[Any], object] | None, Any]
 #: ``Subject._counts`` holds both counters: events in the low bits, invokes above them.
 _INVOKES = 48
 _EVENTS = (1 << _INVOKES) - 1
@@ -132,6 +148,8 @@ class Subject:
         "_stopping",
         "_table",
         "_wake",
+        "_watch",
+        "_watchers",
         "_worker",
         "chart",
         "clock",
@@ -166,13 +184,15 @@ class Subject:
         self._calls: dict[Plan, _Call] | None = None
         self._listeners: tuple[Listener, ...] = ()
         self._steppers: tuple[StepListener, ...] = ()
+        self._watch: dict[str, tuple[StateWatcher, ...]] = {}  # state -> its watchers
+        self._watchers: tuple[StateWatcher, ...] = ()
         self._pending: deque[Record] | None = None
         self._emitting = False
         self._queue: deque[_Item] = deque()
         self._wake: threading.Event | None = None
         self._snapshot: Snapshot | None = None
         self._table: dict[str, Plan] = _NO_PLANS  # plans of the current snapshot
-        self._fast = False  # dispatch may take plans: started, nobody listens, no owner loop
+        self._fast = False  # dispatch may process at once: started, nothing queued, no loop
         self._busy = False
         self._finished = False
         self._closed = False
@@ -272,20 +292,50 @@ class Subject:
     def on_step(self, callback: StepListener) -> Callable[[], None]:
         """Hear ``(event, data, outcome)`` on the owner after each event; returns the undo.
 
-        Unlike :meth:`listen` it builds no records, so plans stay in use (rule 6).
-        The outcome is ``handled`` or the reason the event changed nothing.
+        Unlike :meth:`listen` it builds no records (rule 4). The outcome is
+        ``handled`` or the reason the event changed nothing.
         """
         self._steppers = (*self._steppers, callback)
-        self._refresh()
 
         def off() -> None:
             self._steppers = tuple(c for c in self._steppers if c is not callback)
-            self._refresh()
 
         return off
 
+    def watch(self, states: Iterable[str], watcher: StateWatcher) -> Callable[[], None]:
+        """Tell ``watcher`` when one of ``states`` is entered or exited; returns the undo.
+
+        Only the plans that enter or exit a watched state pay for it (rule 4).
+        Watch before :meth:`start` to hear the initial states entered.
+        """
+        names = tuple(dict.fromkeys(states))
+        unknown = [n for n in names if n not in self.machine.order]
+        if unknown:
+            raise StatectlError(f"{self.name}: no state {unknown} in chart {self.chart.name!r}")
+        for n in names:
+            self._watch[n] = (*self._watch.get(n, ()), watcher)
+        self._watchers = (*self._watchers, watcher)
+        self._calls = None
+
+        def off() -> None:
+            for n in names:
+                left = tuple(w for w in self._watch.get(n, ()) if w is not watcher)
+                if left:
+                    self._watch[n] = left
+                else:
+                    self._watch.pop(n, None)
+            self._watchers = tuple(w for w in self._watchers if w is not watcher)
+            self._calls = None
+
+        return off
+
+    @property
+    def listening(self) -> bool:
+        """Whether anyone receives records (build one only then)."""
+        return bool(self._listeners)
+
     def _refresh(self) -> None:
-        """Recompute whether :meth:`dispatch` may take plans without the queue.
+        """Recompute whether :meth:`dispatch` may process an event at once, without the queue.
 
         ``_fast`` is also False while anything is queued: :meth:`post` appends, then
         clears it; this sets it, then looks at the queue, so whichever thread runs
@@ -294,8 +344,6 @@ class Subject:
         """
         self._fast = (
             self._snapshot is not None
-            and not self._listeners
-            and not self._steppers
             and self._worker is None
             and not self._serving
             and not self._closed
@@ -396,7 +444,7 @@ class Subject:
         if self._worker is not None:
             self._check_owner()
         machine = self.machine
-        if not self._listeners:
+        if not self._listeners and not self._watch:
             entry = machine.quiet_start
             if entry is None:
                 first = initial(machine, self._data)
@@ -427,11 +475,14 @@ class Subject:
         if unknown:
             raise StatectlError(f"{self.name}: states {unknown} are not in {self.chart.name!r}")
         self._commit(self.machine.intern(snapshot))
+        now = self.clock.now()
         if self._listeners:
-            now = self.clock.now()
             self.emit(Started(self.name, now))
-            for state in sorted(snapshot.active, key=order.__getitem__):
+        for state in sorted(snapshot.active, key=order.__getitem__):
+            if self._listeners:
                 self.emit(StateEntered(self.name, now, state))
+            for w in self._watch.get(state, ()):
+                w.entered(state)
 
     def reissue(self, actions: Step | Iterable[Action], data: Any = None) -> tuple[Notify, ...]:
         """Issue the notifications of a step again, changing no state; returns those issued.
@@ -491,44 +542,17 @@ class Subject:
         """Process ``event`` now, on the calling thread as the owner, after anything queued.
 
         The synchronous form of :meth:`post` then :meth:`run_until_idle`: the same
-        records, observer calls and errors; returns how many events ran. While
-        nobody listens and the queue is empty, an event with a plan is performed
-        from it directly.
+        path, records, observer calls and errors; returns how many events ran.
         """
-        if self._fast and not self._busy:  # _fast: nothing is queued either
+        if self._fast and not self._busy and type(event) is str:  # _fast: nothing queued
+            self._busy = True
             try:
-                plan = self._table.get(event)
-            except TypeError:  # unhashable: post() says what is wrong with it
-                plan = None
-            if plan is not None and plan.handled:
-                # _follow() inlined: this is the hot path
-                self._snapshot = plan.target
-                self._table = plan.table
-                if plan.notifies and data is None:
-                    try:
-                        counts, call, arg = self._calls[plan]  # type: ignore[index]
-                    except (KeyError, TypeError):  # not made yet, or dropped
-                        counts, call, arg = self._call_for(plan)
-                    self._counts += counts
-                    self._busy = True
-                    try:
-                        call(arg)
-                    finally:
-                        self._busy = False
-                elif plan.notifies:
-                    self._counts += 1
-                    self._busy = True
-                    try:
-                        self._issue(plan, data)
-                    finally:
-                        self._busy = False
-                else:
-                    self._counts += 1
-                if plan.final:
-                    self._finished = True
-                if not self._fast and self._queue:  # posted meanwhile: run-to-completion
-                    return 1 + self.run_until_idle()
-                return 1
+                self._process(event, data)
+            finally:
+                self._busy = False
+            if self._queue:  # posted meanwhile (an observer's completion): run-to-completion
+                return 1 + self.run_until_idle()
+            return 1
         self.post(event, data)
         return self.run_until_idle()
 
@@ -594,6 +618,8 @@ class Subject:
         self._fast = False
         if not self._finished:
             self._finished = True
+            for w in self._watchers:
+                w.finished()
             if self._listeners:
                 self.emit(Finished(self.name, self.clock.now()))
 
@@ -612,33 +638,6 @@ class Subject:
         self._table = self.machine.plans(target)
         self._refresh()
 
-    def _follow(self, plan: Plan, data: Any) -> bool:
-        """Perform ``plan`` as :meth:`_perform` would with nobody listening; False: not here.
-
-        An unhandled plan that must be rejected (policy ``error``) is left to the
-        full path, which builds the error.
-        """
-        if not plan.handled:
-            if self.policy == "error" and not plan.step.ignored:
-                return False
-            self._counts += 1
-            return True
-        self._snapshot = plan.target
-        self._table = plan.table
-        if plan.notifies and data is None:
-            calls = self._calls
-            entry = calls.get(plan) if calls is not None else None
-            counts, call, arg = entry if entry is not None else self._call_for(plan)
-            self._counts += counts
-            call(arg)
-        else:
-            self._counts += 1
-            if plan.notifies:
-                self._issue(plan, data)
-        if plan.final:
-            self._finished = True
-        return True
-
     def _call_for(self, plan: Plan) -> _Call:
         """What the plan path calls for ``plan`` without data, worked out once per instance.
 
@@ -650,7 +649,12 @@ class Subject:
         if calls is None:
             calls = self._calls = {}
         entry: _Call
-        if len(plan.notifies) == 1:
+        watch = self._watch
+        if watch and any(s in watch for m in plan.step.microsteps for s in (*m.exited, *m.entered)):
+            entry = (1, self._perform_unheard, plan)  # watchers hear it between notifications
+        elif not plan.notifies:
+            entry = (1, None, None)
+        elif len(plan.notifies) == 1:
             action = plan.notifies[0][1]
             route = self._routes.get(action.invoke)
             note = Notification(
@@ -665,6 +669,9 @@ class Subject:
     def _issue_all(self, plan: Plan) -> None:
         self._issue(plan, None)
 
+    def _perform_unheard(self, plan: Plan) -> None:
+        self._perform(plan.step, None, 0.0, False)
+
     def _issue(self, plan: Plan, data: Any) -> None:
         """Issue the notifications of ``plan`` in order, as :meth:`_notify` does unheard."""
         for _, action in plan.notifies:
@@ -678,18 +685,47 @@ class Subject:
                 )
 
     def _process(self, event: str, data: Any) -> None:
-        if not self._listeners:
-            plan = self._table.get(event)
-            steppers = self._steppers
-            if not steppers:
-                if plan is not None and self._follow(plan, data):
-                    return
-            elif plan is not None and plan.handled:  # unhandled: the slow path names why
-                self._follow(plan, data)
-                for callback in steppers:
-                    callback(event, data, "handled")
-                return
-        self._process_slow(event, data)
+        """The one path of an event (rule 6): the plan if there is one, else the kernel."""
+        plan = self._table.get(event)
+        if plan is None:
+            self._process_slow(event, data)
+            return
+        if not plan.handled:
+            if (
+                self._listeners
+                or self._steppers
+                or (self.policy == "error" and not plan.step.ignored)
+            ):
+                self._process_slow(event, data)  # it names why, and rejects
+            else:
+                self._counts += 1
+            return
+        if self._listeners:
+            now = self.clock.now()
+            self._counts += 1
+            self.emit(EventReceived(self.name, now, event, data))
+            self._commit(plan.target)
+            self._perform(plan.step, data, now, True)
+        else:
+            self._snapshot = plan.target
+            self._table = plan.table
+            if data is None:
+                calls = self._calls
+                entry = calls.get(plan) if calls is not None else None
+                counts, call, arg = entry if entry is not None else self._call_for(plan)
+                self._counts += counts
+                if call is not None:
+                    call(arg)
+            else:
+                self._counts += 1
+                if self._watch:
+                    self._perform(plan.step, data, 0.0, False)
+                elif plan.notifies:
+                    self._issue(plan, data)
+            if plan.final and not self._finished:
+                self._finish(0.0, False)
+        for callback in self._steppers:
+            callback(event, data, "handled")
 
     def _process_slow(self, event: str, data: Any) -> None:
         snapshot = self._snapshot
@@ -740,23 +776,40 @@ class Subject:
 
     def _perform(self, decision: Step, data: Any, now: float, listening: bool) -> None:
         name = self.name
+        watch = self._watch
         for micro in decision.microsteps:
             if listening:
                 for s in micro.exited:
                     self.emit(StateExited(name, now, s))
+                    for w in watch.get(s, ()):
+                        w.exited(s)
                 for t in micro.transitions:
                     self.emit(
                         TransitionTaken(name, now, micro.event, (t.source,), t.targets, t.label)
                     )
                 for s in micro.entered:
                     self.emit(StateEntered(name, now, s))
+                    for w in watch.get(s, ()):
+                        w.entered(s)
+            elif watch:
+                for s in micro.exited:
+                    for w in watch.get(s, ()):
+                        w.exited(s)
+                for s in micro.entered:
+                    for w in watch.get(s, ()):
+                        w.entered(s)
             for action in micro.actions:
                 if isinstance(action, Notify):
                     self._notify(action, data, now, listening)
         if decision.final and not self._finished:
-            self._finished = True
-            if listening:
-                self.emit(Finished(name, now))
+            self._finish(now, listening)
+
+    def _finish(self, now: float, listening: bool) -> None:
+        self._finished = True
+        for w in self._watchers:
+            w.finished()
+        if listening:
+            self.emit(Finished(self.name, now))
 
     def _notify(self, action: Notify, data: Any, now: float, listening: bool) -> None:
         self._counts += _ONE_INVOKE
