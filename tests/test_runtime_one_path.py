@@ -1,0 +1,147 @@
+"""One execution path: a wired device (monitors, journal, driver) takes the same plans as a bare one.
+
+The kernel is asked only for a step it has not planned yet; everything that hooks a
+device hooks the step (watchers, step listeners), never a record stream it did not ask for.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import statectl.runtime.subject as subject_module
+from statectl.devices import connect, make_driver
+from statectl.journal import Journal
+from statectl.journal.device import JournalledDevice
+from statectl.model import Chart
+from statectl.runtime import SimClock, Subject, attach_monitors
+from support import Recorder
+
+#: The paper's cycle without its guarded event: every step is plannable today.
+CYCLE = ("Movement", "Movement completion", "Movement", "Error", "Error completion")
+
+
+class Quiet:
+    def poll_fault(self) -> str | None:
+        return None
+
+
+class Watcher:
+    """A StateWatcher that writes down what it hears."""
+
+    def __init__(self) -> None:
+        self.heard: list[tuple[str, str]] = []
+
+    def entered(self, state: str) -> None:
+        self.heard.append(("entered", state))
+
+    def exited(self, state: str) -> None:
+        self.heard.append(("exited", state))
+
+    def finished(self) -> None:
+        self.heard.append(("finished", ""))
+
+
+def _count_kernel_steps(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    asked: list[str] = []
+    real = subject_module.step
+
+    def counting(machine: Any, snapshot: Any, event: str, *args: Any, **kw: Any) -> Any:
+        asked.append(event)
+        return real(machine, snapshot, event, *args, **kw)
+
+    monkeypatch.setattr(subject_module, "step", counting)
+    return asked
+
+
+def _wired(motor: Chart, wiring: str, tmp_path: Path) -> Subject:
+    subject = Subject(motor, clock=SimClock())
+    if wiring == "monitor":
+        subject.attach(Recorder())
+        attach_monitors(subject, Quiet())
+    elif wiring == "driver":
+        connect(subject, make_driver("sim-motor", {}, chart=motor))
+    elif wiring == "journal":
+        subject.attach(Recorder())
+        JournalledDevice(subject, Journal(tmp_path / "j.db")).start()
+        return subject
+    else:
+        subject.attach(Recorder())
+    subject.start()
+    return subject
+
+
+@pytest.mark.parametrize("wiring", ["bare", "monitor", "driver", "journal"])
+def test_a_planned_step_never_asks_the_kernel_again(
+    motor: Chart, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, wiring: str
+) -> None:
+    """After two warm cycles (the second starts from Blocked with a previous state),
+    the same cycle is taken from plans whatever is attached."""
+    subject = _wired(motor, wiring, tmp_path)
+    data = {"Movement": {"amount": 1}} if wiring == "driver" else {}
+    for e in CYCLE * 2:
+        subject.dispatch(e, data.get(e))
+    asked = _count_kernel_steps(monkeypatch)
+    for e in CYCLE:
+        subject.dispatch(e, data.get(e))
+    assert subject.configuration == {"Blocked"}
+    assert asked == []
+
+
+def test_a_watcher_hears_its_states_in_step_order(motor: Chart) -> None:
+    """Entered and exited come for the watched states only, as the step takes them."""
+    subject = Subject(motor, clock=SimClock())
+    watcher = Watcher()
+    subject.watch(["Moving", "Returning"], watcher)
+    subject.start()
+    for e in CYCLE:
+        subject.dispatch(e)
+    subject.close()
+    assert watcher.heard == [
+        ("entered", "Moving"),
+        ("exited", "Moving"),
+        ("entered", "Moving"),
+        ("exited", "Moving"),
+        ("entered", "Returning"),
+        ("exited", "Returning"),
+        ("finished", ""),
+    ]
+
+
+def test_a_watcher_hears_the_same_with_or_without_records(motor: Chart) -> None:
+    """A record listener changes nothing a watcher hears (plan path and record path agree)."""
+    heard = []
+    for listen in (False, True):
+        subject = Subject(motor, clock=SimClock())
+        watcher = Watcher()
+        subject.watch(["Blocked", "Moving"], watcher)
+        if listen:
+            subject.listen(lambda r: None)
+        subject.start()
+        for e in CYCLE:
+            subject.dispatch(e, {"n": 1} if e == "Error" else None)
+        heard.append(watcher.heard)
+    assert heard[0] == heard[1]
+    assert heard[0][0] == ("entered", "Blocked")
+
+
+def test_watching_an_unknown_state_is_refused(motor: Chart) -> None:
+    """A typo in a watched state's name is an error at once, naming the chart."""
+    subject = Subject(motor, clock=SimClock())
+    with pytest.raises(Exception, match="no state \\['Movin'\\]"):
+        subject.watch(["Movin"], Watcher())
+
+
+def test_undoing_a_watch_stops_the_calls(motor: Chart) -> None:
+    """The function watch() returns removes the watcher from planned steps too."""
+    subject = Subject(motor, clock=SimClock())
+    watcher = Watcher()
+    off = subject.watch(["Moving"], watcher)
+    subject.start()
+    subject.dispatch("Movement")
+    off()
+    subject.dispatch("Movement completion")
+    subject.dispatch("Movement")
+    assert watcher.heard == [("entered", "Moving")]
