@@ -1,4 +1,4 @@
-"""One execution path: a wired device (monitors, journal, driver) takes the same plans as a bare one.
+"""One execution path: a wired device (monitors, journal, driver) takes the same plans.
 
 The kernel is asked only for a step it has not planned yet; everything that hooks a
 device hooks the step (watchers, step listeners), never a record stream it did not ask for.
