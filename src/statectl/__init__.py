@@ -1,21 +1,143 @@
-"""statectl: state control for industrial robot devices (Ha, Yoo and Lee's method)."""
+"""statectl: state control for industrial robot devices (Ha, Yoo and Lee's method).
 
-from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, StatectlError
+The stable API (docs/api.md) is what this package exports: ``load`` and ``check``
+a device file, run it as a :class:`Subject` (one device) or a :class:`System`
+(many, one owner), on a :class:`SimClock` or :class:`WallClock`, ``connect`` a
+driver made by ``make_driver``, hear typed records, catch one error root. Names
+are imported on first use, so ``import statectl`` stays cheap and the kernel's
+modules can be imported alone.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+from statectl.errors import (
+    Diagnostic,
+    DiagnosticError,
+    Location,
+    Severity,
+    StatectlError,
+    UnhandledEventError,
+)
 from statectl.model import Chart, ControlKind, EventKind, State, StateKind, Transition
 
+if TYPE_CHECKING:
+    from statectl.api import check, load
+    from statectl.devices import DeviceDriver, connect, make_driver
+    from statectl.observers import Notification, Observer
+    from statectl.runner import System
+    from statectl.runtime import (
+        EventIgnored,
+        EventReceived,
+        EventRejected,
+        FaultDetected,
+        Finished,
+        InvokeIssued,
+        MonitorStarted,
+        MonitorStopped,
+        ObserverCalled,
+        Record,
+        SimClock,
+        Started,
+        StateEntered,
+        StateExited,
+        StateWatcher,
+        Subject,
+        TransitionTaken,
+        WallClock,
+    )
+
 __version__ = "0.1.0"
+
+#: name -> module it lives in, imported when the name is first used
+_LAZY = {
+    "check": "statectl.api",
+    "load": "statectl.api",
+    "DeviceDriver": "statectl.devices",
+    "connect": "statectl.devices",
+    "make_driver": "statectl.devices",
+    "Notification": "statectl.observers",
+    "Observer": "statectl.observers",
+    "System": "statectl.runner",
+    **dict.fromkeys(
+        (
+            "EventIgnored",
+            "EventReceived",
+            "EventRejected",
+            "FaultDetected",
+            "Finished",
+            "InvokeIssued",
+            "MonitorStarted",
+            "MonitorStopped",
+            "ObserverCalled",
+            "Record",
+            "SimClock",
+            "Started",
+            "StateEntered",
+            "StateExited",
+            "StateWatcher",
+            "Subject",
+            "TransitionTaken",
+            "WallClock",
+        ),
+        "statectl.runtime",
+    ),
+}
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'statectl' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)
+
 
 __all__ = [
     "Chart",
     "ControlKind",
+    "DeviceDriver",
     "Diagnostic",
     "DiagnosticError",
+    "EventIgnored",
     "EventKind",
+    "EventReceived",
+    "EventRejected",
+    "FaultDetected",
+    "Finished",
+    "InvokeIssued",
     "Location",
+    "MonitorStarted",
+    "MonitorStopped",
+    "Notification",
+    "Observer",
+    "ObserverCalled",
+    "Record",
     "Severity",
+    "SimClock",
+    "Started",
     "State",
+    "StateEntered",
+    "StateExited",
     "StateKind",
+    "StateWatcher",
     "StatectlError",
+    "Subject",
+    "System",
     "Transition",
+    "TransitionTaken",
+    "UnhandledEventError",
+    "WallClock",
     "__version__",
+    "check",
+    "connect",
+    "load",
+    "make_driver",
 ]

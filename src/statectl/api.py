@@ -1,0 +1,37 @@
+"""The two verbs of the stable API that are not classes: ``load`` and ``check``.
+
+Both take paths, as the command line does, and speak the project's diagnostics:
+``load`` raises :class:`~statectl.errors.DiagnosticError` carrying every problem
+(a missing file is T110 for a device file, S607 for an SCXML document), ``check``
+returns them all (errors, warnings and info) and never raises for a broken file.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from statectl.errors import Diagnostic
+from statectl.model import Chart
+
+__all__ = ["check", "load"]
+
+_SCXML = (".scxml", ".xml")
+
+
+def load(path: str | os.PathLike[str]) -> Chart:
+    """The chart of a device file (YAML, CSV pair, XLSX, Markdown) or an SCXML document."""
+    if Path(path).suffix.lower() in _SCXML:
+        from statectl.scxml import read_scxml_file
+
+        return read_scxml_file(os.fspath(path))
+    from statectl.build import load_chart
+
+    return load_chart(path)
+
+
+def check(*paths: str | os.PathLike[str]) -> list[Diagnostic]:
+    """Every problem ``statectl check`` reports for these device files, in file order."""
+    from statectl.check import check_paths
+
+    return check_paths([os.fspath(p) for p in paths])
