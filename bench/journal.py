@@ -26,7 +26,6 @@ from statectl.runner import DeviceSetup, System
 from statectl.runtime import SimClock, WallClock
 from statectl.semantics import Snapshot
 
-
 #: The paper's whole cycle, the guarded Initialization included (seven events).
 CYCLE = (
     ("Movement", {"amount": 1}),
