@@ -23,7 +23,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     "build": ("errors", "model", "expr", "observers", "tables"),
     "recovery": ("errors", "model", "tables"),
     "guards": (),
-    "check": (
+    "rules": (
         "errors", "model", "expr", "semantics", "observers", "tables", "build", "recovery",
         "guards",
     ),

@@ -9,7 +9,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from statectl.check import CODES, check_chart, check_paths, guards_exclusive
 from statectl.errors import Location, Severity
 from statectl.model import (
     Chart,
@@ -21,6 +20,7 @@ from statectl.model import (
     Transition,
 )
 from statectl.recovery import CODES as RECOVERY_CODES
+from statectl.rules import CODES, check_chart, check_paths, guards_exclusive
 
 MOTOR = Path(__file__).resolve().parent.parent / "examples" / "motor" / "motor.yaml"
 

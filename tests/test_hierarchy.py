@@ -7,10 +7,10 @@ from pathlib import Path
 import pytest
 
 from statectl.build import build, load_chart
-from statectl.check import check_paths
 from statectl.errors import Severity
 from statectl.model import ControlKind, EventKind, StateKind
 from statectl.observers import Notification
+from statectl.rules import check_paths
 from statectl.runtime import SimClock, Subject
 from statectl.semantics import Machine, initial, step
 from statectl.tables import DeviceTables, EventRow, StateRow, load, save, strip_locations

@@ -32,6 +32,6 @@ def load(path: str | os.PathLike[str]) -> Chart:
 
 def check(*paths: str | os.PathLike[str]) -> list[Diagnostic]:
     """Every problem ``statectl check`` reports for these device files, in file order."""
-    from statectl.check import check_paths
+    from statectl.rules import check_paths
 
     return check_paths([os.fspath(p) for p in paths])

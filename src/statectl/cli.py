@@ -63,7 +63,7 @@ def _load_chart(path: str, err: TextIO) -> Chart | None:
 
 
 def cmd_check(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
-    from statectl.check import check_paths
+    from statectl.rules import check_paths
 
     for p in args.files:
         if not Path(p).exists():

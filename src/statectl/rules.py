@@ -1,4 +1,4 @@
-"""Static checks of a built chart: every problem at once, each with a stable code.
+"""The rules `statectl check` applies to a built chart: every problem at once, stable codes.
 
 Rules (guards are ignored except where C403 says otherwise):
 
