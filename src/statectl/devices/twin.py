@@ -266,8 +266,10 @@ class SimTwin(Driver):
                 return
             completion = self._choose(plan.completions)
             delay = self.delays.get(method, self.delay)
+            # a WallClock may fire the timer on its thread before call_later returns: the
+            # callback reads its work only under the lock, which is held until it is listed
             work: list[_Work] = []
-            timer = self.clock.call_later(delay, lambda: self._finish(work[0]))
+            timer = self.clock.call_later(delay, lambda: self._finish(work))
             work.append(_Work(method, plan.entered, completion, timer))
             self._work.append(work[0])
 
@@ -290,10 +292,11 @@ class SimTwin(Driver):
             return completions[0]
         return self._rng.choice(completions)
 
-    def _finish(self, work: _Work) -> None:
+    def _finish(self, holder: list[_Work]) -> None:
         with self._lock:
-            if work not in self._work:
-                return
+            if not holder or holder[0] not in self._work:
+                return  # never listed (call_later raised) or superseded
+            work = holder[0]
             self._work.remove(work)
             self._disarm(work.entered)
             entered: set[str] = set()
