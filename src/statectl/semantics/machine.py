@@ -12,9 +12,9 @@ import threading
 from collections.abc import Iterable
 
 from statectl.errors import DiagnosticError
-from statectl.expr import Expression, compile_expression
+from statectl.expr import CALLABLE_NAMES, Expression, compile_expression
 from statectl.model import Chart, Notify, StateKind, Transition
-from statectl.semantics.records import MEMO_LIMIT, Plan, PlanTable, Snapshot, Step
+from statectl.semantics.records import MEMO_LIMIT, Consult, Plan, PlanTable, Snapshot, Step
 
 __all__ = ["Machine", "compiled", "name_match"]
 
@@ -85,6 +85,12 @@ class Machine:
                     self.guards[t.guard] = expr
         if problems:
             raise DiagnosticError(problems)
+        # guards whose value follows from the snapshot alone: a step they decide is
+        # memoisable (unless a data item shadows a function name the guard may call)
+        shadowed = any(d.name in CALLABLE_NAMES for d in chart.data)
+        self.snapshot_guards: frozenset[str] = frozenset(
+            g for g, e in self.guards.items() if e.names <= {"previous"} and not shadowed
+        )
         self.ignored = chart.ignored
         self._static_domain: dict[int, str | None] = {}
         for t in chart.transitions:
@@ -92,6 +98,8 @@ class Machine:
                 self._static_domain[id(t)] = self._domain(t, t.targets)
         self._candidates: dict[tuple[str, str | None], tuple[Transition, ...]] = {}
         self._memo: dict[tuple[Snapshot, str], Step] = {}
+        # data-guarded steps: per (snapshot, event), the guard outcomes seen and their step
+        self._guarded: dict[tuple[Snapshot, str], list[tuple[tuple[Consult, ...], Step]]] = {}
         self._initial: Step | None = None
         self.event_names: frozenset[str] = frozenset(chart.event_names)
         # interned snapshots with their plan tables, by value and by identity
@@ -102,7 +110,6 @@ class Machine:
         self._installing = threading.Lock()
         #: the memoised initial step's (target, plan table) when :meth:`quiet` found it so
         self.quiet_start: tuple[Snapshot, PlanTable] | None = None
-
 
     def _parent_default(self, history: str) -> tuple[str, ...]:
         """A history state without a default transition (W3C requires one) enters what its
@@ -115,6 +122,7 @@ class Machine:
         if self.kind[parent] is StateKind.COMPOUND:
             return self.initial_of.get(parent, ())
         return tuple(c for c in self.children.get(parent, ()) if not self.kind[c].is_history)
+
     def quiet(self, result: Step) -> tuple[Snapshot, PlanTable] | None:
         """``result``'s interned target and plan table if performing it unheard only moves there.
 
