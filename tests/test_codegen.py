@@ -63,11 +63,13 @@ def test_motor_flattens_to_six_configurations() -> None:
     ("config", "event", "expected"),
     [
         (0, "Initialization", Unhandled.GUARD_FALSE),
-        (2, "Initialization", Unhandled.NONE),
+        (2, "Initialization", None),
         (0, "Error", Unhandled.DECLARED_IGNORED),
     ],
 )
-def test_motor_outcomes_say_why_unhandled(config: int, event: str, expected: Unhandled) -> None:
+def test_motor_outcomes_say_why_unhandled(
+    config: int, event: str, expected: Unhandled | None
+) -> None:
     """An unhandled event keeps the Python Subject's reason."""
     flat, _ = flatten(load_chart(MOTOR))
     assert flat is not None

@@ -17,11 +17,11 @@ here, at generation time, and the C++ only looks the decision up. Rules:
    are part of the configuration. A guard that reads a context field (an ``int``
    data item the user fills at run time) cannot be; such a step becomes a
    :class:`Decision` tree: evaluate runtime guard *g*, go to one subtree or the other.
-   The trees are found by re-running the step with an :class:`~statectl.semantics.Executor`
-   that answers those guards from a list of choices, depth first, every choice
-   tried both ways. One guard evaluated twice in one step, in the same
-   configuration, answers the same both times (guards are pure), so impossible
-   paths are never generated.
+   The trees are found by re-running :func:`~statectl.semantics.step` with a
+   guard oracle that answers those guards from a list of choices (and leaves
+   the rest to the kernel), depth first, every choice tried both ways. One guard
+   evaluated twice in one step, in the same configuration, answers the same both
+   times (guards are pure), so impossible paths are never generated.
 4. A runtime guard is specialised to the configuration it is evaluated in:
    ``previous`` and ``In(...)`` are folded to constants by the Python evaluator,
    what remains must read only integer context fields with ``+ - *``,
@@ -52,20 +52,16 @@ from statectl.model import (
     Log,
     Notify,
     Raise,
-    State,
     Transition,
 )
 from statectl.semantics import (
-    Event,
     Machine,
     Microstep,
     Run,
     Snapshot,
     Step,
-    enter_initial_states,
+    Unhandled,
     initial,
-    macrostep,
-    process_event,
     step,
 )
 
@@ -111,15 +107,6 @@ class EffectKind(enum.Enum):
     INVOKE = "invoke"
 
 
-class Unhandled(enum.Enum):
-    """Why an event changed nothing, in the words of the Python Subject."""
-
-    NONE = ""
-    DECLARED_IGNORED = "declared ignored"
-    GUARD_FALSE = "guard false"
-    NO_TRANSITION = "no transition"
-
-
 @dataclass(frozen=True, slots=True)
 class Effect:
     """One traced thing a step does; ``index`` is a state, transition or invoke number."""
@@ -133,7 +120,7 @@ class Outcome:
     handled: bool
     target: int  # configuration index; the source itself when not handled
     effects: tuple[Effect, ...]
-    unhandled: Unhandled = Unhandled.NONE
+    unhandled: Unhandled | None = None  # the kernel's reason; None when handled
     final: bool = False  # a top-level final state was reached
 
 
@@ -424,7 +411,7 @@ class _TooMany(Exception):
 
 
 class _Oracle:
-    """An Executor that answers runtime guards from ``choices`` (rule 3) and queues Raise."""
+    """The kernel's guard oracle: runtime guards from ``choices`` (rule 3), the rest unforced."""
 
     def __init__(self, flattener: _Flattener, choices: list[bool]) -> None:
         self.flattener = flattener
@@ -432,12 +419,12 @@ class _Oracle:
         self.decisions: list[tuple[int, bool]] = []
         self.memo: dict[int, bool] = {}
 
-    def condition(self, run: Run, transition: Transition) -> bool:
+    def __call__(self, run: Run, transition: Transition) -> bool | None:
         guard = transition.guard
         assert guard is not None
         gid = self.flattener.runtime_guard(guard, run)
         if gid is None:
-            return self.flattener.static_guard(guard, run)
+            return None  # decided by the kernel, as the Python runtime decides it
         if gid in self.memo:
             return self.memo[gid]
         pos = len(self.decisions)
@@ -445,24 +432,6 @@ class _Oracle:
         self.decisions.append((gid, value))
         self.memo[gid] = value
         return value
-
-    def execute(self, run: Run, actions: tuple[Action, ...]) -> None:
-        for a in actions:
-            if isinstance(a, Raise):
-                run.raise_event(Event(a.event))
-
-    def state_entered(self, run: Run, state: State) -> None:
-        return None
-
-    def state_exited(self, run: Run, state: State) -> None:
-        return None
-
-    def done_data(self, run: Run, state: State) -> Any:
-        return None
-
-
-def _snapshot(run: Run) -> Snapshot:
-    return Snapshot(frozenset(run.active), tuple(sorted(run.history.items())), run.previous)
 
 
 class _Flattener:
@@ -495,14 +464,6 @@ class _Flattener:
 
     def _env(self, run: Run) -> dict[str, Any]:
         return {"previous": run.previous, "In": run.active.__contains__}
-
-    def static_guard(self, guard: str, run: Run) -> bool:
-        """Decide a guard that reads no context field, as the semantics would."""
-        env = {**self.values, **self._env(run), "_event": {"name": run.event, "data": None}}
-        try:
-            return bool(self._expr(guard).evaluate(env))
-        except Exception:  # a failing guard is false, as in SCXML
-            return False
 
     def runtime_guard(self, guard: str, run: Run) -> int | None:
         """The runtime guard id of ``guard`` in this configuration, ``None`` if static."""
@@ -578,47 +539,21 @@ class _Flattener:
                     if isinstance(a, Notify)]
         return tuple(out)
 
-    def unhandled(self, snap: Snapshot, event: str, ignored: bool) -> Unhandled:
-        if ignored:
-            return Unhandled.DECLARED_IGNORED
-        m = self.m
-        if any(m.candidates(s, event) for s in snap.active if m.is_atomic(s)):
-            return Unhandled.GUARD_FALSE
-        return Unhandled.NO_TRANSITION
-
     def outcome_of(self, source: Snapshot | None, result: Step) -> Outcome:
         if source is not None and not result.handled:
-            assert result.event is not None
-            reason = self.unhandled(source, result.event, result.ignored)
-            return Outcome(False, self.snapshots[source], (), reason)
+            return Outcome(False, self.snapshots[source], (), result.unhandled)
         target = self.index(result.target)
         return Outcome(True, target, self.effects(result.microsteps), final=result.final)
 
     def oracle_step(self, source: Snapshot | None, event: str | None, choices: list[bool]
                     ) -> tuple[list[tuple[int, bool]], Outcome]:
-        """One step with runtime guards answered from ``choices``; mirrors ``step``."""
+        """One step of the kernel with runtime guards answered from ``choices``."""
         oracle = _Oracle(self, choices)
-        steps: list[Microstep] = []
         if source is None:
-            run = Run(set(), {}, None, self.values, executor=oracle)
-            steps.append(enter_initial_states(self.m, run))
-            macrostep(self.m, run, steps)
-            handled, ignored = True, False
+            result = initial(self.m, self.values, oracle=oracle)
         else:
             assert event is not None
-            run = Run(set(source.active), dict(source.history), source.previous, self.values,
-                      executor=oracle)
-            first = process_event(self.m, run, Event(event, None, "external"))
-            handled = first is not None
-            ignored = False
-            if first is not None:
-                steps.append(first)
-                macrostep(self.m, run, steps)
-            else:
-                ignored = any((s, event) in self.m.ignored for s in source.active)
-        before = source if source is not None else Snapshot(frozenset())
-        after = _snapshot(run) if handled else before
-        result = Step(event, before, after, tuple(steps), handled, ignored, run.final, run.guarded)
+            result = step(self.m, source, event, self.values, oracle=oracle)
         return oracle.decisions, self.outcome_of(source, result)
 
     def tree(self, source: Snapshot | None, event: str | None) -> Tree:

@@ -28,8 +28,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from statectl.cell import Cell, GlobalExpr, InputKind, Link, Trigger
-from statectl.explore.local import LocalSpace, Outcome, Reaction
+from statectl.explore.local import LocalSpace, Outcome
 from statectl.model import EventKind
+from statectl.semantics import Unhandled
 
 __all__ = ["MAX_DELIVERIES", "Branch", "Composed", "Delivery", "Predicate", "Stimulus"]
 
@@ -61,7 +62,7 @@ class Delivery:
     via: str  # "environment", "fault", "completion" or the link's label
     before: str
     after: str
-    reaction: Reaction
+    unhandled: Unhandled | None  # None: handled
     notifies: tuple[str, ...] = ()
     choices: tuple[tuple[str, bool], ...] = ()
 
@@ -240,7 +241,7 @@ class Composed:
             if detail:
                 sender = self.names[d] if s.kind is InputKind.COMPLETION else "environment"
                 log = (Delivery(sender, self.names[d], s.event, s.kind.value,
-                                space.state_of(lid), space.state_of(o.target), o.reaction,
+                                space.state_of(lid), space.state_of(o.target), o.unhandled,
                                 o.notifies, o.choices),)
             work.append((g1, self._queue(g1, d, o), log, (), 1))
         while work:
@@ -257,13 +258,14 @@ class Composed:
             for o in tspace.outcomes(tlid, event):
                 g2 = self.replace(g1, t, o.target) if o.handled else g1
                 more = self._queue(g2, t, o) if o.handled else ()
-                bad2 = (*bad, (t, tlid, event, link)) if o.reaction is Reaction.UNHANDLED else bad
+                missed = o.unhandled is Unhandled.NO_TRANSITION
+                bad2 = (*bad, (t, tlid, event, link)) if missed else bad
                 log2 = log
                 if detail:
                     k = self.links[link]
                     log2 = (*log, Delivery(k.source, k.target, event, k.label,
                                            tspace.state_of(tlid), tspace.state_of(o.target),
-                                           o.reaction, o.notifies, o.choices))
+                                           o.unhandled, o.notifies, o.choices))
                 work.append((g2, rest + more, log2, bad2, count + 1))
         if not detail:
             return out
@@ -278,7 +280,7 @@ class Composed:
                 (
                     o.target,
                     o.handled,
-                    o.reaction is Reaction.UNHANDLED,
+                    o.unhandled is Unhandled.NO_TRANSITION,
                     tuple(
                         (self.position[self.links[i].target], self.links[i].event, i,
                          self.link_guard[i])

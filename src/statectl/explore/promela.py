@@ -23,7 +23,8 @@ import ast
 
 from statectl.cell import GlobalExpr
 from statectl.explore.compose import Composed
-from statectl.explore.local import Outcome, Reaction
+from statectl.explore.local import Outcome
+from statectl.semantics import Unhandled
 
 __all__ = ["STEP_MARK", "export_promela"]
 
@@ -82,7 +83,7 @@ class _Writer:
             outs = space.outcomes(lid, event)
             if only_handled:
                 outs = tuple(o for o in outs if o.handled)
-            if not outs or all(o.reaction is Reaction.IGNORED for o in outs):
+            if not outs or all(o.unhandled is Unhandled.DECLARED_IGNORED for o in outs):
                 continue
             lines.append(f"{indent}:: {self.var[d]} == {lid} -> /* {space.state_of(lid)} */")
             lines.append(f"{indent}   if")
@@ -91,7 +92,7 @@ class _Writer:
                     body = self.outcome(d, o, indent + "      ")
                     body[0] = f"{indent}   :: " + body[0].lstrip()
                     lines.extend(body)
-                elif o.reaction is Reaction.UNHANDLED:
+                elif o.unhandled is Unhandled.NO_TRANSITION:
                     lines.append(f'{indent}   :: printf("unhandled: {self.m.names[d]} in '
                                  f'{space.state_of(lid)} gets {event}\\n"); assert(false)')
                 else:

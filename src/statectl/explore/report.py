@@ -18,7 +18,7 @@ from typing import Any
 
 from statectl.cell import InputKind
 from statectl.explore.compose import Delivery
-from statectl.explore.local import FreeGuard, Reaction
+from statectl.explore.local import FreeGuard
 
 __all__ = ["FAILURES", "Finding", "Kind", "Report", "Trace", "TraceStep", "Unanticipated"]
 
@@ -63,7 +63,7 @@ class TraceStep:
                     "via": d.via,
                     "before": d.before,
                     "after": d.after,
-                    "reaction": d.reaction.value,
+                    "reaction": str(d.unhandled) if d.unhandled is not None else "handled",
                     "calls": list(d.notifies),
                 }
                 for d in self.deliveries
@@ -105,7 +105,7 @@ class Trace:
                 change = f"{d.before} -> {d.after}" if d.before != d.after else d.before
                 what = f"{d.sender} -> {d.receiver}: {d.event}"
                 via = "" if d.via in ("environment", "completion", "fault") else " (link)"
-                tail = "" if d.reaction is Reaction.HANDLED else f" [{d.reaction.value}]"
+                tail = "" if d.unhandled is None else f" [{d.unhandled}]"
                 if d.via == "fault":
                     via = " (fault)"
                 elif d.via == "completion":

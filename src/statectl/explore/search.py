@@ -29,8 +29,8 @@ from typing import TextIO
 
 from statectl.cell import Cell, InputKind
 from statectl.explore.compose import Branch, Composed, Predicate, Stimulus
-from statectl.explore.local import Reaction
 from statectl.explore.report import Finding, Kind, Report, Trace, TraceStep, Unanticipated
+from statectl.semantics import Unhandled
 
 __all__ = ["Progress", "ProgressPrinter", "explore", "trace_to"]
 
@@ -93,7 +93,7 @@ class _Tables:
                         outs = space.outcomes(lid, s.event)
                         handled = [o for o in outs if o.handled]
                         if not handled:
-                            if outs and all(o.reaction is Reaction.UNHANDLED for o in outs):
+                            if outs and all(o.unhandled is Unhandled.NO_TRANSITION for o in outs):
                                 uns.append((i, s))
                             continue
                         if s.when >= 0 or any(model.fires(d, o) for o in handled):
