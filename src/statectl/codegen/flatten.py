@@ -147,9 +147,7 @@ class Configuration:
         previous = self.snapshot.previous or "-"
         text = ", ".join(self.active) + f" (previous {previous})"
         if self.snapshot.history:
-            text += " history " + "; ".join(
-                f"{h}={'+'.join(v)}" for h, v in self.snapshot.history
-            )
+            text += " history " + "; ".join(f"{h}={'+'.join(v)}" for h, v in self.snapshot.history)
         return text
 
 
@@ -187,17 +185,90 @@ class FlatChart:
 
 _CPP_KEYWORDS = frozenset(
     (
-        "alignas", "alignof", "and", "and_eq", "asm", "auto", "bitand", "bitor", "bool",
-        "break", "case", "catch", "char", "char16_t", "char32_t", "class", "compl", "const",
-        "constexpr", "const_cast", "continue", "decltype", "default", "delete", "do",
-        "double", "dynamic_cast", "else", "enum", "explicit", "export", "extern", "false",
-        "float", "for", "friend", "goto", "if", "inline", "int", "long", "mutable",
-        "namespace", "new", "noexcept", "not", "not_eq", "nullptr", "operator", "or",
-        "or_eq", "private", "protected", "public", "register", "reinterpret_cast", "return",
-        "short", "signed", "sizeof", "static", "static_assert", "static_cast", "struct",
-        "switch", "template", "this", "thread_local", "throw", "true", "try", "typedef",
-        "typeid", "typename", "union", "unsigned", "using", "virtual", "void", "volatile",
-        "wchar_t", "while", "xor", "xor_eq"
+        "alignas",
+        "alignof",
+        "and",
+        "and_eq",
+        "asm",
+        "auto",
+        "bitand",
+        "bitor",
+        "bool",
+        "break",
+        "case",
+        "catch",
+        "char",
+        "char16_t",
+        "char32_t",
+        "class",
+        "compl",
+        "const",
+        "constexpr",
+        "const_cast",
+        "continue",
+        "decltype",
+        "default",
+        "delete",
+        "do",
+        "double",
+        "dynamic_cast",
+        "else",
+        "enum",
+        "explicit",
+        "export",
+        "extern",
+        "false",
+        "float",
+        "for",
+        "friend",
+        "goto",
+        "if",
+        "inline",
+        "int",
+        "long",
+        "mutable",
+        "namespace",
+        "new",
+        "noexcept",
+        "not",
+        "not_eq",
+        "nullptr",
+        "operator",
+        "or",
+        "or_eq",
+        "private",
+        "protected",
+        "public",
+        "register",
+        "reinterpret_cast",
+        "return",
+        "short",
+        "signed",
+        "sizeof",
+        "static",
+        "static_assert",
+        "static_cast",
+        "struct",
+        "switch",
+        "template",
+        "this",
+        "thread_local",
+        "throw",
+        "true",
+        "try",
+        "typedef",
+        "typeid",
+        "typename",
+        "union",
+        "unsigned",
+        "using",
+        "virtual",
+        "void",
+        "volatile",
+        "wchar_t",
+        "while",
+        "xor",
+        "xor_eq",
     )
 )
 
@@ -247,7 +318,9 @@ def _check_actions(chart: Chart, where: Location, diags: list[Diagnostic]) -> No
         if s.invokes:
             diags.append(
                 Diagnostic(
-                    "G701", Severity.ERROR, s.invokes[0].origin if s.invokes else at,
+                    "G701",
+                    Severity.ERROR,
+                    s.invokes[0].origin if s.invokes else at,
                     f"state {s.name!r} has <invoke>, which generated code cannot start",
                     "model the child session as its own device",
                 )
@@ -263,7 +336,9 @@ def _check_actions(chart: Chart, where: Location, diags: list[Diagnostic]) -> No
                 if a.invoke not in numbers:
                     diags.append(
                         Diagnostic(
-                            "G709", Severity.ERROR, at,
+                            "G709",
+                            Severity.ERROR,
+                            at,
                             f"{what} notifies invoke #{a.invoke} ({a.name}), which the chart "
                             "does not declare",
                             "declare the invoke (an API in the Event Definition table)",
@@ -273,7 +348,9 @@ def _check_actions(chart: Chart, where: Location, diags: list[Diagnostic]) -> No
             if isinstance(a, Log):
                 diags.append(
                     Diagnostic(
-                        "G708", Severity.WARNING, a.origin if a.origin.line else at,
+                        "G708",
+                        Severity.WARNING,
+                        a.origin if a.origin.line else at,
                         f"{what} has a Log action ({a.label!r}); generated code skips it, "
                         "as the Python Subject does",
                         "use a trace hook in C++ to log",
@@ -283,7 +360,8 @@ def _check_actions(chart: Chart, where: Location, diags: list[Diagnostic]) -> No
             origin = getattr(a, "origin", None)
             diags.append(
                 Diagnostic(
-                    "G701", Severity.ERROR,
+                    "G701",
+                    Severity.ERROR,
                     origin if isinstance(origin, Location) and origin.line else at,
                     f"{what} has a {type(a).__name__} action, which generated C++ cannot perform",
                     "keep executable content to Notify and Raise for a C++ target",
@@ -306,7 +384,9 @@ def _context(chart: Chart, diags: list[Diagnostic]) -> tuple[dict[str, Any], lis
             except Exception as exc:  # reported, not raised: bad input never gives a traceback
                 diags.append(
                     Diagnostic(
-                        "G704", Severity.ERROR, item.origin,
+                        "G704",
+                        Severity.ERROR,
+                        item.origin,
                         f"data item {item.name!r} = {item.expr!r} fails: {exc}",
                         "give it an integer literal",
                     )
@@ -470,7 +550,9 @@ class _Flattener:
         expr = self._expr(guard)
         if "_event" in expr.names:
             self._report(
-                "G703", guard, f"guard {guard!r} reads _event",
+                "G703",
+                guard,
+                f"guard {guard!r} reads _event",
                 "event data does not exist in generated code; use a context field",
             )
             return None
@@ -494,7 +576,8 @@ class _Flattener:
         strange = sorted(n for n in expr.names & self.values.keys() if n not in self.fields)
         if strange:
             self._report(
-                "G704", guard,
+                "G704",
+                guard,
                 f"guard {guard!r} reads {', '.join(strange)}, which is not an integer "
                 "(C++ context fields are 64-bit integers)",
                 "give the data item an integer or boolean value",
@@ -504,7 +587,9 @@ class _Flattener:
             return f"({_Translator(self.fields, self._env(run)).cpp(self.trees[guard])}) != 0"
         except _Untranslatable as exc:
             self._report(
-                "G702", guard, f"guard {guard!r} does not translate to C++: {exc}",
+                "G702",
+                guard,
+                f"guard {guard!r} does not translate to C++: {exc}",
                 "over context fields use integers, + - *, comparisons, and/or/not, a if c else b",
             )
             return "false"
@@ -535,8 +620,9 @@ class _Flattener:
                 Effect(EffectKind.TAKE, self.transition_index[id(t)]) for t in micro.transitions
             ]
             out += [Effect(EffectKind.ENTER, self.order[s]) for s in micro.entered]
-            out += [Effect(EffectKind.INVOKE, a.invoke) for a in micro.actions
-                    if isinstance(a, Notify)]
+            out += [
+                Effect(EffectKind.INVOKE, a.invoke) for a in micro.actions if isinstance(a, Notify)
+            ]
         return tuple(out)
 
     def outcome_of(self, source: Snapshot | None, result: Step) -> Outcome:
@@ -545,8 +631,9 @@ class _Flattener:
         target = self.index(result.target)
         return Outcome(True, target, self.effects(result.microsteps), final=result.final)
 
-    def oracle_step(self, source: Snapshot | None, event: str | None, choices: list[bool]
-                    ) -> tuple[list[tuple[int, bool]], Outcome]:
+    def oracle_step(
+        self, source: Snapshot | None, event: str | None, choices: list[bool]
+    ) -> tuple[list[tuple[int, bool]], Outcome]:
         """One step of the kernel with runtime guards answered from ``choices``."""
         oracle = _Oracle(self, choices)
         if source is None:
@@ -573,8 +660,10 @@ class _Flattener:
 
     def decide(self, source: Snapshot | None, event: str | None) -> Tree:
         """The semantics' own step where no guard was consulted, the oracle otherwise."""
-        result = initial(self.m, self.values) if source is None else step(
-            self.m, source, event or "", self.values
+        result = (
+            initial(self.m, self.values)
+            if source is None
+            else step(self.m, source, event or "", self.values)
         )
         if not result.guarded:
             return self.outcome_of(source, result)
@@ -597,7 +686,9 @@ def flatten(chart: Chart) -> tuple[FlatChart | None, list[Diagnostic]]:
     if chart.datamodel != "safe":
         diags.append(
             Diagnostic(
-                "G705", Severity.ERROR, where,
+                "G705",
+                Severity.ERROR,
+                where,
                 f"datamodel {chart.datamodel!r}: its scripts and conditions cannot run in C++",
                 "use the safe expression language (datamodel 'safe') for a C++ target",
             )
@@ -621,7 +712,10 @@ def flatten(chart: Chart) -> tuple[FlatChart | None, list[Diagnostic]]:
     except _TooMany as exc:
         diags.append(
             Diagnostic(
-                "G706", Severity.ERROR, where, f"chart {chart.name!r}: {exc}",
+                "G706",
+                Severity.ERROR,
+                where,
+                f"chart {chart.name!r}: {exc}",
                 "split the device into several charts or drop history/parallel regions",
             )
         )
@@ -629,7 +723,10 @@ def flatten(chart: Chart) -> tuple[FlatChart | None, list[Diagnostic]]:
     except StatectlError as exc:
         diags.append(
             Diagnostic(
-                "G707", Severity.ERROR, where, f"chart {chart.name!r} does not settle: {exc}",
+                "G707",
+                Severity.ERROR,
+                where,
+                f"chart {chart.name!r} does not settle: {exc}",
                 "look for eventless or raised transitions that loop",
             )
         )
@@ -651,4 +748,3 @@ def flatten(chart: Chart) -> tuple[FlatChart | None, list[Diagnostic]]:
         tuple(fields),
     )
     return flat, diags
-

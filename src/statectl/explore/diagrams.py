@@ -40,8 +40,9 @@ def to_mermaid(trace: Trace, title: str = "") -> str:
     for step in trace.steps:
         for d in step.deliveries:
             arrow = "-)" if d.via == "fault" else "->>"
-            out.append(f"    {d.sender}{arrow}{d.receiver}: {_clean(d.event)}"
-                       f"{_tag(d.via, d.unhandled)}")
+            out.append(
+                f"    {d.sender}{arrow}{d.receiver}: {_clean(d.event)}{_tag(d.via, d.unhandled)}"
+            )
             if d.before != d.after:
                 out.append(f"    Note over {d.receiver}: {d.before} to {d.after}")
     if title:

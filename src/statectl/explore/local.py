@@ -198,8 +198,9 @@ class LocalSpace:
         )
         order = self.machine.order
         self.labels: tuple[str, ...] = tuple(
-            "+".join(sorted((s for s in snap.active if self.machine.is_atomic(s)),
-                            key=order.__getitem__))
+            "+".join(
+                sorted((s for s in snap.active if self.machine.is_atomic(s)), key=order.__getitem__)
+            )
             for snap in self.snapshots
         )
 
@@ -238,14 +239,20 @@ class LocalSpace:
             out.append((result, tuple((self.leaves[k], v) for k, v in asked)))
         return out
 
-    def _outcome(
-        self, result: Step, choices: Choices, queue: deque[int]
-    ) -> Outcome:
+    def _outcome(self, result: Step, choices: Choices, queue: deque[int]) -> Outcome:
         target = self._id(result.target, queue)
         events = frozenset(m.event for m in result.microsteps if m.event and m.transitions)
         notifies = tuple(a.method for a in result.actions if isinstance(a, Notify))
-        return Outcome(target, result.unhandled, frozenset(result.entered), events, result.exited,
-                       result.entered, notifies, choices)
+        return Outcome(
+            target,
+            result.unhandled,
+            frozenset(result.entered),
+            events,
+            result.exited,
+            result.entered,
+            notifies,
+            choices,
+        )
 
     def _close(self) -> tuple[Outcome, ...]:
         """Number every snapshot reachable from the initial ones under every event."""
