@@ -49,7 +49,7 @@ from statectl.semantics.algorithm import (
     step,
     unhandled_reason,
 )
-from statectl.semantics.machine import Machine, compiled, name_match
+from statectl.semantics.machine import Machine, compiled, name_match, structural
 from statectl.semantics.records import (
     MAX_GUARD_PATHS,
     MAX_MICROSTEPS,
@@ -103,5 +103,6 @@ __all__ = [
     "select_eventless_transitions",
     "select_transitions",
     "step",
+    "structural",
     "unhandled_reason",
 ]

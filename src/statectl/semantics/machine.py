@@ -16,7 +16,7 @@ from statectl.expr import CALLABLE_NAMES, Expression, compile_expression
 from statectl.model import Chart, Notify, StateKind, Transition
 from statectl.semantics.records import MEMO_LIMIT, Consult, Plan, PlanTable, Snapshot, Step
 
-__all__ = ["Machine", "compiled", "name_match"]
+__all__ = ["Machine", "compiled", "name_match", "structural"]
 
 
 def name_match(descriptors: Iterable[str], event: str) -> bool:
@@ -33,7 +33,7 @@ def name_match(descriptors: Iterable[str], event: str) -> bool:
 class Machine:
     """A chart compiled for stepping: static tables computed once at load."""
 
-    def __init__(self, chart: Chart) -> None:
+    def __init__(self, chart: Chart, *, guards: bool = True) -> None:
         self.chart = chart
         self.order: dict[str, int] = {s.name: i for i, s in enumerate(chart.states)}
         self.kind: dict[str, StateKind] = {s.name: s.kind for s in chart.states}
@@ -77,7 +77,7 @@ class Machine:
         self.guards: dict[str, Expression] = {}
         problems = []
         # other datamodels' conditions are the executor's to evaluate
-        for t in chart.transitions if chart.datamodel == "safe" else ():
+        for t in chart.transitions if chart.datamodel == "safe" and guards else ():
             if t.guard and t.guard not in self.guards:
                 expr, diags = compile_expression(t.guard, t.origin)
                 problems.extend(diags)
@@ -240,3 +240,16 @@ def compiled(chart: Chart) -> Machine:
             del _COMPILED[next(iter(_COMPILED))]
         _COMPILED[id(chart)] = (chart, m)
         return m
+
+
+def structural(chart: Chart) -> Machine:
+    """A Machine to ask structural questions (entry sets, ancestors) of any built chart.
+
+    The shared :func:`compiled` machine, or, when a guard does not compile (a chart
+    that is being checked may still have such errors), one without guards: what a
+    transition enters does not depend on them.
+    """
+    try:
+        return compiled(chart)
+    except DiagnosticError:
+        return Machine(chart, guards=False)
