@@ -386,3 +386,42 @@ def test_eight_threads_notifying_a_twin_on_a_wall_clock_lose_no_completion() -> 
         clock.stop()
     assert errors == []
     assert len(reported) == rounds * len(twins)
+
+
+PARALLEL_PRESS = """\
+device: Press
+states:
+  - state: Idle
+    control: default
+  - state: Work
+    type: parallel
+  - state: Ram
+    parent: Work
+  - state: Pressing
+    parent: Ram
+    control: event trigger required
+  - state: Clamp
+    parent: Work
+  - state: Holding
+    parent: Clamp
+    control: event trigger required
+events:
+  - {event: Start, old: Idle, new: Work, kind: command, api: Go}
+  - {event: Done, old: Pressing, new: Idle, kind: completion, api: Go}
+  - {event: Release, old: Holding, new: Idle, kind: command}
+"""
+
+
+def test_a_twin_completes_work_entered_in_a_region_of_a_parallel_state(tmp_path: Path) -> None:
+    """Start enters Work, so each region's default (Pressing): Go() completes with Done."""
+    path = tmp_path / "press.yaml"
+    path.write_text(PARALLEL_PRESS, encoding="utf-8")
+    chart = load_chart(path)
+    subject = Subject(chart, clock=SimClock())
+    twin = SimTwin(chart, delay=1.0)
+    connect(subject, twin)
+    subject.start()
+    subject.post("Start")
+    until(subject, "Idle")
+    assert ([c.function for c in twin.api_log], twin.notes) == (["Go"], ())
+    assert subject.configuration == {"Idle"} and subject.events_processed == 2
