@@ -272,3 +272,15 @@ def test_snapshot_guarded_steps_get_a_plan(motor: Chart) -> None:
     taken = step(m, blocked, "Initialization")
     assert (taken.guarded, taken.handled) == (False, True)
     assert m.plans(blocked)["Initialization"].step is taken
+
+
+def test_a_plan_carries_its_steps_entered_exited_and_reason(motor: Chart) -> None:
+    """Hosts read what a planned step entered and exited, and why one was not handled."""
+    m = Machine(motor)
+    s0 = initial(m).target
+    moved = step(m, s0, "Movement")
+    ignored = step(m, moved.target, "Movement")
+    plan, refused = m.plans(s0)["Movement"], m.plans(moved.target)["Movement"]
+    assert (plan.entered, plan.exited, plan.unhandled) == (("Moving",), ("Blocked",), None)
+    assert (refused.entered, refused.unhandled) == ((), ignored.unhandled)
+    assert ignored.unhandled == "declared ignored"

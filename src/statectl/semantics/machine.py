@@ -172,7 +172,17 @@ class Machine:
                 for a in result.actions
                 if isinstance(a, Notify)
             )
-        table[event] = Plan(result, target, next_table, notifies, result.handled, result.final)
+        table[event] = Plan(
+            result,
+            target,
+            next_table,
+            notifies,
+            result.handled,
+            result.final,
+            result.entered,
+            result.exited,
+            result.unhandled,
+        )
 
     # -- structure -------------------------------------------------------------------------
 

@@ -194,7 +194,8 @@ class Plan:
     ``target`` is interned and ``table`` is its own plan table (shared, filled as
     steps are memoised). ``notifies`` is every ``Notify`` of the step in order, each
     with a machine-wide slot number under which a host may cache what it builds for
-    it (a notification without data, say).
+    it (a notification without data, say). ``entered``, ``exited`` and ``unhandled``
+    are the step's, kept here so a host hooking state changes reads a tuple.
     """
 
     step: Step
@@ -203,6 +204,9 @@ class Plan:
     notifies: tuple[tuple[int, Notify], ...]
     handled: bool
     final: bool
+    entered: tuple[str, ...] = ()  # the step's ``entered``, computed once
+    exited: tuple[str, ...] = ()  # the step's ``exited``, computed once
+    unhandled: Unhandled | None = None  # the step's reason when not handled
 
 
 PlanTable = dict[str, Plan]
