@@ -21,7 +21,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     "observers": ("errors", "model"),
     "tables": ("errors", "model"),
     "build": ("errors", "model", "expr", "observers", "tables"),
-    "recovery": ("errors", "model", "tables"),
+    "recovery": ("errors", "model", "expr", "semantics", "tables"),
     "guards": (),
     "rules": (
         "errors", "model", "expr", "semantics", "observers", "tables", "build", "recovery",
@@ -30,7 +30,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     "render": ("errors", "model", "observers", "semantics"),
     "scxml": ("errors", "model", "expr", "semantics", "observers", "runtime"),
     "runtime": ("errors", "model", "expr", "semantics", "observers"),
-    "devices": ("errors", "model", "observers", "runtime"),
+    "devices": ("errors", "model", "expr", "semantics", "observers", "runtime"),
     "codegen": ("errors", "model", "expr", "semantics", "observers", "tables", "build"),
     "cell": ("errors", "model", "expr", "semantics", "observers", "tables", "build"),
     "explore": (

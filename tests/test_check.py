@@ -226,6 +226,26 @@ def test_parallel_regions_are_reachable() -> None:
     assert unreachable == ["state 'z' is unreachable from the initial state Idle"]
 
 
+def test_a_fault_inherited_from_the_superstate_serves_a_monitored_child() -> None:
+    """CiA 402 style: Fault leaves Operation from any substate, so monitored Enabled has one."""
+    chart = Chart(
+        "T",
+        (
+            State("Operation", kind=StateKind.COMPOUND, initial=("Enabled",)),
+            State("Enabled", parent="Operation", controls=frozenset({ControlKind.MONITORING})),
+            State("Faulted"),
+        ),
+        (
+            Transition("Operation", ("Fault",), ("Faulted",)),
+            Transition("Faulted", ("Enable",), ("Operation",)),
+        ),
+        initial=("Faulted",),
+        events=(EventDef("Fault", EventKind.FAULT), EventDef("Enable", EventKind.COMMAND)),
+        ignored=frozenset({("Faulted", "Fault"), ("Operation", "Enable")}),
+    )
+    assert [d.code for d in check_chart(chart) if d.code in ("C407", "C408")] == []
+
+
 def test_unreachable_compound_is_reported_once() -> None:
     """An unreachable compound state is reported with its substates, not each of them."""
     chart = Chart(

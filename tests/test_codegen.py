@@ -52,8 +52,11 @@ def test_motor_flattens_to_six_configurations() -> None:
     assert flat is not None and diags == []
     labels = [c.label for c in flat.configurations]
     assert labels == [
-        "Blocked (previous -)", "Moving (previous Blocked)", "Blocked (previous Moving)",
-        "Returning (previous Moving)", "Returning (previous Blocked)",
+        "Blocked (previous -)",
+        "Moving (previous Blocked)",
+        "Blocked (previous Moving)",
+        "Returning (previous Moving)",
+        "Returning (previous Blocked)",
         "Blocked (previous Returning)",
     ]
     assert flat.guards == ()  # previous == 'Moving' is decided per configuration
@@ -63,11 +66,13 @@ def test_motor_flattens_to_six_configurations() -> None:
     ("config", "event", "expected"),
     [
         (0, "Initialization", Unhandled.GUARD_FALSE),
-        (2, "Initialization", Unhandled.NONE),
+        (2, "Initialization", None),
         (0, "Error", Unhandled.DECLARED_IGNORED),
     ],
 )
-def test_motor_outcomes_say_why_unhandled(config: int, event: str, expected: Unhandled) -> None:
+def test_motor_outcomes_say_why_unhandled(
+    config: int, event: str, expected: Unhandled | None
+) -> None:
     """An unhandled event keeps the Python Subject's reason."""
     flat, _ = flatten(load_chart(MOTOR))
     assert flat is not None
@@ -92,21 +97,40 @@ def test_guard_over_context_becomes_a_runtime_decision() -> None:
 @pytest.mark.parametrize(
     ("changes", "code"),
     [
-        ({"transitions": (Transition("A", ("go",), ("B",), actions=(Script("x = 1"),)),)},
-         "G701"),
-        ({"transitions": (Transition("A", ("go",), ("B",), actions=(Assign("x", "1"),)),)},
-         "G701"),
-        ({"transitions": (Transition("A", ("go",), ("B",), guard="n // 2 > 0"),),
-          "data": (DataItem("n", "4"),)}, "G702"),
-        ({"transitions": (Transition("A", ("go",), ("B",), guard="_event.data > 1"),),
-          "data": (DataItem("n", "4"),)}, "G703"),
-        ({"transitions": (Transition("A", ("go",), ("B",), guard="name == 'x'"),),
-          "data": (DataItem("name", "'y'"),)}, "G704"),
+        ({"transitions": (Transition("A", ("go",), ("B",), actions=(Script("x = 1"),)),)}, "G701"),
+        ({"transitions": (Transition("A", ("go",), ("B",), actions=(Assign("x", "1"),)),)}, "G701"),
+        (
+            {
+                "transitions": (Transition("A", ("go",), ("B",), guard="n // 2 > 0"),),
+                "data": (DataItem("n", "4"),),
+            },
+            "G702",
+        ),
+        (
+            {
+                "transitions": (Transition("A", ("go",), ("B",), guard="_event.data > 1"),),
+                "data": (DataItem("n", "4"),),
+            },
+            "G703",
+        ),
+        (
+            {
+                "transitions": (Transition("A", ("go",), ("B",), guard="name == 'x'"),),
+                "data": (DataItem("name", "'y'"),),
+            },
+            "G704",
+        ),
         ({"datamodel": "python"}, "G705"),
-        ({"transitions": (Transition("A", ("go",), ("B",), actions=(Log("hello"),)),)},
-         "G708"),
-        ({"transitions": (Transition("A", ("go",), ("B",), actions=(Notify(7, "X", "Y", "go"),)),),
-          "invokes": (Invoke(0, "Z", "Zed"),)}, "G709"),
+        ({"transitions": (Transition("A", ("go",), ("B",), actions=(Log("hello"),)),)}, "G708"),
+        (
+            {
+                "transitions": (
+                    Transition("A", ("go",), ("B",), actions=(Notify(7, "X", "Y", "go"),)),
+                ),
+                "invokes": (Invoke(0, "Z", "Zed"),),
+            },
+            "G709",
+        ),
     ],
 )
 def test_unsupported_constructs_are_diagnosed(changes: dict[str, object], code: str) -> None:
@@ -118,9 +142,7 @@ def test_unsupported_constructs_are_diagnosed(changes: dict[str, object], code: 
 
 def test_generate_writes_nothing_on_error(tmp_path: Path) -> None:
     """With an error diagnostic no file is written."""
-    chart = _two_states(
-        transitions=(Transition("A", ("go",), ("B",), actions=(Script("x = 1"),)),)
-    )
+    chart = _two_states(transitions=(Transition("A", ("go",), ("B",), actions=(Script("x = 1"),)),))
     written, diags = generate(chart, tmp_path)
     assert written == [] and any(d.severity is Severity.ERROR for d in diags)
     assert list(tmp_path.iterdir()) == []
@@ -134,8 +156,9 @@ def test_generate_writes_nothing_on_error(tmp_path: Path) -> None:
         (["Random Dev", "1st"], True, ["random_dev", "s_1st"]),
     ],
 )
-def test_identifiers_are_distinct_cpp_names(names: list[str], lower: bool,
-                                            expected: list[str]) -> None:
+def test_identifiers_are_distinct_cpp_names(
+    names: list[str], lower: bool, expected: list[str]
+) -> None:
     """Names become distinct C++ identifiers."""
     assert list(identifiers(names, lower=lower).values()) == expected
 
@@ -146,7 +169,8 @@ def test_regenerating_the_example_gives_identical_files(tmp_path: Path) -> None:
     rels = sorted(str(p.relative_to(tmp_path)) for p in written)
     committed = sorted(
         str(p.relative_to(EXAMPLE / "generated"))
-        for p in (EXAMPLE / "generated").rglob("*") if p.is_file()
+        for p in (EXAMPLE / "generated").rglob("*")
+        if p.is_file()
     )
     assert rels == committed
     _, mismatch, errors = filecmp.cmpfiles(tmp_path, EXAMPLE / "generated", rels, shallow=False)
@@ -187,8 +211,7 @@ def test_example_prints_the_same_trace_as_statectl_demo(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("compiler", [GXX, CLANG], ids=["g++", "clang++"])
 @pytest.mark.parametrize("trace", ["0", "1"])
-def test_generated_motor_is_warning_free(tmp_path: Path, compiler: str | None,
-                                         trace: str) -> None:
+def test_generated_motor_is_warning_free(tmp_path: Path, compiler: str | None, trace: str) -> None:
     """The generated check program builds with -Wall -Wextra -Wpedantic -Werror."""
     if compiler is None:
         pytest.skip("compiler not found on this machine")
@@ -231,8 +254,15 @@ def test_installed_target_is_found_with_find_package(tmp_path: Path) -> None:
         encoding="utf-8",
     )
     steps = (
-        ["cmake", "-S", str(generated), "-B", str(tmp_path / "b1"),
-         f"-DCMAKE_INSTALL_PREFIX={prefix}", "-DSTATECTL_MOTOR_CHECK=OFF"],
+        [
+            "cmake",
+            "-S",
+            str(generated),
+            "-B",
+            str(tmp_path / "b1"),
+            f"-DCMAKE_INSTALL_PREFIX={prefix}",
+            "-DSTATECTL_MOTOR_CHECK=OFF",
+        ],
         ["cmake", "--build", str(tmp_path / "b1")],
         ["cmake", "--install", str(tmp_path / "b1")],
         ["cmake", "-S", str(consumer), "-B", str(tmp_path / "b2"), f"-DCMAKE_PREFIX_PATH={prefix}"],
@@ -304,8 +334,17 @@ def contracts_binary(tmp_path_factory: pytest.TempPathFactory) -> Path:
     generate(load_chart(MOTOR), out)
     (out / "contracts.cpp").write_text(_CONTRACTS)
     binary = out / "contracts"
-    cmd = [GXX, *FLAGS, "-O2", "-DNDEBUG", "-I", str(out), str(out / "contracts.cpp"), "-o",
-           str(binary)]
+    cmd = [
+        GXX,
+        *FLAGS,
+        "-O2",
+        "-DNDEBUG",
+        "-I",
+        str(out),
+        str(out / "contracts.cpp"),
+        "-o",
+        str(binary),
+    ]
     done = subprocess.run(cmd, capture_output=True, text=True, check=False)
     assert done.returncode == 0, done.stderr
     return binary
@@ -315,25 +354,31 @@ def contracts_binary(tmp_path_factory: pytest.TempPathFactory) -> Path:
     ("scenario", "stderr"),
     [
         ("out-of-range", "statectl contract 101 failed: dispatch: event out of range"),
-        ("reenter", "statectl contract 102 failed: dispatch: re-entered from an observer or "
-                    "hook; post() instead"),
+        (
+            "reenter",
+            "statectl contract 102 failed: dispatch: re-entered from an observer or "
+            "hook; post() instead",
+        ),
         ("before-start", "statectl contract 103 failed: dispatch: call start() first"),
         ("start-twice", "statectl contract 104 failed: start: the device was started already"),
     ],
 )
-def test_contract_checks_fire_in_release_builds(contracts_binary: Path, scenario: str,
-                                                stderr: str) -> None:
+def test_contract_checks_fire_in_release_builds(
+    contracts_binary: Path, scenario: str, stderr: str
+) -> None:
     """Each folded dispatch check still names its number and reason at -O2 -DNDEBUG."""
-    done = subprocess.run([str(contracts_binary), scenario], capture_output=True, text=True,
-                          check=False)
+    done = subprocess.run(
+        [str(contracts_binary), scenario], capture_output=True, text=True, check=False
+    )
     assert done.returncode != 0 and done.stdout == ""
     assert done.stderr.strip() == stderr
 
 
 def test_post_from_an_observer_runs_after_the_step(contracts_binary: Path) -> None:
     """post() during dispatch is the supported path: the event runs in run_until_idle()."""
-    done = subprocess.run([str(contracts_binary), "post"], capture_output=True, text=True,
-                          check=True)
+    done = subprocess.run(
+        [str(contracts_binary), "post"], capture_output=True, text=True, check=True
+    )
     assert done.stdout == "ok 2 1 1\n"  # Movement() then Error(); one queued event; Returning
 
 
@@ -341,9 +386,13 @@ def test_post_from_an_observer_runs_after_the_step(contracts_binary: Path) -> No
 @pytest.mark.parametrize(
     "chart",
     [
-        _two_states(transitions=(Transition("A", ("go",), ("B",), guard="limit > 2"),
-                                 Transition("A", ("go",), ("A",), guard="limit < 0")),
-                    data=(DataItem("limit", "3"),)),
+        _two_states(
+            transitions=(
+                Transition("A", ("go",), ("B",), guard="limit > 2"),
+                Transition("A", ("go",), ("A",), guard="limit < 0"),
+            ),
+            data=(DataItem("limit", "3"),),
+        ),
         _two_states(transitions=(), events=()),
     ],
     ids=["runtime-guards", "no-events"],
@@ -353,8 +402,17 @@ def test_release_build_of_edge_charts_is_warning_free(tmp_path: Path, chart: Cha
     assert GXX is not None
     generate(chart, tmp_path)
     binary = tmp_path / "check"
-    cmd = [GXX, *FLAGS, "-O2", "-DNDEBUG", "-I", str(tmp_path), str(tmp_path / "dev_check.cpp"),
-           "-o", str(binary)]
+    cmd = [
+        GXX,
+        *FLAGS,
+        "-O2",
+        "-DNDEBUG",
+        "-I",
+        str(tmp_path),
+        str(tmp_path / "dev_check.cpp"),
+        "-o",
+        str(binary),
+    ]
     done = subprocess.run(cmd, capture_output=True, text=True, check=False)
     assert done.returncode == 0, done.stderr
     out = subprocess.run([str(binary)], capture_output=True, text=True, check=True).stdout

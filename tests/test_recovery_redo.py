@@ -371,3 +371,99 @@ def test_a_substate_left_through_its_superstate_by_a_command_does_not_wait() -> 
     """The gantry's Traversing completes by itself, but Pause leaves it from Running: no J608."""
     dev = load_device(ROOT / "examples" / "gantry" / "gantry.yaml")
     assert "J608" not in {d.code for d in check_recovery(dev.chart, dev.rules)}
+
+
+#: A cell press whose Work is parallel: the ram presses while the clamp holds. Work is
+#: entered with a device call (Start -> Go()); only the ram's completion ends it.
+PARALLEL = """\
+device: Press
+states:
+  - state: Idle
+    control: default
+  - state: Work
+    type: parallel
+  - state: Ram
+    parent: Work
+  - state: Pressing
+    parent: Ram
+    control: event trigger required
+  - state: Clamp
+    parent: Work
+  - state: Holding
+    parent: Clamp
+    control: event trigger required
+events:
+  - {event: Start, old: Idle, new: Work, kind: command, api: Go}
+  - {event: Done, old: Pressing, new: Idle, kind: completion, api: Go}
+  - {event: Release, old: Holding, new: Idle, kind: command}
+recovery:
+  - {state: Pressing, redo: yes}
+"""
+
+
+def test_a_redo_in_a_region_of_a_parallel_state_is_not_a_j607(tmp_path: Path) -> None:
+    """Start enters Work and so both regions' defaults: redoing Pressing has Start's Go()."""
+    path = tmp_path / "press.yaml"
+    path.write_text(PARALLEL, encoding="utf-8")
+    tables, diags = load(path)
+    assert tables is not None and diags == []
+    chart = load_chart(path)
+    assert [d.code for d in check_recovery(chart, tables.recovery)] == []
+
+
+def test_a_journalled_press_resumed_in_a_parallel_region_redoes_its_call(tmp_path: Path) -> None:
+    """Closed while Pressing, the resumed press gets Go() again and its Done takes it to Idle."""
+    path = tmp_path / "press.yaml"
+    path.write_text(PARALLEL, encoding="utf-8")
+    db = tmp_path / "run.db"
+
+    def system() -> System:
+        dev = load_device(path)
+        twin = SimTwin(dev.chart, delay=LONG)
+        return System(
+            (DeviceSetup("Press", dev.chart, dev.rules, str(path), twin),), SimClock(), Journal(db)
+        )
+
+    first = system()
+    first.start()
+    first.post(None, "Start")
+    first.drain()
+    assert "Pressing" in first.subjects["Press"].configuration
+    first.close()
+    second = system()
+    try:
+        assert second.start(resume=True) == {"Press": True}
+        assert second.bound["Press"].recovered == ("redo Go()",)
+        assert api_calls(second) == ["Go"]
+        second.advance(LONG)
+        assert second.subjects["Press"].configuration == {"Idle"}
+    finally:
+        second.close()
+
+
+#: CiA 402 style: Fault leaves Operation from whichever substate is active.
+INHERITED = """\
+device: Drive
+states:
+  - state: Operation
+  - state: Enabled
+    parent: Operation
+    control: monitoring required
+  - state: Faulted
+    control: default
+events:
+  - {event: Enable, old: Faulted, new: Operation, kind: command}
+  - {event: Fault, old: Operation, new: Faulted, kind: fault}
+recovery:
+  - {state: Enabled, event: Fault}
+"""
+
+
+def test_a_recovery_event_inherited_from_the_superstate_leaves_the_state(tmp_path: Path) -> None:
+    """Fault is Operation's transition, so it leaves Enabled: no J604 for Enabled's rule."""
+    path = tmp_path / "drive.yaml"
+    path.write_text(INHERITED, encoding="utf-8")
+    tables, diags = load(path)
+    assert tables is not None and diags == []
+    chart = load_chart(path)
+    assert [d.code for d in check_recovery(chart, tables.recovery)] == []

@@ -33,8 +33,6 @@ EVENTS = (
 )
 
 
-
-
 def started(chart: Chart, *, listen: bool, **kw: Any) -> tuple[Subject, Recorder, list[Record]]:
     """A started Motor with a Recorder on every invoke; ``listen`` forces the full path."""
     subject = Subject(chart, clock=SimClock(), **kw)
@@ -151,8 +149,16 @@ def test_plan_path_matches_the_full_path(motor: Chart, data: Any) -> None:
     runs = []
     for listen in (False, True, False):
         subject, recorder, _ = started(motor, listen=listen)
-        for e in ("Movement", "Movement completion", "Initialization", "Bogus",
-                  "Initialization completion", "Movement", "Error", "Error completion") * 2:
+        for e in (
+            "Movement",
+            "Movement completion",
+            "Initialization",
+            "Bogus",
+            "Initialization completion",
+            "Movement",
+            "Error",
+            "Error completion",
+        ) * 2:
             subject.dispatch(e, data)
         runs.append(outcome(subject, recorder))
     assert runs[0] == runs[1] == runs[2]
@@ -197,8 +203,13 @@ def demo_scenario(chart: Chart, listen: bool) -> tuple[Any, ...]:
     settle()
     subject.dispatch("Movement", {"target": 3})
     settle()
-    return (subject.snapshot, subject.events_processed, subject.invokes_issued,
-            tuple(device.api_log), device.position)
+    return (
+        subject.snapshot,
+        subject.events_processed,
+        subject.invokes_issued,
+        tuple(device.api_log),
+        device.position,
+    )
 
 
 def test_demo_scenario_is_the_same_both_ways(motor: Chart) -> None:
@@ -254,9 +265,22 @@ def test_memoised_steps_become_plans_with_interned_targets(motor: Chart) -> None
     assert [a.invoke for _, a in plan.notifies] == [0]
 
 
-def test_guarded_steps_get_no_plan(motor: Chart) -> None:
-    """A step that consulted a guard depends on more than (snapshot, event): no plan."""
+def test_snapshot_guarded_steps_get_a_plan(motor: Chart) -> None:
+    """A step whose guard reads only ``previous`` depends on (snapshot, event): it has a plan."""
     m = Machine(motor)
-    blocked = Snapshot(frozenset({"Blocked"}), (), "Moving")
-    assert step(m, blocked, "Initialization").guarded
-    assert "Initialization" not in m.plans(blocked)
+    blocked = m.intern(Snapshot(frozenset({"Blocked"}), (), "Moving"))
+    taken = step(m, blocked, "Initialization")
+    assert (taken.guarded, taken.handled) == (False, True)
+    assert m.plans(blocked)["Initialization"].step is taken
+
+
+def test_a_plan_carries_its_steps_entered_exited_and_reason(motor: Chart) -> None:
+    """Hosts read what a planned step entered and exited, and why one was not handled."""
+    m = Machine(motor)
+    s0 = initial(m).target
+    moved = step(m, s0, "Movement")
+    ignored = step(m, moved.target, "Movement")
+    plan, refused = m.plans(s0)["Movement"], m.plans(moved.target)["Movement"]
+    assert (plan.entered, plan.exited, plan.unhandled) == (("Moving",), ("Blocked",), None)
+    assert (refused.entered, refused.unhandled) == ((), ignored.unhandled)
+    assert ignored.unhandled == "declared ignored"

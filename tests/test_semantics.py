@@ -5,14 +5,26 @@ from __future__ import annotations
 import pytest
 
 from statectl.model import Chart, EventDef, Notify, Raise, State, StateKind, Transition
-from statectl.semantics import LivelockError, Machine, Snapshot, initial, name_match, step
+from statectl.semantics import (
+    LivelockError,
+    Machine,
+    Snapshot,
+    Unhandled,
+    initial,
+    name_match,
+    step,
+)
 
 A, CP, P, F = StateKind.ATOMIC, StateKind.COMPOUND, StateKind.PARALLEL, StateKind.FINAL
 HS, HD = StateKind.HISTORY_SHALLOW, StateKind.HISTORY_DEEP
 
 
-def chart(rows: str, states: list[State], initial_: tuple[str, ...] = (),
-          ignored: frozenset[tuple[str, str]] = frozenset()) -> Chart:
+def chart(
+    rows: str,
+    states: list[State],
+    initial_: tuple[str, ...] = (),
+    ignored: frozenset[tuple[str, str]] = frozenset(),
+) -> Chart:
     """Build a chart from Boost.SML-like rows: ``src + event [guard] / !raise = dst``."""
     transitions = []
     for line in rows.strip().splitlines():
@@ -28,9 +40,15 @@ def chart(rows: str, states: list[State], initial_: tuple[str, ...] = (),
             g_tail = rest
         actions = tuple(Raise(a.strip()) for a in g_tail.split("!")[1:])
         event = rest.split("/")[0].strip()
-        transitions.append(Transition(
-            src.strip(), (event,) if event else (), tuple(dst.split()), guard=guard,
-            actions=actions))
+        transitions.append(
+            Transition(
+                src.strip(),
+                (event,) if event else (),
+                tuple(dst.split()),
+                guard=guard,
+                actions=actions,
+            )
+        )
     return Chart("t", tuple(states), tuple(transitions), initial_, ignored=ignored)
 
 
@@ -53,8 +71,12 @@ def motor() -> Chart:
         Moving + Error = Returning
         Returning + Error completion = Blocked
     """
-    c = chart(rows, [State("Blocked"), State("Moving"), State("Returning")], ("Blocked",),
-              ignored=frozenset({("Moving", "Movement")}))
+    c = chart(
+        rows,
+        [State("Blocked"), State("Moving"), State("Returning")],
+        ("Blocked",),
+        ignored=frozenset({("Moving", "Movement")}),
+    )
     return c
 
 
@@ -96,14 +118,17 @@ def test_previous_is_the_atomic_state_left() -> None:
     assert s.previous == "Moving"
 
 
-def test_unguarded_steps_are_memoised_guarded_are_not() -> None:
-    """A step that consulted no guard is cached; one that did is evaluated every time."""
+def test_steps_decided_by_the_snapshot_are_memoised() -> None:
+    """A step that consulted no guard, or only ``previous``/``In()``, is cached as a value."""
     m = Machine(motor())
     s0 = initial(m).target
     assert step(m, s0, "Movement") is step(m, s0, "Movement")
-    g = step(m, Snapshot(frozenset({"Blocked"}), (), "Moving"), "Initialization")
-    assert g.guarded and g.handled
-    assert not step(m, Snapshot(frozenset({"Blocked"}), (), "Blocked"), "Initialization").handled
+    after_moving = Snapshot(frozenset({"Blocked"}), (), "Moving")
+    g = step(m, after_moving, "Initialization")
+    assert (g.guarded, g.handled) == (False, True)
+    assert step(m, after_moving, "Initialization") is g
+    refused = step(m, Snapshot(frozenset({"Blocked"}), (), "Blocked"), "Initialization")
+    assert (refused.handled, refused.unhandled) == (False, Unhandled.GUARD_FALSE)
 
 
 def estop() -> Chart:
@@ -196,9 +221,15 @@ def test_parallel_regions_and_done_events() -> None:
 
 def test_one_event_taken_in_both_regions() -> None:
     """An event handled in two regions fires both transitions in one microstep."""
-    states = [State("R", P), State("A", CP, parent="R"), State("a1", parent="A"),
-              State("a2", parent="A"), State("B", CP, parent="R"), State("b1", parent="B"),
-              State("b2", parent="B")]
+    states = [
+        State("R", P),
+        State("A", CP, parent="R"),
+        State("a1", parent="A"),
+        State("a2", parent="A"),
+        State("B", CP, parent="R"),
+        State("b1", parent="B"),
+        State("b2", parent="B"),
+    ]
     c = chart("a1 + tick = a2\nb1 + tick = b2", states, ("R",))
     m = Machine(c)
     st = step(m, initial(m).target, "tick")
@@ -240,8 +271,12 @@ def test_top_level_final_ends_the_run() -> None:
 def test_notify_actions_are_returned_not_performed() -> None:
     """A transition's Notify action comes back in the step, in order, for the runtime."""
     n = Notify(0, "Moving", "Movement", "Movement")
-    c = Chart("m", (State("B"), State("M")),
-              (Transition("B", ("Movement",), ("M",), actions=(n,)),), ("B",))
+    c = Chart(
+        "m",
+        (State("B"), State("M")),
+        (Transition("B", ("Movement",), ("M",), actions=(n,)),),
+        ("B",),
+    )
     m = Machine(c)
     assert step(m, initial(m).target, "Movement").actions == (n,)
 
@@ -291,3 +326,114 @@ def test_a_history_without_default_enters_what_its_parent_enters(
     m = Machine(chart)
     after = step(m, initial(m, {}).target, "go", {}, None)
     assert set(after.target.active) == entered
+
+
+def data_chart() -> Chart:
+    """Blocked moves on Go when ``speed > 3``, else Idle handles it; ``_event`` picks Fast."""
+    from statectl.model import DataItem
+
+    rows = """
+        Blocked + Go [speed > 3] = Moving
+        Blocked + Go [previous == 'Moving'] = Idle
+        Moving + Stop = Blocked
+        Blocked + Jump [_event['data'] == 'fast'] = Fast
+        Fast + Stop = Blocked
+    """
+    states = [State("Blocked"), State("Moving"), State("Idle"), State("Fast")]
+    c = chart(rows, states, ("Blocked",))
+    return Chart(c.name, c.states, c.transitions, c.initial, data=(DataItem("speed", "0"),))
+
+
+# (speed, event, event data, previous, expected target atomic state or None: not handled)
+DATA_CASES = [
+    (5, "Go", None, None, "Moving"),
+    (1, "Go", None, None, None),
+    (1, "Go", None, "Moving", "Idle"),
+    (5, "Go", None, "Moving", "Moving"),
+    (5, "Go", None, None, "Moving"),  # the memoised path again, same answer
+    (0, "Jump", "fast", None, "Fast"),
+    (0, "Jump", "slow", None, None),
+    (0, "Jump", "fast", None, "Fast"),
+]
+
+
+def test_data_guards_are_re_evaluated_on_every_memoised_step() -> None:
+    """A step whose guards read data or event data answers each call by that call's values."""
+    m = Machine(data_chart())
+    got = []
+    for speed, event, edata, previous, _ in DATA_CASES:
+        snap = Snapshot(frozenset({"Blocked"}), (), previous)
+        result = step(m, snap, event, {"speed": speed}, edata)
+        got.append(next(iter(result.target.active)) if result.handled else None)
+    assert got == [case[-1] for case in DATA_CASES]
+
+
+def test_a_data_guarded_step_is_not_rebuilt_when_its_guards_answer_as_before() -> None:
+    """The second call with the same guard outcomes returns the step already built."""
+    m = Machine(data_chart())
+    snap = Snapshot(frozenset({"Blocked"}), (), None)
+    first = step(m, snap, "Go", {"speed": 5})
+    assert first.guarded
+    assert step(m, snap, "Go", {"speed": 9}) is first
+    assert step(m, snap, "Go", {"speed": 1}) is not first
+
+
+# (what the oracle answers for every guard, expected target of Go from Blocked or None)
+ORACLE_CASES = [(True, "Moving"), (False, None), (None, None)]
+
+
+@pytest.mark.parametrize(("forced", "expected"), ORACLE_CASES)
+def test_a_guard_oracle_forces_outcomes_and_is_never_memoised(
+    forced: bool | None, expected: str | None
+) -> None:
+    """The oracle's answer replaces the guard's value; ``None`` lets the kernel evaluate it."""
+    m = Machine(data_chart())
+    snap = Snapshot(frozenset({"Blocked"}), (), None)
+    asked = []
+
+    def oracle(run: object, t: Transition) -> bool | None:
+        asked.append(t.guard)
+        return forced
+
+    result = step(m, snap, "Go", {"speed": 0}, oracle=oracle)
+    assert (next(iter(result.target.active)) if result.handled else None) == expected
+    assert asked and not m._memo and not m._guarded
+
+
+def test_the_unhandled_reason_is_the_kernels() -> None:
+    """Not handled: declared ignored, guard false or no transition, one enum, said by step."""
+    m = Machine(motor())
+    moving = Snapshot(frozenset({"Moving"}))
+    blocked = Snapshot(frozenset({"Blocked"}), (), "Blocked")
+    cases = [
+        (moving, "Movement", Unhandled.DECLARED_IGNORED),
+        (blocked, "Initialization", Unhandled.GUARD_FALSE),
+        (moving, "Initialization completion", Unhandled.NO_TRANSITION),
+        (blocked, "Movement", None),
+    ]
+    assert [step(m, s, e).unhandled for s, e, _ in cases] == [c[-1] for c in cases]
+    assert Unhandled.GUARD_FALSE == "guard false"  # stored and shown as its value
+
+
+def test_entry_set_enters_every_region_of_a_parallel_target() -> None:
+    """The kernel's entry set of a transition into a parallel state holds each region's default."""
+    from statectl.semantics import entry_set
+
+    states = [
+        State("Idle"),
+        State("Run", kind=P),
+        State("Axis", parent="Run", kind=CP, initial=("AxisHome",)),
+        State("AxisHome", parent="Axis"),
+        State("Gripper", parent="Run", kind=CP, initial=("Open",)),
+        State("Open", parent="Gripper"),
+    ]
+    c = chart("Idle + Go = Run", states, ("Idle",))
+    m = Machine(c)
+    assert entry_set(m, list(c.transitions)) == (
+        "Run",
+        "Axis",
+        "AxisHome",
+        "Gripper",
+        "Open",
+    )
+    assert entry_set(m, []) == ("Idle",)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -14,6 +15,7 @@ from statectl.devices import SimMotor, SimTwin, connect, load_driver_config, mak
 from statectl.devices.base import Driver
 from statectl.errors import DiagnosticError, StatectlError
 from statectl.model import Chart
+from statectl.observers import Notification
 from statectl.runner import run
 from statectl.runtime import Record, SimClock, Subject
 from statectl.runtime.records import TransitionTaken
@@ -294,3 +296,132 @@ def test_make_driver_refuses_a_twin_it_cannot_build(
 def test_drivers_that_take_no_chart_ignore_it() -> None:
     """make_driver(..., chart=) still builds a SimMotor, which has no use for the chart."""
     assert isinstance(make_driver("sim-motor", {"speed": 5}, chart=load_chart(MOTOR)), SimMotor)
+
+
+class _FiresAtOnce:
+    """A clock whose timer fires on its own thread before ``call_later`` returns.
+
+    A WallClock's timer thread may run a zero-delay callback before the caller of
+    ``call_later`` takes its next step; this clock makes that interleaving certain
+    (it waits up to 0.2 s for the callback, which the twin's lock may hold back).
+    """
+
+    def __init__(self) -> None:
+        self.errors: list[BaseException] = []
+
+    def now(self) -> float:
+        return 0.0
+
+    def call_later(self, delay: float, fn: Any, *, background: bool = False) -> Any:
+        import threading
+
+        from statectl.runtime.clock import Timer
+
+        def run() -> None:
+            try:
+                fn()
+            except BaseException as exc:  # what a WallClock hands to on_error
+                self.errors.append(exc)
+
+        thread = threading.Thread(target=run, daemon=True)
+        thread.start()
+        thread.join(0.2)
+        return Timer(delay, fn, background=background)
+
+
+def test_a_twin_timer_that_fires_before_call_later_returns_still_reports_its_completion() -> None:
+    """A completion whose timer fires at once (another thread) is reported, never lost."""
+    import time
+
+    chart = load_chart(MOTOR)
+    clock = _FiresAtOnce()
+    reported: list[str] = []
+    twin = SimTwin(chart, delay=0.0)
+    twin.bind(lambda event, data: reported.append(event), clock)  # type: ignore[arg-type]
+    move = next(i for i in chart.invokes if i.method == "Movement")
+    twin.update(Notification(chart.name, move.number, move.name, move.method, "Movement", None))
+    deadline = time.monotonic() + 2.0
+    while not reported and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert clock.errors == []
+    assert reported == ["Movement completion"]
+
+
+def test_eight_threads_notifying_a_twin_on_a_wall_clock_lose_no_completion() -> None:
+    """Under 8 notifying threads on a WallClock every started completion is reported."""
+    import threading
+    import time
+
+    from statectl.runtime import WallClock
+
+    chart = load_chart(MOTOR)
+    errors: list[BaseException] = []
+    clock = WallClock(on_error=errors.append)
+    reported: list[str] = []
+    twins = [SimTwin(chart, delay=0.0) for _ in range(8)]
+    for twin in twins:
+        twin.bind(lambda event, data: reported.append(event), clock)
+    move = next(i for i in chart.invokes if i.method == "Movement")
+    note = Notification(chart.name, move.number, move.name, move.method, "Movement", None)
+    rounds = 200
+
+    def notify(twin: SimTwin) -> None:
+        deadline = time.monotonic() + 10.0
+        for _ in range(rounds):
+            twin.update(note)
+            # one piece of work at a time, so none is superseded; a lost one stays pending
+            while twin.pending and time.monotonic() < deadline:
+                time.sleep(0)
+
+    threads = [threading.Thread(target=notify, args=(t,)) for t in twins]
+    switch = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # switch threads often, as a loaded machine does
+    try:
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(30)
+    finally:
+        sys.setswitchinterval(switch)
+        clock.stop()
+    assert errors == []
+    assert len(reported) == rounds * len(twins)
+
+
+PARALLEL_PRESS = """\
+device: Press
+states:
+  - state: Idle
+    control: default
+  - state: Work
+    type: parallel
+  - state: Ram
+    parent: Work
+  - state: Pressing
+    parent: Ram
+    control: event trigger required
+  - state: Clamp
+    parent: Work
+  - state: Holding
+    parent: Clamp
+    control: event trigger required
+events:
+  - {event: Start, old: Idle, new: Work, kind: command, api: Go}
+  - {event: Done, old: Pressing, new: Idle, kind: completion, api: Go}
+  - {event: Release, old: Holding, new: Idle, kind: command}
+"""
+
+
+def test_a_twin_completes_work_entered_in_a_region_of_a_parallel_state(tmp_path: Path) -> None:
+    """Start enters Work, so each region's default (Pressing): Go() completes with Done."""
+    path = tmp_path / "press.yaml"
+    path.write_text(PARALLEL_PRESS, encoding="utf-8")
+    chart = load_chart(path)
+    subject = Subject(chart, clock=SimClock())
+    twin = SimTwin(chart, delay=1.0)
+    connect(subject, twin)
+    subject.start()
+    subject.post("Start")
+    until(subject, "Idle")
+    assert ([c.function for c in twin.api_log], twin.notes) == (["Go"], ())
+    assert subject.configuration == {"Idle"} and subject.events_processed == 2

@@ -30,6 +30,7 @@ from collections.abc import Sequence
 
 from statectl.errors import Diagnostic, Severity
 from statectl.model import Action, Block, Chart, ControlKind, EventKind, If, Notify, Transition
+from statectl.semantics import entry_set, structural
 from statectl.tables.schema import RecoveryRow
 
 __all__ = ["CODES", "check_recovery", "redo_sources", "waits_for_device"]
@@ -57,24 +58,6 @@ def _notifies(actions: tuple[Action, ...]) -> bool:
     return False
 
 
-def _entered(chart: Chart, t: Transition) -> set[str]:
-    """States taking ``t`` enters: its targets, their ancestors and default descendants."""
-    out: set[str] = set()
-    todo = list(t.targets)
-    while todo:
-        name = todo.pop()
-        if name in out or not chart.has_state(name):
-            continue
-        out.add(name)
-        state = chart.state(name)
-        todo.extend(state.initial)
-        parent = state.parent
-        while parent is not None and parent not in out:
-            out.add(parent)
-            parent = chart.state(parent).parent
-    return out
-
-
 def _leaving(chart: Chart, name: str) -> list[Transition]:
     """Transitions that leave ``name``: its own and its ancestors'."""
     found: list[Transition] = []
@@ -86,9 +69,16 @@ def _leaving(chart: Chart, name: str) -> list[Transition]:
 
 
 def redo_sources(chart: Chart, state: str) -> tuple[Transition, ...]:
-    """The transitions whose step enters ``state`` with a device API call (what a redo redoes)."""
+    """The transitions whose step enters ``state`` with a device API call (what a redo redoes).
+
+    What a transition enters is the kernel's answer (:func:`~statectl.semantics.entry_set`):
+    its targets, their ancestors, default children and every region of a parallel state.
+    """
+    m = structural(chart)
     return tuple(
-        t for t in chart.transitions if _notifies(t.actions) and state in _entered(chart, t)
+        t
+        for t in chart.transitions
+        if t.targets and _notifies(t.actions) and state in entry_set(m, [t])
     )
 
 
@@ -150,8 +140,9 @@ def check_recovery(
                     )
                 )
             continue
-        if not any(t.source == r.state and r.event in t.events for t in chart.transitions):
-            here = sorted({e for t in chart.transitions_from(r.state) for e in t.events})
+        leaving = _leaving(chart, r.state)  # a superstate's transition leaves it too
+        if not any(r.event in t.events for t in leaving):
+            here = sorted({e for t in leaving for e in t.events})
             diags.append(
                 Diagnostic(
                     "J604",

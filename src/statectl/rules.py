@@ -14,10 +14,10 @@ C404 warning  A state neither handles an event (itself or through an ancestor) n
               in its ignore column: the paper's missed transitions.
 C405 warning  An event is declared but no transition uses it.
 C406 warning  A state's ignore column lists an event the state (or an ancestor) handles.
-C407 warning  A ``monitoring required`` state has no ``fault`` event leaving it, so its
-              monitor would have nothing to raise.
-C408 warning  A ``fault`` event leaves a state that is not ``monitoring required``, so no
-              monitor is running there to raise it.
+C407 warning  A ``monitoring required`` state has no ``fault`` event leaving it (its own
+              transitions or a superstate's), so its monitor would have nothing to raise.
+C408 warning  A ``fault`` event leaves a state that is not ``monitoring required`` and has
+              no monitored substate, so no monitor is running there to raise it.
 
 Undefined guard names and other table errors are the builder's (X3xx, T/B codes);
 :func:`check_paths` reports those too, then checks each chart that built, and its
@@ -34,7 +34,7 @@ from statectl.errors import Diagnostic, Location, Severity, has_errors
 from statectl.guards import guards_exclusive
 from statectl.model import Chart, ControlKind, EventKind, State, StateKind, Transition
 from statectl.recovery import check_recovery
-from statectl.semantics import name_match
+from statectl.semantics import entry_set, name_match, structural
 from statectl.tables import load
 
 __all__ = ["CODES", "check_chart", "check_paths", "guards_exclusive"]
@@ -109,57 +109,25 @@ def _line(loc: Location) -> str:
 
 
 def _reachable(st: _Structure) -> set[str]:
-    """States some run can enter, taking every transition as if its guard held."""
-    reached: set[str] = set()
-    work: list[str] = []
+    """States some run can enter, taking every transition as if its guard held.
 
-    def mark(name: str) -> None:
-        if name in st.by_name and name not in reached:
-            reached.add(name)
-            work.append(name)
-
-    def enter_default(name: str) -> None:
-        if name not in st.by_name:
-            return
-        mark(name)
-        kind = st.kind(name)
-        if kind is StateKind.COMPOUND:
-            kids = [c for c in st.children.get(name, ()) if not st.kind(c).is_history]
-            for target in st.by_name[name].initial or tuple(kids[:1]):
-                enter(target, name)
-        elif kind is StateKind.PARALLEL:
-            for c in st.children.get(name, ()):
-                if not st.kind(c).is_history:
-                    enter_default(c)
-        elif kind.is_history:
-            parent = st.by_name[name].parent
-            for target in st.by_name[name].history_default:
-                enter(target, parent)
-
-    def enter(target: str, upto: str | None) -> None:
-        """Enter ``target`` and its ancestors below ``upto``, with their other regions."""
-        if target not in st.by_name:
-            return
-        enter_default(target)
-        path = target
-        for anc in st.ancestors[target]:
-            if anc == upto:
-                break
-            mark(anc)
-            if st.kind(anc) is StateKind.PARALLEL:
-                for c in st.children.get(anc, ()):
-                    if c != path and not st.kind(c).is_history:
-                        enter_default(c)
-            path = anc
-
-    top = st.chart.initial or st.children.get(None, ())[:1]
-    for name in top:
-        enter(name, None)
+    What the start and each transition enter is the kernel's answer
+    (:func:`~statectl.semantics.entry_set`), history states entering their defaults
+    (what they restore was entered before).
+    """
+    chart = st.chart
+    m = structural(chart)
+    reached = set(entry_set(m, []))
+    work = list(reached)
     while work:
         name = work.pop()
-        for t in st.chart.transitions_from(name):
-            for target in t.targets:
-                enter(target, None)
+        for t in chart.transitions_from(name):
+            if not t.targets or not all(x in st.by_name for x in t.targets):
+                continue
+            for entered in entry_set(m, [t]):
+                if entered not in reached:
+                    reached.add(entered)
+                    work.append(entered)
     return reached
 
 
@@ -312,7 +280,14 @@ def _check_monitors(st: _Structure) -> Iterator[Diagnostic]:
     for s in chart.states:
         if ControlKind.MONITORING not in s.controls:
             continue
-        raises = any(_is_fault(chart, e) for t in chart.transitions_from(s.name) for e in t.events)
+        # a superstate's fault transition leaves the state too (CiA 402's "from any state")
+        leaving = (s.name, *st.ancestors.get(s.name, ()))
+        raises = any(
+            _is_fault(chart, e)
+            for src in leaving
+            for t in chart.transitions_from(src)
+            for e in t.events
+        )
         if not raises:
             yield Diagnostic(
                 "C407",
@@ -322,10 +297,18 @@ def _check_monitors(st: _Structure) -> Iterator[Diagnostic]:
                 "so its monitor would have nothing to raise",
                 "add a fault-kind event row with this old state, or drop 'monitoring required'",
             )
+    monitored_below = {
+        anc
+        for s in chart.states
+        if ControlKind.MONITORING in s.controls
+        for anc in st.ancestors.get(s.name, ())
+    }
     for t in chart.transitions:
         source = st.by_name.get(t.source)
         if source is None or ControlKind.MONITORING in source.controls:
             continue
+        if t.source in monitored_below:
+            continue  # a monitored substate's monitor raises it (a superstate's fault row)
         for e in t.events:
             if _is_fault(chart, e):
                 yield Diagnostic(

@@ -49,7 +49,7 @@ __all__ = ["RUNTIME_HEADERS", "generate", "render", "run_codegen"]
 RUNTIME_HEADERS = ("contract.hpp", "observer.hpp", "runtime.hpp", "spsc_queue.hpp", "trace.hpp")
 
 _REASON_BITS = {
-    Unhandled.NONE: 0,
+    None: 0,
     Unhandled.DECLARED_IGNORED: 1,
     Unhandled.GUARD_FALSE: 2,
     Unhandled.NO_TRANSITION: 3,
@@ -114,7 +114,7 @@ class _Tables:
     def _describe(self, o: Outcome) -> str:
         flat = self.flat
         if not o.handled:
-            return f"unhandled: {o.unhandled.value}"
+            return f"unhandled: {o.unhandled}"
         parts = [f"-> {o.target} {flat.configurations[o.target].label}"]
         parts += [self.effect_text(e) for e in o.effects]
         if o.final:

@@ -17,11 +17,11 @@ here, at generation time, and the C++ only looks the decision up. Rules:
    are part of the configuration. A guard that reads a context field (an ``int``
    data item the user fills at run time) cannot be; such a step becomes a
    :class:`Decision` tree: evaluate runtime guard *g*, go to one subtree or the other.
-   The trees are found by re-running the step with an :class:`~statectl.semantics.Executor`
-   that answers those guards from a list of choices, depth first, every choice
-   tried both ways. One guard evaluated twice in one step, in the same
-   configuration, answers the same both times (guards are pure), so impossible
-   paths are never generated.
+   The trees are found by re-running :func:`~statectl.semantics.step` with a
+   guard oracle that answers those guards from a list of choices (and leaves
+   the rest to the kernel), depth first, every choice tried both ways. One guard
+   evaluated twice in one step, in the same configuration, answers the same both
+   times (guards are pure), so impossible paths are never generated.
 4. A runtime guard is specialised to the configuration it is evaluated in:
    ``previous`` and ``In(...)`` are folded to constants by the Python evaluator,
    what remains must read only integer context fields with ``+ - *``,
@@ -52,20 +52,16 @@ from statectl.model import (
     Log,
     Notify,
     Raise,
-    State,
     Transition,
 )
 from statectl.semantics import (
-    Event,
     Machine,
     Microstep,
     Run,
     Snapshot,
     Step,
-    enter_initial_states,
+    Unhandled,
     initial,
-    macrostep,
-    process_event,
     step,
 )
 
@@ -111,15 +107,6 @@ class EffectKind(enum.Enum):
     INVOKE = "invoke"
 
 
-class Unhandled(enum.Enum):
-    """Why an event changed nothing, in the words of the Python Subject."""
-
-    NONE = ""
-    DECLARED_IGNORED = "declared ignored"
-    GUARD_FALSE = "guard false"
-    NO_TRANSITION = "no transition"
-
-
 @dataclass(frozen=True, slots=True)
 class Effect:
     """One traced thing a step does; ``index`` is a state, transition or invoke number."""
@@ -133,7 +120,7 @@ class Outcome:
     handled: bool
     target: int  # configuration index; the source itself when not handled
     effects: tuple[Effect, ...]
-    unhandled: Unhandled = Unhandled.NONE
+    unhandled: Unhandled | None = None  # the kernel's reason; None when handled
     final: bool = False  # a top-level final state was reached
 
 
@@ -160,9 +147,7 @@ class Configuration:
         previous = self.snapshot.previous or "-"
         text = ", ".join(self.active) + f" (previous {previous})"
         if self.snapshot.history:
-            text += " history " + "; ".join(
-                f"{h}={'+'.join(v)}" for h, v in self.snapshot.history
-            )
+            text += " history " + "; ".join(f"{h}={'+'.join(v)}" for h, v in self.snapshot.history)
         return text
 
 
@@ -200,17 +185,90 @@ class FlatChart:
 
 _CPP_KEYWORDS = frozenset(
     (
-        "alignas", "alignof", "and", "and_eq", "asm", "auto", "bitand", "bitor", "bool",
-        "break", "case", "catch", "char", "char16_t", "char32_t", "class", "compl", "const",
-        "constexpr", "const_cast", "continue", "decltype", "default", "delete", "do",
-        "double", "dynamic_cast", "else", "enum", "explicit", "export", "extern", "false",
-        "float", "for", "friend", "goto", "if", "inline", "int", "long", "mutable",
-        "namespace", "new", "noexcept", "not", "not_eq", "nullptr", "operator", "or",
-        "or_eq", "private", "protected", "public", "register", "reinterpret_cast", "return",
-        "short", "signed", "sizeof", "static", "static_assert", "static_cast", "struct",
-        "switch", "template", "this", "thread_local", "throw", "true", "try", "typedef",
-        "typeid", "typename", "union", "unsigned", "using", "virtual", "void", "volatile",
-        "wchar_t", "while", "xor", "xor_eq"
+        "alignas",
+        "alignof",
+        "and",
+        "and_eq",
+        "asm",
+        "auto",
+        "bitand",
+        "bitor",
+        "bool",
+        "break",
+        "case",
+        "catch",
+        "char",
+        "char16_t",
+        "char32_t",
+        "class",
+        "compl",
+        "const",
+        "constexpr",
+        "const_cast",
+        "continue",
+        "decltype",
+        "default",
+        "delete",
+        "do",
+        "double",
+        "dynamic_cast",
+        "else",
+        "enum",
+        "explicit",
+        "export",
+        "extern",
+        "false",
+        "float",
+        "for",
+        "friend",
+        "goto",
+        "if",
+        "inline",
+        "int",
+        "long",
+        "mutable",
+        "namespace",
+        "new",
+        "noexcept",
+        "not",
+        "not_eq",
+        "nullptr",
+        "operator",
+        "or",
+        "or_eq",
+        "private",
+        "protected",
+        "public",
+        "register",
+        "reinterpret_cast",
+        "return",
+        "short",
+        "signed",
+        "sizeof",
+        "static",
+        "static_assert",
+        "static_cast",
+        "struct",
+        "switch",
+        "template",
+        "this",
+        "thread_local",
+        "throw",
+        "true",
+        "try",
+        "typedef",
+        "typeid",
+        "typename",
+        "union",
+        "unsigned",
+        "using",
+        "virtual",
+        "void",
+        "volatile",
+        "wchar_t",
+        "while",
+        "xor",
+        "xor_eq",
     )
 )
 
@@ -260,7 +318,9 @@ def _check_actions(chart: Chart, where: Location, diags: list[Diagnostic]) -> No
         if s.invokes:
             diags.append(
                 Diagnostic(
-                    "G701", Severity.ERROR, s.invokes[0].origin if s.invokes else at,
+                    "G701",
+                    Severity.ERROR,
+                    s.invokes[0].origin if s.invokes else at,
                     f"state {s.name!r} has <invoke>, which generated code cannot start",
                     "model the child session as its own device",
                 )
@@ -276,7 +336,9 @@ def _check_actions(chart: Chart, where: Location, diags: list[Diagnostic]) -> No
                 if a.invoke not in numbers:
                     diags.append(
                         Diagnostic(
-                            "G709", Severity.ERROR, at,
+                            "G709",
+                            Severity.ERROR,
+                            at,
                             f"{what} notifies invoke #{a.invoke} ({a.name}), which the chart "
                             "does not declare",
                             "declare the invoke (an API in the Event Definition table)",
@@ -286,7 +348,9 @@ def _check_actions(chart: Chart, where: Location, diags: list[Diagnostic]) -> No
             if isinstance(a, Log):
                 diags.append(
                     Diagnostic(
-                        "G708", Severity.WARNING, a.origin if a.origin.line else at,
+                        "G708",
+                        Severity.WARNING,
+                        a.origin if a.origin.line else at,
                         f"{what} has a Log action ({a.label!r}); generated code skips it, "
                         "as the Python Subject does",
                         "use a trace hook in C++ to log",
@@ -296,7 +360,8 @@ def _check_actions(chart: Chart, where: Location, diags: list[Diagnostic]) -> No
             origin = getattr(a, "origin", None)
             diags.append(
                 Diagnostic(
-                    "G701", Severity.ERROR,
+                    "G701",
+                    Severity.ERROR,
                     origin if isinstance(origin, Location) and origin.line else at,
                     f"{what} has a {type(a).__name__} action, which generated C++ cannot perform",
                     "keep executable content to Notify and Raise for a C++ target",
@@ -319,7 +384,9 @@ def _context(chart: Chart, diags: list[Diagnostic]) -> tuple[dict[str, Any], lis
             except Exception as exc:  # reported, not raised: bad input never gives a traceback
                 diags.append(
                     Diagnostic(
-                        "G704", Severity.ERROR, item.origin,
+                        "G704",
+                        Severity.ERROR,
+                        item.origin,
                         f"data item {item.name!r} = {item.expr!r} fails: {exc}",
                         "give it an integer literal",
                     )
@@ -424,7 +491,7 @@ class _TooMany(Exception):
 
 
 class _Oracle:
-    """An Executor that answers runtime guards from ``choices`` (rule 3) and queues Raise."""
+    """The kernel's guard oracle: runtime guards from ``choices`` (rule 3), the rest unforced."""
 
     def __init__(self, flattener: _Flattener, choices: list[bool]) -> None:
         self.flattener = flattener
@@ -432,12 +499,12 @@ class _Oracle:
         self.decisions: list[tuple[int, bool]] = []
         self.memo: dict[int, bool] = {}
 
-    def condition(self, run: Run, transition: Transition) -> bool:
+    def __call__(self, run: Run, transition: Transition) -> bool | None:
         guard = transition.guard
         assert guard is not None
         gid = self.flattener.runtime_guard(guard, run)
         if gid is None:
-            return self.flattener.static_guard(guard, run)
+            return None  # decided by the kernel, as the Python runtime decides it
         if gid in self.memo:
             return self.memo[gid]
         pos = len(self.decisions)
@@ -445,24 +512,6 @@ class _Oracle:
         self.decisions.append((gid, value))
         self.memo[gid] = value
         return value
-
-    def execute(self, run: Run, actions: tuple[Action, ...]) -> None:
-        for a in actions:
-            if isinstance(a, Raise):
-                run.raise_event(Event(a.event))
-
-    def state_entered(self, run: Run, state: State) -> None:
-        return None
-
-    def state_exited(self, run: Run, state: State) -> None:
-        return None
-
-    def done_data(self, run: Run, state: State) -> Any:
-        return None
-
-
-def _snapshot(run: Run) -> Snapshot:
-    return Snapshot(frozenset(run.active), tuple(sorted(run.history.items())), run.previous)
 
 
 class _Flattener:
@@ -496,20 +545,14 @@ class _Flattener:
     def _env(self, run: Run) -> dict[str, Any]:
         return {"previous": run.previous, "In": run.active.__contains__}
 
-    def static_guard(self, guard: str, run: Run) -> bool:
-        """Decide a guard that reads no context field, as the semantics would."""
-        env = {**self.values, **self._env(run), "_event": {"name": run.event, "data": None}}
-        try:
-            return bool(self._expr(guard).evaluate(env))
-        except Exception:  # a failing guard is false, as in SCXML
-            return False
-
     def runtime_guard(self, guard: str, run: Run) -> int | None:
         """The runtime guard id of ``guard`` in this configuration, ``None`` if static."""
         expr = self._expr(guard)
         if "_event" in expr.names:
             self._report(
-                "G703", guard, f"guard {guard!r} reads _event",
+                "G703",
+                guard,
+                f"guard {guard!r} reads _event",
                 "event data does not exist in generated code; use a context field",
             )
             return None
@@ -533,7 +576,8 @@ class _Flattener:
         strange = sorted(n for n in expr.names & self.values.keys() if n not in self.fields)
         if strange:
             self._report(
-                "G704", guard,
+                "G704",
+                guard,
                 f"guard {guard!r} reads {', '.join(strange)}, which is not an integer "
                 "(C++ context fields are 64-bit integers)",
                 "give the data item an integer or boolean value",
@@ -543,7 +587,9 @@ class _Flattener:
             return f"({_Translator(self.fields, self._env(run)).cpp(self.trees[guard])}) != 0"
         except _Untranslatable as exc:
             self._report(
-                "G702", guard, f"guard {guard!r} does not translate to C++: {exc}",
+                "G702",
+                guard,
+                f"guard {guard!r} does not translate to C++: {exc}",
                 "over context fields use integers, + - *, comparisons, and/or/not, a if c else b",
             )
             return "false"
@@ -574,51 +620,27 @@ class _Flattener:
                 Effect(EffectKind.TAKE, self.transition_index[id(t)]) for t in micro.transitions
             ]
             out += [Effect(EffectKind.ENTER, self.order[s]) for s in micro.entered]
-            out += [Effect(EffectKind.INVOKE, a.invoke) for a in micro.actions
-                    if isinstance(a, Notify)]
+            out += [
+                Effect(EffectKind.INVOKE, a.invoke) for a in micro.actions if isinstance(a, Notify)
+            ]
         return tuple(out)
-
-    def unhandled(self, snap: Snapshot, event: str, ignored: bool) -> Unhandled:
-        if ignored:
-            return Unhandled.DECLARED_IGNORED
-        m = self.m
-        if any(m.candidates(s, event) for s in snap.active if m.is_atomic(s)):
-            return Unhandled.GUARD_FALSE
-        return Unhandled.NO_TRANSITION
 
     def outcome_of(self, source: Snapshot | None, result: Step) -> Outcome:
         if source is not None and not result.handled:
-            assert result.event is not None
-            reason = self.unhandled(source, result.event, result.ignored)
-            return Outcome(False, self.snapshots[source], (), reason)
+            return Outcome(False, self.snapshots[source], (), result.unhandled)
         target = self.index(result.target)
         return Outcome(True, target, self.effects(result.microsteps), final=result.final)
 
-    def oracle_step(self, source: Snapshot | None, event: str | None, choices: list[bool]
-                    ) -> tuple[list[tuple[int, bool]], Outcome]:
-        """One step with runtime guards answered from ``choices``; mirrors ``step``."""
+    def oracle_step(
+        self, source: Snapshot | None, event: str | None, choices: list[bool]
+    ) -> tuple[list[tuple[int, bool]], Outcome]:
+        """One step of the kernel with runtime guards answered from ``choices``."""
         oracle = _Oracle(self, choices)
-        steps: list[Microstep] = []
         if source is None:
-            run = Run(set(), {}, None, self.values, executor=oracle)
-            steps.append(enter_initial_states(self.m, run))
-            macrostep(self.m, run, steps)
-            handled, ignored = True, False
+            result = initial(self.m, self.values, oracle=oracle)
         else:
             assert event is not None
-            run = Run(set(source.active), dict(source.history), source.previous, self.values,
-                      executor=oracle)
-            first = process_event(self.m, run, Event(event, None, "external"))
-            handled = first is not None
-            ignored = False
-            if first is not None:
-                steps.append(first)
-                macrostep(self.m, run, steps)
-            else:
-                ignored = any((s, event) in self.m.ignored for s in source.active)
-        before = source if source is not None else Snapshot(frozenset())
-        after = _snapshot(run) if handled else before
-        result = Step(event, before, after, tuple(steps), handled, ignored, run.final, run.guarded)
+            result = step(self.m, source, event, self.values, oracle=oracle)
         return oracle.decisions, self.outcome_of(source, result)
 
     def tree(self, source: Snapshot | None, event: str | None) -> Tree:
@@ -638,8 +660,10 @@ class _Flattener:
 
     def decide(self, source: Snapshot | None, event: str | None) -> Tree:
         """The semantics' own step where no guard was consulted, the oracle otherwise."""
-        result = initial(self.m, self.values) if source is None else step(
-            self.m, source, event or "", self.values
+        result = (
+            initial(self.m, self.values)
+            if source is None
+            else step(self.m, source, event or "", self.values)
         )
         if not result.guarded:
             return self.outcome_of(source, result)
@@ -662,7 +686,9 @@ def flatten(chart: Chart) -> tuple[FlatChart | None, list[Diagnostic]]:
     if chart.datamodel != "safe":
         diags.append(
             Diagnostic(
-                "G705", Severity.ERROR, where,
+                "G705",
+                Severity.ERROR,
+                where,
                 f"datamodel {chart.datamodel!r}: its scripts and conditions cannot run in C++",
                 "use the safe expression language (datamodel 'safe') for a C++ target",
             )
@@ -686,7 +712,10 @@ def flatten(chart: Chart) -> tuple[FlatChart | None, list[Diagnostic]]:
     except _TooMany as exc:
         diags.append(
             Diagnostic(
-                "G706", Severity.ERROR, where, f"chart {chart.name!r}: {exc}",
+                "G706",
+                Severity.ERROR,
+                where,
+                f"chart {chart.name!r}: {exc}",
                 "split the device into several charts or drop history/parallel regions",
             )
         )
@@ -694,7 +723,10 @@ def flatten(chart: Chart) -> tuple[FlatChart | None, list[Diagnostic]]:
     except StatectlError as exc:
         diags.append(
             Diagnostic(
-                "G707", Severity.ERROR, where, f"chart {chart.name!r} does not settle: {exc}",
+                "G707",
+                Severity.ERROR,
+                where,
+                f"chart {chart.name!r} does not settle: {exc}",
                 "look for eventless or raised transitions that loop",
             )
         )
@@ -716,4 +748,3 @@ def flatten(chart: Chart) -> tuple[FlatChart | None, list[Diagnostic]]:
         tuple(fields),
     )
     return flat, diags
-

@@ -6,10 +6,11 @@ Rules:
    ``M()`` and, ``delays[M]`` (else ``delay``) seconds later on the clock,
    reports the completion event of ``M`` that the device's state handles.
 2. Which completion: the ``completion``-kind events of ``M``'s observer (the
-   Event Definition rows with API ``M``) whose transition leaves the state the
-   notification entered (the targets of the transitions the event took, with
-   their ancestors and default descendants). None: nothing is reported and a
-   note says why. Several: the first in table order, or a choice of the
+   Event Definition rows with API ``M``) whose transition leaves a state the
+   notification entered or one of its superstates (what the event's transitions
+   enter is the kernel's entry set: targets, their ancestors, default children,
+   every parallel region; a targetless transition stays in its source). None:
+   nothing is reported and a note says why. Several: the first in table order, or a choice of the
    ``seed``'s random stream when a seed is given.
 3. Work the device has not finished is superseded when a later notification
    leaves the state it entered (an Error in Moving), or comes from a state the
@@ -39,6 +40,7 @@ from statectl.errors import StatectlError
 from statectl.model import Chart, ControlKind, EventKind, Notify, StateKind, Transition
 from statectl.observers import Notification
 from statectl.runtime.clock import Timer
+from statectl.semantics import Machine, entry_set, structural
 
 __all__ = ["DEFAULT_DELAY", "SimTwin", "TwinNote", "twin_option_problems"]
 
@@ -120,19 +122,21 @@ def _ancestors(chart: Chart, name: str) -> Iterable[str]:
         parent = chart.state(parent).parent
 
 
-def _default_entry(chart: Chart, name: str) -> set[str]:
-    """``name`` and the states its default entry enters below it."""
-    state = chart.state(name)
-    found = {name}
-    if state.kind is StateKind.PARALLEL:
-        below: Iterable[str] = (c.name for c in chart.children(name))
-    elif state.initial:
-        below = state.initial
-    else:
-        below = ()
-    for child in below:
-        found |= _default_entry(chart, child)
-    return found
+def _entered(m: Machine, t: Transition) -> set[str]:
+    """What taking ``t`` enters, by the kernel; a targetless transition stays in its source."""
+    if not t.targets:
+        return {t.source} if t.source in m.order else set()
+    if not all(x in m.order for x in t.targets):
+        return set()
+    return set(entry_set(m, [t]))
+
+
+def _around(m: Machine, states: Iterable[str]) -> set[str]:
+    """``states`` and their superstates: whose transitions leave them."""
+    out = set(states)
+    for s in states:
+        out.update(m.ancestors.get(s, ()))
+    return out
 
 
 def _descendants(chart: Chart, name: str) -> set[str]:
@@ -175,6 +179,7 @@ class SimTwin(Driver):
         if problems:
             raise StatectlError(f"SimTwin for {chart.name}: " + "; ".join(problems))
         self.chart = chart
+        self._machine = structural(chart)
         self.delay = float(delay)
         self.delays: dict[str, float] = {k: float(v) for k, v in (delays or {}).items()}
         self.faults: dict[str, float] = {k: float(v) for k, v in (faults or {}).items()}
@@ -220,10 +225,8 @@ class SimTwin(Driver):
         left: set[str] = set()
         for t in taken:
             left |= _descendants(chart, t.source) if chart.has_state(t.source) else {t.source}
-            for target in t.targets or (t.source,):
-                if chart.has_state(target):
-                    entered |= _default_entry(chart, target)
-                    entered |= set(_ancestors(chart, target))
+            entered |= _entered(self._machine, t)
+        leaves = _around(self._machine, entered)
         api = next((a for a in chart.apis if a.method == method), None)
         events = api.events if api is not None else ()
         kinds = {e: chart.event(e) for e in events}
@@ -233,7 +236,7 @@ class SimTwin(Driver):
         completions = tuple(
             e
             for e in candidates
-            if any(e in t.events and t.source in entered for t in chart.transitions)
+            if any(e in t.events and t.source in leaves for t in chart.transitions)
         )
         where = ", ".join(sorted(entered)) or "no known state"
         if not candidates:
@@ -266,8 +269,10 @@ class SimTwin(Driver):
                 return
             completion = self._choose(plan.completions)
             delay = self.delays.get(method, self.delay)
+            # a WallClock may fire the timer on its thread before call_later returns: the
+            # callback reads its work only under the lock, which is held until it is listed
             work: list[_Work] = []
-            timer = self.clock.call_later(delay, lambda: self._finish(work[0]))
+            timer = self.clock.call_later(delay, lambda: self._finish(work))
             work.append(_Work(method, plan.entered, completion, timer))
             self._work.append(work[0])
 
@@ -290,17 +295,18 @@ class SimTwin(Driver):
             return completions[0]
         return self._rng.choice(completions)
 
-    def _finish(self, work: _Work) -> None:
+    def _finish(self, holder: list[_Work]) -> None:
         with self._lock:
-            if work not in self._work:
-                return
+            if not holder or holder[0] not in self._work:
+                return  # never listed (call_later raised) or superseded
+            work = holder[0]
             self._work.remove(work)
             self._disarm(work.entered)
             entered: set[str] = set()
+            leaves = _around(self._machine, work.entered)
             for t in self.chart.transitions:
-                if work.completion in t.events and t.source in work.entered:
-                    for target in t.targets:
-                        entered |= _default_entry(self.chart, target)
+                if work.completion in t.events and t.source in leaves and t.targets:
+                    entered |= _entered(self._machine, t)
             self._enter(entered)
         self.report(work.completion)
 

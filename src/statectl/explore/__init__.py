@@ -6,7 +6,7 @@
 
 from statectl.explore.compose import MAX_DELIVERIES, Branch, Composed, Delivery, Stimulus
 from statectl.explore.diagrams import to_mermaid, to_plantuml
-from statectl.explore.local import FreeGuard, LocalSpace, Outcome, Reaction
+from statectl.explore.local import FreeGuard, LocalSpace, Outcome
 from statectl.explore.promela import export_promela
 from statectl.explore.report import (
     FAILURES,
@@ -33,7 +33,6 @@ __all__ = [
     "Outcome",
     "Progress",
     "ProgressPrinter",
-    "Reaction",
     "Report",
     "Stimulus",
     "Trace",

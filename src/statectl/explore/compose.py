@@ -28,8 +28,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from statectl.cell import Cell, GlobalExpr, InputKind, Link, Trigger
-from statectl.explore.local import LocalSpace, Outcome, Reaction
+from statectl.explore.local import LocalSpace, Outcome
 from statectl.model import EventKind
+from statectl.semantics import Unhandled
 
 __all__ = ["MAX_DELIVERIES", "Branch", "Composed", "Delivery", "Predicate", "Stimulus"]
 
@@ -61,7 +62,7 @@ class Delivery:
     via: str  # "environment", "fault", "completion" or the link's label
     before: str
     after: str
-    reaction: Reaction
+    unhandled: Unhandled | None  # None: handled
     notifies: tuple[str, ...] = ()
     choices: tuple[tuple[str, bool], ...] = ()
 
@@ -94,8 +95,9 @@ class _InRewriter(ast.NodeTransformer):
         table = self.model.padded(d, self.model.spaces[d].states_in(state))
         key = f"t{len(self.tables)}"
         self.tables[key] = table
-        lookup = ast.parse(f"{key}[(g >> {self.model.shift[d]}) & {self.model.mask[d]}]",
-                           mode="eval").body
+        lookup = ast.parse(
+            f"{key}[(g >> {self.model.shift[d]}) & {self.model.mask[d]}]", mode="eval"
+        ).body
         return ast.copy_location(lookup, node)
 
 
@@ -158,9 +160,7 @@ class Composed:
         rewriter = _InRewriter(self)
         body = rewriter.visit(tree.body)
         fn = ast.Expression(
-            ast.Lambda(
-                ast.arguments([], [ast.arg("g")], None, [], [], None, []), body
-            )
+            ast.Lambda(ast.arguments([], [ast.arg("g")], None, [], [], None, []), body)
         )
         ast.fix_missing_locations(fn)
         namespace: dict[str, object] = {"__builtins__": {}, **rewriter.tables}
@@ -229,8 +229,13 @@ class Composed:
         space = self.spaces[d]
         lid = self.local(g, d)
         out: list[Branch] = []
-        Work = tuple[int, tuple[tuple[int, str, int], ...], tuple[Delivery, ...],
-                     tuple[tuple[int, int, str, int], ...], int]
+        Work = tuple[
+            int,
+            tuple[tuple[int, str, int], ...],
+            tuple[Delivery, ...],
+            tuple[tuple[int, int, str, int], ...],
+            int,
+        ]
         work: list[Work] = []
         for o in space.outcomes(lid, s.event):
             if not o.handled:
@@ -239,9 +244,19 @@ class Composed:
             log: tuple[Delivery, ...] = ()
             if detail:
                 sender = self.names[d] if s.kind is InputKind.COMPLETION else "environment"
-                log = (Delivery(sender, self.names[d], s.event, s.kind.value,
-                                space.state_of(lid), space.state_of(o.target), o.reaction,
-                                o.notifies, o.choices),)
+                log = (
+                    Delivery(
+                        sender,
+                        self.names[d],
+                        s.event,
+                        s.kind.value,
+                        space.state_of(lid),
+                        space.state_of(o.target),
+                        o.unhandled,
+                        o.notifies,
+                        o.choices,
+                    ),
+                )
             work.append((g1, self._queue(g1, d, o), log, (), 1))
         while work:
             g1, pending, log, bad, count = work.pop()
@@ -257,13 +272,25 @@ class Composed:
             for o in tspace.outcomes(tlid, event):
                 g2 = self.replace(g1, t, o.target) if o.handled else g1
                 more = self._queue(g2, t, o) if o.handled else ()
-                bad2 = (*bad, (t, tlid, event, link)) if o.reaction is Reaction.UNHANDLED else bad
+                missed = o.unhandled is Unhandled.NO_TRANSITION
+                bad2 = (*bad, (t, tlid, event, link)) if missed else bad
                 log2 = log
                 if detail:
                     k = self.links[link]
-                    log2 = (*log, Delivery(k.source, k.target, event, k.label,
-                                           tspace.state_of(tlid), tspace.state_of(o.target),
-                                           o.reaction, o.notifies, o.choices))
+                    log2 = (
+                        *log,
+                        Delivery(
+                            k.source,
+                            k.target,
+                            event,
+                            k.label,
+                            tspace.state_of(tlid),
+                            tspace.state_of(o.target),
+                            o.unhandled,
+                            o.notifies,
+                            o.choices,
+                        ),
+                    )
                 work.append((g2, rest + more, log2, bad2, count + 1))
         if not detail:
             return out
@@ -278,12 +305,18 @@ class Composed:
                 (
                     o.target,
                     o.handled,
-                    o.reaction is Reaction.UNHANDLED,
+                    o.unhandled is Unhandled.NO_TRANSITION,
                     tuple(
-                        (self.position[self.links[i].target], self.links[i].event, i,
-                         self.link_guard[i])
+                        (
+                            self.position[self.links[i].target],
+                            self.links[i].event,
+                            i,
+                            self.link_guard[i],
+                        )
                         for i in self.fires(d, o)
-                    ) if o.handled else (),
+                    )
+                    if o.handled
+                    else (),
                 )
                 for o in self.spaces[d].outcomes(lid, event)
             )
@@ -302,8 +335,9 @@ class Composed:
         d = s.device
         lid = (g >> shift[d]) & mask[d]
         out: list[tuple[int, tuple[tuple[int, int, str, int], ...], bool]] = []
-        work: list[tuple[int, tuple[tuple[int, str, int], ...],
-                         tuple[tuple[int, int, str, int], ...], int]] = []
+        work: list[
+            tuple[int, tuple[tuple[int, str, int], ...], tuple[tuple[int, int, str, int], ...], int]
+        ] = []
         for target, handled, _unhandled, fired in self.moves(d, lid, s.event):
             if handled:
                 g1 = (g & ~(mask[d] << shift[d])) | (target << shift[d])

@@ -9,8 +9,8 @@ Rules:
 
 from __future__ import annotations
 
-from statectl.explore.local import Reaction
 from statectl.explore.report import Trace
+from statectl.semantics import Unhandled
 
 __all__ = ["to_mermaid", "to_plantuml"]
 
@@ -21,10 +21,10 @@ def _clean(text: str) -> str:
     return text.replace(";", ",").replace("#", "").replace("\n", " ")
 
 
-def _tag(via: str, reaction: Reaction) -> str:
+def _tag(via: str, unhandled: Unhandled | None) -> str:
     tag = "" if via in ("environment",) else f" ({'link' if ' -> ' in via else via})"
-    if reaction is not Reaction.HANDLED:
-        tag += f" [{reaction.value}]"
+    if unhandled is not None:
+        tag += f" [{unhandled}]"
     return tag
 
 
@@ -40,8 +40,9 @@ def to_mermaid(trace: Trace, title: str = "") -> str:
     for step in trace.steps:
         for d in step.deliveries:
             arrow = "-)" if d.via == "fault" else "->>"
-            out.append(f"    {d.sender}{arrow}{d.receiver}: {_clean(d.event)}"
-                       f"{_tag(d.via, d.reaction)}")
+            out.append(
+                f"    {d.sender}{arrow}{d.receiver}: {_clean(d.event)}{_tag(d.via, d.unhandled)}"
+            )
             if d.before != d.after:
                 out.append(f"    Note over {d.receiver}: {d.before} to {d.after}")
     if title:
@@ -61,7 +62,7 @@ def to_plantuml(trace: Trace, title: str = "") -> str:
     for step in trace.steps:
         for d in step.deliveries:
             arrow = "->>" if d.via == "fault" else "->"
-            out.append(f"{d.sender} {arrow} {d.receiver} : {d.event}{_tag(d.via, d.reaction)}")
+            out.append(f"{d.sender} {arrow} {d.receiver} : {d.event}{_tag(d.via, d.unhandled)}")
             if d.before != d.after:
                 out.append(f"note over {d.receiver} : {d.before} -> {d.after}")
     if title:

@@ -9,21 +9,21 @@ Rules:
 2. A guard part that reads data the model does not track (``_event``, or a data
    item declared without a value) is a *free choice*: both outcomes are
    explored. Parts over tracked data (``previous``, ``In()``, data with a value)
-   are evaluated as the runtime would. The choice is forced by rewriting the
-   untracked part into a call of an oracle that the evaluation env carries;
-   nothing in the kernel changes (the kernel hook that would replace this is
-   described in ``docs/cells.md``).
+   are evaluated as the runtime would. The choice is forced through the
+   kernel's guard oracle (``step(..., oracle=...)``): the explorer keeps its own
+   copy of each such guard with the untracked parts replaced by calls of a
+   chooser, evaluates it over the kernel's guard env and hands the kernel the
+   value; the Machine's guards are never rewritten.
 3. ``previous`` is kept in the snapshot only when some guard reads it, so local
    states that no guard can tell apart are one state.
-4. Each outcome says how the device reacted: handled, declared ignored, refused
-   by a false guard, or unhandled (no row and not ignored), which is the missed
-   transition the cell checks for.
+4. Each outcome says how the device reacted: handled, or the kernel's
+   :class:`~statectl.semantics.Unhandled` reason (declared ignored, guard false,
+   no transition: the missed transition the cell checks for).
 """
 
 from __future__ import annotations
 
 import ast
-import enum
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -31,21 +31,23 @@ from typing import Any
 
 from statectl.errors import Location
 from statectl.expr import Expression
-from statectl.model import Chart, ControlKind, EventKind, Notify
-from statectl.semantics import Machine, Snapshot, Step, initial, step
+from statectl.model import Chart, ControlKind, EventKind, Notify, Transition
+from statectl.semantics import (
+    Machine,
+    Run,
+    Snapshot,
+    Step,
+    Unhandled,
+    guard_env,
+    initial,
+    step,
+)
 
-__all__ = ["FreeGuard", "LocalSpace", "Outcome", "Reaction"]
+__all__ = ["FreeGuard", "LocalSpace", "Outcome"]
 
 ORACLE = "_statectl_choose"
 Choices = tuple[tuple[str, bool], ...]
 TRACKED = frozenset({"previous", "In"})
-
-
-class Reaction(enum.Enum):
-    HANDLED = "handled"
-    IGNORED = "ignored"  # the state table declares the event ignored
-    GUARD_FALSE = "guard false"  # a row exists but its guard did not hold
-    UNHANDLED = "unhandled"  # no row and not declared ignored
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,7 +55,7 @@ class Outcome:
     """One way a device can react to one event in one local state."""
 
     target: int
-    reaction: Reaction
+    unhandled: Unhandled | None  # None: handled
     entered: frozenset[str]
     events: frozenset[str]  # events on which transitions were taken (external and raised)
     exited: tuple[str, ...] = ()
@@ -63,7 +65,7 @@ class Outcome:
 
     @property
     def handled(self) -> bool:
-        return self.reaction is Reaction.HANDLED
+        return self.unhandled is None
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,11 +78,10 @@ class FreeGuard:
     where: Location
 
 
-class _Oracle:
+class _Chooser:
     """Answers free guard parts from a forced prefix, then ``False``; records what it was asked."""
 
-    def __init__(self, leaves: list[str], prefix: tuple[bool, ...]) -> None:
-        self.leaves = leaves
+    def __init__(self, prefix: tuple[bool, ...]) -> None:
         self.prefix = prefix
         self.asked: list[tuple[int, bool]] = []
 
@@ -89,6 +90,26 @@ class _Oracle:
         value = self.prefix[n] if n < len(self.prefix) else False
         self.asked.append((leaf, value))
         return value
+
+
+class _Oracle:
+    """The kernel's guard oracle: guards with free parts are evaluated here, others unforced."""
+
+    def __init__(self, free: dict[str, Expression], choose: _Chooser) -> None:
+        self.free = free
+        self.choose = choose
+
+    def __call__(self, run: Run, t: Transition) -> bool | None:
+        expr = self.free.get(t.guard or "")
+        if expr is None:
+            return None
+        current = run.current
+        env = guard_env(run, current.data if current is not None else None)
+        env[ORACLE] = self.choose
+        try:
+            return bool(expr.evaluate(env))
+        except Exception:  # a failing guard is false, as in the kernel
+            return False
 
 
 def _untracked(node: ast.AST, tracked_data: frozenset[str]) -> bool:
@@ -138,6 +159,8 @@ class LocalSpace:
         self.data: dict[str, Any] = {d.name: _literal(d.expr) for d in chart.data}
         tracked_data = frozenset(k for k, v in self.data.items() if v is not None)
         self.leaves: list[str] = []
+        # guards with free parts, each with those parts replaced by the chooser's calls
+        self.rewritten: dict[str, Expression] = {}
         free: list[FreeGuard] = []
         reads_previous = False
         seen: set[str] = set()
@@ -157,7 +180,7 @@ class LocalSpace:
                 free.append(FreeGuard(name, t.guard, parts, t.origin))
                 old = self.machine.guards[t.guard]
                 code = compile(tree, f"<free guard {t.origin}>", "eval")
-                self.machine.guards[t.guard] = Expression(old.source, code, old.names)
+                self.rewritten[t.guard] = Expression(old.source, code, old.names)
         self.free_guards = tuple(free)
         self.keep_previous = reads_previous
         self.events: tuple[str, ...] = chart.event_names
@@ -175,8 +198,9 @@ class LocalSpace:
         )
         order = self.machine.order
         self.labels: tuple[str, ...] = tuple(
-            "+".join(sorted((s for s in snap.active if self.machine.is_atomic(s)),
-                            key=order.__getitem__))
+            "+".join(
+                sorted((s for s in snap.active if self.machine.is_atomic(s)), key=order.__getitem__)
+            )
             for snap in self.snapshots
         )
 
@@ -200,38 +224,35 @@ class LocalSpace:
         """Every step the kernel can take, one per combination of free choices consulted."""
         out: list[tuple[Step, Choices]] = []
         pending: list[tuple[bool, ...]] = [()]
+        m, data = self.machine, self.data
         while pending:
             prefix = pending.pop()
-            oracle = _Oracle(self.leaves, prefix)
-            data = {**self.data, ORACLE: oracle}
-            result = initial(self.machine, data) if event is None else step(
-                self.machine, snap, event, data
-            )
-            for i in range(len(prefix), len(oracle.asked)):
-                pending.append((*(v for _, v in oracle.asked[:i]), True))
-            out.append((result, tuple((self.leaves[k], v) for k, v in oracle.asked)))
+            chooser = _Chooser(prefix)
+            oracle = _Oracle(self.rewritten, chooser) if self.rewritten else None
+            if event is None:
+                result = initial(m, data, oracle=oracle)
+            else:
+                result = step(m, snap, event, data, oracle=oracle)
+            asked = chooser.asked
+            for i in range(len(prefix), len(asked)):
+                pending.append((*(v for _, v in asked[:i]), True))
+            out.append((result, tuple((self.leaves[k], v) for k, v in asked)))
         return out
 
-    def _outcome(
-        self, result: Step, choices: Choices, queue: deque[int]
-    ) -> Outcome:
+    def _outcome(self, result: Step, choices: Choices, queue: deque[int]) -> Outcome:
         target = self._id(result.target, queue)
-        if result.handled:
-            reaction = Reaction.HANDLED
-        elif result.ignored:
-            reaction = Reaction.IGNORED
-        elif result.event is not None and self._has_row(result.source, result.event):
-            reaction = Reaction.GUARD_FALSE
-        else:
-            reaction = Reaction.UNHANDLED
         events = frozenset(m.event for m in result.microsteps if m.event and m.transitions)
         notifies = tuple(a.method for a in result.actions if isinstance(a, Notify))
-        return Outcome(target, reaction, frozenset(result.entered), events, result.exited,
-                       result.entered, notifies, choices)
-
-    def _has_row(self, snap: Snapshot, event: str) -> bool:
-        m = self.machine
-        return any(m.candidates(s, event) for s in snap.active if m.is_atomic(s))
+        return Outcome(
+            target,
+            result.unhandled,
+            frozenset(result.entered),
+            events,
+            result.exited,
+            result.entered,
+            notifies,
+            choices,
+        )
 
     def _close(self) -> tuple[Outcome, ...]:
         """Number every snapshot reachable from the initial ones under every event."""

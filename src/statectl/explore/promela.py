@@ -23,7 +23,8 @@ import ast
 
 from statectl.cell import GlobalExpr
 from statectl.explore.compose import Composed
-from statectl.explore.local import Outcome, Reaction
+from statectl.explore.local import Outcome
+from statectl.semantics import Unhandled
 
 __all__ = ["STEP_MARK", "export_promela"]
 
@@ -71,8 +72,9 @@ class _Writer:
             k = self.m.links[i]
             code = self.code[self.m.position[k.target], k.event]
             guard = self.expr(k.guard) if k.guard else "true"
-            lines.append(f"{indent}if :: {guard} -> pend!{code} :: else -> skip fi; "
-                         f"/* {k.label} */")
+            lines.append(
+                f"{indent}if :: {guard} -> pend!{code} :: else -> skip fi; /* {k.label} */"
+            )
         return lines
 
     def table(self, d: int, event: str, indent: str, only_handled: bool) -> list[str]:
@@ -82,7 +84,7 @@ class _Writer:
             outs = space.outcomes(lid, event)
             if only_handled:
                 outs = tuple(o for o in outs if o.handled)
-            if not outs or all(o.reaction is Reaction.IGNORED for o in outs):
+            if not outs or all(o.unhandled is Unhandled.DECLARED_IGNORED for o in outs):
                 continue
             lines.append(f"{indent}:: {self.var[d]} == {lid} -> /* {space.state_of(lid)} */")
             lines.append(f"{indent}   if")
@@ -91,9 +93,11 @@ class _Writer:
                     body = self.outcome(d, o, indent + "      ")
                     body[0] = f"{indent}   :: " + body[0].lstrip()
                     lines.extend(body)
-                elif o.reaction is Reaction.UNHANDLED:
-                    lines.append(f'{indent}   :: printf("unhandled: {self.m.names[d]} in '
-                                 f'{space.state_of(lid)} gets {event}\\n"); assert(false)')
+                elif o.unhandled is Unhandled.NO_TRANSITION:
+                    lines.append(
+                        f'{indent}   :: printf("unhandled: {self.m.names[d]} in '
+                        f'{space.state_of(lid)} gets {event}\\n"); assert(false)'
+                    )
                 else:
                     lines.append(f"{indent}   :: skip")
             lines.append(f"{indent}   fi")
@@ -106,8 +110,10 @@ def export_promela(model: Composed, *, invariants: bool = True, unhandled: bool 
     """The Promela text of ``model`` (rules 1-4)."""
     w = _Writer(model)
     m = model
-    out = [f"/* cell {m.cell.name}: composed by statectl for SPIN (statectl verify "
-           "--export promela) */"]
+    out = [
+        f"/* cell {m.cell.name}: composed by statectl for SPIN (statectl verify "
+        "--export promela) */"
+    ]
     for d, space in enumerate(m.spaces):
         states = ", ".join(f"{i}={space.state_of(i)}" for i in range(len(space.snapshots)))
         kind = "byte" if len(space.snapshots) <= 256 else "short"
@@ -133,8 +139,11 @@ def export_promela(model: Composed, *, invariants: bool = True, unhandled: bool 
     out.append("  code = 0 /* so equal device states are one SPIN state */")
     out.append("}")
     out.append("")
-    checks = [f"  assert({w.expr(inv.expr)}); /* invariant {inv.name} */"
-              for inv in m.cell.invariants] if invariants else []
+    checks = (
+        [f"  assert({w.expr(inv.expr)}); /* invariant {inv.name} */" for inv in m.cell.invariants]
+        if invariants
+        else []
+    )
     out.append("inline check() {")
     out.extend(checks or ["  skip"])
     out.append("}")

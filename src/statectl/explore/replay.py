@@ -233,8 +233,9 @@ def run_cell(
             stim = Stimulus(step.kind, m.position[step.device], step.event)
             offered = {(s.kind, s.device, s.event) for s in m.enabled(g)}
             if (stim.kind, stim.device, stim.event) not in offered:
-                divergences.append(f"step {i + 1}: {stim.label(m.names)} is not offered in "
-                                   f"{m.describe(g)}")
+                divergences.append(
+                    f"step {i + 1}: {stim.label(m.names)} is not offered in {m.describe(g)}"
+                )
         else:
             choices = [s for s in m.enabled(g) if m.successors(g, s)]
             if not choices:
@@ -248,13 +249,15 @@ def run_cell(
         h = r.state()
         if plan is not None and plan[i].expect:
             got = dict(zip(m.names, m.labels(h), strict=True))
-            diff = [f"{d} is {got.get(d)} (trace: {s})" for d, s in plan[i].expect
-                    if got.get(d) != s]
+            diff = [
+                f"{d} is {got.get(d)} (trace: {s})" for d, s in plan[i].expect if got.get(d) != s
+            ]
             if diff:
                 divergences.append(f"step {i + 1}: " + "; ".join(diff))
         elif expected and h not in expected:
-            divergences.append(f"step {i + 1}: runtime reached {m.describe(h)}, "
-                               "which the explorer does not")
+            divergences.append(
+                f"step {i + 1}: runtime reached {m.describe(h)}, which the explorer does not"
+            )
         for name, fn in invariants:
             if not fn(h):
                 violations.append(f"step {i + 1}: invariant {name} fails in {m.describe(h)}")
@@ -268,8 +271,9 @@ def run_cell(
     return result
 
 
-def run_main(cell: str, *, replay: str | None = None, walk: int = 20, seed: int = 0,
-             out: TextIO, err: TextIO) -> int:
+def run_main(
+    cell: str, *, replay: str | None = None, walk: int = 20, seed: int = 0, out: TextIO, err: TextIO
+) -> int:
     """The whole ``statectl run CELL [--replay TRACE]`` command; returns the exit code."""
     if not Path(cell).is_file():
         err.write(f"statectl run: {cell}: no such file\n")

@@ -18,7 +18,7 @@ from typing import Any
 
 from statectl.cell import InputKind
 from statectl.explore.compose import Delivery
-from statectl.explore.local import FreeGuard, Reaction
+from statectl.explore.local import FreeGuard
 
 __all__ = ["FAILURES", "Finding", "Kind", "Report", "Trace", "TraceStep", "Unanticipated"]
 
@@ -63,7 +63,7 @@ class TraceStep:
                     "via": d.via,
                     "before": d.before,
                     "after": d.after,
-                    "reaction": d.reaction.value,
+                    "reaction": str(d.unhandled) if d.unhandled is not None else "handled",
                     "calls": list(d.notifies),
                 }
                 for d in self.deliveries
@@ -105,7 +105,7 @@ class Trace:
                 change = f"{d.before} -> {d.after}" if d.before != d.after else d.before
                 what = f"{d.sender} -> {d.receiver}: {d.event}"
                 via = "" if d.via in ("environment", "completion", "fault") else " (link)"
-                tail = "" if d.reaction is Reaction.HANDLED else f" [{d.reaction.value}]"
+                tail = "" if d.unhandled is None else f" [{d.unhandled}]"
                 if d.via == "fault":
                     via = " (fault)"
                 elif d.via == "completion":
@@ -214,8 +214,13 @@ class Report:
             "unanticipated_states": self.unanticipated_states,
             "unanticipated": [u.to_json() for u in self.unanticipated],
             "free_choices": [
-                {"device": g.device, "guard": g.guard, "parts": list(g.parts),
-                 "file": g.where.file, "line": g.where.line}
+                {
+                    "device": g.device,
+                    "guard": g.guard,
+                    "parts": list(g.parts),
+                    "file": g.where.file,
+                    "line": g.where.line,
+                }
                 for g in self.free_guards
             ],
         }
@@ -229,12 +234,16 @@ class Report:
             f"peak {self.peak_bytes / 2**20:.0f} MiB)",
         ]
         if not self.complete:
-            out.append("incomplete: the --max-states bound was reached; properties not "
-                       "violated so far are not proven")
+            out.append(
+                "incomplete: the --max-states bound was reached; properties not "
+                "violated so far are not proven"
+            )
         for g in self.free_guards:
             parts = "; ".join(g.parts)
-            out.append(f"free choice: {g.device} guard {g.guard!r} ({g.where}) reads data the "
-                       f"model does not track ({parts}); both outcomes explored")
+            out.append(
+                f"free choice: {g.device} guard {g.guard!r} ({g.where}) reads data the "
+                f"model does not track ({parts}); both outcomes explored"
+            )
         for p, v in self.properties:
             out.append(f"  {v.upper():<10} {p}")
         for f in self.findings:
@@ -250,7 +259,9 @@ class Report:
                 "device table anticipated (neither handled nor declared ignored):"
             )
             for u in self.unanticipated:
-                out.append(f"  {u.device} in {u.state} gets {u.event} ({u.source.value}): "
-                           f"{u.count:,} states")
+                out.append(
+                    f"  {u.device} in {u.state} gets {u.event} ({u.source.value}): "
+                    f"{u.count:,} states"
+                )
         out.append(f"verdict: {self.verdict}")
         return "\n".join(out) + "\n"

@@ -29,8 +29,8 @@ from typing import TextIO
 
 from statectl.cell import Cell, InputKind
 from statectl.explore.compose import Branch, Composed, Predicate, Stimulus
-from statectl.explore.local import Reaction
 from statectl.explore.report import Finding, Kind, Report, Trace, TraceStep, Unanticipated
+from statectl.semantics import Unhandled
 
 __all__ = ["Progress", "ProgressPrinter", "explore", "trace_to"]
 
@@ -52,8 +52,10 @@ class ProgressPrinter:
 
     def __call__(self, p: Progress) -> None:
         rate = p.states / p.seconds if p.seconds else 0.0
-        text = (f"\rexploring: {p.states:,} states, {p.expanded:,} expanded, depth {p.depth}, "
-                f"{rate:,.0f} states/s ")
+        text = (
+            f"\rexploring: {p.states:,} states, {p.expanded:,} expanded, depth {p.depth}, "
+            f"{rate:,.0f} states/s "
+        )
         self.stream.write(text)
         self.stream.flush()
         self.shown = True
@@ -93,7 +95,7 @@ class _Tables:
                         outs = space.outcomes(lid, s.event)
                         handled = [o for o in outs if o.handled]
                         if not handled:
-                            if outs and all(o.reaction is Reaction.UNHANDLED for o in outs):
+                            if outs and all(o.unhandled is Unhandled.NO_TRANSITION for o in outs):
                                 uns.append((i, s))
                             continue
                         if s.when >= 0 or any(model.fires(d, o) for o in handled):
@@ -113,8 +115,14 @@ class _Tables:
             self.unant.append(tuple(un))
 
 
-def trace_to(model: Composed, parent: array[int], states: list[int], i: int,
-             last: Stimulus | None = None, match: Callable[[object], bool] | None = None) -> Trace:
+def trace_to(
+    model: Composed,
+    parent: array[int],
+    states: list[int],
+    i: int,
+    last: Stimulus | None = None,
+    match: Callable[[object], bool] | None = None,
+) -> Trace:
     """The trace from the initial state to state ``i`` (then ``last``, if given)."""
     path: list[int] = []
     while i >= 0:
@@ -131,13 +139,15 @@ def trace_to(model: Composed, parent: array[int], states: list[int], i: int,
     return Trace(model.names, model.labels(states[path[0]]), tuple(steps))
 
 
-def _step_between(model: Composed, g: int, ok: Callable[..., bool],
-                  only: Stimulus | None = None) -> TraceStep:
+def _step_between(
+    model: Composed, g: int, ok: Callable[..., bool], only: Stimulus | None = None
+) -> TraceStep:
     for s in model.enabled(g) if only is None else [only]:
         for br in model.branches(g, s, detail=True):
             if ok(br):
-                return TraceStep(s.kind, model.names[s.device], s.event, br.deliveries,
-                                 model.labels(br.state))
+                return TraceStep(
+                    s.kind, model.names[s.device], s.event, br.deliveries, model.labels(br.state)
+                )
     raise AssertionError("no stimulus links two states of the explored graph")
 
 
@@ -276,53 +286,83 @@ def explore(
     properties.append(("no deadlock", verdict(bool(deadlocks))))
     if deadlocks:
         first = deadlocks[0]
-        findings.append(Finding(
-            Kind.DEADLOCK, "deadlock",
-            f"no input can change {model.describe(states[first])}",
-            trace_to(model, parent, states, first), len(deadlocks)))
+        findings.append(
+            Finding(
+                Kind.DEADLOCK,
+                "deadlock",
+                f"no input can change {model.describe(states[first])}",
+                trace_to(model, parent, states, first),
+                len(deadlocks),
+            )
+        )
     for inv in cell.invariants:
-        properties.append((f"invariant {inv.name}: {inv.expr.source}",
-                           verdict(inv.name in violated)))
+        properties.append(
+            (f"invariant {inv.name}: {inv.expr.source}", verdict(inv.name in violated))
+        )
         if inv.name in violated:
             at = violated[inv.name]
-            findings.append(Finding(
-                Kind.INVARIANT, inv.name,
-                f"{inv.expr.source} is false in {model.describe(states[at])}",
-                trace_to(model, parent, states, at), violations[inv.name]))
-    properties.append(("every link-delivered event is handled or ignored",
-                       verdict(bool(unhandled))))
+            findings.append(
+                Finding(
+                    Kind.INVARIANT,
+                    inv.name,
+                    f"{inv.expr.source} is false in {model.describe(states[at])}",
+                    trace_to(model, parent, states, at),
+                    violations[inv.name],
+                )
+            )
+    properties.append(
+        ("every link-delivered event is handled or ignored", verdict(bool(unhandled)))
+    )
     for key, (at, s, target) in unhandled.items():
         t, label, event = key
         name = model.names[t]
-        findings.append(Finding(
-            Kind.UNHANDLED, f"{name}.{event}",
-            f"a link delivers {event!r} to {name} in {label}, which neither handles nor "
-            "ignores it (a missed transition that shows only in interaction)",
-            trace_to(model, parent, states, at, s, _shows(model, key, target)),
-            unhandled_count[key]))
+        findings.append(
+            Finding(
+                Kind.UNHANDLED,
+                f"{name}.{event}",
+                f"a link delivers {event!r} to {name} in {label}, which neither handles nor "
+                "ignores it (a missed transition that shows only in interaction)",
+                trace_to(model, parent, states, at, s, _shows(model, key, target)),
+                unhandled_count[key],
+            )
+        )
     properties.append(("no link livelock", verdict(bool(livelocks))))
     for at, s in livelocks.values():
-        findings.append(Finding(
-            Kind.LIVELOCK, s.label(model.names),
-            f"links keep delivering events after {s.label(model.names)}; "
-            "more than 256 deliveries in one step",
-            trace_to(model, parent, states, at)))
+        findings.append(
+            Finding(
+                Kind.LIVELOCK,
+                s.label(model.names),
+                f"links keep delivering events after {s.label(model.names)}; "
+                "more than 256 deliveries in one step",
+                trace_to(model, parent, states, at),
+            )
+        )
     for rec in cell.recovery:
         failed_at, count = (-1, 0)
         if complete:
-            failed_at, count = _recovery(model, model.predicate(rec.target),
-                                         model.predicate(rec.source) if rec.source else None,
-                                         states, src, dst)
+            failed_at, count = _recovery(
+                model,
+                model.predicate(rec.target),
+                model.predicate(rec.source) if rec.source else None,
+                states,
+                src,
+                dst,
+            )
         text = f"recovery {rec.name}: always able to reach {rec.target.source}"
         if rec.source is not None:
             text += f" from {rec.source.source}"
         properties.append((text, verdict(failed_at >= 0)))
         if failed_at >= 0:
-            findings.append(Finding(
-                Kind.RECOVERY, rec.name,
-                f"from {model.describe(states[failed_at])} no sequence of inputs reaches "
-                f"{rec.target.source}",
-                trace_to(model, parent, states, failed_at), count))
+            findings.append(
+                Finding(
+                    Kind.RECOVERY,
+                    rec.name,
+                    f"from {model.describe(states[failed_at])} no sequence of inputs reaches "
+                    f"{rec.target.source}",
+                    trace_to(model, parent, states, failed_at),
+                    count,
+                )
+            )
     reached: list[set[int]] = [set() for _ in range(n)]
     for g in states:
         for d in range(n):
@@ -331,21 +371,31 @@ def explore(
         seen = {s for lid in reached[d] for s in space.active(lid)}
         for st in space.chart.states:
             if st.name not in seen:
-                findings.append(Finding(
-                    Kind.UNREACHED, f"{model.names[d]}.{st.name}",
-                    f"device {model.names[d]} never enters {st.name} in this cell"
-                    + ("" if complete else " (within the bound)")))
+                findings.append(
+                    Finding(
+                        Kind.UNREACHED,
+                        f"{model.names[d]}.{st.name}",
+                        f"device {model.names[d]} never enters {st.name} in this cell"
+                        + ("" if complete else " (within the bound)"),
+                    )
+                )
     unants = tuple(
-        Unanticipated(model.names[d], model.spaces[d].state_of(lid), event, kind,
-                      unant_count[(d, lid, event, kind)],
-                      trace_to(model, parent, states, first))
+        Unanticipated(
+            model.names[d],
+            model.spaces[d].state_of(lid),
+            event,
+            kind,
+            unant_count[(d, lid, event, kind)],
+            trace_to(model, parent, states, first),
+        )
         for (d, lid, event, kind), first in unant_first.items()
     )
     return Report(
         cell=cell.name,
         path=cell.path,
-        devices=tuple((nm, len(sp.snapshots)) for nm, sp in zip(model.names, model.spaces,
-                                                                strict=True)),
+        devices=tuple(
+            (nm, len(sp.snapshots)) for nm, sp in zip(model.names, model.spaces, strict=True)
+        ),
         states=len(states),
         transitions=transitions,
         depth=depth,
@@ -372,8 +422,14 @@ def _shows(model: Composed, key: tuple[int, str, str], target: int) -> Callable[
     return match
 
 
-def _recovery(model: Composed, target: Predicate, source: Predicate | None, states: list[int],
-              src: array[int], dst: array[int]) -> tuple[int, int]:
+def _recovery(
+    model: Composed,
+    target: Predicate,
+    source: Predicate | None,
+    states: list[int],
+    src: array[int],
+    dst: array[int],
+) -> tuple[int, int]:
     """First state (BFS order) where ``source`` holds and no path reaches ``target``; count."""
     n = len(states)
     count_in = array("q", bytes(8 * (n + 1)))
@@ -392,7 +448,7 @@ def _recovery(model: Composed, target: Predicate, source: Predicate | None, stat
         good[k] = 1
     while stack:
         k = stack.pop()
-        for p in preds[count_in[k]:count_in[k + 1]]:
+        for p in preds[count_in[k] : count_in[k + 1]]:
             if not good[p]:
                 good[p] = 1
                 stack.append(p)

@@ -14,7 +14,9 @@ Rules:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any
+
+from statectl.semantics import Unhandled
 
 __all__ = [
     "ApiCall",
@@ -36,9 +38,9 @@ __all__ = [
     "format_args",
 ]
 
-#: Why an event changed nothing: the state table says so, its guard was false,
-#: no active state has a transition for it, or the chart has never heard of it.
-IgnoreReason = Literal["declared ignored", "guard false", "no transition", "unknown event"]
+#: Why an event changed nothing: the kernel's :class:`~statectl.semantics.Unhandled`
+#: (a ``str`` enum, so it compares, prints and serialises as ``"guard false"`` etc.).
+IgnoreReason = Unhandled
 
 
 @dataclass(frozen=True, slots=True)
@@ -116,7 +118,7 @@ class EventRejected:
     device: str
     time: float
     event: str
-    reason: str
+    reason: IgnoreReason
 
 
 @dataclass(frozen=True, slots=True)

@@ -9,9 +9,10 @@ Rules:
    pure; the Subject performs the decision: it commits the new snapshot, emits
    the records, and for each ``Notify`` calls the one observer registered for
    that invoke number (the paper's specific notification).
-3. An event that changes nothing is never lost silently. The reason is one of
-   ``declared ignored`` (the state table says so), ``guard false`` (a transition
-   existed but its guard did not hold), ``no transition`` or ``unknown event``.
+3. An event that changes nothing is never lost silently. The reason is the
+   kernel's :class:`~statectl.semantics.Unhandled`: ``declared ignored`` (the state
+   table says so), ``guard false`` (a transition existed but its guard did not
+   hold), ``no transition``, or ``unknown event`` (said here, before stepping).
    Declared-ignored events are always just recorded; the others are recorded as
    ``EventIgnored`` under policy ``ignore`` and as ``EventRejected`` plus an
    :class:`~statectl.errors.UnhandledEventError` under policy ``error`` (raised
@@ -69,13 +70,14 @@ from statectl.runtime.records import (
     StateExited,
     TransitionTaken,
 )
-from statectl.semantics import Plan, Snapshot, Step, compiled, initial, step
+from statectl.semantics import Plan, Snapshot, Step, Unhandled, compiled, initial, step
 
 __all__ = ["ApiLogging", "Listener", "Policy", "StateWatcher", "StepListener", "Subject"]
 
 Policy = Literal["ignore", "error"]
 Listener = Callable[[Record], None]
-#: ``(event, data, outcome)`` after an event ran; outcome is ``handled`` or the ignore reason.
+#: ``(event, data, outcome)`` after an event ran; outcome is ``"handled"`` or the
+#: :class:`~statectl.semantics.Unhandled` reason (a ``str`` enum: stored as its value).
 StepListener = Callable[[str, Any, str], None]
 ErrorHandler = Callable[[BaseException], None]
 
@@ -650,7 +652,7 @@ class Subject:
             calls = self._calls = {}
         entry: _Call
         watch = self._watch
-        if watch and any(s in watch for m in plan.step.microsteps for s in (*m.exited, *m.entered)):
+        if watch and any(s in watch for s in (*plan.exited, *plan.entered)):
             entry = (1, self._perform_unheard, plan)  # watchers hear it between notifications
         elif not plan.notifies:
             entry = (1, None, None)
@@ -691,14 +693,17 @@ class Subject:
             self._process_slow(event, data)
             return
         if not plan.handled:
+            reason = plan.unhandled
             if (
                 self._listeners
-                or self._steppers
-                or (self.policy == "error" and not plan.step.ignored)
+                or reason is None
+                or (self.policy == "error" and reason is not Unhandled.DECLARED_IGNORED)
             ):
-                self._process_slow(event, data)  # it names why, and rejects
+                self._process_slow(event, data)  # records, and the rejection's error
             else:
                 self._counts += 1
+                for callback in self._steppers:
+                    callback(event, data, reason)
             return
         if self._listeners:
             now = self.clock.now()
@@ -736,21 +741,11 @@ class Subject:
         if listening:
             self.emit(EventReceived(self.name, now, event, data))
         if event not in self.machine.event_names:
-            self._unhandled(event, data, "unknown event", now, snapshot)
+            self._unhandled(event, data, Unhandled.UNKNOWN_EVENT, now, snapshot)
             return
         decision = step(self.machine, snapshot, event, self._data, data)
-        if not decision.handled:
-            if decision.ignored:
-                reason: IgnoreReason = "declared ignored"
-            elif any(
-                self.machine.candidates(s, event)
-                for s in snapshot.active
-                if self.machine.is_atomic(s)
-            ):
-                reason = "guard false"
-            else:
-                reason = "no transition"
-            self._unhandled(event, data, reason, now, snapshot)
+        if decision.unhandled is not None:
+            self._unhandled(event, data, decision.unhandled, now, snapshot)
             return
         self._commit(decision.target)
         self._perform(decision, data, now, listening)
@@ -762,7 +757,7 @@ class Subject:
     ) -> None:
         for callback in self._steppers:
             callback(event, data, reason)
-        if self.policy == "ignore" or reason == "declared ignored":
+        if self.policy == "ignore" or reason is Unhandled.DECLARED_IGNORED:
             if self._listeners:
                 self.emit(EventIgnored(self.name, now, event, reason))
             return

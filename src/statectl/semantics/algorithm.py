@@ -13,14 +13,18 @@ from typing import Any
 from statectl.model import Action, Raise, StateKind, Transition
 from statectl.semantics.machine import Machine
 from statectl.semantics.records import (
+    MAX_GUARD_PATHS,
     MAX_MICROSTEPS,
     MEMO_LIMIT,
+    Consult,
     Event,
+    GuardOracle,
     LivelockError,
     Microstep,
     Run,
     Snapshot,
     Step,
+    Unhandled,
 )
 
 __all__ = [
@@ -28,8 +32,10 @@ __all__ = [
     "compute_exit_set",
     "condition_match",
     "enter_initial_states",
+    "entry_set",
     "exit_interpreter",
     "get_transition_domain",
+    "guard_env",
     "initial",
     "macrostep",
     "microstep",
@@ -38,30 +44,66 @@ __all__ = [
     "select_eventless_transitions",
     "select_transitions",
     "step",
+    "unhandled_reason",
 ]
 
 # -- the W3C algorithm ------------------------------------------------------------------------
 
 
-def _in_env(run: Run, m: Machine, event_data: Any) -> dict[str, Any]:
-    active = run.active
+def guard_env(run: Run, event_data: Any = None) -> dict[str, Any]:
+    """What a guard is evaluated over at this point of ``run``: data, ``previous``, ``In``."""
     env: dict[str, Any] = dict(run.data)
     env["previous"] = run.previous
-    env["In"] = active.__contains__
+    env["In"] = run.active.__contains__
     env["_event"] = {"name": run.event, "data": event_data}
     return env
 
 
-def condition_match(m: Machine, run: Run, t: Transition, event_data: Any) -> bool:
-    if not t.guard:
-        return True
-    run.guarded = True
-    if run.executor is not None:
-        return run.executor.condition(run, t)
+def _evaluate(m: Machine, guard: str, env: dict[str, Any]) -> bool:
     try:
-        return bool(m.guards[t.guard].evaluate(_in_env(run, m, event_data)))
+        return bool(m.guards[guard].evaluate(env))
     except Exception:  # a failing guard is false, as in SCXML
         return False
+
+
+def condition_match(m: Machine, run: Run, t: Transition, event_data: Any) -> bool:
+    """Whether ``t``'s guard holds: the executor's, the oracle's or the kernel's answer.
+
+    A guard that reads only the snapshot (``previous``, ``In()``) is decided by the
+    step's source and event, so it leaves the step memoisable; a guard over data is
+    noted in ``run.consulted`` with its context, so a memoised step re-evaluates it.
+    """
+    guard = t.guard
+    if not guard:
+        return True
+    if run.executor is not None:
+        run.guarded = True
+        return run.executor.condition(run, t)
+    oracle = run.oracle
+    if oracle is not None:
+        forced = oracle(run, t)
+        if forced is not None:
+            run.guarded = True
+            return forced
+    value = _evaluate(m, guard, guard_env(run, event_data))
+    if guard not in m.snapshot_guards:
+        run.guarded = True
+        consulted = run.consulted
+        if consulted is not None:
+            current = run.current
+            external = current is not None and current.type == "external" and run.event is not None
+            consulted.append(
+                Consult(
+                    guard,
+                    run.previous,
+                    frozenset(run.active),
+                    run.event,
+                    external,
+                    None if external else event_data,
+                    value,
+                )
+            )
+    return value
 
 
 def select_transitions(
@@ -204,6 +246,29 @@ def compute_entry_set(
     return to_enter, default_entry, history_content
 
 
+def entry_set(
+    m: Machine, transitions: list[Transition], history: Mapping[str, tuple[str, ...]] | None = None
+) -> tuple[str, ...]:
+    """The states taking ``transitions`` enters, in document order (``None``: start-up).
+
+    The answer every host asks for instead of walking the chart itself: targets,
+    their ancestors below the transition domain, default children and every
+    region of an entered parallel state. ``history`` is what history states hold
+    (none recorded: their defaults).
+    """
+    run = Run(set(), dict(history or {}), None, {})
+    if transitions:
+        to_enter = compute_entry_set(m, run, transitions)[0]
+    else:
+        to_enter = []
+        targets = m.top_initial
+        for s in targets:
+            add_descendant_states_to_enter(m, run, s, to_enter, set(), {})
+        for s in targets:
+            add_ancestor_states_to_enter(m, run, s, None, to_enter, set(), {})
+    return tuple(sorted(to_enter, key=m.order.__getitem__))
+
+
 def add_descendant_states_to_enter(
     m: Machine,
     run: Run,
@@ -238,9 +303,7 @@ def add_descendant_states_to_enter(
         for s in targets:
             add_descendant_states_to_enter(m, run, s, to_enter, default_entry, history_content)
         for s in targets:
-            add_ancestor_states_to_enter(
-                m, run, s, state, to_enter, default_entry, history_content
-            )
+            add_ancestor_states_to_enter(m, run, s, state, to_enter, default_entry, history_content)
     elif kind is StateKind.PARALLEL:
         for child in m.children.get(state, ()):
             if m.kind[child].is_history:
@@ -278,14 +341,10 @@ def add_ancestor_states_to_enter(
 def is_in_final_state(m: Machine, run: Run, s: str) -> bool:
     kind = m.kind[s]
     if kind is StateKind.COMPOUND:
-        return any(
-            m.kind[c] is StateKind.FINAL and c in run.active for c in m.children.get(s, ())
-        )
+        return any(m.kind[c] is StateKind.FINAL and c in run.active for c in m.children.get(s, ()))
     if kind is StateKind.PARALLEL:
         return all(
-            is_in_final_state(m, run, c)
-            for c in m.children.get(s, ())
-            if not m.kind[c].is_history
+            is_in_final_state(m, run, c) for c in m.children.get(s, ()) if not m.kind[c].is_history
         )
     return False
 
@@ -382,7 +441,6 @@ def macrostep(m: Machine, run: Run, steps: list[Microstep]) -> None:
             steps.append(microstep(m, run, enabled, internal.name))
 
 
-
 def process_event(m: Machine, run: Run, event: Event) -> Microstep | None:
     """Select and take the transitions of one external event (the macrostep's first microstep)."""
     run.current = event
@@ -419,20 +477,56 @@ def _snapshot(run: Run) -> Snapshot:
     return Snapshot(frozenset(run.active), tuple(sorted(run.history.items())), run.previous)
 
 
-def initial(m: Machine, data: Mapping[str, Any] | None = None) -> Step:
-    """Enter the chart's initial configuration and settle it (memoised when no guard ran)."""
+def initial(
+    m: Machine, data: Mapping[str, Any] | None = None, *, oracle: GuardOracle | None = None
+) -> Step:
+    """Enter the chart's initial configuration and settle it (memoised when no guard ran).
+
+    ``oracle`` forces guard outcomes (see :data:`~statectl.semantics.GuardOracle`).
+    """
     cached = m._initial
-    if cached is not None:
+    if cached is not None and oracle is None:
         return cached
-    run = Run(set(), {}, None, data or {})
+    run = Run(set(), {}, None, data or {}, oracle=oracle)
     steps = [enter_initial_states(m, run)]
     macrostep(m, run, steps)
     empty = Snapshot(frozenset())
     target = m.intern(_snapshot(run))
     result = Step(None, empty, target, tuple(steps), True, False, run.final, run.guarded)
-    if not run.guarded:
+    if not run.guarded and oracle is None:
         m._initial = result
     return result
+
+
+def unhandled_reason(m: Machine, snapshot: Snapshot, event: str) -> Unhandled:
+    """Why ``event`` changed nothing in ``snapshot`` (a step that took no transition)."""
+    active = snapshot.active
+    if any((s, event) in m.ignored for s in active):
+        return Unhandled.DECLARED_IGNORED
+    if any(m.candidates(s, event) for s in active if m.is_atomic(s)):
+        return Unhandled.GUARD_FALSE
+    return Unhandled.NO_TRANSITION
+
+
+def _replay(
+    m: Machine,
+    paths: list[tuple[tuple[Consult, ...], Step]],
+    data: Mapping[str, Any] | None,
+    event_data: Any,
+) -> Step | None:
+    """The memoised step whose guards over data answer now as they did then, if any."""
+    base = data or {}
+    for consults, result in paths:
+        for c in consults:
+            env: dict[str, Any] = dict(base)
+            env["previous"] = c.previous
+            env["In"] = c.active.__contains__
+            env["_event"] = {"name": c.event, "data": event_data if c.external else c.data}
+            if _evaluate(m, c.guard, env) is not c.value:
+                break
+        else:
+            return result
+    return None
 
 
 def step(
@@ -441,39 +535,67 @@ def step(
     event: str,
     data: Mapping[str, Any] | None = None,
     event_data: Any = None,
+    *,
+    oracle: GuardOracle | None = None,
 ) -> Step:
-    """Process one external event to completion; return what happened, perform nothing."""
-    hit = m._by_id.get(id(snapshot))
-    if hit is not None and hit[0] is snapshot:
-        plan = hit[1].get(event)
-        if plan is not None:
-            return plan.step
+    """Process one external event to completion; return what happened, perform nothing.
+
+    A step whose guards read only the snapshot is memoised (and kept as a plan); one
+    whose guards read data is memoised per outcome of those guards, which are
+    re-evaluated in order on the next call instead of rebuilding the step. With
+    ``oracle`` the guards it answers are forced and nothing is memoised.
+    """
     key = (snapshot, event)
-    cached = m._memo.get(key)
-    if cached is not None:
-        return cached
-    run = Run(set(snapshot.active), dict(snapshot.history), snapshot.previous, data or {})
+    if oracle is None:
+        hit = m._by_id.get(id(snapshot))
+        if hit is not None and hit[0] is snapshot:
+            plan = hit[1].get(event)
+            if plan is not None:
+                return plan.step
+        cached = m._memo.get(key)
+        if cached is not None:
+            return cached
+        paths = m._guarded.get(key)
+        if paths is not None:
+            found = _replay(m, paths, data, event_data)
+            if found is not None:
+                return found
+    run = Run(
+        set(snapshot.active),
+        dict(snapshot.history),
+        snapshot.previous,
+        data or {},
+        oracle=oracle,
+        consulted=[] if oracle is None else None,
+    )
     steps: list[Microstep] = []
     first = process_event(m, run, Event(event, event_data, "external"))
     handled = first is not None
-    ignored = False
+    reason = None
     if first is not None:
         steps.append(first)
         macrostep(m, run, steps)
     else:
-        ignored = any((s, event) in m.ignored for s in snapshot.active)
+        reason = unhandled_reason(m, snapshot, event)
     result = Step(
         event,
         snapshot,
         m.intern(_snapshot(run)) if handled else snapshot,
         tuple(steps),
         handled,
-        ignored,
+        reason is Unhandled.DECLARED_IGNORED,
         run.final,
         run.guarded,
+        reason,
     )
-    if not run.guarded and len(m._memo) < MEMO_LIMIT:
-        m._memo[key] = result
-        if event in m.event_names:
-            m._install(snapshot, event, result)
+    if oracle is None:
+        if not run.guarded:
+            if len(m._memo) < MEMO_LIMIT:
+                m._memo[key] = result
+                if event in m.event_names:
+                    m._install(snapshot, event, result)
+        elif run.consulted is not None and len(m._guarded) < MEMO_LIMIT:
+            paths = m._guarded.setdefault(key, [])
+            if len(paths) < MAX_GUARD_PATHS:
+                paths.append((tuple(run.consulted), result))
     return result

@@ -12,11 +12,11 @@ import threading
 from collections.abc import Iterable
 
 from statectl.errors import DiagnosticError
-from statectl.expr import Expression, compile_expression
+from statectl.expr import CALLABLE_NAMES, Expression, compile_expression
 from statectl.model import Chart, Notify, StateKind, Transition
-from statectl.semantics.records import MEMO_LIMIT, Plan, PlanTable, Snapshot, Step
+from statectl.semantics.records import MEMO_LIMIT, Consult, Plan, PlanTable, Snapshot, Step
 
-__all__ = ["Machine", "compiled", "name_match"]
+__all__ = ["Machine", "compiled", "name_match", "structural"]
 
 
 def name_match(descriptors: Iterable[str], event: str) -> bool:
@@ -33,7 +33,7 @@ def name_match(descriptors: Iterable[str], event: str) -> bool:
 class Machine:
     """A chart compiled for stepping: static tables computed once at load."""
 
-    def __init__(self, chart: Chart) -> None:
+    def __init__(self, chart: Chart, *, guards: bool = True) -> None:
         self.chart = chart
         self.order: dict[str, int] = {s.name: i for i, s in enumerate(chart.states)}
         self.kind: dict[str, StateKind] = {s.name: s.kind for s in chart.states}
@@ -77,7 +77,7 @@ class Machine:
         self.guards: dict[str, Expression] = {}
         problems = []
         # other datamodels' conditions are the executor's to evaluate
-        for t in chart.transitions if chart.datamodel == "safe" else ():
+        for t in chart.transitions if chart.datamodel == "safe" and guards else ():
             if t.guard and t.guard not in self.guards:
                 expr, diags = compile_expression(t.guard, t.origin)
                 problems.extend(diags)
@@ -85,6 +85,12 @@ class Machine:
                     self.guards[t.guard] = expr
         if problems:
             raise DiagnosticError(problems)
+        # guards whose value follows from the snapshot alone: a step they decide is
+        # memoisable (unless a data item shadows a function name the guard may call)
+        shadowed = any(d.name in CALLABLE_NAMES for d in chart.data)
+        self.snapshot_guards: frozenset[str] = frozenset(
+            g for g, e in self.guards.items() if e.names <= {"previous"} and not shadowed
+        )
         self.ignored = chart.ignored
         self._static_domain: dict[int, str | None] = {}
         for t in chart.transitions:
@@ -92,6 +98,8 @@ class Machine:
                 self._static_domain[id(t)] = self._domain(t, t.targets)
         self._candidates: dict[tuple[str, str | None], tuple[Transition, ...]] = {}
         self._memo: dict[tuple[Snapshot, str], Step] = {}
+        # data-guarded steps: per (snapshot, event), the guard outcomes seen and their step
+        self._guarded: dict[tuple[Snapshot, str], list[tuple[tuple[Consult, ...], Step]]] = {}
         self._initial: Step | None = None
         self.event_names: frozenset[str] = frozenset(chart.event_names)
         # interned snapshots with their plan tables, by value and by identity
@@ -102,7 +110,6 @@ class Machine:
         self._installing = threading.Lock()
         #: the memoised initial step's (target, plan table) when :meth:`quiet` found it so
         self.quiet_start: tuple[Snapshot, PlanTable] | None = None
-
 
     def _parent_default(self, history: str) -> tuple[str, ...]:
         """A history state without a default transition (W3C requires one) enters what its
@@ -115,6 +122,7 @@ class Machine:
         if self.kind[parent] is StateKind.COMPOUND:
             return self.initial_of.get(parent, ())
         return tuple(c for c in self.children.get(parent, ()) if not self.kind[c].is_history)
+
     def quiet(self, result: Step) -> tuple[Snapshot, PlanTable] | None:
         """``result``'s interned target and plan table if performing it unheard only moves there.
 
@@ -164,7 +172,17 @@ class Machine:
                 for a in result.actions
                 if isinstance(a, Notify)
             )
-        table[event] = Plan(result, target, next_table, notifies, result.handled, result.final)
+        table[event] = Plan(
+            result,
+            target,
+            next_table,
+            notifies,
+            result.handled,
+            result.final,
+            result.entered,
+            result.exited,
+            result.unhandled,
+        )
 
     # -- structure -------------------------------------------------------------------------
 
@@ -232,3 +250,16 @@ def compiled(chart: Chart) -> Machine:
             del _COMPILED[next(iter(_COMPILED))]
         _COMPILED[id(chart)] = (chart, m)
         return m
+
+
+def structural(chart: Chart) -> Machine:
+    """A Machine to ask structural questions (entry sets, ancestors) of any built chart.
+
+    The shared :func:`compiled` machine, or, when a guard does not compile (a chart
+    that is being checked may still have such errors), one without guards: what a
+    transition enters does not depend on them.
+    """
+    try:
+        return compiled(chart)
+    except DiagnosticError:
+        return Machine(chart, guards=False)

@@ -8,8 +8,9 @@ escape and an SCXML session keeps for its whole life.
 
 from __future__ import annotations
 
+import enum
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -17,10 +18,13 @@ from statectl.errors import StatectlError
 from statectl.model import Action, Notify, State, Transition
 
 __all__ = [
+    "MAX_GUARD_PATHS",
     "MAX_MICROSTEPS",
     "MEMO_LIMIT",
+    "Consult",
     "Event",
     "Executor",
+    "GuardOracle",
     "LivelockError",
     "Microstep",
     "Plan",
@@ -28,18 +32,33 @@ __all__ = [
     "Run",
     "Snapshot",
     "Step",
+    "Unhandled",
 ]
 
 #: Bound on microsteps in one macrostep; a chart that exceeds it loops forever.
 MAX_MICROSTEPS = 10_000
 #: Bound on memoised steps (and interned snapshots) per machine.
 MEMO_LIMIT = 100_000
+#: Bound on the guard outcomes memoised for one (snapshot, event) of a data-guarded step.
+MAX_GUARD_PATHS = 64
 
 History = tuple[tuple[str, tuple[str, ...]], ...]
 
 
 class LivelockError(StatectlError):
     """Eventless or raised transitions that never settle."""
+
+
+class Unhandled(enum.StrEnum):
+    """Why an event changed nothing: the one answer the runtime, explorer, C++ and journal give.
+
+    A ``str`` enum: its value is what records, reports and journals show and store.
+    """
+
+    DECLARED_IGNORED = "declared ignored"  # the state table lists it in an active state
+    GUARD_FALSE = "guard false"  # a transition exists for it, but no guard held
+    NO_TRANSITION = "no transition"  # no transition and not declared ignored
+    UNKNOWN_EVENT = "unknown event"  # not an event of the chart (decided by the host)
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,7 +85,12 @@ class Microstep:
 
 @dataclass(frozen=True, slots=True)
 class Step:
-    """The decision for one external event (or for start-up, ``event=None``)."""
+    """The decision for one external event (or for start-up, ``event=None``).
+
+    ``entered`` and ``exited`` are the states each microstep entered and exited, in
+    order (exit order, then document order per microstep); ``unhandled`` is why an
+    event changed nothing (``None`` when it was handled).
+    """
 
     event: str | None
     source: Snapshot
@@ -75,7 +99,8 @@ class Step:
     handled: bool  # a transition was taken for the external event
     ignored: bool  # unhandled, but declared ignored in an active state
     final: bool  # a top-level final state was reached
-    guarded: bool = False  # a guard was consulted (the step is not memoised)
+    guarded: bool = False  # a guard over data (or a forced one) was consulted
+    unhandled: Unhandled | None = None  # why not handled; None when handled
 
     @property
     def actions(self) -> tuple[Action, ...]:
@@ -87,10 +112,12 @@ class Step:
 
     @property
     def exited(self) -> tuple[str, ...]:
+        """States exited, per microstep in exit order (children before parents)."""
         return tuple(s for m in self.microsteps for s in m.exited)
 
     @property
     def entered(self) -> tuple[str, ...]:
+        """States entered, per microstep in document order (parents before children)."""
         return tuple(s for m in self.microsteps for s in m.entered)
 
 
@@ -151,6 +178,9 @@ class Run:
     final_state: str | None = None
     current: Event | None = None  # the event being processed: SCXML's ``_event``
     executor: Executor | None = None
+    oracle: GuardOracle | None = None
+    # the guards over data consulted, in order, with what they saw (see machine.GuardTrie)
+    consulted: list[Consult] | None = None
 
     def raise_event(self, event: Event) -> None:
         """Append to the internal queue (``<raise>``, ``error.*``, ``done.state.*``)."""
@@ -164,7 +194,8 @@ class Plan:
     ``target`` is interned and ``table`` is its own plan table (shared, filled as
     steps are memoised). ``notifies`` is every ``Notify`` of the step in order, each
     with a machine-wide slot number under which a host may cache what it builds for
-    it (a notification without data, say).
+    it (a notification without data, say). ``entered``, ``exited`` and ``unhandled``
+    are the step's, kept here so a host hooking state changes reads a tuple.
     """
 
     step: Step
@@ -173,6 +204,32 @@ class Plan:
     notifies: tuple[tuple[int, Notify], ...]
     handled: bool
     final: bool
+    entered: tuple[str, ...] = ()  # the step's ``entered``, computed once
+    exited: tuple[str, ...] = ()  # the step's ``exited``, computed once
+    unhandled: Unhandled | None = None  # the step's reason when not handled
 
 
 PlanTable = dict[str, Plan]
+
+#: Forces guard outcomes through the kernel: ``oracle(run, transition)`` returns the
+#: guard's value, or ``None`` to let the kernel evaluate it as usual. A step taken
+#: with an oracle is never memoised (an explorer or a code generator asks "what if").
+GuardOracle = Callable[[Run, Transition], "bool | None"]
+
+
+@dataclass(frozen=True, slots=True)
+class Consult:
+    """A guard over data evaluated during a step, with the context it was evaluated in.
+
+    The configuration, ``previous`` and event name at that point follow from the
+    source snapshot and the outcomes of the earlier consults, so a memoised step
+    re-evaluates its consults in order and needs no rebuilding.
+    """
+
+    guard: str
+    previous: str | None
+    active: frozenset[str]
+    event: str | None
+    external: bool  # the event is the step's external one: its data is ``_event.data``
+    data: Any  # otherwise the (internal) event's data
+    value: bool
