@@ -44,6 +44,10 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "errors", "model", "expr", "semantics", "observers", "tables", "build", "recovery",
         "runtime", "devices",
     ),
+    "system": (
+        "errors", "model", "expr", "semantics", "observers", "tables", "build", "recovery",
+        "runtime", "devices", "journal", "cell", "explore",
+    ),
     "web": (
         "errors", "model", "expr", "semantics", "observers", "tables", "build", "recovery",
         "runtime", "devices", "render", "journal", "cell", "explore",

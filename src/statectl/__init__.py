@@ -27,7 +27,6 @@ if TYPE_CHECKING:
     from statectl.api import check, load
     from statectl.devices import DeviceDriver, connect, make_driver
     from statectl.observers import Notification, Observer
-    from statectl.runner import System
     from statectl.runtime import (
         EventIgnored,
         EventReceived,
@@ -48,6 +47,7 @@ if TYPE_CHECKING:
         TransitionTaken,
         WallClock,
     )
+    from statectl.system import QueueFull, System
 
 __version__ = "0.1.0"
 
@@ -60,7 +60,8 @@ _LAZY = {
     "make_driver": "statectl.devices",
     "Notification": "statectl.observers",
     "Observer": "statectl.observers",
-    "System": "statectl.runner",
+    "System": "statectl.system",
+    "QueueFull": "statectl.system",
     **dict.fromkeys(
         (
             "EventIgnored",
@@ -119,6 +120,7 @@ __all__ = [
     "Notification",
     "Observer",
     "ObserverCalled",
+    "QueueFull",
     "Record",
     "Severity",
     "SimClock",

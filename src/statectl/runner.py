@@ -52,7 +52,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -66,28 +66,24 @@ from statectl.devices import (
     RunConfig,
     SimTwin,
     TwinNote,
-    connect,
     load_run_config,
     make_driver,
 )
 from statectl.errors import Diagnostic, DiagnosticError, Severity, StatectlError
-from statectl.explore.replay import CellLinks
 from statectl.journal import (
     Guarantee,
     Journal,
     JournalError,
-    JournalledDevice,
     JournalReader,
-    RecoveryRule,
     Sync,
-    Ticket,
     export_jsonl,
     load_device,
     replay,
 )
 from statectl.model import Chart
-from statectl.runtime import Clock, SimClock, Subject, TraceWriter, WallClock, format_data
+from statectl.runtime import Clock, SimClock, TraceWriter, WallClock, format_data
 from statectl.runtime.trace import format_record
+from statectl.system import DeviceSetup, System
 
 __all__ = [
     "DeviceSetup",
@@ -103,233 +99,6 @@ __all__ = [
 ]
 
 OK, PROBLEMS, USAGE = 0, 1, 2
-#: Simulated seconds a batch run lets pass at most for one event to settle.
-SETTLE_LIMIT = 60.0
-_TICK = 0.02
-
-
-@dataclass(frozen=True, slots=True)
-class DeviceSetup:
-    """One device of a run: its chart, recovery rules, file and driver."""
-
-    name: str
-    chart: Chart
-    rules: tuple[RecoveryRule, ...] = ()
-    source: str = ""
-    driver: DeviceDriver | None = None
-
-
-@dataclass(slots=True)
-class System:
-    """Devices on one clock with one owner; optionally journalled (rules 1-2)."""
-
-    setups: Sequence[DeviceSetup]
-    clock: Clock
-    journal: Journal | None = None
-    cell: Cell | None = None
-    subjects: dict[str, Subject] = field(default_factory=dict)
-    bound: dict[str, JournalledDevice] = field(default_factory=dict)
-    wake: threading.Event = field(default_factory=threading.Event)
-    owner: threading.RLock = field(default_factory=threading.RLock)
-    links: CellLinks | None = None
-    _live: bool = False  # started and not closing: the writer may drain
-
-    def __post_init__(self) -> None:
-        for d in self.setups:
-            s = Subject(d.chart, clock=self.clock, name=d.name)
-            self.subjects[d.name] = s
-            if d.driver is not None:
-                connect(s, d.driver)
-            if self.journal is not None:
-                self.bound[d.name] = JournalledDevice(s, self.journal, source=d.source)
-        if self.cell is not None:
-            links = self.links = CellLinks(self.cell, self.subjects)
-            for name, s in self.subjects.items():
-                s.listen(links.watch)
-                if name in self.bound:
-                    self.bound[name].sends = self._link_sends  # journalled with the step
-                else:
-                    s.on_step(self._link_step)
-        if self.journal is not None and self.journal.guarantee is Guarantee.DURABLE_FIRST:
-            self.journal.after_commit(self._committed)
-
-    def _link_step(self, event: str, data: Any, outcome: str) -> None:
-        """Rule 4: on the owner after a device's step, send the links it fired."""
-        assert self.links is not None
-        if not self._live:
-            self.links.fired.clear()  # entering the initial states fires nothing
-            return
-        for link in self.links.due():
-            self.subjects[link.target].post(link.event)
-
-    def _link_sends(self) -> list[tuple[JournalledDevice, str]]:
-        """Rule 4 with a journal: the links a device's step fired, to journal with the step."""
-        assert self.links is not None
-        if not self._live:
-            self.links.fired.clear()  # entering the initial states fires nothing
-            return []
-        return [(self.bound[k.target], k.event) for k in self.links.due()]
-
-    def _committed(self) -> None:
-        """On the writer after a commit (rule 2): drain now if nobody owns the devices."""
-        if not self._live:
-            return
-        if self.owner.acquire(blocking=False):
-            try:
-                self._drain()
-            finally:
-                self.owner.release()
-        else:
-            self.wake.set()
-
-    def listen(self, callback: Callable[[Any], None]) -> None:
-        for s in self.subjects.values():
-            s.listen(callback)
-
-    def start(self, *, resume: bool = False) -> dict[str, bool]:
-        """Start every device, or resume it from the journal; which ones were resumed."""
-        resumed: dict[str, bool] = {}
-        if resume and self.journal is None:
-            raise StatectlError("--resume needs --journal DB")
-        if resume and self.journal is not None:
-            self.journal.flush()
-            with JournalReader(self.journal.path) as reader:
-                for d in self.setups:
-                    resumed[d.name] = self.bound[d.name].resume(reader, d.rules)
-        else:
-            for d in self.setups:
-                if d.name in self.bound:
-                    self.bound[d.name].start()
-                else:
-                    self.subjects[d.name].start()
-                resumed[d.name] = False
-        if self.links is not None:
-            self.links.fired.clear()  # entering the initial or restored states fires nothing
-        self._live = True
-        self.drain()  # recovery transitions, redelivered events: the links they fire are sent
-        self.wake.set()  # events delivered before the start are drained by the owner
-        return resumed
-
-    def device(self, name: str | None) -> str:
-        if name is None:
-            if len(self.subjects) == 1:
-                return next(iter(self.subjects))
-            raise StatectlError(f"name the device: {', '.join(self.subjects)}")
-        if name not in self.subjects:
-            raise StatectlError(f"no device {name!r}; devices: {', '.join(self.subjects)}")
-        return name
-
-    def post(self, device: str | None, event: str, data: Any = None) -> Ticket | None:
-        """Accept an event from outside (any thread); with a journal the ticket says when."""
-        name = self.device(device)
-        bound = self.bound.get(name)
-        if bound is not None:
-            ticket = bound.post(event, data)
-            if bound.journal.guarantee is Guarantee.PROMPT:
-                self.wake.set()  # the device has it now; durable-first: the writer wakes
-            return ticket
-        self.subjects[name].post(event, data)
-        self.wake.set()
-        return None
-
-    def drain(self) -> int:
-        """Be the owner once: process every device's queue until all are empty."""
-        with self.owner:
-            return self._drain()
-
-    def _drain(self) -> int:
-        total = 0
-        while True:
-            n = sum(s.run_until_idle() for s in self.subjects.values())
-            total += n
-            if n == 0 and not any(s.queued for s in self.subjects.values()):
-                return total
-
-    def advance(self, seconds: float) -> None:
-        """On a SimClock: let ``seconds`` pass as the owner, draining after every timer."""
-        clock = self.clock
-        if not isinstance(clock, SimClock):
-            raise StatectlError("advance() needs a SimClock; a WallClock moves by itself")
-        with self.owner:  # timers touch the clock and the devices: the owner's work
-            self._drain()
-            clock.advance(seconds, settle=self._drain)
-            self._drain()
-
-    def settle(self, limit: float = SETTLE_LIMIT) -> None:
-        """On a SimClock: let time pass until the work in flight is done (or ``limit`` seconds).
-
-        Work is every timer but the background ones: a monitor polls for as long as
-        its state is active, so waiting for it would always run to the limit. Polls
-        that fall due meanwhile still run, in time order.
-        """
-        clock = self.clock
-        with self.owner:
-            if not isinstance(clock, SimClock):
-                self._drain()
-                return
-            end = clock.now() + limit
-            self._drain()
-            while True:
-                self._commit()
-                due = clock.next_deadline(work_only=True)
-                if due is None or due > end:
-                    break
-                clock.run_until(due, settle=self._drain)
-                self._drain()
-
-    def _commit(self) -> None:
-        """As the owner: let accepted events (links) commit and run before time moves on.
-
-        Otherwise a link event would wait in the journal while the clock ran to
-        the settle limit, and a twin's completion would come before it.
-        """
-        while self.journal is not None and self.journal.queued:
-            self.journal.flush()
-            self._drain()
-
-    def quiesce(self) -> None:
-        """A batch run's pause: settle, and let every accepted event (links too) commit and run."""
-        while True:
-            self.settle()
-            if self.journal is None:
-                return
-            self.journal.flush()
-            with self.owner:
-                if self.journal.queued == 0 and not any(s.queued for s in self.subjects.values()):
-                    return
-
-    def serve(self, stop: threading.Event, *, paced: bool = True) -> None:
-        """The owner loop until ``stop``: drain when woken; on a SimClock follow the wall clock.
-
-        Events wake it at once; the tick only moves a paced SimClock on and looks at ``stop``.
-        """
-        last = time.monotonic()
-        sim = paced and isinstance(self.clock, SimClock)
-        while not stop.is_set():
-            self.wake.wait(_TICK)
-            self.wake.clear()
-            if sim:
-                now = time.monotonic()
-                self.advance(now - last)
-                last = now
-            else:
-                self.drain()
-
-    def close(self) -> None:
-        """Commit what the journal holds, then stop the devices and the clock.
-
-        Accepted events not yet processed stay in the journal for ``--resume``.
-        """
-        self._live = False
-        with self.owner:
-            try:
-                if self.journal is not None:
-                    self.journal.close()
-            finally:
-                for s in self.subjects.values():
-                    s.close()
-                if isinstance(self.clock, WallClock):
-                    self.clock.stop()
 
 
 def parse_event_line(line: str) -> tuple[str | None, str, Any] | float | None:

@@ -111,8 +111,9 @@ _ONE_INVOKE = 1 << _INVOKES
 #: The plan table of a Subject not started yet: empty, never written.
 _NO_PLANS: dict[str, Plan] = {}
 
-#: A queued event ``(name, data, None)``, or ``(None, None, fn)`` to run ``fn`` on the owner.
-_Item = tuple[str | None, Any, Callable[[], object] | None]
+#: A queued event ``(name, data, then)`` (``then(outcome)`` once it ran, or None), or
+#: ``(None, None, fn)`` to run ``fn`` on the owner.
+_Item = tuple[str | None, Any, Callable[..., object] | None]
 
 
 def _print_error(exc: BaseException) -> None:
@@ -143,6 +144,7 @@ class Subject:
         "_name",
         "_pending",
         "_queue",
+        "_queued_hook",
         "_routes",
         "_serving",
         "_snapshot",
@@ -191,6 +193,7 @@ class Subject:
         self._pending: deque[Record] | None = None
         self._emitting = False
         self._queue: deque[_Item] = deque()
+        self._queued_hook: Callable[[Subject], object] | None = None
         self._wake: threading.Event | None = None
         self._snapshot: Snapshot | None = None
         self._table: dict[str, Plan] = _NO_PLANS  # plans of the current snapshot
@@ -402,17 +405,34 @@ class Subject:
 
     # -- posting (any thread) ----------------------------------------------------------------
 
-    def post(self, event: str, data: Any = None) -> None:
-        """Queue ``event`` for the owner; never blocks, safe from any thread."""
+    def post(
+        self, event: str, data: Any = None, *, then: Callable[[str], object] | None = None
+    ) -> None:
+        """Queue ``event`` for the owner; never blocks, safe from any thread.
+
+        ``then(outcome)`` is called on the owner right after the event ran, with
+        ``"handled"`` or the :class:`~statectl.semantics.Unhandled` reason.
+        """
         if not isinstance(event, str):
             raise StatectlError(f"an event name must be a str (got {event!r})")
         if self._closed:
             raise StatectlError(f"{self.name} is closed; event {event!r} cannot be posted")
-        self._queue.append((event, data, None))
+        self._queue.append((event, data, then))
         self._fast = False  # after the append: see _refresh()
         wake = self._wake
         if wake is not None:
             wake.set()
+        hook = self._queued_hook
+        if hook is not None:
+            hook(self)
+
+    def on_queued(self, hook: Callable[[Subject], object] | None) -> None:
+        """Call ``hook(subject)`` after every post or call_soon (from the posting thread).
+
+        A host that owns many devices (a :class:`~statectl.system.System`) learns
+        which ones have work instead of asking them all; ``None`` removes it.
+        """
+        self._queued_hook = hook
 
     def call_soon(self, fn: Callable[[], object]) -> None:
         """Run ``fn`` on the owner, in queue order with the events (monitors use this)."""
@@ -423,6 +443,9 @@ class Subject:
         wake = self._wake
         if wake is not None:
             wake.set()
+        hook = self._queued_hook
+        if hook is not None:
+            hook(self)
 
     def _ensure_wake(self) -> threading.Event:
         """The worker's wake-up event, made when an owner loop first needs it.
@@ -528,12 +551,15 @@ class Subject:
         try:
             while queue and not self._stopping:
                 event, data, fn = queue.popleft()
-                if fn is not None:
-                    fn()
+                if event is None:
+                    if fn is not None:
+                        fn()
                     continue
-                assert event is not None
                 count += 1
-                self._process(event, data)
+                if fn is None:
+                    self._process(event, data)
+                else:
+                    self._process_then(event, data, fn)
         finally:
             self._busy = False
             if not self._fast:
@@ -731,6 +757,20 @@ class Subject:
                 self._finish(0.0, False)
         for callback in self._steppers:
             callback(event, data, "handled")
+
+    def _process_then(self, event: str, data: Any, then: Callable[[str], object]) -> None:
+        """:meth:`_process`, then ``then(outcome)``: the outcome a step listener would hear."""
+        heard: list[str] = []
+
+        def hear(_event: str, _data: Any, outcome: str) -> None:
+            heard.append(outcome)
+
+        self._steppers = (hear, *self._steppers)
+        try:
+            self._process(event, data)
+        finally:
+            self._steppers = tuple(c for c in self._steppers if c is not hear)
+            then(heard[0] if heard else "handled")
 
     def _process_slow(self, event: str, data: Any) -> None:
         snapshot = self._snapshot

@@ -1,0 +1,395 @@
+"""Many devices on one clock and one owner: the :class:`System` a host embeds.
+
+Rules:
+1. A :class:`System` is devices on one clock with one owner at a time: whoever
+   holds the owner lock (the thread in :meth:`System.serve`, a caller of
+   :meth:`System.drain`, or the journal's writer) processes the devices' events,
+   run-to-completion, so devices never race each other. The owner visits only
+   the devices that have work: a device tells the System when something is
+   queued for it (:meth:`~statectl.runtime.Subject.on_queued`), so 1,000 idle
+   devices cost nothing and need no thread of their own.
+2. With a journal every event from outside is accepted through it and every
+   step is journalled; ``resume`` brings each device back from the journal,
+   through its recovery rules, before the owner takes any new event. The
+   journal's guarantee says when an accepted event reaches its device. Under
+   ``prompt`` (default) a post queues the inbox row, hands the event to its
+   device and wakes the owner, as without a journal; the ticket turns durable
+   at the next commit. Under ``durable-first`` the writer, right after a
+   commit, delivers the batch's events and, if the owner lock is free, drains
+   the devices itself in the same wake-up (no second thread hop); if another
+   thread owns them it only wakes the serve loop, which picks the events up.
+3. A cell runs the same way: one device per instance, on one clock and one
+   owner, and the cell's links (:class:`~statectl.explore.replay.CellLinks`):
+   after a device's step, each link it fired whose guard holds sends its event
+   to the target, through the journal when there is one: the link events are
+   journalled with the step that fired them, in one commit, so after a crash
+   both are in the journal (the link event is redelivered if its target had not
+   run it) or neither is (the step runs again on resume and fires them again).
+   Each device's queue is first in, first out.
+4. :meth:`System.post` never blocks. With ``max_queue`` a device whose queue
+   holds that many events refuses more with :class:`QueueFull`, which tells a
+   producer it outruns the device instead of letting memory grow.
+5. asyncio: :meth:`System.send` posts and resolves once the device has
+   processed the event (its outcome: ``handled`` or the
+   :class:`~statectl.semantics.Unhandled` reason); :meth:`System.records` is an
+   async iterator of every device's records. Both hand results to the event
+   loop with ``call_soon_threadsafe``: the owner never waits for a coroutine.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+from collections import deque
+from collections.abc import AsyncIterator, Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from statectl.cell import Cell
+from statectl.devices import DeviceDriver, connect
+from statectl.errors import StatectlError
+from statectl.explore.replay import CellLinks
+from statectl.journal import (
+    Guarantee,
+    Journal,
+    JournalledDevice,
+    JournalReader,
+    RecoveryRule,
+    Ticket,
+)
+from statectl.model import Chart
+from statectl.runtime import Clock, Record, SimClock, Subject, WallClock
+
+__all__ = ["SETTLE_LIMIT", "DeviceSetup", "QueueFull", "System"]
+
+#: Simulated seconds a batch run lets pass at most for one event to settle.
+SETTLE_LIMIT = 60.0
+_TICK = 0.02
+
+
+class QueueFull(StatectlError):
+    """A device's queue holds ``max_queue`` events: the producer outruns it (rule 4)."""
+
+
+@dataclass(frozen=True, slots=True)
+class DeviceSetup:
+    """One device of a run: its chart, recovery rules, file and driver."""
+
+    name: str
+    chart: Chart
+    rules: tuple[RecoveryRule, ...] = ()
+    source: str = ""
+    driver: DeviceDriver | None = None
+
+
+@dataclass(slots=True)
+class System:
+    """Devices on one clock with one owner; optionally journalled, a cell, bounded (rules 1-4)."""
+
+    setups: Sequence[DeviceSetup]
+    clock: Clock
+    journal: Journal | None = None
+    cell: Cell | None = None
+    max_queue: int | None = None
+    subjects: dict[str, Subject] = field(default_factory=dict)
+    bound: dict[str, JournalledDevice] = field(default_factory=dict)
+    wake: threading.Event = field(default_factory=threading.Event)
+    owner: threading.RLock = field(default_factory=threading.RLock)
+    links: CellLinks | None = None
+    _live: bool = False  # started and not closing: the writer may drain
+    #: devices that had something queued since the owner last looked (rule 1)
+    _ready: deque[Subject] = field(default_factory=deque)
+
+    def __post_init__(self) -> None:
+        if self.max_queue is not None and self.max_queue < 1:
+            raise StatectlError(f"max_queue must be at least 1 (got {self.max_queue!r})")
+        ready = self._ready.append
+        for d in self.setups:
+            if d.name in self.subjects:
+                raise StatectlError(f"two devices are named {d.name!r}; names must be unique")
+            s = Subject(d.chart, clock=self.clock, name=d.name)
+            s.on_queued(ready)
+            self.subjects[d.name] = s
+            if d.driver is not None:
+                connect(s, d.driver)
+            if self.journal is not None:
+                self.bound[d.name] = JournalledDevice(s, self.journal, source=d.source)
+        if self.cell is not None:
+            links = self.links = CellLinks(self.cell, self.subjects)
+            for name, s in self.subjects.items():
+                s.listen(links.watch)
+                if name in self.bound:
+                    self.bound[name].sends = self._link_sends  # journalled with the step
+                else:
+                    s.on_step(self._link_step)
+        if self.journal is not None and self.journal.guarantee is Guarantee.DURABLE_FIRST:
+            self.journal.after_commit(self._committed)
+
+    def _link_step(self, event: str, data: Any, outcome: str) -> None:
+        """Rule 4: on the owner after a device's step, send the links it fired."""
+        assert self.links is not None
+        if not self._live:
+            self.links.fired.clear()  # entering the initial states fires nothing
+            return
+        for link in self.links.due():
+            self.subjects[link.target].post(link.event)
+
+    def _link_sends(self) -> list[tuple[JournalledDevice, str]]:
+        """Rule 4 with a journal: the links a device's step fired, to journal with the step."""
+        assert self.links is not None
+        if not self._live:
+            self.links.fired.clear()  # entering the initial states fires nothing
+            return []
+        return [(self.bound[k.target], k.event) for k in self.links.due()]
+
+    def _committed(self) -> None:
+        """On the writer after a commit (rule 2): drain now if nobody owns the devices."""
+        if not self._live:
+            return
+        if self.owner.acquire(blocking=False):
+            try:
+                self._drain()
+            finally:
+                self.owner.release()
+        else:
+            self.wake.set()
+
+    def listen(self, callback: Callable[[Any], None]) -> None:
+        for s in self.subjects.values():
+            s.listen(callback)
+
+    def start(self, *, resume: bool = False) -> dict[str, bool]:
+        """Start every device, or resume it from the journal; which ones were resumed."""
+        resumed: dict[str, bool] = {}
+        if resume and self.journal is None:
+            raise StatectlError("--resume needs --journal DB")
+        if resume and self.journal is not None:
+            self.journal.flush()
+            with JournalReader(self.journal.path) as reader:
+                for d in self.setups:
+                    resumed[d.name] = self.bound[d.name].resume(reader, d.rules)
+        else:
+            for d in self.setups:
+                if d.name in self.bound:
+                    self.bound[d.name].start()
+                else:
+                    self.subjects[d.name].start()
+                resumed[d.name] = False
+        if self.links is not None:
+            self.links.fired.clear()  # entering the initial or restored states fires nothing
+        self._ready.extend(self.subjects.values())  # whatever was queued before the start
+        self._live = True
+        self.drain()  # recovery transitions, redelivered events: the links they fire are sent
+        self.wake.set()  # events delivered before the start are drained by the owner
+        return resumed
+
+    def device(self, name: str | None) -> str:
+        if name is None:
+            if len(self.subjects) == 1:
+                return next(iter(self.subjects))
+            raise StatectlError(f"name the device: {', '.join(self.subjects)}")
+        if name not in self.subjects:
+            raise StatectlError(f"no device {name!r}; devices: {', '.join(self.subjects)}")
+        return name
+
+    def post(self, device: str | None, event: str, data: Any = None) -> Ticket | None:
+        """Accept an event from outside (any thread); with a journal the ticket says when.
+
+        Never blocks; with ``max_queue`` a full device raises :class:`QueueFull` (rule 4).
+        """
+        name = self.device(device)
+        limit = self.max_queue
+        if limit is not None and self.subjects[name].queued >= limit:
+            raise QueueFull(
+                f"{name}: {limit} events are queued already (max_queue); the producer "
+                "outruns the device: slow down, or retry once it has caught up"
+            )
+        bound = self.bound.get(name)
+        if bound is not None:
+            ticket = bound.post(event, data)
+            if bound.journal.guarantee is Guarantee.PROMPT:
+                self.wake.set()  # the device has it now; durable-first: the writer wakes
+            return ticket
+        self.subjects[name].post(event, data)
+        self.wake.set()
+        return None
+
+    def drain(self) -> int:
+        """Be the owner once: process every device's queue until all are empty."""
+        with self.owner:
+            return self._drain()
+
+    def _drain(self) -> int:
+        """As the owner: run the devices that have work until none has (rule 1)."""
+        total = 0
+        ready = self._ready
+        while ready:
+            s = ready.popleft()
+            if s.queued:
+                total += s.run_until_idle()
+        return total
+
+    def advance(self, seconds: float) -> None:
+        """On a SimClock: let ``seconds`` pass as the owner, draining after every timer."""
+        clock = self.clock
+        if not isinstance(clock, SimClock):
+            raise StatectlError("advance() needs a SimClock; a WallClock moves by itself")
+        with self.owner:  # timers touch the clock and the devices: the owner's work
+            self._drain()
+            clock.advance(seconds, settle=self._drain)
+            self._drain()
+
+    def settle(self, limit: float = SETTLE_LIMIT) -> None:
+        """On a SimClock: let time pass until the work in flight is done (or ``limit`` seconds).
+
+        Work is every timer but the background ones: a monitor polls for as long as
+        its state is active, so waiting for it would always run to the limit. Polls
+        that fall due meanwhile still run, in time order.
+        """
+        clock = self.clock
+        with self.owner:
+            if not isinstance(clock, SimClock):
+                self._drain()
+                return
+            end = clock.now() + limit
+            self._drain()
+            while True:
+                self._commit()
+                due = clock.next_deadline(work_only=True)
+                if due is None or due > end:
+                    break
+                clock.run_until(due, settle=self._drain)
+                self._drain()
+
+    def _commit(self) -> None:
+        """As the owner: let accepted events (links) commit and run before time moves on.
+
+        Otherwise a link event would wait in the journal while the clock ran to
+        the settle limit, and a twin's completion would come before it.
+        """
+        while self.journal is not None and self.journal.queued:
+            self.journal.flush()
+            self._drain()
+
+    def quiesce(self) -> None:
+        """A batch run's pause: settle, and let every accepted event (links too) commit and run."""
+        while True:
+            self.settle()
+            if self.journal is None:
+                return
+            self.journal.flush()
+            with self.owner:
+                if self.journal.queued == 0 and not any(s.queued for s in self.subjects.values()):
+                    return
+
+    def serve(self, stop: threading.Event, *, paced: bool = True) -> None:
+        """The owner loop until ``stop``: drain when woken; on a SimClock follow the wall clock.
+
+        Events wake it at once; the tick only moves a paced SimClock on and looks at ``stop``.
+        """
+        last = time.monotonic()
+        sim = paced and isinstance(self.clock, SimClock)
+        while not stop.is_set():
+            self.wake.wait(_TICK)
+            self.wake.clear()
+            if sim:
+                now = time.monotonic()
+                self.advance(now - last)
+                last = now
+            else:
+                self.drain()
+
+    # -- asyncio (rule 5) ---------------------------------------------------------------------
+
+    async def send(self, device: str | None, event: str, data: Any = None) -> str:
+        """Post ``event`` and wait until its device has processed it; returns the outcome.
+
+        The outcome is ``"handled"`` or the :class:`~statectl.semantics.Unhandled`
+        reason. Something must own the devices meanwhile (:meth:`serve` on a thread,
+        as :meth:`start_owner` starts it). A journalled System accepts through its
+        journal: use :meth:`post` and the ticket there.
+        """
+        if self.journal is not None:
+            raise StatectlError(
+                "send() runs on a System without a journal; with one, post() and wait "
+                "for the ticket"
+            )
+        name = self.device(device)
+        limit = self.max_queue
+        subject = self.subjects[name]
+        if limit is not None and subject.queued >= limit:
+            raise QueueFull(f"{name}: {limit} events are queued already (max_queue)")
+        loop = asyncio.get_running_loop()
+        done: asyncio.Future[str] = loop.create_future()
+        subject.post(
+            event, data, then=lambda outcome: loop.call_soon_threadsafe(_resolve, done, outcome)
+        )
+        self.wake.set()
+        return await done
+
+    async def records(self, maxsize: int = 10_000) -> AsyncIterator[Record]:
+        """Every device's records as they happen, until the consumer stops iterating.
+
+        Records are built only while someone iterates. A consumer that falls
+        ``maxsize`` records behind loses the oldest (a warning, never a stalled owner).
+        """
+        loop = asyncio.get_running_loop()
+        queue: asyncio.Queue[Record] = asyncio.Queue(maxsize)
+
+        def put(record: Record) -> None:
+            if queue.full():
+                queue.get_nowait()
+            queue.put_nowait(record)
+
+        def listener(record: Record) -> None:
+            loop.call_soon_threadsafe(put, record)
+
+        offs = [s.listen(listener) for s in self.subjects.values()]
+        try:
+            while True:
+                yield await queue.get()
+        finally:
+            for off in offs:
+                off()
+
+    def start_owner(self, *, paced: bool = True) -> Callable[[], None]:
+        """Run :meth:`serve` on a daemon thread; returns the function that stops it."""
+        stop = threading.Event()
+        thread = threading.Thread(
+            target=self.serve,
+            args=(stop,),
+            kwargs={"paced": paced},
+            daemon=True,
+            name="statectl-system",
+        )
+        thread.start()
+
+        def halt() -> None:
+            stop.set()
+            self.wake.set()
+            if thread is not threading.current_thread():
+                thread.join()
+
+        return halt
+
+    def close(self) -> None:
+        """Commit what the journal holds, then stop the devices and the clock.
+
+        Accepted events not yet processed stay in the journal for ``--resume``.
+        """
+        self._live = False
+        with self.owner:
+            try:
+                if self.journal is not None:
+                    self.journal.close()
+            finally:
+                for s in self.subjects.values():
+                    s.close()
+                if isinstance(self.clock, WallClock):
+                    self.clock.stop()
+
+
+def _resolve(future: asyncio.Future[str], result: str) -> None:
+    if not future.done():  # the awaiting task may have been cancelled
+        future.set_result(result)

@@ -1,0 +1,168 @@
+"""The System a host embeds: many devices, one owner, bounded queues, asyncio."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+
+import pytest
+
+from statectl import QueueFull, SimClock, StatectlError, StateEntered, System
+from statectl.model import Chart
+from statectl.system import DeviceSetup
+from support import Recorder
+
+
+def _system(motor: Chart, n: int, **kw: object) -> System:
+    setups = tuple(DeviceSetup(f"M{i}", motor) for i in range(n))
+    return System(setups, SimClock(), **kw)  # type: ignore[arg-type]  # System's own options
+
+
+def test_the_owner_visits_only_devices_with_work(motor: Chart) -> None:
+    """Draining runs the devices that had something posted, and each of their events."""
+    system = _system(motor, 50)
+    system.start()
+    touched = [system.subjects[f"M{i}"] for i in (3, 17, 42)]
+    for s in touched:
+        system.post(s.name, "Movement")
+    assert system.drain() == 3
+    assert [s.configuration for s in touched] == [{"Moving"}] * 3
+    assert sum(s.events_processed for s in system.subjects.values()) == 3
+    system.close()
+
+
+def test_events_posted_before_the_start_are_run_at_the_start(motor: Chart) -> None:
+    """A device's queue filled before start() is not forgotten by the ready list."""
+    system = _system(motor, 2)
+    system.subjects["M1"].post("Movement")
+    system.start()
+    system.drain()
+    assert system.subjects["M1"].configuration == {"Moving"}
+    system.close()
+
+
+def test_a_full_queue_refuses_with_queue_full(motor: Chart) -> None:
+    """With max_queue, the event past the limit raises QueueFull; the queue keeps the rest."""
+    system = _system(motor, 1, max_queue=3)
+    system.start()
+    for _ in range(3):
+        system.post("M0", "Movement")
+    with pytest.raises(QueueFull, match="3 events are queued already"):
+        system.post("M0", "Movement")
+    assert system.subjects["M0"].queued == 3
+    system.drain()
+    system.post("M0", "Movement completion")  # room again once the device caught up
+    system.close()
+
+
+def test_max_queue_must_be_positive(motor: Chart) -> None:
+    """A max_queue below 1 is a usage error at construction."""
+    with pytest.raises(StatectlError, match="max_queue must be at least 1"):
+        _system(motor, 1, max_queue=0)
+
+
+def test_two_devices_with_one_name_are_refused(motor: Chart) -> None:
+    """Names address devices, so they must be unique."""
+    with pytest.raises(StatectlError, match="two devices are named 'A'"):
+        System((DeviceSetup("A", motor), DeviceSetup("A", motor)), SimClock())
+
+
+def test_many_posting_threads_lose_nothing(motor: Chart) -> None:
+    """Four threads posting to 200 devices while the owner runs: every event is processed."""
+    system = _system(motor, 200)
+    recorders = {}
+    for name, s in system.subjects.items():
+        recorders[name] = Recorder()
+        s.attach(recorders[name])
+    system.start()
+    halt = system.start_owner(paced=False)
+    names = list(system.subjects)
+
+    def feed(mine: list[str]) -> None:
+        for _ in range(5):
+            for name in mine:
+                system.post(name, "Movement")
+                system.post(name, "Movement completion")
+
+    posters = [threading.Thread(target=feed, args=(names[k::4],)) for k in range(4)]
+    for p in posters:
+        p.start()
+    for p in posters:
+        p.join()
+    system.drain()
+    halt()
+    assert sum(s.events_processed for s in system.subjects.values()) == 200 * 10
+    assert all(len(r.seen) == 5 for r in recorders.values())
+    system.close()
+
+
+def test_send_resolves_with_the_outcome(motor: Chart) -> None:
+    """await send() returns once the device ran the event: handled, or why not."""
+    system = _system(motor, 1)
+    system.start()
+    halt = system.start_owner(paced=False)
+
+    async def main() -> list[str]:
+        return [
+            await system.send("M0", "Initialization"),  # its guard: previous == 'Moving'
+            await system.send("M0", "Movement"),
+            await system.send("M0", "Movement"),  # Moving declares Movement ignored
+            await system.send("M0", "Bogus"),
+        ]
+
+    try:
+        outcomes = asyncio.run(asyncio.wait_for(main(), 10))
+    finally:
+        halt()
+    assert outcomes == ["guard false", "handled", "declared ignored", "unknown event"]
+    assert system.subjects["M0"].configuration == {"Moving"}
+    system.close()
+
+
+def test_records_iterate_every_devices_records(motor: Chart) -> None:
+    """async for over records() sees the states each device enters, in order."""
+    system = _system(motor, 2)
+    system.start()
+    halt = system.start_owner(paced=False)
+
+    async def main() -> list[tuple[str, str]]:
+        seen: list[tuple[str, str]] = []
+        stream = system.records()
+        reader = asyncio.ensure_future(_collect(stream, seen, 4))
+        await asyncio.sleep(0)  # the iterator is listening before anything happens
+        await system.send("M0", "Movement")
+        await system.send("M1", "Movement")
+        await system.send("M0", "Movement completion")
+        await system.send("M1", "Movement completion")
+        await asyncio.wait_for(reader, 10)
+        await stream.aclose()
+        return seen
+
+    try:
+        seen = asyncio.run(main())
+    finally:
+        halt()
+    assert seen == [("M0", "Moving"), ("M1", "Moving"), ("M0", "Blocked"), ("M1", "Blocked")]
+    assert not any(s.listening for s in system.subjects.values())  # the listener left
+    system.close()
+
+
+async def _collect(stream: object, seen: list[tuple[str, str]], n: int) -> None:
+    async for r in stream:  # type: ignore[attr-defined]  # an async generator
+        if isinstance(r, StateEntered):
+            seen.append((r.device, r.state))
+            if len(seen) == n:
+                return
+
+
+def test_send_refuses_a_journalled_system(motor: Chart, tmp_path: object) -> None:
+    """A journalled System accepts through its journal: send() says to use post()."""
+    from pathlib import Path
+
+    from statectl.journal import Journal
+
+    system = System((DeviceSetup("M0", motor),), SimClock(), Journal(Path(str(tmp_path)) / "j.db"))
+    system.start()
+    with pytest.raises(StatectlError, match="with one, post\\(\\) and wait for the ticket"):
+        asyncio.run(system.send("M0", "Movement"))
+    system.close()
