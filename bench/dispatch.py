@@ -51,7 +51,7 @@ from statectl.devices import connect, make_driver
 from statectl.journal import Journal
 from statectl.journal.device import JournalledDevice
 from statectl.model import Chart, State, StateKind, Transition
-from statectl.runner import DeviceSetup, System
+from statectl.system import DeviceSetup, System
 from statectl.runtime import SimClock, Subject, TraceWriter
 from statectl.runtime.monitors import attach_monitors
 

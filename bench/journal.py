@@ -22,7 +22,7 @@ from pathlib import Path
 from statectl.demo import motor_chart
 from statectl.journal import Guarantee, Journal, JournalReader, StepKind, Sync
 from statectl.observers import Notification
-from statectl.runner import DeviceSetup, System
+from statectl.system import DeviceSetup, System
 from statectl.runtime import SimClock, WallClock
 from statectl.semantics import Snapshot
 
