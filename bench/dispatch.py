@@ -51,9 +51,9 @@ from statectl.devices import connect, make_driver
 from statectl.journal import Journal
 from statectl.journal.device import JournalledDevice
 from statectl.model import Chart, State, StateKind, Transition
-from statectl.system import DeviceSetup, System
 from statectl.runtime import SimClock, Subject, TraceWriter
 from statectl.runtime.monitors import attach_monitors
+from statectl.system import DeviceSetup, System
 
 MOTOR_YAML = Path(__file__).resolve().parents[1] / "examples" / "motor" / "motor.yaml"
 MOTOR_CYCLE = (

@@ -22,9 +22,9 @@ from pathlib import Path
 from statectl.demo import motor_chart
 from statectl.journal import Guarantee, Journal, JournalReader, StepKind, Sync
 from statectl.observers import Notification
-from statectl.system import DeviceSetup, System
 from statectl.runtime import SimClock, WallClock
 from statectl.semantics import Snapshot
+from statectl.system import DeviceSetup, System
 
 #: The paper's whole cycle, the guarded Initialization included (seven events).
 CYCLE = (
