@@ -54,11 +54,14 @@ class Machine:
                 chain.append(p)
                 p = self.parent[p]
             self.ancestors[s.name] = tuple(chain)
-        self.descendants: dict[str | None, frozenset[str]] = {None: frozenset(self.order)}
+        # linear in the sum of depths: each state is added to its ancestors' sets
+        below: dict[str, list[str]] = {s.name: [] for s in chart.states}
         for s in chart.states:
-            self.descendants[s.name] = frozenset(
-                d for d in self.order if s.name in self.ancestors[d]
-            )
+            for a in self.ancestors[s.name]:
+                below[a].append(s.name)
+        self.descendants: dict[str | None, frozenset[str]] = {None: frozenset(self.order)}
+        for name, names in below.items():
+            self.descendants[name] = frozenset(names)
         for s in chart.states:
             if s.kind is StateKind.COMPOUND:
                 kids = [c for c in self.children.get(s.name, ()) if not self.kind[c].is_history]
@@ -67,8 +70,11 @@ class Machine:
             if s.kind.is_history:
                 self.history_default[s.name] = s.history_default or self._parent_default(s.name)
         self.top_initial: tuple[str, ...] = chart.initial or self.children.get(None, ())[:1]
+        by_source: dict[str, list[Transition]] = {name: [] for name in self.order}
+        for t in chart.transitions:  # one pass, document order kept within each source
+            by_source[t.source].append(t)
         self.transitions_of: dict[str, tuple[Transition, ...]] = {
-            name: tuple(t for t in chart.transitions if t.source == name) for name in self.order
+            name: tuple(ts) for name, ts in by_source.items()
         }
         self.histories_of: dict[str, tuple[str, ...]] = {
             name: tuple(c for c in self.children.get(name, ()) if self.kind[c].is_history)
