@@ -54,15 +54,13 @@ class EventSpec:
 
 def derive_invokes(rows: Sequence[EventSpec]) -> tuple[tuple[Api, ...], tuple[Invoke, ...]]:
     """Group events by API into observer methods and number them (rules 2 and 5)."""
-    methods: dict[str, list[str]] = {}
+    methods: dict[str, dict[str, None]] = {}  # method -> its events, first-seen order
     driving_target: dict[str, str] = {}
     explicit: dict[str, str] = {}
     for r in rows:
         if not r.api:
             continue
-        events = methods.setdefault(r.api, [])
-        if r.event not in events:
-            events.append(r.event)
+        methods.setdefault(r.api, {})[r.event] = None
         if r.kind in DRIVING_KINDS:
             driving_target.setdefault(r.api, r.new)
         if r.invoke:
