@@ -1,4 +1,4 @@
-"""The stable API: every exported name resolves, and docs/api.md's examples run."""
+"""The stable API: every exported name resolves, and the docs' Python examples run."""
 
 from __future__ import annotations
 
@@ -10,7 +10,13 @@ import pytest
 import statectl
 
 ROOT = Path(__file__).resolve().parents[1]
-BLOCKS = re.findall(r"```python\n(.*?)```", (ROOT / "docs" / "api.md").read_text(), re.S)
+#: pages whose ```python blocks are runnable examples
+PAGES = ("api.md", "runtime.md")
+BLOCKS = [
+    (page, block)
+    for page in PAGES
+    for block in re.findall(r"```python\n(.*?)```", (ROOT / "docs" / page).read_text(), re.S)
+]
 
 
 @pytest.mark.parametrize("name", statectl.__all__)
@@ -27,11 +33,13 @@ def test_an_unknown_name_is_an_attribute_error() -> None:
 
 def test_the_docs_have_examples() -> None:
     """docs/api.md keeps its runnable examples (one device, errors, many devices)."""
-    assert len(BLOCKS) >= 3
+    assert len([b for page, b in BLOCKS if page == "api.md"]) >= 3
 
 
-@pytest.mark.parametrize("block", BLOCKS, ids=lambda b: b.splitlines()[2][:40])
-def test_docs_example_runs(block: str, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Each python block of docs/api.md runs from the project root, its asserts holding."""
+@pytest.mark.parametrize(
+    ("page", "block"), BLOCKS, ids=[f"{p}:{i}" for i, (p, _) in enumerate(BLOCKS)]
+)
+def test_docs_example_runs(page: str, block: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each python block of the pages runs from the project root, its asserts holding."""
     monkeypatch.chdir(ROOT)
-    exec(compile(block, "docs/api.md", "exec"), {})
+    exec(compile(block, f"docs/{page}", "exec"), {})
