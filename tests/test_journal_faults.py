@@ -100,6 +100,9 @@ COPY_STEP = (
     "active, history, previous FROM steps WHERE inbox = 1"
 )
 
+LAST = "id = (SELECT max(id) FROM steps)"  # the step resume reads
+PENDING = "INSERT INTO inbox VALUES (99, 'Motor', 0, 'Movement', '{oops')"  # resume reads it
+
 # (fault, what is done to a good journal, what the message says)
 FAULTS: list[tuple[str, Callable[[Path], None], str]] = [
     ("truncated", truncate, "is truncated"),
@@ -112,8 +115,9 @@ FAULTS: list[tuple[str, Callable[[Path], None], str]] = [
     ("newer schema", sql("UPDATE meta SET value = '2'"), "schema version is '2'"),
     ("no schema version", sql("DELETE FROM meta"), "no schema version"),
     ("unknown step kind", sql("UPDATE steps SET kind = 'teleport' WHERE id = 2"), "'teleport'"),
-    ("step of wrong type", sql("UPDATE steps SET active = 42 WHERE id = 3"), "wrong type"),
-    ("data not JSON", sql("UPDATE inbox SET data = '{oops' WHERE seq = 1"), "wrong type"),
+    ("step of wrong type", sql(f"UPDATE steps SET active = 42 WHERE {LAST}"), "wrong type"),
+    ("step data not JSON", sql(f"UPDATE steps SET data = '{{oops' WHERE {LAST}"), "wrong type"),
+    ("event data not JSON", sql(PENDING), "accepted events with columns of the wrong type: #99"),
     ("event applied twice", sql(COPY_STEP), "applied more than once: #1 by steps 2, "),
     ("steps missing", sql("DELETE FROM steps WHERE inbox = 1"), "steps are missing"),
     ("step of no event", sql("DELETE FROM inbox WHERE seq = 2"), "does not hold"),
@@ -170,6 +174,21 @@ def test_every_command_refuses_a_damaged_journal(
     assert out == ""  # nothing shown, exported or started
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run.db"]  # no output file, no temp
     assert snapshot_of(db) == before
+
+
+def test_a_bad_row_resume_does_not_read_is_refused_by_readers_only(
+    good_journal: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An old event's data that is not JSON: show refuses it; resume, which never reads
+    it (and checks only the rows it reads, to stay fast), resumes."""
+    db = damaged(good_journal, tmp_path, sql("UPDATE inbox SET data = '{oops' WHERE seq = 1"))
+    shown = cli(command("show", db, tmp_path), monkeypatch)
+    assert (shown[0], "accepted events with columns of the wrong type: #1" in shown[2]) == (
+        1,
+        True,
+    )
+    resumed = cli(command("run --resume", db, tmp_path), monkeypatch)
+    assert (resumed[0], "resumed Motor in Blocked" in resumed[1]) == (0, True), resumed[2]
 
 
 def test_a_journal_without_steps_is_not_resumed_and_nothing_is_redelivered(
