@@ -275,16 +275,25 @@ def long_journal(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return db
 
 
-@pytest.mark.parametrize("name", ["show", "export", "replay"])
-def test_a_reader_that_goes_away_ends_the_command_quietly(long_journal: Path, name: str) -> None:
+@pytest.mark.parametrize("name", ["show", "export", "replay", "run"])
+def test_a_reader_that_goes_away_ends_the_command_quietly(
+    long_journal: Path, tmp_path: Path, name: str
+) -> None:
     """``statectl journal show DB | head -1``: no traceback, the exit status of SIGPIPE."""
     env = {**os.environ, "PYTHONPATH": f"{SRC}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
-    child = subprocess.Popen(
-        [sys.executable, "-m", "statectl", "journal", name, str(long_journal)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        env=env,
-    )
+    argv = ["journal", name, str(long_journal)]
+    events = tmp_path / "events.txt"
+    events.write_text("Movement {amount: 1}\n+2\n" * 3000, encoding="utf-8")
+    if name == "run":  # its trace streams too
+        argv = ["run", str(MOTOR), "--journal", str(tmp_path / "run.db")]
+    with events.open("rb") as stdin:
+        child = subprocess.Popen(
+            [sys.executable, "-m", "statectl", *argv],
+            stdin=stdin,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            env=env,
+        )
     assert child.stdout is not None and child.stderr is not None
     first = child.stdout.readline()
     child.stdout.close()  # what head does after its line
@@ -364,6 +373,31 @@ def test_a_full_disk_stops_the_run_keeps_every_acknowledged_event(tmp_path: Path
             assert resumed.start(resume=True) == {"Motor": True}
         finally:
             resumed.close()
+
+
+def test_a_resume_on_a_full_disk_fails_before_anything_reaches_the_device(
+    tmp_path: Path,
+) -> None:
+    """The restore is committed first: on a full disk resume fails, the pending event unsent."""
+    chart = load_device(MOTOR)
+    setup = DeviceSetup("Motor", chart.chart, chart.rules, str(MOTOR))
+    with tmpfs(tmp_path / "disk", "1m") as disk:
+        db = disk / "run.db"
+        first = System((setup,), SimClock(), Journal(db))
+        first.start()
+        with first.owner:  # accepted, never processed: resume would redeliver it
+            ticket = first.post(None, "Movement", {"amount": 1})
+            assert ticket is not None and ticket.wait(5.0)
+            first.close()
+        again = System((setup,), SimClock(), Journal(db))
+        assert again.journal is not None
+        again.journal.flush()  # the devices rows: what is written next is the restore
+        fill(disk)
+        with pytest.raises(JournalError, match="the disk is full"):
+            again.start(resume=True)
+        assert (again.subjects["Motor"].queued, again.bound["Motor"].redelivered) == (0, 0)
+        with pytest.raises(JournalError):
+            again.close()
 
 
 def test_a_full_disk_fails_the_command_line_run_and_export(tmp_path: Path) -> None:

@@ -650,6 +650,8 @@ def run(
         if system.journal is not None:
             system.journal.flush()  # a write that failed meanwhile fails the run
         return OK
+    except BrokenPipeError:
+        raise  # the reader of the trace went away: the command line ends quietly
     except (StatectlError, OSError) as exc:
         failed = str(exc)
         err.write(f"statectl run: {exc}\n")

@@ -30,6 +30,7 @@ from __future__ import annotations
 import datetime as dt
 import errno
 import os
+import shutil
 import sqlite3
 from collections.abc import Iterable
 from pathlib import Path
@@ -70,17 +71,28 @@ class JournalDamaged(JournalError):
         super().__init__(f"journal {path} cannot be trusted: {'; '.join(self.problems)}")
 
 
-def sqlite_problem(exc: BaseException) -> str:
-    """What an SQLite or OS error means for a journal, in words a user can act on."""
+def sqlite_problem(exc: BaseException, where: Path | None = None) -> str:
+    """What an SQLite or OS error means for a journal, in words a user can act on.
+
+    ``where``: the journal's directory; SQLite reports a full disk while opening
+    (it cannot make the -shm file) as an I/O error, so its free space is looked at.
+    """
     text = str(exc)
     low = text.lower()
-    if "full" in low or getattr(exc, "errno", None) == errno.ENOSPC:
+    if "full" in low or getattr(exc, "errno", None) == errno.ENOSPC or _full(where):
         return f"the disk is full ({text}); free space and try again"
     if "readonly" in low or "read-only" in low or getattr(exc, "errno", None) == errno.EROFS:
         return f"it is read-only ({text}); statectl needs to write it and the files beside it"
     if "not a database" in low or "malformed" in low or "corrupt" in low:
         return f"it is damaged ({text})"
     return text
+
+
+def _full(where: Path | None) -> bool:
+    try:
+        return where is not None and shutil.disk_usage(where).free < 65536
+    except OSError:
+        return False
 
 
 def _file_problems(path: Path, *, reader: bool) -> list[str]:
@@ -319,7 +331,9 @@ def check_journal(path: str | Path, *, reader: bool = True) -> None:
         db = connect_ro(p)
     except sqlite3.Error as exc:
         _remove_empty(sides)
-        raise JournalError(f"journal {p}: cannot open it: {sqlite_problem(exc)}") from None
+        raise JournalError(
+            f"journal {p}: cannot open it: {sqlite_problem(exc, p.parent)}"
+        ) from None
     try:
         rows = [str(r[0]) for r in db.execute("PRAGMA quick_check(4)")]
         if rows != ["ok"]:
@@ -327,7 +341,9 @@ def check_journal(path: str | Path, *, reader: bool = True) -> None:
             raise JournalDamaged(p, [f"SQLite finds it damaged: {found}"])
         problems = _schema_problems(db) or _row_problems(db, deep=reader)
     except sqlite3.OperationalError as exc:  # locked, I/O, out of memory: not the file's fault
-        raise JournalError(f"journal {p}: cannot read it: {sqlite_problem(exc)}") from None
+        raise JournalError(
+            f"journal {p}: cannot read it: {sqlite_problem(exc, p.parent)}"
+        ) from None
     except sqlite3.DatabaseError as exc:  # not a database, malformed
         raise JournalDamaged(p, [sqlite_problem(exc)]) from None
     except JournalDamaged:

@@ -199,7 +199,7 @@ def connect_db(
     except sqlite3.Error as exc:
         if db is not None:
             db.close()
-        raise JournalError(f"cannot open journal {p}: {_problem(exc)}") from None
+        raise JournalError(f"cannot open journal {p}: {_problem(exc, p.parent)}") from None
     except JournalError:
         if db is not None:
             db.close()
@@ -207,10 +207,10 @@ def connect_db(
     return db
 
 
-def _problem(exc: BaseException) -> str:
+def _problem(exc: BaseException, where: Path | None = None) -> str:
     from statectl.journal.check import sqlite_problem  # check.py imports this module
 
-    return sqlite_problem(exc)
+    return sqlite_problem(exc, where)
 
 
 @dataclass(frozen=True, slots=True)
@@ -498,8 +498,9 @@ class Journal:
 
     def _failed(self) -> JournalError:
         """The error every caller gets once a write failed: what, where, and what to do."""
+        problem = _problem(self._failure or Exception(), self.path.parent)
         return JournalError(
-            f"journal {self.path}: write failed: {_problem(self._failure or Exception())}; "
+            f"journal {self.path}: write failed: {problem}; "
             "nothing after the last commit is accepted (the journal keeps everything before "
             "it: resume with --resume once the cause is fixed)"
         )
