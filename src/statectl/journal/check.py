@@ -36,7 +36,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from statectl.journal.store import SCHEMA_VERSION, JournalError, StepKind
+from statectl.journal.store import _SCHEMA, SCHEMA_VERSION, JournalError, StepKind
 
 __all__ = [
     "COLUMNS",
@@ -47,16 +47,20 @@ __all__ = [
     "sqlite_problem",
 ]
 
-#: The tables of a journal and their columns, in order (store._SCHEMA).
-COLUMNS: dict[str, tuple[str, ...]] = {
-    "meta": ("key", "value"),
-    "devices": ("name", "chart", "source", "data"),
-    "inbox": ("seq", "device", "wall", "event", "data"),
-    "steps": (
-        "id", "device", "kind", "inbox", "wall", "time", "event", "data", "outcome",
-        "active", "history", "previous",
-    ),
-}  # fmt: skip
+
+def _columns() -> dict[str, tuple[str, ...]]:
+    """The tables of a journal and their columns, in order: read from the schema itself."""
+    db = sqlite3.connect(":memory:")
+    try:
+        db.executescript(_SCHEMA)
+        names = [r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type='table'")]
+        return {t: tuple(r[1] for r in db.execute(f"PRAGMA table_info({t})")) for t in names}
+    finally:
+        db.close()
+
+
+#: The tables of a journal and their columns, in order.
+COLUMNS: dict[str, tuple[str, ...]] = _columns()
 
 _HEADER = b"SQLite format 3\x00"
 _SHOWN = 3  # rows named per problem
