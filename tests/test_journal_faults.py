@@ -191,6 +191,24 @@ def test_a_bad_row_resume_does_not_read_is_refused_by_readers_only(
     assert (resumed[0], "resumed Motor in Blocked" in resumed[1]) == (0, True), resumed[2]
 
 
+def test_a_bad_old_step_a_redo_walks_back_to_fails_the_resume_clearly(tmp_path: Path) -> None:
+    """Resume reads an untyped old step only for a redo: a row that does not parse is named."""
+    db = tmp_path / "run.db"
+    dev = load_device(MOTOR)
+    first = System(
+        (DeviceSetup("Motor", dev.chart, dev.rules, str(MOTOR)),), SimClock(), Journal(db)
+    )
+    first.start()
+    for event in ("Movement", "Error"):  # Returning, which the Motor's redo rule redoes
+        first.post(None, event)
+        first.drain()
+    first.close()
+    sql("UPDATE steps SET history = 'oops' WHERE event = 'Movement'")(db)
+    out, err = io.StringIO(), io.StringIO()
+    code = run(str(MOTOR), journal=str(db), resume=True, events=io.StringIO(), out=out, err=err)
+    assert (code, f"journal {db}: step 2 cannot be read" in err.getvalue()) == (1, True), err
+
+
 def test_a_journal_without_steps_is_not_resumed_and_nothing_is_redelivered(
     good_journal: Path, tmp_path: Path
 ) -> None:
