@@ -15,6 +15,10 @@ Rules:
    commit, delivers the batch's events and, if the owner lock is free, drains
    the devices itself in the same wake-up (no second thread hop); if another
    thread owns them it only wakes the serve loop, which picks the events up.
+   An existing journal is checked before the run uses it (journal/check.py): one
+   that cannot be trusted is refused and nothing starts, unless ``--fresh`` sets it
+   aside (renamed with a timestamp) for a new one. A journal that stops taking
+   writes (a full disk) stops the run with a message; nothing more is accepted.
 3. Time: ``--realtime`` runs on a :class:`WallClock`; otherwise a
    :class:`SimClock`, which a live run (``--dashboard``) moves in step with the
    wall clock and a batch run (events from a file or stdin) moves only to let
