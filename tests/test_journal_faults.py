@@ -321,6 +321,28 @@ def test_a_reader_that_goes_away_ends_the_command_quietly(
     assert (code, err) == (BROKEN_PIPE, "")
 
 
+@pytest.mark.parametrize(("reader_open", "code"), [(False, BROKEN_PIPE), (True, 1)])
+def test_a_broken_pipe_elsewhere_is_an_error(
+    monkeypatch: pytest.MonkeyPatch, reader_open: bool, code: int
+) -> None:
+    """Only a closed standard output ends quietly; a broken pipe of another kind is reported."""
+    import statectl.cli
+
+    def broken(*_: object) -> int:
+        raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr(statectl.cli, "cmd_journal", broken)
+    read, write = os.pipe()
+    if not reader_open:
+        os.close(read)
+    err = io.StringIO()
+    with os.fdopen(write, "w") as out:
+        got = main(["journal", "show", "x.db"], out, err)
+    if reader_open:
+        os.close(read)
+    assert (got, "Broken pipe" in err.getvalue()) == (code, reader_open)
+
+
 # --- a file system of its own: full, read-only ---------------------------------------------
 
 

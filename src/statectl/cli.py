@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import select
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -441,7 +442,10 @@ def main(argv: Sequence[str] | None = None, out: TextIO | None = None,
     except KeyboardInterrupt:
         err.write("statectl: interrupted\n")
         return 130
-    except BrokenPipeError:
+    except BrokenPipeError as exc:
+        if not _reader_gone(out):  # another pipe (a driver's): an error like any other
+            err.write(f"statectl: {exc}\n")
+            return PROBLEMS
         return _broken_pipe(out)
     return code
 
@@ -449,6 +453,21 @@ def main(argv: Sequence[str] | None = None, out: TextIO | None = None,
 #: The exit status of a command whose reader went away (``statectl journal show DB | head``),
 #: as if SIGPIPE had ended it: 128 + 13, what a shell reports for such a tool.
 BROKEN_PIPE = 141
+
+
+def _reader_gone(out: TextIO) -> bool:
+    """Whether our output's reader went away: its pipe reports an error or a hang-up.
+
+    Without a file descriptor (tests' StringIO) or ``poll`` (Windows), the error is taken at
+    its word.
+    """
+    try:
+        fd = out.fileno()
+        poll = select.poll()
+    except (AttributeError, OSError, ValueError):
+        return True
+    poll.register(fd, select.POLLOUT)
+    return any(ev & (select.POLLERR | select.POLLHUP) for _, ev in poll.poll(0))
 
 
 def _broken_pipe(out: TextIO) -> int:
