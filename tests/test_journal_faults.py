@@ -316,6 +316,7 @@ def test_a_reader_that_goes_away_ends_the_command_quietly(
     first = child.stdout.readline()
     child.stdout.close()  # what head does after its line
     err = child.stderr.read().decode()
+    child.stderr.close()
     code = child.wait(timeout=60)
     assert first
     assert (code, err) == (BROKEN_PIPE, "")
