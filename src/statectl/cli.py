@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import select
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -224,6 +226,7 @@ def cmd_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         token=args.token,
         journal=args.journal,
         resume=args.resume,
+        fresh=args.fresh,
         sync=args.sync,
         guarantee=args.guarantee,
         realtime=args.realtime,
@@ -237,8 +240,14 @@ def cmd_journal(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
 
     if args.journal_command == "replay":
         return journal_replay(args.db, device=args.device, out=out, err=err)
-    show = journal_show if args.journal_command == "show" else journal_export
-    return show(args.db, device=args.device, since=args.since, until=args.until, out=out, err=err)
+    if args.journal_command == "export":
+        return journal_export(
+            args.db, device=args.device, since=args.since, until=args.until, to=args.out,
+            out=out, err=err,
+        )  # fmt: skip
+    return journal_show(
+        args.db, device=args.device, since=args.since, until=args.until, out=out, err=err
+    )
 
 
 def cmd_scxml_import(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
@@ -363,7 +372,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--token", help="token that allows sending events from the dashboard "
                    "(default: $STATECTL_DASHBOARD_TOKEN, the config's, else a new one printed)")
     s.add_argument("--journal", metavar="DB", help="journal every event to this SQLite file")
-    s.add_argument("--resume", action="store_true", help="resume from the journal first")
+    s.add_argument("--resume", action="store_true", help="resume from the journal first; "
+                   "a journal that cannot be trusted is refused (see --fresh)")
+    s.add_argument("--fresh", action="store_true", help="start a new journal, the old one set "
+                   "aside with a timestamp suffix; with --resume only if it cannot be trusted")
     s.add_argument("--sync", default="normal", choices=("normal", "full"),
                    help="journal durability: normal (process crash) or full (power loss)")
     s.add_argument("--guarantee", default="prompt", choices=("prompt", "durable-first"),
@@ -388,6 +400,9 @@ def build_parser() -> argparse.ArgumentParser:
         if name != "replay":
             s.add_argument("--since", help="epoch seconds or ISO 8601")
             s.add_argument("--until", help="epoch seconds or ISO 8601")
+        if name == "export":
+            s.add_argument("-o", "--out", metavar="FILE",
+                           help="write to FILE (whole or not at all) instead of standard output")
         s.set_defaults(func=cmd_journal)
 
     scxml = sub.add_parser("scxml", help="SCXML documents")
@@ -427,7 +442,53 @@ def main(argv: Sequence[str] | None = None, out: TextIO | None = None,
     except KeyboardInterrupt:
         err.write("statectl: interrupted\n")
         return 130
+    except BrokenPipeError as exc:
+        if not _reader_gone(out):  # another pipe (a driver's): an error like any other
+            err.write(f"statectl: {exc}\n")
+            return PROBLEMS
+        return _broken_pipe(out)
     return code
+
+
+#: The exit status of a command whose reader went away (``statectl journal show DB | head``),
+#: as if SIGPIPE had ended it: 128 + 13, what a shell reports for such a tool.
+BROKEN_PIPE = 141
+
+
+def _reader_gone(out: TextIO) -> bool:
+    """Whether our output's reader went away: its pipe reports an error or a hang-up.
+
+    Without a file descriptor (tests' StringIO) or ``poll`` (Windows), the error is taken at
+    its word.
+    """
+    try:
+        fd = out.fileno()
+        poll = select.poll()
+    except (AttributeError, OSError, ValueError):
+        return True
+    poll.register(fd, select.POLLOUT)
+    return any(ev & (select.POLLERR | select.POLLHUP) for _, ev in poll.poll(0))
+
+
+def _broken_pipe(out: TextIO) -> int:
+    """The reader of our output went away: stop quietly, as a command ended by SIGPIPE does.
+
+    Python ignores SIGPIPE, so a write raises BrokenPipeError instead; what is still
+    buffered for the closed pipe is pointed at /dev/null, or flushing it at exit
+    would fail again and print "Exception ignored". SIGPIPE is not restored to its
+    default instead: it would also end a run serving the dashboard when a browser's
+    socket closes.
+    """
+    try:
+        fd = out.fileno()
+    except (AttributeError, OSError, ValueError):  # not a real file (tests): nothing buffered
+        return BROKEN_PIPE
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, fd)
+    finally:
+        os.close(devnull)
+    return BROKEN_PIPE
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,32 +1,17 @@
 """``statectl run DEVICE`` for real, and ``statectl journal show|replay|export``.
 
 Rules:
-1. A :class:`System` is devices on one clock with one owner at a time: whoever
-   holds the owner lock (the thread in :meth:`System.serve`, a caller of
-   :meth:`System.drain`, or the journal's writer) processes every device's
-   events, run-to-completion, so devices never race each other.
-2. With a journal every event from outside is accepted through it and every
-   step is journalled; ``resume`` brings each device back from the journal,
-   through its recovery rules, before the owner takes any new event. The
-   journal's guarantee says when an accepted event reaches its device. Under
-   ``prompt`` (default) a post queues the inbox row, hands the event to its
-   device and wakes the owner, as without a journal; the ticket turns durable
-   at the next commit. Under ``durable-first`` the writer, right after a
-   commit, delivers the batch's events and, if the owner lock is free, drains
-   the devices itself in the same wake-up (no second thread hop); if another
-   thread owns them it only wakes the serve loop, which picks the events up.
+1. A run is a :class:`~statectl.system.System` (devices on one clock and one
+   owner; journalled, a cell; see :mod:`statectl.system` for its own rules).
+2. An existing journal is checked before the run uses it (journal/check.py): one
+   that cannot be trusted is refused and nothing starts, unless ``--fresh`` sets it
+   aside (renamed with a timestamp) for a new one. A journal that stops taking
+   writes (a full disk) stops the run with a message; nothing more is accepted.
 3. Time: ``--realtime`` runs on a :class:`WallClock`; otherwise a
    :class:`SimClock`, which a live run (``--dashboard``) moves in step with the
    wall clock and a batch run (events from a file or stdin) moves only to let
    each event's consequences settle, so a batch run is deterministic.
-4. A cell file runs the same way: one device per instance, on one clock and one
-   owner, and the cell's links (:class:`~statectl.explore.replay.CellLinks`):
-   after a device's step, each link it fired whose guard holds sends its event
-   to the target, through the journal when there is one: the link events are
-   journalled with the step that fired them, in one commit, so after a crash
-   both are in the journal (the link event is redelivered if its target had not
-   run it) or neither is (the step runs again on resume and fires them again).
-   Each device's queue is first in, first out.
+4. A cell file runs the same way, its links sent by the System.
 5. Events come as lines ``[DEVICE:] EVENT [DATA]`` (DATA in YAML flow style, e.g.
    ``Movement {amount: 10}``); ``+SECONDS`` lets simulated time pass; ``#``
    starts a comment. A bad line is reported with its number and skipped. A
@@ -48,6 +33,7 @@ import contextlib
 import datetime as dt
 import heapq
 import os
+import sqlite3
 import sys
 import threading
 import time
@@ -73,13 +59,16 @@ from statectl.errors import Diagnostic, DiagnosticError, Severity, StatectlError
 from statectl.journal import (
     Guarantee,
     Journal,
+    JournalDamaged,
     JournalError,
     JournalReader,
     Sync,
     export_jsonl,
     load_device,
     replay,
+    set_aside,
 )
+from statectl.journal.check import sqlite_problem
 from statectl.model import Chart
 from statectl.runtime import Clock, SimClock, TraceWriter, WallClock, format_data
 from statectl.runtime.trace import format_record
@@ -229,6 +218,8 @@ def _feed(system: System, lines: Iterable[str], err: TextIO, *, batch: bool) -> 
                 if ticket is not None:
                     ticket.wait()
                 system.quiesce()
+        except JournalError as exc:  # nothing more can be accepted: stop, say where
+            raise JournalError(f"line {number}: {exc}") from None
         except StatectlError as exc:
             err.write(f"line {number}: {exc}\n")
 
@@ -293,6 +284,7 @@ def run(
     token: str | None = None,
     journal: str | None = None,
     resume: bool = False,
+    fresh: bool = False,
     sync: str = "normal",
     guarantee: str = "prompt",
     realtime: bool = False,
@@ -309,10 +301,12 @@ def run(
     stdin ends (without a dashboard) or Ctrl-C. ``ready(system, url)`` is called
     once everything runs (tests use it to find the dashboard's port).
     ``guarantee`` (``--guarantee``) is ``prompt`` or ``durable-first``: when a
-    journalled event reaches its device (docs/journal.md).
+    journalled event reaches its device (docs/journal.md). ``fresh`` (``--fresh``)
+    sets an existing journal aside and starts a new one; with ``resume`` only a
+    journal that cannot be trusted is set aside (docs/journal.md, "Faults").
     """
-    if resume and journal is None:
-        err.write("statectl run: --resume needs --journal DB\n")
+    if (resume or fresh) and journal is None:
+        err.write(f"statectl run: {'--resume' if resume else '--fresh'} needs --journal DB\n")
         return USAGE
     if not Path(path).exists():
         err.write(f"statectl run: {path}: no such file\n")
@@ -340,6 +334,7 @@ def run(
             err.write(f"{d}\n")
         return PROBLEMS
     live = dashboard or realtime
+    failed = ""  # what the run reported as its failure, if anything
     system: System | None = None
     server: Any = None
     try:
@@ -352,7 +347,9 @@ def run(
         )
         setups = tuple(replace(d, driver=drivers.get(d.name)) for d in devices)
         clock: Clock = WallClock() if realtime else SimClock()
-        store = Journal(journal, sync=mode, guarantee=promise) if journal is not None else None
+        store = None
+        if journal is not None:
+            store = _open_journal(journal, mode, promise, resume=resume, fresh=fresh, out=out)
         system = System(setups, clock, store, cell)
         width = max(len(n) for n in system.subjects)
         if driver is None and config is None:
@@ -403,48 +400,121 @@ def run(
             feeder.start()
         with contextlib.suppress(KeyboardInterrupt):
             system.serve(halt)
+        if system.journal is not None:
+            system.journal.flush()  # a write that failed meanwhile fails the run
         return OK
+    except BrokenPipeError:
+        raise  # the reader of the trace went away: the command line ends quietly
     except (StatectlError, OSError) as exc:
+        failed = str(exc)
         err.write(f"statectl run: {exc}\n")
         return PROBLEMS
     finally:
         if server is not None:
             server.stop()
         if system is not None:
-            system.close()
+            _close(system, err, failed)
 
 
 def _feed_then_stop(
     system: System, lines: TextIO, err: TextIO, halt: threading.Event, stop_at_end: bool
 ) -> None:
-    _feed(system, lines, err, batch=False)
+    try:
+        _feed(system, lines, err, batch=False)
+    except JournalError:
+        halt.set()  # the owner's loop ends; run() reports the failure from flush()
+        return
     if stop_at_end:
         halt.set()
+
+
+def _open_journal(
+    path: str, sync: Sync, guarantee: Guarantee, *, resume: bool, fresh: bool, out: TextIO
+) -> Journal:
+    """The run's journal, checked before anything starts; ``--fresh`` sets the old one aside.
+
+    ``fresh`` without ``resume``: any existing journal is set aside. With
+    ``resume``: only one that cannot be trusted (:class:`JournalDamaged`). Without
+    ``fresh`` such a journal is refused, and the message says how to start over.
+    """
+    p = Path(path)
+    if resume and p.is_file() and p.stat().st_size == 0:  # a new journal has its schema
+        damage: JournalDamaged | None = JournalDamaged(p, ["it is empty (0 bytes)"])
+    else:
+        damage = None
+    if fresh and not resume and p.exists() and p.stat().st_size > 0:
+        aside = set_aside(p)
+        out.write(f"journal {p} set aside as {aside}; starting a new journal\n")
+    try:
+        if damage is not None:
+            raise damage
+        return Journal(p, sync=sync, guarantee=guarantee)
+    except JournalDamaged as exc:
+        if not fresh:
+            raise JournalError(
+                f"{exc}. Nothing was started. To start over with a new journal and keep this "
+                f"one aside (renamed with a timestamp), run again with --fresh"
+            ) from None
+        aside = set_aside(p)
+        out.write(f"{exc}\njournal {p} set aside as {aside}; starting a new journal\n")
+        return Journal(p, sync=sync, guarantee=guarantee)
+
+
+def _close(system: System, err: TextIO, failed: str) -> None:
+    """Close the run; a journal failure not reported yet is reported (no traceback)."""
+    try:
+        system.close()
+    except JournalError as exc:
+        if str(exc) not in failed:
+            err.write(f"statectl run: {exc}\n")
 
 
 # -- statectl journal ------------------------------------------------------------------------
 
 
-def _reader(path: str, err: TextIO) -> JournalReader | None:
+def _reader(command: str, path: str, err: TextIO) -> JournalReader | int:
+    """The checked journal, or the exit code: 2 if there is none, 1 if it cannot be trusted.
+
+    The whole journal is checked before anything is written (journal/check.py), so
+    a damaged journal gives a message and no partial output.
+    """
+    if not Path(path).exists():
+        err.write(f"statectl journal {command}: no journal at {path}\n")
+        return USAGE
     try:
         return JournalReader(path)
     except JournalError as exc:
-        err.write(f"statectl journal: {exc}\n")
-        return None
+        err.write(f"statectl journal {command}: {exc}\n")
+        return PROBLEMS
 
 
 def _reader_in_window(
     command: str, path: str, since: str | None, until: str | None, err: TextIO
-) -> tuple[JournalReader, float | None, float | None] | None:
-    """The journal and the time window a ``journal show|export`` asks for; None: usage error."""
+) -> tuple[JournalReader, float | None, float | None] | int:
+    """The journal and the time window a ``journal show|export`` asks for, or the exit code."""
     try:
         lo = parse_time(since) if since is not None else None
         hi = parse_time(until) if until is not None else None
     except StatectlError as exc:
         err.write(f"statectl journal {command}: {exc}\n")
-        return None
-    reader = _reader(path, err)
-    return None if reader is None else (reader, lo, hi)
+        return USAGE
+    reader = _reader(command, path, err)
+    return reader if isinstance(reader, int) else (reader, lo, hi)
+
+
+@contextlib.contextmanager
+def _reading(command: str, path: str, err: TextIO) -> Iterator[list[int]]:
+    """Turn a failure while the journal is read (damage SQLite meets late, I/O) into exit 1.
+
+    Yields a one-element list holding the exit code: 0, or 1 after a failure.
+    """
+    code = [OK]
+    try:
+        yield code
+    except (JournalError, sqlite3.Error) as exc:
+        text = exc if isinstance(exc, JournalError) else sqlite_problem(exc)
+        err.write(f"statectl journal {command}: journal {path}: {text}\n")
+        code[0] = PROBLEMS
 
 
 def journal_show(
@@ -458,8 +528,8 @@ def journal_show(
 ) -> int:
     """``statectl journal show``: one line per accepted event and step, in order."""
     opened = _reader_in_window("show", path, since, until, err)
-    if opened is None:
-        return USAGE
+    if isinstance(opened, int):
+        return opened
     reader, lo, hi = opened
 
     def accepted() -> Iterator[tuple[float, int, str]]:
@@ -479,13 +549,13 @@ def journal_show(
                 text += f"  {s.outcome}"
             yield s.wall, 1, text
 
-    with reader:
+    with reader, _reading("show", path, err) as code:
         # Both come in journal order, which is wall-clock order: merged as they stream, so
         # a journal of millions of rows is shown without being held in memory.
         for wall, _, text in heapq.merge(accepted(), steps(), key=lambda x: (x[0], x[1])):
             stamp = dt.datetime.fromtimestamp(wall).isoformat(timespec="milliseconds")
             out.write(f"{stamp}  {text}\n")
-    return OK
+    return code[0]
 
 
 def journal_export(
@@ -494,17 +564,38 @@ def journal_export(
     device: str | None = None,
     since: str | None = None,
     until: str | None = None,
+    to: str | None = None,
     out: TextIO = sys.stdout,
     err: TextIO = sys.stderr,
 ) -> int:
-    """``statectl journal export``: JSON Lines (accepted events, then steps)."""
+    """``statectl journal export``: JSON Lines (accepted events, then steps).
+
+    ``to`` (``--out FILE``): written to a temporary file beside it and renamed
+    over it once complete, so a failure (a damaged row, a full disk) leaves no
+    partial file and an existing FILE untouched.
+    """
     opened = _reader_in_window("export", path, since, until, err)
-    if opened is None:
-        return USAGE
+    if isinstance(opened, int):
+        return opened
     reader, lo, hi = opened
-    with reader:
-        export_jsonl(reader, out, device=device, since=lo, until=hi)
-    return OK
+    with reader, _reading("export", path, err) as code:
+        if to is None:
+            export_jsonl(reader, out, device=device, since=lo, until=hi)
+            return OK
+        target = Path(to)
+        tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+        try:
+            with tmp.open("w", encoding="utf-8") as f:
+                n = export_jsonl(reader, f, device=device, since=lo, until=hi)
+            tmp.replace(target)
+        except OSError as exc:
+            err.write(f"statectl journal export: cannot write {to}: {sqlite_problem(exc)}\n")
+            code[0] = PROBLEMS
+        finally:
+            tmp.unlink(missing_ok=True)
+        if code[0] == OK:
+            out.write(f"wrote {n} line(s) to {to}\n")
+    return code[0]
 
 
 def journal_replay(
@@ -520,10 +611,10 @@ def journal_replay(
     The charts come from the device files the journal names, or ``model``
     (device -> file) where given.
     """
-    reader = _reader(path, err)
-    if reader is None:
-        return USAGE
-    with reader:
+    reader = _reader("replay", path, err)
+    if isinstance(reader, int):
+        return reader
+    with reader, _reading("replay", path, err) as code:
         charts: dict[str, Chart] = {}
         for d in reader.devices():
             if device is not None and d.name != device:
@@ -547,6 +638,8 @@ def journal_replay(
         except JournalError as exc:
             err.write(f"statectl journal replay: {exc}\n")
             return PROBLEMS
+    if code[0] != OK:
+        return code[0]
     for m in result.mismatches:
         out.write(f"MISMATCH {m}\n")
     for name, snap in sorted(result.final.items()):

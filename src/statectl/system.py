@@ -53,6 +53,7 @@ from statectl.explore.replay import CellLinks
 from statectl.journal import (
     Guarantee,
     Journal,
+    JournalError,
     JournalledDevice,
     JournalReader,
     RecoveryRule,
@@ -166,9 +167,17 @@ class System:
             raise StatectlError("--resume needs --journal DB")
         if resume and self.journal is not None:
             self.journal.flush()
-            with JournalReader(self.journal.path) as reader:
-                for d in self.setups:
-                    resumed[d.name] = self.bound[d.name].resume(reader, d.rules)
+            # the Journal checked the file when it opened it (journal/check.py); a row
+            # it did not type that resume reads (a redo's walk back) is refused here
+            path = self.journal.path
+            try:
+                with JournalReader(path, check=False) as reader:
+                    for d in self.setups:
+                        resumed[d.name] = self.bound[d.name].resume(reader, d.rules)
+            except JournalError as exc:
+                if str(path) in str(exc):
+                    raise
+                raise JournalError(f"journal {path}: {exc}; nothing was resumed") from None
         else:
             for d in self.setups:
                 if d.name in self.bound:

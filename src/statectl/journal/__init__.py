@@ -5,6 +5,7 @@ See docs/journal.md. :class:`Journal` writes (one thread, group commit),
 to both, :func:`load_device` reads a device file with its Recovery table.
 """
 
+from statectl.journal.check import JournalDamaged, check_journal, set_aside
 from statectl.journal.device import JournalledDevice
 from statectl.journal.read import (
     REDO,
@@ -29,6 +30,7 @@ __all__ = [
     "Guarantee",
     "InboxRow",
     "Journal",
+    "JournalDamaged",
     "JournalError",
     "JournalReader",
     "JournalledDevice",
@@ -39,9 +41,11 @@ __all__ = [
     "StepRow",
     "Sync",
     "Ticket",
+    "check_journal",
     "check_recovery",
     "export_jsonl",
     "load_device",
     "replay",
     "restore_subject",
+    "set_aside",
 ]

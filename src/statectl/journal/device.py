@@ -29,6 +29,8 @@ Rules:
    ``recovery`` step with outcome ``redo`` and the redone event. Without an
    entering step (the device started in the state, or the journal begins after
    it) the rule is skipped and :attr:`JournalledDevice.recovered` says so.
+   The ``restore`` step is committed before any of that: a journal that cannot
+   be written (a full disk) fails the resume before anything reaches the device.
 4. Exactly once in the journal, at least once at the device: an accepted event
    processed but without a committed step when the process died is processed
    again on resume, and its API call may repeat. Under ``PROMPT`` an event
@@ -194,6 +196,9 @@ class JournalledDevice:
         else:
             restore_subject(self.subject, last.snapshot)
             self._record_now(StepKind.RESTORE)
+            # the journal can be written (not full, not read-only) before anything reaches
+            # the device again: a recovery event or a redelivered one
+            self.journal.flush()
             pending = reader.pending(self.name)
             active = self.subject.configuration
             taken = []

@@ -8,7 +8,8 @@ Rules:
 3. Replay runs the recorded events against the model on a :class:`SimClock`:
    each device starts fresh, time follows the
    journalled device clock (shifted so that no restart goes back in time), and
-   each event and recovery step is posted and processed, except a recovery
+   each event and recovery step is posted and processed (an accepted event
+   applied by two steps is refused: it ran twice), except a recovery
    ``redo`` step (:data:`REDO`): it re-issued device calls and changed no state,
    so it is not posted. The
    snapshot the model reaches must equal the journalled one after every step
@@ -32,6 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
+from statectl.journal.check import check_journal, connect_ro, sqlite_problem
 from statectl.journal.store import JournalError, StepKind, decode_snapshot
 from statectl.journal.subjects import restore_subject
 from statectl.model import Chart
@@ -110,10 +112,20 @@ class StepRow:
 
 def _step(row: tuple[Any, ...]) -> StepRow:
     rid, device, kind, inbox, wall, t, event, data, outcome, active, history, previous = row
-    return StepRow(
-        rid, device, StepKind(kind), inbox, wall, t, event, json.loads(data), outcome,
-        decode_snapshot(active, history, previous),
-    )  # fmt: skip
+    try:
+        return StepRow(
+            rid, device, StepKind(kind), inbox, wall, t, event, json.loads(data), outcome,
+            decode_snapshot(active, history, previous),
+        )  # fmt: skip
+    except (ValueError, TypeError, IndexError, KeyError) as exc:
+        raise JournalError(f"step {rid} cannot be read ({type(exc).__name__}: {exc})") from None
+
+
+def _json(text: Any, what: str) -> Any:
+    try:
+        return json.loads(text)
+    except (ValueError, TypeError) as exc:
+        raise JournalError(f"{what} cannot be read: its data is not JSON ({exc})") from None
 
 
 def _window(
@@ -139,16 +151,22 @@ def _window(
 class JournalReader:
     """Read-only access to a journal file."""
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, *, check: bool = True) -> None:
+        """Open ``path`` read-only; ``check``: refuse a journal that cannot be trusted first.
+
+        Raises :class:`JournalError` (no journal, cannot open) or its
+        :class:`~statectl.journal.check.JournalDamaged` (journal/check.py).
+        """
         p = Path(path)
-        if not p.exists():
+        if check:
+            check_journal(p)
+        elif not p.exists():
             raise JournalError(f"no journal at {p}")
         try:
-            self._db = sqlite3.connect(f"{p.resolve().as_uri()}?mode=ro", uri=True)
-            self._db.execute("PRAGMA busy_timeout=5000")
+            self._db = connect_ro(p)
             self._db.execute("SELECT 1 FROM steps LIMIT 1")
         except sqlite3.Error as exc:
-            raise JournalError(f"{p} is not a statectl journal ({exc})") from None
+            raise JournalError(f"journal {p}: cannot read it: {sqlite_problem(exc)}") from None
         self.path = p
 
     def close(self) -> None:
@@ -162,14 +180,16 @@ class JournalReader:
 
     def devices(self) -> tuple[DeviceRow, ...]:
         rows = self._db.execute("SELECT name, chart, source, data FROM devices ORDER BY name")
-        return tuple(DeviceRow(n, c, s, json.loads(d)) for n, c, s, d in rows)
+        return tuple(DeviceRow(n, c, s, _json(d, f"device {n}")) for n, c, s, d in rows)
 
     def device(self, name: str) -> DeviceRow | None:
         """The ``devices`` row of ``name`` (its chart, file and datamodel), if it ran."""
         row = self._db.execute(
             "SELECT name, chart, source, data FROM devices WHERE name = ?", (name,)
         ).fetchone()
-        return DeviceRow(row[0], row[1], row[2], json.loads(row[3])) if row is not None else None
+        if row is None:
+            return None
+        return DeviceRow(row[0], row[1], row[2], _json(row[3], f"device {row[0]}"))
 
     def entering_step(
         self, device: str, state: str, upto: int | None = None
@@ -221,7 +241,7 @@ class JournalReader:
         for seq, dev, wall, event, data in self._db.execute(
             f"SELECT * FROM inbox{where} ORDER BY seq", args
         ):
-            yield InboxRow(seq, dev, wall, event, json.loads(data))
+            yield InboxRow(seq, dev, wall, event, _json(data, f"accepted event #{seq}"))
 
     def last_step(self, device: str) -> StepRow | None:
         row = self._db.execute(
@@ -245,7 +265,9 @@ class JournalReader:
         rows = self._db.execute(
             "SELECT * FROM inbox WHERE device = ? AND seq > ? ORDER BY seq", (device, done)
         )
-        return tuple(InboxRow(s, d, w, e, json.loads(x)) for s, d, w, e, x in rows)
+        return tuple(
+            InboxRow(s, d, w, e, _json(x, f"accepted event #{s}")) for s, d, w, e, x in rows
+        )
 
     def counts(self) -> dict[str, int]:
         inbox = self._db.execute("SELECT count(*) FROM inbox").fetchone()[0]
@@ -316,7 +338,15 @@ def replay(
     mismatches: list[Mismatch] = []
     base = 0.0  # device clocks restart with each run; replay time never goes back
     count = 0
+    applied: dict[int, int] = {}  # inbox seq -> the step that applied it
     for row in reader.steps(device, upto=upto):
+        if row.inbox is not None:
+            first = applied.setdefault(row.inbox, row.id)
+            if first != row.id:
+                raise JournalError(
+                    f"accepted event #{row.inbox} ({row.device}: {row.event}) was applied "
+                    f"twice, by steps {first} and {row.id}: the journal cannot be trusted"
+                )
         if row.kind in (StepKind.START, StepKind.RESTORE) and row.time + base < clock.now():
             base = clock.now() - row.time
         clock.run_until(max(clock.now(), row.time + base))

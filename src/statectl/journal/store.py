@@ -39,8 +39,10 @@ Rules:
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import json
+import os
 import queue
 import sqlite3
 import sys
@@ -164,26 +166,51 @@ def decode_snapshot(active: str, history: str, previous: str | None) -> Snapshot
 def connect_db(
     path: str | Path, *, sync: Sync = Sync.NORMAL, create: bool = True
 ) -> sqlite3.Connection:
-    """Open ``path`` in WAL mode with the schema in place."""
+    """Open ``path`` in WAL mode; the schema is made only in a database without tables.
+
+    A database with some of the tables is damage, never a new journal: recreating
+    a deleted ``steps`` table would make a resume re-deliver every accepted event.
+    """
     p = Path(path)
     if not create and not p.exists():
         raise JournalError(f"no journal at {p}; run with --journal {p} first")
+    db: sqlite3.Connection | None = None
     try:
         db = sqlite3.connect(str(p), isolation_level=None, check_same_thread=False)
+        db.execute("PRAGMA busy_timeout=5000")
         db.execute("PRAGMA journal_mode=WAL")
         db.execute(f"PRAGMA synchronous={sync.value.upper()}")
-        db.execute("PRAGMA busy_timeout=5000")
-        db.executescript(_SCHEMA)
-        row = db.execute("SELECT value FROM meta WHERE key='version'").fetchone()
-        if row is None:
+        tables = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+        if not tables:
+            db.executescript(_SCHEMA)
             db.execute("INSERT OR IGNORE INTO meta VALUES ('version', ?)", (str(SCHEMA_VERSION),))
-        elif row[0] != str(SCHEMA_VERSION):
+            return db
+        missing = [t for t in ("meta", "devices", "inbox", "steps") if t not in tables]
+        if missing:
             raise JournalError(
-                f"{p}: journal schema version {row[0]}, this statectl reads {SCHEMA_VERSION}"
+                f"journal {p} cannot be trusted: table {', '.join(missing)} is missing"
+            )
+        row = db.execute("SELECT value FROM meta WHERE key='version'").fetchone()
+        if row is None or row[0] != str(SCHEMA_VERSION):
+            found = "none" if row is None else repr(row[0])
+            raise JournalError(
+                f"journal {p}: schema version {found}, this statectl reads {SCHEMA_VERSION}"
             )
     except sqlite3.Error as exc:
-        raise JournalError(f"cannot open journal {p}: {exc}") from None
+        if db is not None:
+            db.close()
+        raise JournalError(f"cannot open journal {p}: {_problem(exc, p.parent)}") from None
+    except JournalError:
+        if db is not None:
+            db.close()
+        raise
     return db
+
+
+def _problem(exc: BaseException, where: Path | None = None) -> str:
+    from statectl.journal.check import sqlite_problem  # check.py imports this module
+
+    return sqlite_problem(exc, where)
 
 
 @dataclass(frozen=True, slots=True)
@@ -249,6 +276,11 @@ class Journal:
     ``deliver`` callback, marks the batch durable and then runs the
     :meth:`after_commit` hooks (a :class:`~statectl.runner.System` drains its
     devices there when their owner is idle), all in the same wake-up.
+
+    An existing journal is checked first (``check``, see journal/check.py) and
+    refused with :class:`~statectl.journal.check.JournalDamaged` if it cannot be
+    trusted. A write that fails (a full disk, a file made read-only) is rolled
+    back, so the file keeps every commit before it whole (rule 5).
     """
 
     def __init__(
@@ -259,6 +291,7 @@ class Journal:
         guarantee: Guarantee | str = Guarantee.PROMPT,
         commit_delay: float | None = None,
         max_batch: int = 20_000,
+        check: bool = True,
     ):
         self.path = Path(path)
         self.sync = sync
@@ -271,6 +304,16 @@ class Journal:
             commit_delay = PROMPT_COMMIT_DELAY if self.guarantee is Guarantee.PROMPT else 0.0
         self.commit_delay = commit_delay
         self.max_batch = max_batch
+        if check and self.path.exists():
+            from statectl.journal.check import check_journal  # it imports this module
+
+            check_journal(self.path, reader=False)
+            if not (os.access(self.path, os.W_OK) and os.access(self.path.parent, os.W_OK)):
+                raise JournalError(
+                    f"journal {self.path}: it is read-only (the file or its directory cannot "
+                    "be written); statectl appends to a journal and writes its -wal and -shm "
+                    "files beside it: make them writable, or give another --journal"
+                )
         self._db = connect_db(self.path, sync=sync)
         last = self._db.execute("SELECT max(seq) FROM inbox").fetchone()[0]
         self._seq = int(last or 0)
@@ -415,7 +458,7 @@ class Journal:
         target = self._enqueued
         ok = self._wait(lambda: self._done >= target, timeout)
         if self._failure is not None:
-            raise JournalError(f"journal write failed: {self._failure}")
+            raise self._failed()
         return ok
 
     def _wait(self, done: Callable[[], bool], timeout: float | None) -> bool:
@@ -427,7 +470,7 @@ class Journal:
             try:
                 while not done():
                     if self._failure is not None:
-                        raise JournalError(f"journal write failed: {self._failure}")
+                        raise self._failed()
                     left = None if deadline is None else deadline - time.monotonic()
                     if left is not None and left <= 0:
                         return False
@@ -447,17 +490,26 @@ class Journal:
         self._thread.join()
         self._db.close()
         if self._failure is not None:
-            raise JournalError(f"journal write failed: {self._failure}")
+            raise self._failed()
 
     @property
     def queued(self) -> int:
         return self._enqueued - self._done
 
+    def _failed(self) -> JournalError:
+        """The error every caller gets once a write failed: what, where, and what to do."""
+        problem = _problem(self._failure or Exception(), self.path.parent)
+        return JournalError(
+            f"journal {self.path}: write failed: {problem}; "
+            "nothing after the last commit is accepted (the journal keeps everything before "
+            "it: resume with --resume once the cause is fixed)"
+        )
+
     def _check(self) -> None:
         if self._closing:
             raise JournalError(f"journal {self.path} is closed")
         if self._failure is not None:
-            raise JournalError(f"journal write failed: {self._failure}")
+            raise self._failed()
 
     # -- the writer thread -----------------------------------------------------------------------
 
@@ -503,6 +555,8 @@ class Journal:
             self._write(db, batch)
             db.execute("COMMIT")
         except BaseException as exc:  # the writer must report, never die silently
+            with contextlib.suppress(sqlite3.Error):  # SQLite may have rolled it back already
+                db.execute("ROLLBACK")  # nothing half-written: the transaction goes entirely
             with self._cond:
                 self._failure = exc
                 self._cond.notify_all()

@@ -1,0 +1,495 @@
+"""The journal under faults: every damaged journal is refused by every command, clearly.
+
+One table of faults (what is done to a good journal, what the message must say) runs
+through one helper against each command that reads a journal: ``journal show``,
+``journal export`` (to standard output and to a file), ``journal replay`` and
+``run --resume``. Each must exit 1 with a message naming the journal and the fault,
+write nothing on standard output (and no file), and leave the journal as it was.
+A full disk and a read-only journal need a file system of their own (a small tmpfs);
+those tests skip when the machine does not allow mounting one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import shutil
+import sqlite3
+import subprocess
+import sys
+import uuid
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+from statectl.cli import BROKEN_PIPE, main
+from statectl.journal import (
+    Journal,
+    JournalDamaged,
+    JournalError,
+    JournalReader,
+    StepKind,
+    check_journal,
+    load_device,
+    replay,
+)
+from statectl.runner import DeviceSetup, System, run
+from statectl.runtime import SimClock
+from statectl.semantics import Snapshot
+
+MOTOR = Path(__file__).parent.parent / "examples" / "motor" / "motor.yaml"
+SRC = Path(__file__).parent.parent / "src"
+EVENTS = "Movement {amount: 2}\n+5\nMovement {amount: 1}\n+5\nMovement {amount: 3}\n"
+
+
+@pytest.fixture(scope="module")
+def good_journal(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A journal of a real run: three movements of the shipped Motor, closed cleanly."""
+    where = tmp_path_factory.mktemp("good")
+    db = where / "run.db"
+    code = run(str(MOTOR), journal=str(db), events=io.StringIO(EVENTS), out=io.StringIO())
+    assert code == 0
+    return db
+
+
+def sql(*statements: str) -> Callable[[Path], None]:
+    def damage(db: Path) -> None:
+        con = sqlite3.connect(db)
+        try:
+            for s in statements:
+                con.execute(s)
+            con.commit()
+        finally:
+            con.close()
+
+    return damage
+
+
+def truncate(db: Path) -> None:
+    with db.open("r+b") as f:
+        f.truncate(db.stat().st_size // 2)
+
+
+def flip_bytes(db: Path) -> None:
+    """Invert 64 bytes at the start of the third page: a b-tree page's header."""
+    with db.open("r+b") as f:
+        page = int.from_bytes(f.read(18)[16:18], "big")
+        f.seek(2 * page)
+        block = f.read(64)
+        f.seek(2 * page)
+        f.write(bytes(b ^ 0xFF for b in block))
+
+
+def not_sqlite(db: Path) -> None:
+    db.write_text("device,event\nMotor,Movement\n", encoding="utf-8")
+
+
+def empty(db: Path) -> None:
+    db.write_bytes(b"")
+
+
+def directory(db: Path) -> None:
+    db.unlink()
+    db.mkdir()
+
+
+COPY_STEP = (
+    "INSERT INTO steps SELECT NULL, device, kind, inbox, wall, time, event, data, outcome, "
+    "active, history, previous FROM steps WHERE inbox = 1"
+)
+
+LAST = "id = (SELECT max(id) FROM steps)"  # the step resume reads
+PENDING = "INSERT INTO inbox VALUES (99, 'Motor', 0, 'Movement', '{oops')"  # resume reads it
+
+# (fault, what is done to a good journal, what the message says)
+FAULTS: list[tuple[str, Callable[[Path], None], str]] = [
+    ("truncated", truncate, "is truncated"),
+    ("flipped bytes", flip_bytes, "damaged"),
+    ("not SQLite", not_sqlite, "not a SQLite database"),
+    ("empty", empty, "empty (0 bytes)"),
+    ("a directory", directory, "is a directory"),
+    ("steps table dropped", sql("DROP TABLE steps"), "table steps is missing"),
+    ("inbox table dropped", sql("DROP TABLE inbox"), "table inbox is missing"),
+    ("newer schema", sql("UPDATE meta SET value = '2'"), "schema version is '2'"),
+    ("no schema version", sql("DELETE FROM meta"), "no schema version"),
+    ("unknown step kind", sql("UPDATE steps SET kind = 'teleport' WHERE id = 2"), "'teleport'"),
+    ("step of wrong type", sql(f"UPDATE steps SET active = 42 WHERE {LAST}"), "wrong type"),
+    ("step data not JSON", sql(f"UPDATE steps SET data = '{{oops' WHERE {LAST}"), "wrong type"),
+    ("event data not JSON", sql(PENDING), "accepted events with columns of the wrong type: #99"),
+    ("event applied twice", sql(COPY_STEP), "applied more than once: #1 by steps 2, "),
+    ("steps missing", sql("DELETE FROM steps WHERE inbox = 1"), "steps are missing"),
+    ("step of no event", sql("DELETE FROM inbox WHERE seq = 2"), "does not hold"),
+]
+
+
+def damaged(good: Path, tmp_path: Path, fault: Callable[[Path], None]) -> Path:
+    db = tmp_path / "run.db"
+    shutil.copyfile(good, db)
+    fault(db)
+    return db
+
+
+def snapshot_of(path: Path) -> bytes | None:
+    return path.read_bytes() if path.is_file() else None
+
+
+def command(name: str, db: Path, tmp_path: Path) -> list[str]:
+    return {
+        "show": ["journal", "show", str(db)],
+        "export": ["journal", "export", str(db)],
+        "export --out": ["journal", "export", str(db), "--out", str(tmp_path / "out.jsonl")],
+        "replay": ["journal", "replay", str(db)],
+        "run --resume": ["run", str(MOTOR), "--journal", str(db), "--resume"],
+    }[name]
+
+
+COMMANDS = ["show", "export", "export --out", "replay", "run --resume"]
+
+
+def cli(argv: list[str], monkeypatch: pytest.MonkeyPatch) -> tuple[int, str, str]:
+    out, err = io.StringIO(), io.StringIO()
+    monkeypatch.setattr(sys, "stdin", io.StringIO("Movement {amount: 1}\n"))
+    code = main(argv, out, err)
+    return code, out.getvalue(), err.getvalue()
+
+
+@pytest.mark.parametrize("name", COMMANDS)
+@pytest.mark.parametrize(("fault", "damage", "says"), FAULTS, ids=[f[0] for f in FAULTS])
+def test_every_command_refuses_a_damaged_journal(
+    good_journal: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    name: str,
+    fault: str,
+    damage: Callable[[Path], None],
+    says: str,
+) -> None:
+    """Exit 1, one message naming the journal and the fault, no output, the journal untouched."""
+    db = damaged(good_journal, tmp_path, damage)
+    before = snapshot_of(db)
+    code, out, err = cli(command(name, db, tmp_path), monkeypatch)
+    assert (code, says in err, str(db) in err) == (1, True, True), err
+    assert out == ""  # nothing shown, exported or started
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.db"]  # no output file, no temp
+    assert snapshot_of(db) == before
+
+
+def test_a_bad_row_resume_does_not_read_is_refused_by_readers_only(
+    good_journal: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An old event's data that is not JSON: show refuses it; resume, which never reads
+    it (and checks only the rows it reads, to stay fast), resumes."""
+    db = damaged(good_journal, tmp_path, sql("UPDATE inbox SET data = '{oops' WHERE seq = 1"))
+    shown = cli(command("show", db, tmp_path), monkeypatch)
+    assert (shown[0], "accepted events with columns of the wrong type: #1" in shown[2]) == (
+        1,
+        True,
+    )
+    resumed = cli(command("run --resume", db, tmp_path), monkeypatch)
+    assert (resumed[0], "resumed Motor in Blocked" in resumed[1]) == (0, True), resumed[2]
+
+
+def test_a_bad_old_step_a_redo_walks_back_to_fails_the_resume_clearly(tmp_path: Path) -> None:
+    """Resume reads an untyped old step only for a redo: a row that does not parse is named."""
+    db = tmp_path / "run.db"
+    dev = load_device(MOTOR)
+    first = System(
+        (DeviceSetup("Motor", dev.chart, dev.rules, str(MOTOR)),), SimClock(), Journal(db)
+    )
+    first.start()
+    for event in ("Movement", "Error"):  # Returning, which the Motor's redo rule redoes
+        first.post(None, event)
+        first.drain()
+    first.close()
+    sql("UPDATE steps SET history = 'oops' WHERE event = 'Movement'")(db)
+    out, err = io.StringIO(), io.StringIO()
+    code = run(str(MOTOR), journal=str(db), resume=True, events=io.StringIO(), out=out, err=err)
+    assert (code, f"journal {db}: step 2 cannot be read" in err.getvalue()) == (1, True), err
+
+
+def test_a_journal_without_steps_is_not_resumed_and_nothing_is_redelivered(
+    good_journal: Path, tmp_path: Path
+) -> None:
+    """Dropping ``steps`` used to resume with exit 0 and send every old Movement again."""
+    db = damaged(good_journal, tmp_path, sql("DROP TABLE steps"))
+    out, err = io.StringIO(), io.StringIO()
+    code = run(str(MOTOR), journal=str(db), resume=True, events=io.StringIO(), out=out, err=err)
+    assert (code, "Movement" in out.getvalue()) == (1, False)
+    assert "--fresh" in err.getvalue()
+    with sqlite3.connect(db) as con:  # the table was not made again behind the user's back
+        tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+    assert "steps" not in tables
+
+
+def test_replay_names_an_event_applied_twice_even_unchecked(
+    good_journal: Path, tmp_path: Path
+) -> None:
+    """replay() itself refuses a second step for one accepted event, naming both steps."""
+    db = damaged(good_journal, tmp_path, sql(COPY_STEP))
+    with JournalReader(db, check=False) as reader, pytest.raises(JournalError) as caught:
+        replay(reader, {"Motor": load_device(MOTOR).chart})
+    assert "accepted event #1 (Motor: Movement) was applied twice, by steps 2 and" in str(
+        caught.value
+    )
+
+
+@pytest.mark.parametrize("resume", [True, False])
+def test_fresh_sets_the_old_journal_aside_and_says_where(
+    good_journal: Path, tmp_path: Path, resume: bool
+) -> None:
+    """--fresh renames the journal with a timestamp and starts a new one; --resume --fresh
+    does so only for a journal it cannot trust."""
+    db = damaged(good_journal, tmp_path, sql("DROP TABLE steps"))
+    before = db.read_bytes()
+    out = io.StringIO()
+    code = run(
+        str(MOTOR), journal=str(db), resume=resume, fresh=True, events=io.StringIO(), out=out
+    )
+    aside = [p for p in tmp_path.iterdir() if p.name.startswith("run.db.")]
+    assert (code, len(aside)) == (0, 1)
+    assert f"set aside as {aside[0]}" in out.getvalue()
+    assert aside[0].read_bytes() == before
+    check_journal(db)  # the new journal is whole
+    with JournalReader(db) as reader:
+        assert [s.kind for s in reader.steps()] == [StepKind.START]
+
+
+def test_resume_fresh_resumes_a_journal_it_can_trust(good_journal: Path, tmp_path: Path) -> None:
+    """--resume --fresh on a good journal resumes it and sets nothing aside."""
+    db = damaged(good_journal, tmp_path, lambda db: None)
+    out = io.StringIO()
+    code = run(str(MOTOR), journal=str(db), resume=True, fresh=True, events=io.StringIO(), out=out)
+    assert (code, "resumed Motor in Blocked" in out.getvalue()) == (0, True)
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("run.db")) == ["run.db"]
+
+
+def test_fresh_needs_a_journal(tmp_path: Path) -> None:
+    """--fresh without --journal is a usage error."""
+    err = io.StringIO()
+    assert run(str(MOTOR), fresh=True, events=io.StringIO(), err=err) == 2
+    assert "--fresh needs --journal" in err.getvalue()
+
+
+# --- a reader that goes away -----------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def long_journal(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A journal whose show/export output is far larger than a pipe's buffer."""
+    db = tmp_path_factory.mktemp("long") / "long.db"
+    journal = Journal(db)
+    blocked = Snapshot(frozenset({"Blocked"}), (), None)
+    journal.register("Motor", "Motor", str(MOTOR), {})
+    journal.record("Motor", StepKind.START, blocked, time_=0.0)
+    for i in range(3000):
+        seq = journal.accept("Motor", "Initialization").seq
+        journal.record(
+            "Motor", StepKind.EVENT, blocked, time_=i, event="Initialization", inbox=seq,
+            outcome="guard false",
+        )  # fmt: skip
+    journal.close()
+    return db
+
+
+@pytest.mark.parametrize("name", ["show", "export", "replay", "run"])
+def test_a_reader_that_goes_away_ends_the_command_quietly(
+    long_journal: Path, tmp_path: Path, name: str
+) -> None:
+    """``statectl journal show DB | head -1``: no traceback, the exit status of SIGPIPE."""
+    env = {**os.environ, "PYTHONPATH": f"{SRC}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+    argv = ["journal", name, str(long_journal)]
+    events = tmp_path / "events.txt"
+    events.write_text("Movement {amount: 1}\n+2\n" * 3000, encoding="utf-8")
+    if name == "run":  # its trace streams too
+        argv = ["run", str(MOTOR), "--journal", str(tmp_path / "run.db")]
+    with events.open("rb") as stdin:
+        child = subprocess.Popen(
+            [sys.executable, "-m", "statectl", *argv],
+            stdin=stdin,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            env=env,
+        )
+    assert child.stdout is not None and child.stderr is not None
+    first = child.stdout.readline()
+    child.stdout.close()  # what head does after its line
+    err = child.stderr.read().decode()
+    child.stderr.close()
+    code = child.wait(timeout=60)
+    assert first
+    assert (code, err) == (BROKEN_PIPE, "")
+
+
+@pytest.mark.parametrize(("reader_open", "code"), [(False, BROKEN_PIPE), (True, 1)])
+def test_a_broken_pipe_elsewhere_is_an_error(
+    monkeypatch: pytest.MonkeyPatch, reader_open: bool, code: int
+) -> None:
+    """Only a closed standard output ends quietly; a broken pipe of another kind is reported."""
+    import statectl.cli
+
+    def broken(*_: object) -> int:
+        raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr(statectl.cli, "cmd_journal", broken)
+    read, write = os.pipe()
+    if not reader_open:
+        os.close(read)
+    err = io.StringIO()
+    with os.fdopen(write, "w") as out:
+        got = main(["journal", "show", "x.db"], out, err)
+    if reader_open:
+        os.close(read)
+    assert (got, "Broken pipe" in err.getvalue()) == (code, reader_open)
+
+
+# --- a file system of its own: full, read-only ---------------------------------------------
+
+
+@contextlib.contextmanager
+def tmpfs(where: Path, size: str) -> Iterator[Path]:
+    """A small tmpfs at ``where``; skips the test where mounting is not allowed."""
+    where.mkdir()
+    if sys.platform != "linux" or shutil.which("mount") is None:
+        pytest.skip("needs Linux mount")
+    made = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", f"size={size}", f"statectl-{uuid.uuid4().hex[:8]}",
+         str(where)],
+        capture_output=True,
+        check=False,
+    )  # fmt: skip
+    if made.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {made.stderr.decode().strip()}")
+    try:
+        yield where
+    finally:
+        subprocess.run(["umount", "-l", str(where)], check=False)
+
+
+def fill(directory: Path) -> None:
+    """Take every free byte of ``directory``'s file system."""
+    with contextlib.suppress(OSError), (directory / "filler").open("wb") as f:
+        while True:
+            f.write(b"\0" * 4096)
+            f.flush()
+
+
+def grow(disk: Path) -> None:
+    """Make room on the tmpfs: the disk full no more."""
+    subprocess.run(["mount", "-o", "remount,size=16m", str(disk)], check=True)
+
+
+def test_a_full_disk_stops_the_run_keeps_every_acknowledged_event(tmp_path: Path) -> None:
+    """On a full disk a post fails clearly; what was acknowledged is in the journal, whole."""
+    chart = load_device(MOTOR)
+    with tmpfs(tmp_path / "disk", "1m") as disk:
+        db = disk / "run.db"
+        setup = DeviceSetup("Motor", chart.chart, chart.rules, str(MOTOR))
+        system = System((setup,), SimClock(), Journal(db))
+        system.start()
+        acknowledged: list[int] = []
+        failure = None
+        try:
+            for i in range(5000):  # each posts 2 kB: far more than the space left
+                ticket = system.post(None, "Initialization", {"pad": "x" * 2000, "i": i})
+                assert ticket is not None
+                ticket.wait(10.0)
+                acknowledged.append(ticket.seq)
+                system.drain()
+        except JournalError as exc:
+            failure = str(exc)
+        with pytest.raises(JournalError):
+            system.close()
+        assert failure is not None and "the disk is full" in failure and str(db) in failure
+        assert acknowledged  # the disk filled up during the run, not before it
+        grow(disk)
+        check_journal(db)  # whole: the failed transaction left nothing behind
+        with JournalReader(db) as reader:
+            kept = {r.seq for r in reader.inbox()}
+            assert set(acknowledged) <= kept
+            assert replay(reader, {"Motor": chart.chart}).ok
+        resumed = System((setup,), SimClock(), Journal(db))
+        try:
+            assert resumed.start(resume=True) == {"Motor": True}
+        finally:
+            resumed.close()
+
+
+def test_a_resume_on_a_full_disk_fails_before_anything_reaches_the_device(
+    tmp_path: Path,
+) -> None:
+    """The restore is committed first: on a full disk resume fails, the pending event unsent."""
+    chart = load_device(MOTOR)
+    setup = DeviceSetup("Motor", chart.chart, chart.rules, str(MOTOR))
+    with tmpfs(tmp_path / "disk", "1m") as disk:
+        db = disk / "run.db"
+        first = System((setup,), SimClock(), Journal(db))
+        first.start()
+        with first.owner:  # accepted, never processed: resume would redeliver it
+            ticket = first.post(None, "Movement", {"amount": 1})
+            assert ticket is not None and ticket.wait(5.0)
+            first.close()
+        again = System((setup,), SimClock(), Journal(db))
+        assert again.journal is not None
+        again.journal.flush()  # the devices rows: what is written next is the restore
+        fill(disk)
+        with pytest.raises(JournalError, match="the disk is full"):
+            again.start(resume=True)
+        assert (again.subjects["Motor"].queued, again.bound["Motor"].redelivered) == (0, 0)
+        with pytest.raises(JournalError):
+            again.close()
+
+
+def test_a_full_disk_fails_the_command_line_run_and_export(tmp_path: Path) -> None:
+    """``statectl run`` says which line was not accepted and why; export leaves no file."""
+    with tmpfs(tmp_path / "disk", "1m") as disk:
+        db = disk / "run.db"
+        lines = "".join(f"Initialization {{pad: {'x' * 2000}}}\n" for _ in range(600))
+        out, err = io.StringIO(), io.StringIO()
+        code = run(str(MOTOR), journal=str(db), events=io.StringIO(lines), out=out, err=err)
+        text = err.getvalue()
+        assert (code, "the disk is full" in text, "line " in text) == (1, True, True), text
+        assert "Traceback" not in text
+        fill(disk)
+        got = main(["journal", "export", str(db), "--out", str(disk / "out.jsonl")],
+                   io.StringIO(), err := io.StringIO())  # fmt: skip
+        assert (got, "disk is full" in err.getvalue()) == (1, True), err.getvalue()
+        assert not [p for p in disk.iterdir() if "out.jsonl" in p.name]
+        grow(disk)
+        assert main(["journal", "replay", str(db)], io.StringIO(), io.StringIO()) == 0
+
+
+def test_a_read_only_journal_is_read_but_not_resumed(good_journal: Path, tmp_path: Path) -> None:
+    """show/export/replay read a journal on a read-only file system; --resume says why not."""
+    with tmpfs(tmp_path / "disk", "4m") as disk:
+        db = disk / "run.db"
+        shutil.copyfile(good_journal, db)
+        remount = subprocess.run(
+            ["mount", "-o", "remount,ro", str(disk)], capture_output=True, check=False
+        )
+        if remount.returncode != 0:
+            pytest.skip(f"cannot remount read-only: {remount.stderr.decode().strip()}")
+        for argv in (["show"], ["export"], ["replay"]):
+            out, err = io.StringIO(), io.StringIO()
+            assert main(["journal", *argv, str(db)], out, err) == 0, err.getvalue()
+            assert out.getvalue()
+        out, err = io.StringIO(), io.StringIO()
+        code = run(str(MOTOR), journal=str(db), resume=True, events=io.StringIO(), out=out,
+                   err=err)  # fmt: skip
+        assert (code, "read-only" in err.getvalue(), str(db) in err.getvalue()) == (1, True, True)
+        with pytest.raises(JournalError, match="read-only"):
+            Journal(db)
+
+
+def test_check_journal_finds_a_damaged_journal_as_a_value(
+    good_journal: Path, tmp_path: Path
+) -> None:
+    """JournalDamaged carries its path and one line per problem."""
+    db = damaged(good_journal, tmp_path, sql("DROP TABLE steps", "DROP TABLE inbox"))
+    with pytest.raises(JournalDamaged) as caught:
+        check_journal(db)
+    assert (caught.value.path, caught.value.problems) == (
+        db,
+        ("table inbox is missing", "table steps is missing"),
+    )
