@@ -382,10 +382,10 @@ class Session:
             if not path.is_file():
                 raise EvaluationError(f"src {src!r} is not a regular file")
             with path.open("rb") as stream:
-                data = stream.read(MAX_SRC_BYTES + 1)
-            if len(data) > MAX_SRC_BYTES:
+                raw = stream.read(MAX_SRC_BYTES + 1)
+            if len(raw) > MAX_SRC_BYTES:
                 raise EvaluationError(f"src {src!r} is larger than {MAX_SRC_BYTES:,} bytes")
-            return data.decode("utf-8"), path.parent
+            return raw.decode("utf-8"), path.parent
         except OSError as exc:
             raise EvaluationError(f"cannot read src {src!r}: {exc.strerror}") from exc
         except UnicodeDecodeError as exc:
