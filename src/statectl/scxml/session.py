@@ -293,7 +293,8 @@ class Session:
         self.running = True
         self.started = False
         self.final_state: str | None = None
-        self.microsteps: list[Microstep] = []
+        #: The latest microsteps (for inspection); the livelock bound counts one macrostep.
+        self.microsteps: deque[Microstep] = deque(maxlen=1000)
         self.to_invoke: list[str] = []
         self.invocations: dict[str, tuple[str, InvokeDef, Session | None]] = {}  # id -> state
         self.bound: set[str] = set()
@@ -395,7 +396,11 @@ class Session:
         """The inner loop of ``mainEventLoop``, then the invokes it made due."""
         while self.running:
             self.scheduler.check_deadline()
-            macrostep(self.machine, self.run, self.microsteps)
+            steps: list[Microstep] = []
+            try:
+                macrostep(self.machine, self.run, steps)
+            finally:
+                self.microsteps.extend(steps)
             if self.run.final:
                 self.finish()
                 return
