@@ -169,3 +169,20 @@ def test_scxml_run_watchdog_stops_trusted_code_no_check_reaches(folder: Path) ->
     assert done.returncode == 1
     assert "still running" in done.stderr
     assert "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize(
+    "cond", ["not " * 5000 + "In('s')", "x" * 20_000, "-" * 100_000 + "1", "In('s') +"]
+)
+def test_null_datamodel_refuses_hostile_conditions_without_a_traceback(
+    folder: Path, cond: str
+) -> None:
+    """A null document's deep, long or broken condition is error.execution, not a crash."""
+    text = (
+        f'{HEAD} datamodel="null" initial="s"><state id="s">'
+        f'<transition cond="{cond}" target="escaped"/>'
+        '<transition event="error.execution" target="refused"/></state>'
+        '<final id="refused"/><final id="escaped"/></scxml>'
+    )
+    result, _trace = _run(text, folder)
+    assert result == "refused"

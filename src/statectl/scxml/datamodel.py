@@ -33,6 +33,7 @@ from statectl.errors import Location, StatectlError
 from statectl.expr import (
     CALLABLE_NAMES,
     MAX_SIZE,
+    MAX_SOURCE,
     Expression,
     ExpressionRefused,
     compile_expression,
@@ -208,10 +209,14 @@ class NullDatamodel:
                 raise EvaluationError("the null datamodel only evaluates In('state')")
 
     def evaluate(self, expr: str) -> Any:
+        if len(expr) > MAX_SOURCE:
+            raise EvaluationError(f"expression longer than {MAX_SOURCE:,} characters")
         try:
             tree = ast.parse(expr.strip(), mode="eval")
         except SyntaxError as exc:
-            raise EvaluationError(f"{expr!r} does not parse") from exc
+            raise EvaluationError(f"{expr[:60]!r} does not parse") from exc
+        except (RecursionError, MemoryError) as exc:
+            raise EvaluationError(f"{expr[:60]!r} is nested too deeply") from exc
         self._check(tree)
         try:
             return eval(compile(tree, "<null>", "eval"), {"__builtins__": {}, "In": self._in})
