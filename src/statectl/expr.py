@@ -303,12 +303,12 @@ ALLOWED_PRIVATE = frozenset({"_event"})
 
 _SAFE_GLOBALS: dict[str, Any] = {
     "__builtins__": {},
-    "_op_mul": _op_mul,
-    "_op_add": _op_add,
-    "_op_mod": _op_mod,
-    "_op_attr": _op_attr,
-    "_op_display": _op_display,
-    **{f"_fn_{name}": f for name, f in FUNCTIONS.items()},
+    "<*>": _op_mul,
+    "<+>": _op_add,
+    "<%>": _op_mod,
+    "<.>": _op_attr,
+    "<display>": _op_display,
+    **{f"<{name}>": f for name, f in FUNCTIONS.items()},
 }
 
 _ALLOWED_NODES: tuple[type[ast.AST], ...] = (
@@ -354,7 +354,6 @@ _ALLOWED_NODES: tuple[type[ast.AST], ...] = (
 
 #: Helper names the bounded code calls; they win over any variable of the same name.
 _HELPERS: dict[str, Any] = {k: v for k, v in _SAFE_GLOBALS.items() if k != "__builtins__"}
-_NO_BUILTINS: dict[str, Any] = {"__builtins__": {}}
 
 
 @dataclass(frozen=True, slots=True)
@@ -370,9 +369,8 @@ class Expression:
 
         Raises :class:`ExpressionRefused` when an operation would exceed a bound.
         """
-        namespace = dict(env)
-        namespace.update(_HELPERS)  # the whitelist holds names: data cannot shadow them
-        return eval(self.code, _NO_BUILTINS, namespace)  # checked, bounded AST, no builtins
+        # The helpers' names ('<len>', '<*>') are no identifier: no variable can shadow them.
+        return eval(self.code, _SAFE_GLOBALS, dict(env))  # checked, bounded AST, no builtins
 
 
 def _describe(node: ast.AST) -> str:
@@ -413,9 +411,9 @@ class _Bound(ast.NodeTransformer):
     """Route every operation with non-linear cost, and every attribute read, via a guard."""
 
     _OPS: ClassVar[dict[type[ast.operator], str]] = {
-        ast.Mult: "_op_mul",
-        ast.Add: "_op_add",
-        ast.Mod: "_op_mod",
+        ast.Mult: "<*>",
+        ast.Add: "<+>",
+        ast.Mod: "<%>",
     }
 
     def visit_BinOp(self, node: ast.BinOp) -> ast.expr:
@@ -425,12 +423,12 @@ class _Bound(ast.NodeTransformer):
 
     def visit_Attribute(self, node: ast.Attribute) -> ast.expr:
         self.generic_visit(node)
-        return _call("_op_attr", node, node.value, ast.Constant(node.attr))
+        return _call("<.>", node, node.value, ast.Constant(node.attr))
 
     def visit_Call(self, node: ast.Call) -> ast.expr:
         self.generic_visit(node)
         if isinstance(node.func, ast.Name) and node.func.id in FUNCTIONS:
-            node.func = ast.Name("_fn_" + node.func.id, ast.Load())
+            node.func = ast.Name(f"<{node.func.id}>", ast.Load())
         return node
 
     def _display(self, node: ast.expr) -> ast.expr:
@@ -440,7 +438,7 @@ class _Bound(ast.NodeTransformer):
             parts.append(node)  # '**' unpacking: not all literal
         if all(isinstance(p, ast.Constant) for p in parts):
             return node
-        return _call("_op_display", node, node)
+        return _call("<display>", node, node)
 
     visit_List = visit_Tuple = visit_Set = visit_Dict = _display
 
@@ -483,7 +481,7 @@ def _fold(tree: ast.AST) -> list[tuple[ast.AST, str]]:
                 continue
             try:
                 code = compile(ast.Expression(node), "<literal part>", "eval")
-                eval(code, _NO_BUILTINS, dict(_HELPERS))  # bounded helpers, literals only
+                eval(code, _SAFE_GLOBALS, {})  # bounded helpers, literals only
             except ExpressionRefused as exc:
                 problems.append((node, str(exc)))
             except Exception:  # other failures surface when it is evaluated
