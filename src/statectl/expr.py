@@ -33,8 +33,9 @@ it, so guards are a checked, bounded subset of Python expressions. Rules:
 from __future__ import annotations
 
 import ast
+import functools
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import CodeType
 from typing import Any, ClassVar
 
@@ -388,33 +389,48 @@ def _describe(node: ast.AST) -> str:
     }.get(type(node).__name__, type(node).__name__)
 
 
-def _depth(tree: ast.AST) -> int:
-    """Nesting depth of sub-expressions, computed without recursion; stops past the limit."""
-    deepest = 0
-    stack: list[tuple[ast.AST, int]] = [(tree, 0)]
-    while stack:
-        node, depth = stack.pop()
-        if isinstance(node, ast.expr):
-            depth += 1
-        if depth > MAX_DEPTH:
-            return depth
-        deepest = max(deepest, depth)
-        stack.extend((child, depth) for child in ast.iter_child_nodes(node))
-    return deepest
-
-
 def _call(helper: str, node: ast.AST, *args: ast.expr) -> ast.expr:
-    return ast.copy_location(ast.Call(ast.Name(helper, ast.Load()), list(args), []), node)
+    func = ast.copy_location(ast.Name(helper, ast.Load()), node)
+    return ast.copy_location(ast.Call(func, list(args), []), node)
 
 
 class _Bound(ast.NodeTransformer):
-    """Route every operation with non-linear cost, and every attribute read, via a guard."""
+    """Route every operation with non-linear cost, and every attribute read, via a guard.
+
+    On the way it marks the parts built from literals only (``literal``, by node
+    id) and notes whether any of them calls a guard (``foldable``).
+    """
 
     _OPS: ClassVar[dict[type[ast.operator], str]] = {
         ast.Mult: "<*>",
         ast.Add: "<+>",
         ast.Mod: "<%>",
     }
+
+    def __init__(self) -> None:
+        self.literal: set[int] = set()
+        self.foldable = False
+        self.big: list[ast.Constant] = []
+
+    def _is_literal(self, node: ast.AST) -> bool:
+        return isinstance(node, ast.Constant) or id(node) in self.literal
+
+    def visit(self, node: ast.AST) -> Any:
+        new = super().visit(node)
+        if isinstance(new, ast.Constant):
+            if isinstance(new.value, int) and new.value.bit_length() > MAX_INT_BITS:
+                self.big.append(new)
+        elif isinstance(new, ast.Call):
+            func = new.func
+            helper = isinstance(func, ast.Name) and func.id in _HELPERS
+            if helper and all(self._is_literal(a) for a in new.args):
+                self.literal.add(id(new))
+                self.foldable = True
+        elif isinstance(new, ast.expr) and not isinstance(new, ast.Name):
+            children = [c for c in ast.iter_child_nodes(new) if isinstance(c, ast.expr)]
+            if all(self._is_literal(c) for c in children):
+                self.literal.add(id(new))
+        return new
 
     def visit_BinOp(self, node: ast.BinOp) -> ast.expr:
         self.generic_visit(node)
@@ -423,12 +439,13 @@ class _Bound(ast.NodeTransformer):
 
     def visit_Attribute(self, node: ast.Attribute) -> ast.expr:
         self.generic_visit(node)
-        return _call("<.>", node, node.value, ast.Constant(node.attr))
+        name = ast.copy_location(ast.Constant(node.attr), node)
+        return _call("<.>", node, node.value, name)
 
     def visit_Call(self, node: ast.Call) -> ast.expr:
         self.generic_visit(node)
         if isinstance(node.func, ast.Name) and node.func.id in FUNCTIONS:
-            node.func = ast.Name(f"<{node.func.id}>", ast.Load())
+            node.func = ast.copy_location(ast.Name(f"<{node.func.id}>", ast.Load()), node.func)
         return node
 
     def _display(self, node: ast.expr) -> ast.expr:
@@ -438,47 +455,24 @@ class _Bound(ast.NodeTransformer):
             parts.append(node)  # '**' unpacking: not all literal
         if all(isinstance(p, ast.Constant) for p in parts):
             return node
+        if all(self._is_literal(p) for p in parts):
+            self.literal.add(id(node))
         return _call("<display>", node, node)
 
     visit_List = visit_Tuple = visit_Set = visit_Dict = _display
 
 
-def _literal_nodes(tree: ast.AST) -> set[int]:
-    """Ids of the expression nodes built from literals and bounded functions only."""
-    literal: set[int] = set()
-    order: list[ast.AST] = []
-    stack: list[ast.AST] = [tree]
-    while stack:
-        node = stack.pop()
-        order.append(node)
-        stack.extend(ast.iter_child_nodes(node))
-    for node in reversed(order):  # children before parents
-        if isinstance(node, ast.Name):
-            continue
-        if isinstance(node, ast.Call) and not (
-            isinstance(node.func, ast.Name) and node.func.id in _HELPERS
-        ):
-            continue
-        children = [c for c in ast.iter_child_nodes(node) if isinstance(c, ast.expr)]
-        if isinstance(node, ast.Call):
-            children = list(node.args)
-        if all(id(c) in literal for c in children):
-            literal.add(id(node))
-    return literal
-
-
-def _fold(tree: ast.AST) -> list[tuple[ast.AST, str]]:
+def _fold(tree: ast.AST, bound: _Bound) -> list[tuple[ast.AST, str]]:
     """Evaluate each largest literal-only part once: the bounds it breaks, found at load."""
-    literal = _literal_nodes(tree)
-    problems: list[tuple[ast.AST, str]] = []
+    problems: list[tuple[ast.AST, str]] = [
+        (c, f"integer literal of more than {MAX_INT_BITS} bits") for c in bound.big
+    ]
+    if not bound.foldable:
+        return problems
     stack: list[ast.AST] = [tree]
     while stack:
         node = stack.pop()
-        if isinstance(node, ast.expr) and id(node) in literal:
-            if isinstance(node, ast.Constant):
-                if isinstance(node.value, int) and node.value.bit_length() > MAX_INT_BITS:
-                    problems.append((node, f"integer literal of more than {MAX_INT_BITS} bits"))
-                continue
+        if isinstance(node, ast.expr) and id(node) in bound.literal:
             try:
                 code = compile(ast.Expression(node), "<literal part>", "eval")
                 eval(code, _SAFE_GLOBALS, {})  # bounded helpers, literals only
@@ -525,8 +519,6 @@ def _parse(
         ]
     except (RecursionError, MemoryError):
         return None, [_too_deep(what, text, where, f"nests deeper than {MAX_DEPTH} levels")]
-    if _depth(tree) > MAX_DEPTH:
-        return None, [_too_deep(what, text, where, f"nests deeper than {MAX_DEPTH} levels")]
     return tree, []
 
 
@@ -539,7 +531,16 @@ def _refusals(
     def refuse(message: str, hint: str) -> None:
         diagnostics.append(Diagnostic("X302", Severity.ERROR, where, message, hint))
 
-    for node in ast.walk(tree):
+    stack: list[tuple[ast.AST, int]] = [(tree, 0)]
+    while stack:
+        node, depth = stack.pop()
+        if isinstance(node, ast.expr):
+            depth += 1
+            if depth > MAX_DEPTH:
+                return names, [
+                    _too_deep(what, source, where, f"nests deeper than {MAX_DEPTH} levels")
+                ]
+        stack.extend((child, depth) for child in ast.iter_child_nodes(node))
         col = getattr(node, "col_offset", None)
         at = f" at column {col + 1}" if col is not None else ""
         if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Pow):
@@ -580,15 +581,27 @@ def _refusals(
 def compile_expression(
     source: str, where: Location, *, what: str = "guard"
 ) -> tuple[Expression | None, list[Diagnostic]]:
-    """Parse, check and bound ``source``; return the expression or the reasons it was refused."""
+    """Parse, check and bound ``source``; return the expression or the reasons it was refused.
+
+    The work is cached by text (a table repeats its guards), so only the location of
+    each diagnostic is per call.
+    """
+    expression, diagnostics = _compile_cached(source, what)
+    return expression, [replace(d, where=where) for d in diagnostics]
+
+
+@functools.lru_cache(maxsize=4096)
+def _compile_cached(source: str, what: str) -> tuple[Expression | None, tuple[Diagnostic, ...]]:
+    where = Location()  # each caller puts its own location on the diagnostics
     tree, diagnostics = _parse(source, where, what)
     if tree is None:
-        return None, diagnostics
+        return None, tuple(diagnostics)
     names, diagnostics = _refusals(tree, source, where, what)
     if diagnostics:
-        return None, diagnostics
-    bounded = ast.fix_missing_locations(_Bound().visit(tree))
-    for node, why in _fold(bounded):
+        return None, tuple(diagnostics)
+    bound = _Bound()
+    bounded = bound.visit(tree)
+    for node, why in _fold(bounded, bound):
         col = getattr(node, "col_offset", None)
         at = f" at column {col + 1}" if col is not None else ""
         diagnostics.append(
@@ -601,9 +614,9 @@ def compile_expression(
             )
         )
     if diagnostics:
-        return None, diagnostics
-    code = compile(bounded, f"<{what} {where}>", "eval")
-    return Expression(source.strip(), code, frozenset(names)), diagnostics
+        return None, tuple(diagnostics)
+    code = compile(bounded, f"<{what}>", "eval")
+    return Expression(source.strip(), code, frozenset(names)), ()
 
 
 def check_names(
