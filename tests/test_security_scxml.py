@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import os
 import subprocess
 import sys
@@ -9,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from statectl.cli import main
 from statectl.scxml import Scheduler, Session, SimulatedClock, read_scxml
 from statectl.scxml.reader import SCXML_NS
 from statectl.scxml.session import MAX_INVOKE_DEPTH, MAX_SRC_BYTES
@@ -186,3 +188,13 @@ def test_null_datamodel_refuses_hostile_conditions_without_a_traceback(
     )
     result, _trace = _run(text, folder)
     assert result == "refused"
+
+
+@pytest.mark.parametrize("timeout", ["0", "-1", "nan", "inf"])
+def test_scxml_run_refuses_a_timeout_that_bounds_nothing(folder: Path, timeout: str) -> None:
+    """A zero, negative, nan or infinite --timeout is a usage error (exit 2), not a hang."""
+    path = folder / "doc.scxml"
+    path.write_text(f'{HEAD} initial="f"><final id="f"/></scxml>', encoding="utf-8")
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["scxml", "run", str(path), "--timeout", timeout], out, err) == 2
+    assert "--timeout must be" in err.getvalue()

@@ -178,6 +178,9 @@ def cmd_scxml_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
 
     from statectl.scxml import SessionTimeout, run_file
 
+    if not 0 < args.timeout <= 1e6:  # also refuses nan and inf
+        err.write("statectl scxml run: --timeout must be a number of seconds in (0, 1e6]\n")
+        return USAGE
     def watchdog() -> None:
         err.write(
             f"statectl scxml run: stopped: still running {SCXML_WATCHDOG_GRACE:g} s after "
