@@ -6,12 +6,14 @@ import io
 import os
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
 from statectl.cli import main
 from statectl.scxml import Scheduler, Session, SimulatedClock, read_scxml
+from statectl.scxml.datamodel import EvaluationError, SafeDatamodel
 from statectl.scxml.reader import SCXML_NS
 from statectl.scxml.session import MAX_INVOKE_DEPTH, MAX_SRC_BYTES
 
@@ -198,3 +200,26 @@ def test_scxml_run_refuses_a_timeout_that_bounds_nothing(folder: Path, timeout: 
     out, err = io.StringIO(), io.StringIO()
     assert main(["scxml", "run", str(path), "--timeout", timeout], out, err) == 2
     assert "--timeout must be" in err.getvalue()
+
+
+@pytest.mark.parametrize(
+    ("action", "fragment"),
+    [
+        (lambda dm: dm.declare("len", [1]), "callable name"),
+        (lambda dm: dm.declare("_x", 1), "callable name"),
+        (lambda dm: dm.declare("f", "x".join), "is a function"),
+        (lambda dm: dm.assign("s", "x".upper), "is a function"),
+        (lambda dm: dm.declare("big", [0] * 1_000_001), "larger than"),
+        (lambda dm: dm.evaluate("s.join"), "is a method"),
+        (lambda dm: dm.evaluate("In"), "is a function"),
+        (lambda dm: dm.evaluate("s * 1000000"), "repetition"),
+    ],
+)
+def test_safe_datamodel_holds_data_only_at_run_time(
+    action: Callable[[SafeDatamodel], object], fragment: str
+) -> None:
+    """Without the load check, the safe datamodel itself refuses callables and huge values."""
+    dm = SafeDatamodel({"s"}.__contains__)
+    dm.declare("s", "ab")
+    with pytest.raises(EvaluationError, match=fragment):
+        action(dm)
