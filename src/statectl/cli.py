@@ -181,6 +181,7 @@ def cmd_scxml_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     if not 0 < args.timeout <= 1e6:  # also refuses nan and inf
         err.write("statectl scxml run: --timeout must be a number of seconds in (0, 1e6]\n")
         return USAGE
+
     def watchdog() -> None:
         err.write(
             f"statectl scxml run: stopped: still running {SCXML_WATCHDOG_GRACE:g} s after "
@@ -433,7 +434,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument(
         "--allow-src",
         action="store_true",
-        help="let a safe/null document read <data>/<invoke> src files in its own directory",
+        help="let a safe/null document read <data src> files in its own directory",
     )
     s.add_argument("--verbose", action="store_true", help="print <log> and error events")
     s.set_defaults(func=cmd_scxml_run)
