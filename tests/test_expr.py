@@ -2,10 +2,20 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from statectl.errors import Location
-from statectl.expr import check_names, compile_expression
+from statectl.expr import (
+    MAX_DEPTH,
+    MAX_SIZE,
+    MAX_SOURCE,
+    ExpressionRefused,
+    check_names,
+    compile_expression,
+    value_size,
+)
 
 HERE = Location("motor.yaml", 12)
 
@@ -85,3 +95,128 @@ def test_evaluation_has_no_builtins() -> None:
     assert probe is not None
     with pytest.raises(NameError):
         probe.evaluate({})
+
+
+@pytest.mark.parametrize(
+    ("source", "fragment"),
+    [
+        ("'a' * 10000000000", "repetition '*'"),
+        ("len([0] * 100000000 * 3) > 0", "repetition '*'"),
+        ("x + ('a' * 1000000 + 'b')", "concatenation '+'"),
+        ("'%0999999999d' % 1", "format width is larger than 1000"),
+        ("'%.999999999f' % 1.5", "format precision is larger than 1000"),
+        ("'%*d' % (5, 1)", "'*' is not allowed"),
+        ("'%((a))0999999d' % {'(a)': 1}", "format width"),
+        ("round(1, -1000000000)", "round() digits"),
+        ("int('9' * 6000)", "int() of a text longer than 5000"),
+        ("int('1' * 4000) * 3", "integer of more than 10000 bits"),
+        ("9" * 3500, "integer literal of more than 10000 bits"),
+        ("'x'.join", "is a method or function"),
+        ("1 if x else [[0] * 1000] * 10000", "repetition '*'"),
+    ],
+)
+def test_literal_parts_beyond_a_bound_are_refused_at_load(source: str, fragment: str) -> None:
+    """A literal-only part that would exceed a bound is X304 at load, naming the bound."""
+    expr, diags = compile_expression(source, HERE)
+    assert expr is None
+    assert [d.code for d in diags] == ["X304"]
+    assert fragment in diags[0].message, diags[0].message
+
+
+@pytest.mark.parametrize(
+    "source",
+    [
+        "-" * 1000 + "1",
+        "[" * 2000 + "]" * 2000,
+        "(" * 1000 + "1" + ")" * 1000,
+        "-" * 100_000 + "1",
+        "1 + " * (MAX_DEPTH + 1) + "1",
+        "x" * (MAX_SOURCE + 1),
+    ],
+    ids=["unary-1000", "lists-2000", "parens-1000", "unary-100000", "chain", "long"],
+)
+def test_too_deep_or_too_long_is_a_diagnostic_not_a_recursion_error(source: str) -> None:
+    """Nesting past MAX_DEPTH or text past MAX_SOURCE gives X305 naming the limits."""
+    expr, diags = compile_expression(source, HERE)
+    assert expr is None
+    assert [d.code for d in diags] == ["X305"]
+    assert str(MAX_DEPTH) in diags[0].hint and f"{MAX_SOURCE:,}" in diags[0].hint
+
+
+def test_nesting_up_to_the_limit_evaluates() -> None:
+    """An expression exactly MAX_DEPTH deep still compiles and evaluates."""
+    expr, diags = compile_expression("-" * (MAX_DEPTH - 1) + "1", HERE)
+    assert diags == []
+    assert expr is not None
+    assert expr.evaluate({}) == (-1) ** (MAX_DEPTH - 1)
+
+
+@pytest.mark.parametrize(
+    ("source", "env", "fragment"),
+    [
+        ("x * n", {"x": [0], "n": 100_000_000}, "repetition '*'"),
+        ("n * x", {"x": "ab", "n": 600_000}, "repetition '*'"),
+        ("x + x", {"x": "a" * 600_000}, "concatenation '+'"),
+        ("[x, x]", {"x": "a" * 600_000}, "display"),
+        ("str([x, x])", {"x": "a" * 600_000}, "display"),
+        ("('%0' + str(n) + 'd') % 1", {"n": 999_999_999}, "format width"),
+        ("'%s' % x", {"x": ["a" * 600_000, "a" * 600_000]}, "'%' formatting"),
+        ("round(1, n)", {"n": -1_000_000_000}, "round() digits"),
+        ("x * x", {"x": 2**6000}, "integer of more than"),
+        ("x + x", {"x": 2**10_000 - 1}, "integer of more than"),
+        ("int(s)", {"s": "9" * 6000}, "int() of a text"),
+        ("float(s)", {"s": "1" * 6000}, "float() of a text"),
+        ("s.upper", {"s": "abc"}, "is a method"),
+        ("d.get", {"d": {}}, "is a method"),
+        ("str(x)", {"x": [[0] * 1000] * 2000}, "str()"),
+    ],
+)
+def test_operations_beyond_a_bound_are_refused_at_run_time(
+    source: str, env: dict[str, object], fragment: str
+) -> None:
+    """What only data makes too big raises ExpressionRefused before the work is done."""
+    expr, diags = compile_expression(source, HERE)
+    assert expr is not None, [str(d) for d in diags]
+    with pytest.raises(ExpressionRefused, match=re.escape(fragment)):
+        expr.evaluate(env)
+
+
+@pytest.mark.parametrize(
+    ("source", "expected"),
+    [
+        ("len('a' * 1000000)", 1_000_000),
+        ("len([0] * 500000)", 500_000),
+        ("len('%1000d' % 1)", 1000),
+        ("len('%.1000f' % 1.5)", 1002),
+        ("round(1234, -3)", 1000),
+        ("round(2.5, 1000)", 2.5),
+        ("len(str(int('9' * 3000)))", 3000),
+        ("'%05d|%-3s|%(k)s' % {'k': 'v'} if False else '%05d' % 42", "00042"),
+        ("len(x + x)", 1_000_000),
+    ],
+)
+def test_values_within_the_bounds_still_evaluate(source: str, expected: object) -> None:
+    """The bounds refuse only what exceeds them: values up to each limit still work."""
+    expr, diags = compile_expression(source, HERE)
+    assert diags == []
+    assert expr is not None
+    assert expr.evaluate({"x": "a" * 500_000}) == expected
+
+
+@pytest.mark.parametrize(
+    ("name", "expected"), [("len", 3), ("str", "['3', '1', '2']"), ("max", "3"), ("min", "1")]
+)
+def test_a_variable_cannot_shadow_a_whitelisted_function(name: str, expected: object) -> None:
+    """A call by a whitelisted name reaches the guarded function whatever the data holds."""
+    expr, _ = compile_expression(f"{name}(['3', '1', '2'])", HERE)
+    assert expr is not None
+    assert expr.evaluate({name: "x".join}) == expected
+
+
+def test_value_size_counts_shared_parts_without_walking_them() -> None:
+    """A value doubled by sharing 40 times is measured as huge, and quickly."""
+    value: object = [0]
+    for _ in range(40):
+        value = [value, value]
+    assert value_size(value) > MAX_SIZE
+    assert value_size(["ab", [1, 2.5, None], {"k": "v"}]) == 1 + 2 + 4 + 3

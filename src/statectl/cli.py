@@ -169,10 +169,44 @@ def cmd_demo(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     return OK
 
 
-def cmd_scxml_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
-    from statectl.scxml import run_file
+#: Seconds past ``--timeout`` after which ``scxml run`` exits even if the run is stuck
+#: in one long operation the cooperative deadline cannot interrupt (trusted python code).
+SCXML_WATCHDOG_GRACE = 2.0
 
-    final = run_file(str(Path(args.file).resolve()), args.timeout)
+
+def cmd_scxml_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    import os
+    import threading
+
+    from statectl.scxml import SessionTimeout, run_file
+
+    if not 0 < args.timeout <= 1e6:  # also refuses nan and inf
+        err.write("statectl scxml run: --timeout must be a number of seconds in (0, 1e6]\n")
+        return USAGE
+
+    def watchdog() -> None:
+        err.write(
+            f"statectl scxml run: stopped: still running {SCXML_WATCHDOG_GRACE:g} s after "
+            f"--timeout {args.timeout:g} s\n"
+        )
+        err.flush()
+        os._exit(PROBLEMS)  # last resort: the run is stuck where no deadline check reaches
+
+    timer = threading.Timer(args.timeout + SCXML_WATCHDOG_GRACE, watchdog)
+    timer.daemon = True
+    timer.start()
+    try:
+        final = run_file(
+            str(Path(args.file).resolve()),
+            args.timeout,
+            verbose=args.verbose,
+            allow_src=args.allow_src,
+        )
+    except SessionTimeout:
+        err.write(f"statectl scxml run: stopped: --timeout {args.timeout:g} s passed\n")
+        return PROBLEMS
+    finally:
+        timer.cancel()
     if final is None:
         err.write(f"statectl scxml run: no top-level final state within {args.timeout} s\n")
         return PROBLEMS
@@ -409,7 +443,15 @@ def build_parser() -> argparse.ArgumentParser:
     ssub = scxml.add_subparsers(dest="scxml_command", required=True, parser_class=_Parser)
     s = ssub.add_parser("run", help="run a document; print 'final: <id>' at a top-level final")
     s.add_argument("file", metavar="FILE")
-    s.add_argument("--timeout", type=float, default=10.0)
+    s.add_argument(
+        "--timeout", type=float, default=10.0, help="stop after S wall-clock seconds (exit 1)"
+    )
+    s.add_argument(
+        "--allow-src",
+        action="store_true",
+        help="let a safe/null document read <data src> files in its own directory",
+    )
+    s.add_argument("--verbose", action="store_true", help="print <log> and error events")
     s.set_defaults(func=cmd_scxml_run)
     s = ssub.add_parser("import", help="convert SCXML to a device file when it fits the tables")
     s.add_argument("file", metavar="FILE")

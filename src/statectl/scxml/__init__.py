@@ -9,16 +9,18 @@ top-level final state) are the entry points; the W3C algorithm itself is
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 
 from statectl.scxml.reader import read_scxml, read_scxml_file
-from statectl.scxml.session import RealClock, Scheduler, Session, SimulatedClock
+from statectl.scxml.session import RealClock, Scheduler, Session, SessionTimeout, SimulatedClock
 from statectl.scxml.writer import write_scxml
 
 __all__ = [
     "RealClock",
     "Scheduler",
     "Session",
+    "SessionTimeout",
     "SimulatedClock",
     "read_scxml",
     "read_scxml_file",
@@ -28,17 +30,26 @@ __all__ = [
 
 
 def run_file(
-    path: str, timeout: float, *, simulated: bool = False, verbose: bool = False
+    path: str,
+    timeout: float,
+    *,
+    simulated: bool = False,
+    verbose: bool = False,
+    allow_src: bool = False,
 ) -> str | None:
     """Run one document; return the id of the top-level final state reached, else ``None``.
 
     Delays run on the wall clock unless ``simulated`` (then time jumps to the next
-    delayed send and ``timeout`` is simulated seconds). A document with errors
-    raises :class:`~statectl.errors.DiagnosticError`.
+    delayed send and ``timeout`` is simulated seconds). Either way the run also
+    stops after ``timeout`` wall-clock seconds with :class:`SessionTimeout`,
+    whatever the document does. ``allow_src`` lets a ``safe``/``null`` document
+    read ``src`` files inside its own directory. A document with errors raises
+    :class:`~statectl.errors.DiagnosticError`.
     """
     chart = read_scxml_file(path)
     clock = SimulatedClock() if simulated else RealClock()
     log = (lambda text: print(text, file=sys.stderr)) if verbose else None
     scheduler = Scheduler(clock, log, log)
-    session = Session(chart, scheduler, base=Path(path).resolve().parent)
+    scheduler.wall_deadline = time.monotonic() + timeout
+    session = Session(chart, scheduler, base=Path(path).resolve().parent, allow_src=allow_src)
     return scheduler.run(session, clock.now() + timeout)

@@ -8,14 +8,17 @@ Rules:
    namespace per session holds every ``<data>`` id, the system variables and
    ``In``; expressions are stripped, then ``eval``'d there, ``<script>`` is
    dedented and ``exec``'d there.
-3. ``safe``: statectl's checked expression language (:mod:`statectl.expr`);
-   locations are plain declared names; ``<script>`` is refused.
+3. ``safe``: statectl's checked, bounded expression language
+   (:mod:`statectl.expr`); locations are plain declared names; ``<script>`` is
+   refused. A variable may not be named like a callable (``len``, ``In``, ...) or
+   start with ``_``, and no value it holds may be a function or exceed
+   :data:`statectl.expr.MAX_SIZE`: data never makes a callable reachable.
 4. Every datamodel refuses to assign an undeclared location or a system
    variable (``_event``, ``_sessionid``, ``_name``, ``_ioprocessors``, ``_x``);
    that and every failing evaluation raise :class:`EvaluationError`.
 5. Inline values (``<data>``, ``<content>``, ``<assign>`` bodies and ``src``
    files) that parse as JSON become that value, anything else the
-   whitespace-normalised string.
+   whitespace-normalised string; JSON nested too deeply to decode is an error.
 """
 
 from __future__ import annotations
@@ -27,7 +30,15 @@ from collections.abc import Callable
 from typing import Any, Protocol
 
 from statectl.errors import Location, StatectlError
-from statectl.expr import compile_expression
+from statectl.expr import (
+    CALLABLE_NAMES,
+    MAX_SIZE,
+    MAX_SOURCE,
+    Expression,
+    ExpressionRefused,
+    compile_expression,
+    value_size,
+)
 
 __all__ = [
     "SYSTEM_VARIABLES",
@@ -53,6 +64,8 @@ def inline_value(text: str) -> Any:
         return json.loads(text)
     except ValueError:
         return " ".join(text.split())
+    except RecursionError as exc:
+        raise EvaluationError("inline JSON value is nested too deeply to decode") from exc
 
 
 class Datamodel(Protocol):
@@ -196,10 +209,14 @@ class NullDatamodel:
                 raise EvaluationError("the null datamodel only evaluates In('state')")
 
     def evaluate(self, expr: str) -> Any:
+        if len(expr) > MAX_SOURCE:
+            raise EvaluationError(f"expression longer than {MAX_SOURCE:,} characters")
         try:
             tree = ast.parse(expr.strip(), mode="eval")
         except SyntaxError as exc:
-            raise EvaluationError(f"{expr!r} does not parse") from exc
+            raise EvaluationError(f"{expr[:60]!r} does not parse") from exc
+        except (RecursionError, MemoryError) as exc:
+            raise EvaluationError(f"{expr[:60]!r} is nested too deeply") from exc
         self._check(tree)
         try:
             return eval(compile(tree, "<null>", "eval"), {"__builtins__": {}, "In": self._in})
@@ -220,15 +237,40 @@ class NullDatamodel:
 
 
 class SafeDatamodel:
-    """``datamodel="safe"``: the checked expression language; no scripts."""
+    """``datamodel="safe"``: the checked, bounded expression language; no scripts."""
 
     name = "safe"
 
     def __init__(self, in_state: Callable[[str], bool]) -> None:
         self.values: dict[str, Any] = {"In": in_state}
+        self._compiled: dict[str, Expression] = {}
+
+    @staticmethod
+    def _name(name: str) -> str:
+        text = name.strip()
+        if not text.isidentifier() or text.startswith("_") or text in CALLABLE_NAMES:
+            raise EvaluationError(
+                f"{text!r} cannot be a variable of the safe datamodel: names are plain, do "
+                "not start with '_' and are not a callable name ("
+                + ", ".join(sorted(CALLABLE_NAMES))
+                + ")"
+            )
+        return text
+
+    @staticmethod
+    def _value(value: Any, what: str) -> Any:
+        if callable(value):
+            raise EvaluationError(
+                f"{what} is a function, not a value; the safe datamodel holds data only"
+            )
+        if value_size(value) > MAX_SIZE:
+            raise EvaluationError(
+                f"{what} is larger than {MAX_SIZE:,} characters or elements (the safe limit)"
+            )
+        return value
 
     def declare(self, name: str, value: Any) -> None:
-        self.values[name] = value
+        self.values[self._name(name)] = self._value(value, f"the value of {name.strip()!r}")
 
     def declared(self, name: str) -> bool:
         return name in self.values
@@ -237,13 +279,19 @@ class SafeDatamodel:
         self.values[name] = value
 
     def evaluate(self, expr: str) -> Any:
-        compiled, problems = compile_expression(expr, Location(), what="expression")
+        compiled = self._compiled.get(expr)
         if compiled is None:
-            raise EvaluationError("; ".join(d.message for d in problems))
+            compiled, problems = compile_expression(expr, Location(), what="expression")
+            if compiled is None:
+                raise EvaluationError("; ".join(d.message for d in problems))
+            self._compiled[expr] = compiled
         try:
-            return compiled.evaluate(self.values)
+            result = compiled.evaluate(self.values)
+        except ExpressionRefused as exc:
+            raise EvaluationError(f"{expr.strip()!r} refused: {exc}") from exc
         except Exception as exc:
             raise EvaluationError(f"{expr.strip()!r} failed: {exc!r}") from exc
+        return self._value(result, repr(expr.strip()))
 
     def condition(self, expr: str) -> bool:
         return bool(self.evaluate(expr))
@@ -257,7 +305,7 @@ class SafeDatamodel:
             raise EvaluationError(f"{name} is a system variable and cannot be assigned")
         if not name.isidentifier() or name not in self.values:
             raise EvaluationError(f"{name!r} is not a declared variable")
-        self.values[name] = value
+        self.values[self._name(name)] = self._value(value, f"the value for {name!r}")
 
     def run_script(self, source: str) -> None:
         raise EvaluationError("the safe datamodel runs no scripts; use datamodel='python'")

@@ -13,7 +13,14 @@ Rules:
    else (an attribute, a subscript, a system variable) is X302, an undeclared name
    X303.
 4. ``<script>`` is refused (X302): the safe datamodel runs no code.
-5. Each diagnostic carries the line of the element it is about.
+5. The whitelist holds names: a ``<data id>``, ``<foreach item/index>`` or any
+   location named like a callable (``len``, ``str``, ``In``, ...) or starting with
+   ``_`` is X302, so no variable can stand where a function is called.
+6. ``<data src>`` and ``<invoke src>`` that leave the document's directory (an
+   absolute path, a ``..`` step, a URL scheme other than ``file:``) are X302; a
+   relative ``src`` loads, and the session reads it only when run with
+   ``allow_src`` (``statectl scxml run --allow-src``), confined to that directory.
+7. Each diagnostic carries the line of the element it is about.
 """
 
 from __future__ import annotations
@@ -21,7 +28,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator
 
 from statectl.errors import Diagnostic, Location, Severity
-from statectl.expr import check_names, compile_expression
+from statectl.expr import CALLABLE_NAMES, check_names, compile_expression
 from statectl.model import (
     Action,
     Assign,
@@ -38,10 +45,23 @@ from statectl.model import (
     Send,
 )
 
-__all__ = ["check_safe"]
+__all__ = ["check_safe", "src_escapes"]
 
 #: Names a safe document may read without declaring them.
 IMPLICIT = frozenset({"_event", "previous"})
+
+
+def src_escapes(src: str) -> str | None:
+    """Why a ``src`` would leave the document's directory, or ``None`` when it stays inside."""
+    text = src.strip()
+    path = text.removeprefix("file:")
+    if ":" in path.split("/", 1)[0] or text.startswith("file://"):
+        return "names a URL or a drive"
+    if path.startswith(("/", "\\")) or path == "":
+        return "is an absolute path" if path else "is empty"
+    if ".." in path.replace("\\", "/").split("/"):
+        return "steps out with '..'"
+    return None
 
 
 def _foreach_names(actions: Iterable[Action]) -> Iterator[str]:
@@ -88,11 +108,41 @@ class _Checker:
         if expression is not None:
             self.out.extend(check_names(expression, self.known, where, what=what))
 
+    def src(self, src: str | None, where: Location, what: str) -> None:
+        why = None if src is None else src_escapes(src)
+        if why is not None:
+            self.out.append(
+                Diagnostic(
+                    "X302",
+                    Severity.ERROR,
+                    where,
+                    f"{what} {src!r} {why}: a datamodel='safe' document reads no file "
+                    "outside its own directory",
+                    "put the file next to the document and name it relatively, or inline the value",
+                )
+            )
+
+    def variable(self, name: str, where: Location, what: str) -> None:
+        text = name.strip()
+        if text in CALLABLE_NAMES or text.startswith("_") or not text.isidentifier():
+            self.out.append(
+                Diagnostic(
+                    "X302",
+                    Severity.ERROR,
+                    where,
+                    f"{what} {name!r} cannot be a variable of the safe datamodel",
+                    "variables are plain names, do not start with '_' and are not a callable "
+                    "name (" + ", ".join(sorted(CALLABLE_NAMES)) + "); rename it",
+                )
+            )
+
     def location(self, name: str | None, where: Location, what: str) -> None:
         if name is None:
             return
         text = name.strip()
-        if not text.isidentifier() or text.startswith("_"):
+        if text in CALLABLE_NAMES:
+            self.variable(text, where, what)
+        elif not text.isidentifier() or text.startswith("_"):
             self.out.append(
                 Diagnostic(
                     "X302",
@@ -173,6 +223,7 @@ class _Checker:
             self.expr(a.sendidexpr, a.origin, "cancel sendidexpr")
 
     def invoke(self, d: InvokeDef) -> None:
+        self.src(d.src, d.origin, "invoke src")
         self.expr(d.typeexpr, d.origin, "invoke typeexpr")
         self.expr(d.srcexpr, d.origin, "invoke srcexpr")
         self.location(d.idlocation, d.origin, "invoke idlocation")
@@ -183,12 +234,13 @@ class _Checker:
         self.actions(d.finalize, d.origin)
 
     def chart(self, chart: Chart) -> list[Diagnostic]:
-        for item in chart.data:
+        items = list(chart.data) + [d for s in chart.states for d in s.data]
+        for item in items:
+            self.variable(item.name, item.origin, "data id")
+            self.src(item.src, item.origin, "data src")
             self.expr(item.expr, item.origin, "data expression")
         self.actions(chart.script, chart.origin)
         for s in chart.states:
-            for item in s.data:
-                self.expr(item.expr, item.origin, "data expression")
             for actions in (s.on_entry, s.on_exit, s.initial_actions, s.history_actions):
                 self.actions(actions, s.origin)
             for d in s.invokes:

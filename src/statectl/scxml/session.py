@@ -17,6 +17,18 @@ microstep by microstep and performs the executable content it hands over. Rules:
 4. Send targets: none (own external queue), ``#_internal``, ``#_parent``,
    ``#_<invokeid>``, ``#_scxml_<sessionid>``; other targets are
    ``error.execution``, unreachable sessions ``error.communication``.
+5. Bounds (docs/security.md): a run given a wall-clock deadline
+   (:attr:`Scheduler.wall_deadline`) checks it at every condition, block, action,
+   foreach iteration, state entry and event, and raises :class:`SessionTimeout`
+   once it has passed, whatever the document does. Invokes nest at most
+   :data:`MAX_INVOKE_DEPTH` deep with at most :data:`MAX_SESSIONS` running
+   sessions; a ``src`` file (``<data>``, ``<invoke>``) must be a regular file of
+   at most :data:`MAX_SRC_BYTES` bytes. Beyond a bound: ``error.execution``.
+6. Trust: a ``python`` document is trusted and reads ``src`` files anywhere. A
+   ``safe`` or ``null`` document reads files only inside the top document's
+   directory (no ``..``, no absolute path, no symlink out): ``<invoke src>``
+   always, ``<data src>`` only if the session is created with ``allow_src=True``
+   (``statectl scxml run --allow-src``), since its content becomes readable data.
 """
 
 from __future__ import annotations
@@ -32,6 +44,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol
 
+from statectl.errors import StatectlError
 from statectl.model import (
     Action,
     Assign,
@@ -57,6 +70,7 @@ from statectl.scxml.datamodel import (
     make_datamodel,
 )
 from statectl.scxml.reader import read_scxml
+from statectl.scxml.safecheck import src_escapes
 from statectl.semantics import (
     Event,
     Machine,
@@ -68,7 +82,30 @@ from statectl.semantics import (
     process_event,
 )
 
-__all__ = ["SCXML_IO", "Clock", "RealClock", "Scheduler", "Session", "SimulatedClock"]
+__all__ = [
+    "MAX_INVOKE_DEPTH",
+    "MAX_SESSIONS",
+    "MAX_SRC_BYTES",
+    "SCXML_IO",
+    "Clock",
+    "RealClock",
+    "Scheduler",
+    "Session",
+    "SessionTimeout",
+    "SimulatedClock",
+]
+
+#: Deepest chain of invoked sessions (a document invoking itself stops here).
+MAX_INVOKE_DEPTH = 16
+#: Most sessions running at once in one scheduler (a document and its invoked children).
+MAX_SESSIONS = 256
+#: Largest ``src`` file a ``<data>`` or ``<invoke>`` reads.
+MAX_SRC_BYTES = 1 << 20
+
+
+class SessionTimeout(StatectlError):
+    """The run passed its wall-clock deadline; the session stops where it is."""
+
 
 SCXML_IO = "http://www.w3.org/TR/scxml/#SCXMLEventProcessor"
 SCXML_INVOKE = "http://www.w3.org/TR/scxml/"
@@ -167,6 +204,13 @@ class Scheduler:
         self.sessions: dict[str, Session] = {}
         self.timers: list[_Timer] = []
         self._seq = itertools.count()
+        #: ``time.monotonic()`` after which every session stops with :class:`SessionTimeout`.
+        self.wall_deadline: float | None = None
+
+    def check_deadline(self) -> None:
+        """Raise :class:`SessionTimeout` once the wall-clock deadline has passed."""
+        if self.wall_deadline is not None and time.monotonic() > self.wall_deadline:
+            raise SessionTimeout("the run passed its wall-clock deadline")
 
     def add_timer(
         self, session: Session, delay: float, sendid: str, deliver: Callable[[], None]
@@ -195,6 +239,7 @@ class Scheduler:
     def run(self, root: Session, deadline: float | None = None) -> str | None:
         """Run until ``root`` stops or nothing can happen before ``deadline`` (clock time)."""
         while True:
+            self.check_deadline()
             self.run_ready()
             if not root.running:
                 return root.final_state
@@ -225,6 +270,7 @@ class Session:
         parent: Session | None = None,
         invokeid: str = "",
         initial_data: Mapping[str, Any] | None = None,
+        allow_src: bool = False,
     ) -> None:
         self.chart = chart
         self.machine = Machine(chart)
@@ -238,11 +284,17 @@ class Session:
         # A python document is trusted by whoever runs it; its children inherit that,
         # nobody else's does (a safe parent's python child is refused in ``invoke``).
         self.trusted: bool = chart.datamodel == "python" and (parent is None or parent.trusted)
+        # An untrusted session reads src files only if the top session allows it, and
+        # then only under the top document's directory.
+        self.allow_src: bool = parent.allow_src if parent is not None else allow_src
+        self.src_root: Path = parent.src_root if parent is not None else self.base.resolve()
+        self.depth: int = parent.depth + 1 if parent is not None else 0
         self.external: deque[Event] = deque()
         self.running = True
         self.started = False
         self.final_state: str | None = None
-        self.microsteps: list[Microstep] = []
+        #: The latest microsteps (for inspection); the livelock bound counts one macrostep.
+        self.microsteps: deque[Microstep] = deque(maxlen=1000)
         self.to_invoke: list[str] = []
         self.invocations: dict[str, tuple[str, InvokeDef, Session | None]] = {}  # id -> state
         self.bound: set[str] = set()
@@ -300,22 +352,55 @@ class Session:
         if name in self.initial_data:
             dm.declare(name, self.initial_data[name])
             return
-        dm.declare(name, None)
         try:
+            dm.declare(name, None)
             if expr is not None:
                 dm.declare(name, dm.evaluate(expr))
             elif src is not None:
-                path = self.base / src.removeprefix("file:")
-                dm.declare(name, inline_value(path.read_text(encoding="utf-8")))
+                dm.declare(name, inline_value(self.read_src(src, data=True)[0]))
             elif body is not None:
                 dm.declare(name, inline_value(body))
-        except (EvaluationError, OSError):
+        except EvaluationError as exc:
+            self.scheduler.trace(f"error.execution: <data id={name!r}>: {exc}")
             self.error("error.execution")
+
+    def read_src(self, src: str, *, data: bool = False) -> tuple[str, Path]:
+        """The text of a ``src`` file and its directory, within this session's trust."""
+        path = self.base / src.strip().removeprefix("file:")
+        if not self.trusted:
+            kind = self.chart.datamodel
+            if data and not self.allow_src:
+                raise EvaluationError(
+                    f"src {src!r} refused: a {kind!r} document reads no files unless run "
+                    "with --allow-src (then only inside its own directory)"
+                )
+            why = src_escapes(src)
+            if why is None and not path.resolve().is_relative_to(self.src_root):
+                why = "leaves the document's directory through a link"
+            if why is not None:
+                raise EvaluationError(f"src {src!r} refused: it {why}")
+        try:
+            if not path.is_file():
+                raise EvaluationError(f"src {src!r} is not a regular file")
+            with path.open("rb") as stream:
+                raw = stream.read(MAX_SRC_BYTES + 1)
+            if len(raw) > MAX_SRC_BYTES:
+                raise EvaluationError(f"src {src!r} is larger than {MAX_SRC_BYTES:,} bytes")
+            return raw.decode("utf-8"), path.parent
+        except OSError as exc:
+            raise EvaluationError(f"cannot read src {src!r}: {exc.strerror}") from exc
+        except UnicodeDecodeError as exc:
+            raise EvaluationError(f"src {src!r} is not UTF-8 text") from exc
 
     def settle(self) -> None:
         """The inner loop of ``mainEventLoop``, then the invokes it made due."""
         while self.running:
-            macrostep(self.machine, self.run, self.microsteps)
+            self.scheduler.check_deadline()
+            steps: list[Microstep] = []
+            try:
+                macrostep(self.machine, self.run, steps)
+            finally:
+                self.microsteps.extend(steps)
             if self.run.final:
                 self.finish()
                 return
@@ -332,6 +417,7 @@ class Session:
         if not self.started:
             self.start()
         while self.running and self.external:
+            self.scheduler.check_deadline()
             event = self.external.popleft()
             self.datamodel.set_system("_event", event)
             self.run.current = event
@@ -384,6 +470,7 @@ class Session:
 
     def condition(self, run: Run, transition: Transition) -> bool:
         assert transition.guard is not None
+        self.scheduler.check_deadline()
         self._bind_event(run)
         try:
             return self.datamodel.condition(transition.guard)
@@ -392,6 +479,7 @@ class Session:
             return False
 
     def state_entered(self, run: Run, state: State) -> None:
+        self.scheduler.check_deadline()
         self.to_invoke.append(state.name)
         if state.name not in self.bound:
             self.bound.add(state.name)
@@ -422,6 +510,7 @@ class Session:
 
     def execute(self, run: Run, actions: tuple[Action, ...]) -> None:
         """Perform one block; the first error ends it with ``error.execution``."""
+        self.scheduler.check_deadline()
         self._bind_event(run)
         try:
             for action in actions:
@@ -436,6 +525,7 @@ class Session:
     # -- executable content ---------------------------------------------------------------------
 
     def perform(self, action: Action) -> None:
+        self.scheduler.check_deadline()
         dm = self.datamodel
         if isinstance(action, Block):
             self.execute(self.run, action.actions)
@@ -443,7 +533,10 @@ class Session:
             self.run.raise_event(Event(action.event))
         elif isinstance(action, Log):
             value = dm.evaluate(action.expr) if action.expr is not None else action.message
-            text = str(value)
+            try:
+                text = str(value)
+            except (RecursionError, ValueError) as exc:
+                raise EvaluationError(f"<log> value cannot be shown: {exc!r}") from exc
             self.scheduler.log(
                 f"{action.label}: {text}" if action.label and text else action.label or text
             )
@@ -597,6 +690,17 @@ class Session:
 
     # -- invoke ---------------------------------------------------------------------------------
 
+    def check_invoke_bounds(self) -> None:
+        """Refuse an invoke past :data:`MAX_INVOKE_DEPTH` or :data:`MAX_SESSIONS`."""
+        if self.depth + 1 > MAX_INVOKE_DEPTH:
+            raise EvaluationError(
+                f"invokes nest deeper than {MAX_INVOKE_DEPTH} sessions (a document invoking "
+                "itself?)"
+            )
+        running = sum(1 for s in self.scheduler.sessions.values() if s.running)
+        if running >= MAX_SESSIONS:
+            raise EvaluationError(f"more than {MAX_SESSIONS} sessions would run at once")
+
     def invoke(self, state: str, d: InvokeDef) -> None:
         dm = self.datamodel
         invokeid = d.id or f"{state}.{self.new_id('invoke')}"
@@ -613,11 +717,10 @@ class Session:
                 src = d.src if d.srcexpr is None else str(dm.evaluate(d.srcexpr))
                 if src is None:
                     raise EvaluationError("<invoke> has neither src, srcexpr nor content")
-                path = self.base / src.removeprefix("file:")
-                text = path.read_text(encoding="utf-8")
-                base = path.parent
+                text, base = self.read_src(src)
             values = self.params_value(d.namelist, d.params)
-        except (EvaluationError, OSError) as exc:
+            self.check_invoke_bounds()
+        except EvaluationError as exc:
             self.scheduler.trace(f"invoke failed: {exc}")
             self.error("error.execution")
             return
