@@ -592,8 +592,12 @@ def run(
         _show_notes(drivers, out, width)
         url = None
         if dashboard:
-            from statectl.web import Dashboard  # the web layer is optional at run time
-
+            try:
+                from statectl.web import Dashboard  # the web layer is optional at run time
+            except ImportError as exc:
+                raise StatectlError(
+                    f"the dashboard needs aiohttp ({exc}): pip install 'statectl[dashboard]'"
+                ) from None
             server = Dashboard(system.subjects.values(), post=system.post, token=token)
             url = server.start(host, port)
         resumed = system.start(resume=resume)
