@@ -71,6 +71,9 @@ class Limits:
     heartbeat: float = 15.0
     #: Pending connections the kernel keeps before accept.
     backlog: int = 1024
+    #: Seconds a refused request's unread body is read and thrown away before its connection
+    #: closes (closing at once could reset the connection before the refusal is read).
+    linger: float = 2.0
     #: Seconds a post waits for its journal to make the event durable.
     durable_wait: float = 5.0
 

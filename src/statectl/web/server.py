@@ -28,13 +28,16 @@ import asyncio
 import contextlib
 import hmac
 import json
+import logging
 import secrets
 import socket
+import sys
 import threading
 from collections.abc import Callable, Iterable
 from typing import Any
 
 from aiohttp import web
+from aiohttp.http_exceptions import HttpProcessingError
 
 from statectl.errors import StatectlError
 from statectl.observers import extract
@@ -110,6 +113,25 @@ class _Device:
             except StatectlError:  # no Graphviz: a plain layout drawn here
                 self.svg = fallback_svg(from_chart(chart))
         return self.svg
+
+
+class _HttpLog(logging.Logger):
+    """aiohttp's connection log: a client's fault is one debug line, not a traceback.
+
+    Malformed requests (aiohttp answers 400 and closes) and connections that go away
+    are the client's doing; any other exception is a bug here and keeps its traceback.
+    """
+
+    def exception(self, msg: object, *args: object, exc_info: Any = True, **kw: Any) -> None:
+        exc = exc_info if isinstance(exc_info, BaseException) else sys.exc_info()[1]
+        if isinstance(exc, HttpProcessingError | ConnectionError | asyncio.CancelledError):
+            self.debug("%s: %s", str(msg) % args if args else msg, exc)
+        else:
+            super().exception(msg, *args, exc_info=exc_info, **kw)
+
+
+_LOG = _HttpLog("statectl.web.http")
+_LOG.parent = logging.getLogger("statectl.web")
 
 
 class Dashboard:
@@ -263,7 +285,9 @@ class Dashboard:
             make_app(self, self.fanout, limits),
             handle_signals=False,
             access_log=None,
+            logger=_LOG,
             keepalive_timeout=limits.idle_timeout,
+            lingering_time=limits.linger,
             handler_cancellation=True,  # a page that goes away ends its handler
             shutdown_timeout=2.0,
         )
