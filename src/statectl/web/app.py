@@ -74,6 +74,9 @@ class Limits:
     #: Seconds a refused request's unread body is read and thrown away before its connection
     #: closes (closing at once could reset the connection before the refusal is read).
     linger: float = 2.0
+    #: Seconds the loop waits after a device's first new record before sending, so that the
+    #: records of one step go to each stream in one write.
+    gather: float = 0.002
     #: Seconds a post waits for its journal to make the event durable.
     durable_wait: float = 5.0
 

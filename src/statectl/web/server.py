@@ -6,12 +6,14 @@ Rules:
    script ship in the package (``statectl/web/assets``) and diagrams are SVG
    rendered here, so the page works offline.
 2. Live updates are Server-Sent Events (``GET /api/events``): a snapshot of every
-   device first, then the recent log, then one message per trace record with the
-   device's state after it.
+   device first, then the recent log, then one message per trace record with what
+   the step may have changed of the device's state (active states, monitors, counts;
+   the chart's events and invokes are in the snapshot only).
 3. A device never waits for a web client: a record becomes text on the device's
    owner thread and is appended to a list under a lock held for the append only;
    the first append since the last hand-over wakes the loop with one
-   ``call_soon_threadsafe``. The loop numbers the messages and writes them to every
+   ``call_soon_threadsafe``. The loop waits ``Limits.gather`` (2 ms) so the records
+   of one step travel together, then numbers the messages and writes them to every
    stream (``statectl.web.stream``); a stream that falls behind is dropped.
 4. If the loop falls more than ``PENDING_MAX`` messages behind the devices, the
    messages are discarded and every stream is dropped (each page reconnects and
@@ -79,8 +81,8 @@ class _Device:
         self.svg: str | None = None
 
     def state(self) -> dict[str, Any]:
+        """Everything the page shows of the device (the snapshot's part)."""
         s = self.subject
-        active = sorted(s.configuration)
         invokes = []
         for i in s.chart.invokes:
             observer = s.observer_for(i.number)
@@ -93,12 +95,20 @@ class _Device:
                 }
             )
         return {
-            "name": s.name,
+            **self.live(),
             "chart": s.chart.name,
-            "active": active,
-            "active_ids": [self.ids[a] for a in active if a in self.ids],
             "events": list(s.chart.event_names),
             "invokes": invokes,
+        }
+
+    def live(self) -> dict[str, Any]:
+        """What a step may change (a record's part; the page merges it into the snapshot's)."""
+        s = self.subject
+        active = sorted(s.configuration)
+        return {
+            "name": s.name,
+            "active": active,
+            "active_ids": [self.ids[a] for a in active if a in self.ids],
             "monitors": [{"state": k, "status": v} for k, v in self.monitors.items()],
             "events_processed": s.events_processed,
             "invokes_issued": s.invokes_issued,
@@ -190,7 +200,7 @@ class Dashboard:
             "time": record.time,
             "kind": kind_of(record),
             "text": format_record(record),
-            "state": device.state(),
+            "state": device.live(),
         }
         self.publish(json.dumps(message))
 
@@ -212,7 +222,11 @@ class Dashboard:
                 return
             self._wake_sent = True
         with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
-            loop.call_soon_threadsafe(self._hand_over)
+            loop.call_soon_threadsafe(self._gather, loop)
+
+    def _gather(self, loop: asyncio.AbstractEventLoop) -> None:
+        """On the loop: hand over once the step that woke it has likely said everything."""
+        loop.call_later(self.limits.gather, self._hand_over)
 
     def _hand_over(self) -> None:
         """On the loop: take every pending message and send it to every stream."""
