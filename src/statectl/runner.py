@@ -593,12 +593,16 @@ def run(
         url = None
         if dashboard:
             try:
-                from statectl.web import Dashboard  # the web layer is optional at run time
+                from statectl.web import Dashboard, Limits  # optional at run time
             except ImportError as exc:
                 raise StatectlError(
                     f"the dashboard needs aiohttp ({exc}): pip install 'statectl[dashboard]'"
                 ) from None
-            server = Dashboard(system.subjects.values(), post=system.post, token=token)
+            streams = table.dashboard.streams
+            limits = Limits() if streams is None else Limits(streams=streams)
+            server = Dashboard(
+                system.subjects.values(), post=system.post, token=token, limits=limits
+            )
             url = server.start(host, port)
         resumed = system.start(resume=resume)
         for name, bound in system.bound.items():
