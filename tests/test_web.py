@@ -118,6 +118,28 @@ def test_posts_without_token_or_from_elsewhere_are_refused(
     assert served.system.subjects["Motor"].queued == 0
 
 
+@pytest.mark.parametrize(
+    ("headers", "status"),
+    [
+        ({}, 200),
+        ({"Host": "localhost:{port}"}, 200),
+        ({"Origin": "http://127.0.0.1:{port}"}, 200),
+        ({"Origin": "http://localhost:{port}"}, 200),
+        ({"Host": "evil.example:{port}"}, 403),
+        ({"Host": "127.0.0.1:1"}, 403),
+        ({"Origin": "http://evil.example"}, 403),
+        ({"Origin": "null"}, 403),
+        ({"Origin": "https://127.0.0.1:{port}"}, 403),
+    ],
+)
+def test_reading_follows_the_host_and_origin_rules_too(
+    served: Served, headers: dict[str, str], status: int
+) -> None:
+    """GET /api/state: a foreign Host (DNS rebinding) or Origin is refused like a post."""
+    filled = {k: v.format(port=served.port) for k, v in headers.items()}
+    assert served.request("GET", "/api/state", headers=filled)[0] == status
+
+
 def test_a_same_origin_post_is_accepted(served: Served) -> None:
     """The page's own origin passes the origin check."""
     headers = {**POST, "Origin": f"http://127.0.0.1:{served.port}"}
@@ -150,6 +172,7 @@ def test_the_event_stream_starts_with_a_snapshot_then_records(served: Served) ->
         assert seen[:2] == ["run", "enter"]  # the backlog: the start
         assert seen[2:4] == ["event", "exit"]
         assert m["state"]["active"] == ["Moving"]  # type: ignore[index]
+        assert "invokes" not in m["state"]  # type: ignore[operator]  # the snapshot's part
     finally:
         conn.close()
 

@@ -435,3 +435,40 @@ def test_clients_that_go_away_leave_no_traceback(
     bad = [r for r in caplog.records if r.levelno >= logging.WARNING or r.exc_info]
     assert bad == []
     assert "Traceback" not in capfd.readouterr().err
+
+
+def test_publishing_never_waits_for_a_stalled_loop_and_an_overrun_drops_every_stream(
+    server: Server,
+) -> None:
+    """With the loop held, PENDING_MAX + 1 messages still publish; then each stream is dropped.
+
+    A page that stayed would miss messages, so none stays: it reconnects to a snapshot.
+    """
+    from statectl.web.server import PENDING_MAX
+
+    reply = server.stream()
+    held, release = threading.Event(), threading.Event()
+
+    def hold() -> None:
+        held.set()
+        release.wait(10)
+
+    loop = server.dash._loop
+    assert loop is not None
+    loop.call_soon_threadsafe(hold)
+    assert held.wait(5)
+    try:
+        for i in range(PENDING_MAX + 1):
+            server.dash.publish(json.dumps({"type": "test", "i": i}))
+        assert not release.is_set()  # all published while the loop was held
+    finally:
+        release.set()
+    with pytest.raises((EOFError, http.client.IncompleteRead, ConnectionError)):
+        while True:
+            next_message(reply)
+    reply.close()
+    after = server.stream()
+    server.dash.publish(json.dumps({"type": "test", "i": "after"}))
+    got = [next_message(after) for _ in range(3)]  # the backlog: run, enter; then ours
+    assert [m.get("kind", m.get("i")) for m in got] == ["run", "enter", "after"]
+    after.close()
