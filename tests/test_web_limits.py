@@ -447,6 +447,9 @@ def test_publishing_never_waits_for_a_stalled_loop_and_an_overrun_drops_every_st
     from statectl.web.server import PENDING_MAX
 
     reply = server.stream()
+    deadline = time.monotonic() + 5
+    while server.dash.fanout.seq < 2 and time.monotonic() < deadline:
+        time.sleep(0.01)  # the start's records (run, enter) are out: nothing pending
     held, release = threading.Event(), threading.Event()
 
     def hold() -> None:

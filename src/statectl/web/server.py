@@ -9,8 +9,9 @@ Rules:
    device first, then the recent log, then one message per trace record with what
    the step may have changed of the device's state (active states, monitors, counts;
    the chart's events and invokes are in the snapshot only).
-3. A device never waits for a web client: a record becomes text on the device's
-   owner thread and is appended to a list under a lock held for the append only;
+3. A device never waits for a web client: on the device's owner thread a record is
+   only noted, with the device's active states, counts and monitors after it, in a
+   list under a lock held for the append only (the JSON is made on the loop);
    the first append since the last hand-over wakes the loop with one
    ``call_soon_threadsafe``. The loop waits ``Limits.gather`` (2 ms) so the records
    of one step travel together, then numbers the messages and writes them to every
@@ -36,6 +37,7 @@ import socket
 import sys
 import threading
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 from typing import Any
 
 from aiohttp import web
@@ -66,6 +68,35 @@ LOG_SIZE = 500
 PENDING_MAX = 20_000
 #: ``post(device, event, data)``: returns a ticket-like object with ``seq`` and ``wait()``, or None.
 PostFn = Callable[[str | None, str, Any], Any]
+
+
+@dataclass(frozen=True, slots=True)
+class _Noted:
+    """A record and the device's state after it, taken on the owner thread."""
+
+    device: _Device
+    record: Record
+    configuration: frozenset[str]
+    events: int
+    invokes: int
+    calls: int
+    monitors: tuple[tuple[str, str], ...]
+
+    def message(self) -> str:
+        """The record as the page's JSON message (on the loop)."""
+        record = self.record
+        return json.dumps(
+            {
+                "type": "record",
+                "device": record.device,
+                "time": record.time,
+                "kind": kind_of(record),
+                "text": format_record(record),
+                "state": self.device.render_live(
+                    self.configuration, self.events, self.invokes, self.calls, self.monitors
+                ),
+            }
+        )
 
 
 class _Device:
@@ -104,15 +135,28 @@ class _Device:
     def live(self) -> dict[str, Any]:
         """What a step may change (a record's part; the page merges it into the snapshot's)."""
         s = self.subject
-        active = sorted(s.configuration)
+        return self.render_live(
+            s.configuration, s.events_processed, s.invokes_issued, self.calls,
+            tuple(self.monitors.items()),
+        )  # fmt: skip
+
+    def render_live(
+        self,
+        configuration: frozenset[str],
+        events: int,
+        invokes: int,
+        calls: int,
+        monitors: tuple[tuple[str, str], ...],
+    ) -> dict[str, Any]:
+        active = sorted(configuration)
         return {
-            "name": s.name,
+            "name": self.subject.name,
             "active": active,
             "active_ids": [self.ids[a] for a in active if a in self.ids],
-            "monitors": [{"state": k, "status": v} for k, v in self.monitors.items()],
-            "events_processed": s.events_processed,
-            "invokes_issued": s.invokes_issued,
-            "observer_calls": self.calls,
+            "monitors": [{"state": k, "status": v} for k, v in monitors],
+            "events_processed": events,
+            "invokes_issued": invokes,
+            "observer_calls": calls,
         }
 
     def diagram(self) -> str:
@@ -162,7 +206,7 @@ class Dashboard:
         self.origins: frozenset[str] = frozenset()
         self.hosts: frozenset[str] = frozenset()
         self._lock = threading.Lock()
-        self._pending: list[str] = []
+        self._pending: list[str | _Noted] = []
         self._overrun = False
         self._loop: asyncio.AbstractEventLoop | None = None
         self._wake_sent = False
@@ -180,6 +224,11 @@ class Dashboard:
     # -- records -> messages (owner threads) ---------------------------------------------
 
     def _on_record(self, record: Record) -> None:
+        """On the owner thread: note the record and what the device is after it (rule 3).
+
+        Only values are taken here (the record, the active states, the counts); turning
+        them into JSON is the loop's work, so a step costs the device a few microseconds.
+        """
         device = self.devices.get(record.device)
         if device is None:
             return
@@ -194,23 +243,24 @@ class Dashboard:
                 device.calls += 1
             case _:
                 pass
-        message = {
-            "type": "record",
-            "device": record.device,
-            "time": record.time,
-            "kind": kind_of(record),
-            "text": format_record(record),
-            "state": device.live(),
-        }
-        self.publish(json.dumps(message))
+        s = device.subject
+        self._hand(
+            _Noted(
+                device, record, s.configuration, s.events_processed, s.invokes_issued,
+                device.calls, tuple(device.monitors.items()),
+            )
+        )  # fmt: skip
 
     def publish(self, text: str) -> None:
         """Hand ``text`` to every connected page and keep it for later ones (rule 3).
 
         Any thread may call this; it never blocks on the network.
         """
+        self._hand(text)
+
+    def _hand(self, item: str | _Noted) -> None:
         with self._lock:
-            self._pending.append(text)
+            self._pending.append(item)
             loop = self._loop
             if loop is None:  # not serving: only the log for later pages matters
                 del self._pending[:-LOG_SIZE]
@@ -231,12 +281,12 @@ class Dashboard:
     def _hand_over(self) -> None:
         """On the loop: take every pending message and send it to every stream."""
         with self._lock:
-            texts, self._pending = self._pending, []
+            items, self._pending = self._pending, []
             overrun, self._overrun = self._overrun, False
             self._wake_sent = False
         if overrun:
             self.fanout.drop_all("overrun")
-        self.fanout.publish(texts)
+        self.fanout.publish([i if isinstance(i, str) else i.message() for i in items])
 
     def snapshot(self) -> dict[str, Any]:
         return {
