@@ -440,7 +440,7 @@ def test_clients_that_go_away_leave_no_traceback(
 def test_publishing_never_waits_for_a_stalled_loop_and_an_overrun_drops_every_stream(
     server: Server,
 ) -> None:
-    """With the loop held, PENDING_MAX + 1 messages still publish; then each stream is dropped.
+    """With the loop held a device steps and PENDING_MAX + 1 messages publish; then streams drop.
 
     A page that stayed would miss messages, so none stays: it reconnects to a snapshot.
     """
@@ -461,6 +461,9 @@ def test_publishing_never_waits_for_a_stalled_loop_and_an_overrun_drops_every_st
     loop.call_soon_threadsafe(hold)
     assert held.wait(5)
     try:
+        server.system.post("Motor", "Movement", {"amount": 5})
+        server.system.drain()  # a device step with the loop held: done, nothing waited
+        assert server.system.subjects["Motor"].configuration == {"Moving"}
         for i in range(PENDING_MAX + 1):
             server.dash.publish(json.dumps({"type": "test", "i": i}))
         assert not release.is_set()  # all published while the loop was held
