@@ -182,3 +182,27 @@ def test_the_fallback_diagram_marks_nodes_like_graphviz() -> None:
     svg = fallback_svg(from_chart(motor_chart()))
     assert svg.count('<g class="node"><title>') == 3
     assert "<title>Moving</title>" in svg
+
+
+def test_an_ipv6_loopback_dashboard_takes_its_bracketed_host() -> None:
+    """On ::1 the URL and the accepted Host are [::1]:port; a bare ::1 Host is refused."""
+    dash = Dashboard([])
+    try:
+        url = dash.start("::1", 0)
+    except OSError:
+        pytest.skip("no IPv6 loopback here")
+    try:
+        assert url == f"http://[::1]:{dash.port}/"
+        statuses = []
+        for host in (f"[::1]:{dash.port}", f"::1:{dash.port}"):
+            conn = http.client.HTTPConnection("::1", dash.port, timeout=10)
+            try:
+                conn.request("GET", "/api/state", headers={"Host": host})
+                reply = conn.getresponse()
+                reply.read()
+                statuses.append(reply.status)
+            finally:
+                conn.close()
+        assert statuses == [200, 403]
+    finally:
+        dash.stop()

@@ -308,7 +308,8 @@ class Dashboard:
         sock = socket.create_server((host, port), family=family, backlog=self.limits.backlog)
         bound = int(sock.getsockname()[1])
         self._port = bound
-        names = {host, "127.0.0.1", "localhost"} if host in ("127.0.0.1", "localhost") else {host}
+        shown = f"[{host}]" if ":" in host else host  # an IPv6 address in a URL or Host
+        names = {host, "127.0.0.1", "localhost"} if host in ("127.0.0.1", "localhost") else {shown}
         self.hosts = frozenset(f"{n}:{bound}" for n in names)
         self.origins = frozenset(f"http://{h}" for h in self.hosts)
         ready = threading.Event()
@@ -323,7 +324,7 @@ class Dashboard:
             self._thread.join(2.0)
             self._thread = None
             raise StatectlError(f"the dashboard did not start: {failure[0]}")
-        return f"http://{host}:{bound}/"
+        return f"http://{shown}:{bound}/"
 
     def _serve(
         self, sock: socket.socket, ready: threading.Event, failure: list[BaseException]
