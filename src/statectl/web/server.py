@@ -37,8 +37,7 @@ import socket
 import sys
 import threading
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 from aiohttp import web
 from aiohttp.http_exceptions import HttpProcessingError
@@ -70,9 +69,12 @@ PENDING_MAX = 20_000
 PostFn = Callable[[str | None, str, Any], Any]
 
 
-@dataclass(frozen=True, slots=True)
-class _Noted:
-    """A record and the device's state after it, taken on the owner thread."""
+class _Noted(NamedTuple):
+    """A record and the device's state after it, taken on the owner thread.
+
+    An immutable tuple rather than a frozen dataclass: it is made once per record on the
+    device's thread, where a frozen dataclass's ``__init__`` costs several times more.
+    """
 
     device: _Device
     record: Record
@@ -108,6 +110,7 @@ class _Device:
         diagram = from_chart(chart)
         self.ids = {n.name: n.id for n in diagram.nodes}
         self.monitors: dict[str, str] = {m.state: "idle" for m in extract(chart).monitors}
+        self.monitor_items = tuple(self.monitors.items())  # what records carry, kept current
         self.calls = 0
         self.svg: str | None = None
 
@@ -137,7 +140,7 @@ class _Device:
         s = self.subject
         return self.render_live(
             s.configuration, s.events_processed, s.invokes_issued, self.calls,
-            tuple(self.monitors.items()),
+            self.monitor_items,
         )  # fmt: skip
 
     def render_live(
@@ -235,10 +238,13 @@ class Dashboard:
         match record:
             case MonitorStarted(state=state):
                 device.monitors[state] = "running"
+                device.monitor_items = tuple(device.monitors.items())
             case MonitorStopped(state=state):
                 device.monitors[state] = "idle"
+                device.monitor_items = tuple(device.monitors.items())
             case FaultDetected(state=state, detail=detail):
                 device.monitors[state] = f"fault: {detail}"
+                device.monitor_items = tuple(device.monitors.items())
             case ObserverCalled():
                 device.calls += 1
             case _:
@@ -247,7 +253,7 @@ class Dashboard:
         self._hand(
             _Noted(
                 device, record, s.configuration, s.events_processed, s.invokes_issued,
-                device.calls, tuple(device.monitors.items()),
+                device.calls, device.monitor_items,
             )
         )  # fmt: skip
 
