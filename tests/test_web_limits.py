@@ -163,6 +163,7 @@ REFUSALS: list[tuple[str, Callable[[str], bytes], int]] = [
      403),
     ("nowhere", lambda h: request(h, "POST", "/nowhere", SMUGGLED, POST_OK), 404),
     ("two hosts", lambda h: request(h, "GET", "/api/state", b"", f"Host: {h}\r\n"), 400),
+    ("no host", lambda h: b"GET /api/state HTTP/1.1\r\n\r\n" + SMUGGLED, 400),
     ("two origins", lambda h: request(h, "GET", "/api/state", b"",
                                       f"Origin: http://{h}\r\nOrigin: http://{h}\r\n"), 403),
     ("body too large", lambda h: request(h, "POST", "/api/post", b"{" * 5000, POST_OK), 413),
