@@ -485,3 +485,39 @@ def test_publishing_never_waits_for_a_stalled_loop_and_an_overrun_drops_every_st
     assert seen[:2] == ["run", "enter"] and seen[-1] == "after"
     assert tail == list(range(PENDING_MAX + 1 - len(tail), PENDING_MAX + 1))
     after.close()
+
+
+def test_a_stream_that_takes_nothing_is_dropped_after_the_stall_timeout() -> None:
+    """Under its buffer cap but backed up at every check for stall_timeout: dropped.
+
+    The device then goes quiet; a reader that keeps up stays.
+    """
+    s = start(Limits(heartbeat=0.1, stall_timeout=0.5, stream_buffer=64 << 20))
+    reader = s.stream()
+    stalled = socket.socket()
+    stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    stalled.connect(("127.0.0.1", s.port))
+    try:
+        stalled.sendall(request(s.host, "GET", "/api/events"))
+        deadline = time.monotonic() + 5
+        while len(s.dash.fanout.streams) < 2 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        filler = "x" * 8000
+        for i in range(1000):  # 8 MB: more than the kernel holds for the stalled client
+            s.dash.publish(json.dumps({"type": "test", "i": i, "pad": filler}))
+            if i % 8 == 7:
+                while next_message(reader).get("i") != i:
+                    pass
+        deadline = time.monotonic() + 10
+        while len(s.dash.fanout.streams) > 1 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert (len(s.dash.fanout.streams), s.dash.fanout.dropped) == (1, 1)
+        s.dash.publish(json.dumps({"type": "test", "i": "still here"}))
+        while (m := next_message(reader)).get("type") != "test" or m["i"] != "still here":
+            pass
+        assert drained_to_the_end(stalled)
+    finally:
+        reader.close()
+        stalled.close()
+        s.dash.stop()
+        s.system.close()

@@ -67,8 +67,10 @@ class Limits:
     body_timeout: float = 10.0
     #: Bytes queued for one stream before it is dropped as too slow.
     stream_buffer: int = 1 << 20
-    #: Seconds between keep-alive comments on an otherwise quiet stream.
+    #: Seconds between keep-alive comments on an otherwise quiet stream (and stall checks).
     heartbeat: float = 15.0
+    #: Seconds an event stream may leave bytes waiting at every check before it is dropped.
+    stall_timeout: float = 60.0
     #: Pending connections the kernel keeps before accept.
     backlog: int = 1024
     #: Seconds a refused request's unread body is read and thrown away before its connection
@@ -111,7 +113,8 @@ def make_app(dash: Dashboard, fanout: Fanout, limits: Limits) -> web.Application
         try:
             response = await handler(request)
         except web.HTTPException as exc:  # 404, 405, 413 from aiohttp: same shape as ours
-            return _refuse(exc.status, exc.reason)
+            allow = {"Allow": exc.headers["Allow"]} if "Allow" in exc.headers else {}
+            return _refuse(exc.status, exc.reason, **allow)
         if response.status >= 400:
             response.force_close()
         return response

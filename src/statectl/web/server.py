@@ -384,9 +384,10 @@ class Dashboard:
             await runner.cleanup()
 
     async def _heartbeat(self, every: float) -> None:
+        loop = asyncio.get_running_loop()
         while True:
             await asyncio.sleep(every)
-            self.fanout.heartbeat()
+            self.fanout.heartbeat(loop.time(), self.limits.stall_timeout)
 
     @property
     def port(self) -> int:

@@ -12,6 +12,10 @@ Rules:
    reconnects by itself and starts again from a snapshot.
 4. A stream holds a slot from the moment it is admitted, so the cap on streams
    is exact even while responses are being prepared.
+5. A client that takes nothing does not hold its slot forever on a quiet device:
+   at each heartbeat a stream with bytes still waiting for it (the kernel's buffer is
+   full) is noted, and one found so at every heartbeat for ``stall`` seconds is
+   dropped.
 """
 
 from __future__ import annotations
@@ -34,12 +38,14 @@ def chunk(data: bytes) -> bytes:
 class Stream:
     """One SSE connection: its transport once the headers are out, and its end."""
 
-    __slots__ = ("closed", "limit", "transport")
+    __slots__ = ("backed_up_since", "closed", "limit", "transport")
 
     def __init__(self, limit: int, loop: asyncio.AbstractEventLoop) -> None:
         self.transport: asyncio.BaseTransport | None = None
         self.limit = limit
         self.closed: asyncio.Future[str] = loop.create_future()
+        #: Loop time since which bytes have waited for this client at every check (rule 5).
+        self.backed_up_since: float | None = None
 
     def send(self, data: bytes) -> bool:
         """Write ``data``; False (and the stream ends) when the client is gone or behind."""
@@ -100,8 +106,22 @@ class Fanout:
         self.log.extend(frames)
         self._send(chunk(b"".join(frames)))
 
-    def heartbeat(self) -> None:
+    def heartbeat(self, now: float, stall: float) -> None:
+        """Send a comment to every stream and drop those backed up for ``stall`` s (rule 5)."""
         self._send(chunk(IDLE))
+        for stream in tuple(self.streams):
+            transport = stream.transport
+            if not isinstance(transport, asyncio.WriteTransport):
+                continue
+            if transport.get_write_buffer_size() == 0:
+                stream.backed_up_since = None
+            elif stream.backed_up_since is None:
+                stream.backed_up_since = now
+            elif now - stream.backed_up_since >= stall:
+                transport.abort()
+                stream.end("stalled")
+                self.streams.discard(stream)
+                self.dropped += 1
 
     def drop_all(self, why: str) -> None:
         for stream in tuple(self.streams):
