@@ -8,8 +8,8 @@ gets every message, numbered without a gap, and measures the time from a record'
 step (its ``time`` on the device's clock, which is monotonic and shared by both
 processes) to its arrival. This process samples its own RSS meanwhile.
 
-Bounded: the client process gets ``--seconds`` plus 60 s in all and is killed by PID
-otherwise; the server exits its own run by itself. Loopback only.
+Bounded: each client process has its own time-outs, and every one still running
+``--seconds`` + 120 s after the start is killed by its PID. Loopback only.
 
     python bench/dashboard.py                  # 1,000 clients, 100 events/s, 10 s
     python bench/dashboard.py --clients 100 --seconds 3   # smoke run
@@ -148,6 +148,15 @@ def serve(args: argparse.Namespace) -> dict[str, Any]:
     result: dict[str, Any] = {"client_loop": args.loop, "clients": args.clients,
                               "client_processes": args.procs,
                               "rate": args.rate}  # fmt: skip
+
+    def kill_all() -> None:  # the bound on the whole run: every child, by its PID
+        for proc in procs:
+            if proc.poll() is None:
+                proc.kill()
+
+    watchdog = threading.Timer(args.seconds + 120, kill_all)
+    watchdog.daemon = True
+    watchdog.start()
     try:
         for proc in procs:  # "ready N" once every stream of the process has its snapshot
             assert proc.stdout is not None
@@ -232,6 +241,7 @@ def serve(args: argparse.Namespace) -> dict[str, Any]:
             except subprocess.TimeoutExpired:
                 proc.kill()  # by PID: the Popen's own process
                 proc.wait()
+        watchdog.cancel()
         dash.stop()
 
 
@@ -314,8 +324,11 @@ async def clients(args: argparse.Namespace) -> dict[str, Any]:
     streams: list[Stream] = []
     for i in range(0, args.clients, 100):  # connect in groups, each waits for its snapshots
         group = [Stream(run) for _ in range(min(100, args.clients - i))]
-        await asyncio.gather(
-            *(loop.create_connection(lambda s=s: s, "127.0.0.1", args.port) for s in group)
+        await asyncio.wait_for(
+            asyncio.gather(
+                *(loop.create_connection(lambda s=s: s, "127.0.0.1", args.port) for s in group)
+            ),
+            30,
         )
         await asyncio.wait_for(asyncio.gather(*(s.snapshot for s in group)), 30)
         streams.extend(group)
