@@ -66,6 +66,8 @@ def test_a_dashboard_only_file_leaves_the_drivers_open(tmp_path: Path) -> None:
         ("dashboard:\n  host: ''\n", 2, "host must be an address"),
         ("dashboard:\n  token: hunter2\n", 2, "16 characters or more"),
         ("dashboard:\n  token: 12345678901234567890\n", 2, "16 characters or more"),
+        ("dashboard:\n  streams: 0\n", 2, "streams must be a number 1-100000"),
+        ("dashboard:\n  streams: many\n", 2, "streams must be a number 1-100000"),
     ],
 )
 def test_a_bad_dashboard_section_is_d510_with_its_line(
@@ -156,6 +158,25 @@ def test_the_config_gives_port_and_token_and_the_token_is_not_printed(tmp_path: 
     assert served.codes == [0], served.err.getvalue()
     assert f"token: (from {config})" in served.out.getvalue()
     assert SECRET not in served.out.getvalue()
+
+
+def test_the_config_caps_the_event_streams(tmp_path: Path) -> None:
+    """``streams: 1``: the run's dashboard serves one event stream and refuses a second (503)."""
+    config = write(tmp_path, f"dashboard: {{token: {SECRET}, streams: 1}}\n")
+    with Served(config=str(config)) as served:
+        assert served.url is not None
+        port = int(served.url.rsplit(":", 1)[1].strip("/"))
+        first = http.client.HTTPConnection("127.0.0.1", port, timeout=10)
+        second = http.client.HTTPConnection("127.0.0.1", port, timeout=10)
+        try:
+            first.request("GET", "/api/events")
+            assert first.getresponse().status == 200
+            second.request("GET", "/api/events")
+            assert second.getresponse().status == 503
+        finally:
+            first.close()
+            second.close()
+    assert served.codes == [0], served.err.getvalue()
 
 
 @pytest.mark.parametrize(

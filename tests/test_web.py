@@ -118,6 +118,28 @@ def test_posts_without_token_or_from_elsewhere_are_refused(
     assert served.system.subjects["Motor"].queued == 0
 
 
+@pytest.mark.parametrize(
+    ("headers", "status"),
+    [
+        ({}, 200),
+        ({"Host": "localhost:{port}"}, 200),
+        ({"Origin": "http://127.0.0.1:{port}"}, 200),
+        ({"Origin": "http://localhost:{port}"}, 200),
+        ({"Host": "evil.example:{port}"}, 403),
+        ({"Host": "127.0.0.1:1"}, 403),
+        ({"Origin": "http://evil.example"}, 403),
+        ({"Origin": "null"}, 403),
+        ({"Origin": "https://127.0.0.1:{port}"}, 403),
+    ],
+)
+def test_reading_follows_the_host_and_origin_rules_too(
+    served: Served, headers: dict[str, str], status: int
+) -> None:
+    """GET /api/state: a foreign Host (DNS rebinding) or Origin is refused like a post."""
+    filled = {k: v.format(port=served.port) for k, v in headers.items()}
+    assert served.request("GET", "/api/state", headers=filled)[0] == status
+
+
 def test_a_same_origin_post_is_accepted(served: Served) -> None:
     """The page's own origin passes the origin check."""
     headers = {**POST, "Origin": f"http://127.0.0.1:{served.port}"}
@@ -150,6 +172,7 @@ def test_the_event_stream_starts_with_a_snapshot_then_records(served: Served) ->
         assert seen[:2] == ["run", "enter"]  # the backlog: the start
         assert seen[2:4] == ["event", "exit"]
         assert m["state"]["active"] == ["Moving"]  # type: ignore[index]
+        assert "invokes" not in m["state"]  # type: ignore[operator]  # the snapshot's part
     finally:
         conn.close()
 
@@ -159,3 +182,27 @@ def test_the_fallback_diagram_marks_nodes_like_graphviz() -> None:
     svg = fallback_svg(from_chart(motor_chart()))
     assert svg.count('<g class="node"><title>') == 3
     assert "<title>Moving</title>" in svg
+
+
+def test_an_ipv6_loopback_dashboard_takes_its_bracketed_host() -> None:
+    """On ::1 the URL and the accepted Host are [::1]:port; a bare ::1 Host is refused."""
+    dash = Dashboard([])
+    try:
+        url = dash.start("::1", 0)
+    except OSError:
+        pytest.skip("no IPv6 loopback here")
+    try:
+        assert url == f"http://[::1]:{dash.port}/"
+        statuses = []
+        for host in (f"[::1]:{dash.port}", f"::1:{dash.port}"):
+            conn = http.client.HTTPConnection("::1", dash.port, timeout=10)
+            try:
+                conn.request("GET", "/api/state", headers={"Host": host})
+                reply = conn.getresponse()
+                reply.read()
+                statuses.append(reply.status)
+            finally:
+                conn.close()
+        assert statuses == [200, 403]
+    finally:
+        dash.stop()

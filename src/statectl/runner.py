@@ -358,9 +358,17 @@ def run(
         _show_notes(drivers, out, width)
         url = None
         if dashboard:
-            from statectl.web import Dashboard  # the web layer is optional at run time
-
-            server = Dashboard(system.subjects.values(), post=system.post, token=token)
+            try:
+                from statectl.web import Dashboard, Limits  # optional at run time
+            except ImportError as exc:
+                raise StatectlError(
+                    f"the dashboard needs aiohttp ({exc}): pip install 'statectl[dashboard]'"
+                ) from None
+            streams = table.dashboard.streams
+            limits = Limits() if streams is None else Limits(streams=streams)
+            server = Dashboard(
+                system.subjects.values(), post=system.post, token=token, limits=limits
+            )
             url = server.start(host, port)
         resumed = system.start(resume=resume)
         for name, bound in system.bound.items():

@@ -21,7 +21,7 @@ Rules:
 5. The same file may carry the live dashboard's settings, so a token need not
    be typed on a command line (where ``ps`` shows it)::
 
-       dashboard: {host: 127.0.0.1, port: 8765, token: <16 or more characters>}
+       dashboard: {host: 127.0.0.1, port: 8765, token: <16 or more characters>, streams: 1000}
 
    :func:`load_run_config` reads both sections; a file with only ``dashboard``
    leaves the drivers to ``--driver`` or the twins. Problems there are D510.
@@ -77,7 +77,9 @@ SUPPLIED = ("chart",)
 DriverConfig = dict[str, tuple[str, dict[str, Any]]]
 
 _DEVICE_KEYS = ("driver", "options")
-_DASHBOARD_KEYS = ("host", "port", "token")
+_DASHBOARD_KEYS = ("host", "port", "token", "streams")
+#: The most event streams a config file may allow (each holds a socket and a buffer).
+MAX_STREAMS = 100_000
 
 #: The shortest dashboard token a config file may set: a short one can be guessed.
 MIN_TOKEN = 16
@@ -90,6 +92,7 @@ class DashboardConfig:
     host: str | None = None
     port: int | None = None
     token: str | None = None
+    streams: int | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -356,6 +359,12 @@ def _dashboard(
         ):
             error("D510", line, f"dashboard: port must be a number 0-65535 (got {val!r})",
                   "0 takes any free port")  # fmt: skip
+        elif name == "streams" and not (
+            isinstance(val, int) and not isinstance(val, bool) and 1 <= val <= MAX_STREAMS
+        ):
+            error("D510", line,
+                  f"dashboard: streams must be a number 1-{MAX_STREAMS} (got {val!r})",
+                  "the most pages that may follow the run at once; 1000 by default")  # fmt: skip
         elif name == "token" and not (isinstance(val, str) and len(val) >= MIN_TOKEN):
             shown = "a shorter text" if isinstance(val, str) else repr(val)  # never echo a secret
             error(

@@ -1,35 +1,46 @@
 """The live dashboard: running devices' statecharts, event log and observer calls in a browser.
 
 Rules:
-1. Standard library only: one :class:`ThreadingHTTPServer` on a daemon thread,
-   bound to 127.0.0.1 unless told otherwise; the page and its script ship in the
-   package (``statectl/web/assets``) and diagrams are SVG rendered here, so the
-   page works offline.
+1. The HTTP side is aiohttp (``statectl.web.app``) on its own asyncio event loop in
+   one daemon thread, bound to 127.0.0.1 unless told otherwise; the page and its
+   script ship in the package (``statectl/web/assets``) and diagrams are SVG
+   rendered here, so the page works offline.
 2. Live updates are Server-Sent Events (``GET /api/events``): a snapshot of every
-   device first, then one message per trace record with the device's state after
-   it. Records are turned into messages on the device's owner thread and queued
-   per client (bounded; a slow client loses the oldest), so a browser never
-   slows a device down.
-3. Reading is open; posting an event (``POST /api/post``) needs the token printed
-   at start-up (header ``X-Statectl-Token``) and a JSON body. A request whose
-   ``Origin`` is not this server's, or whose ``Host`` is not an address the
-   server answers on (DNS rebinding), is refused with 403.
-4. With a journal the reply to a post comes once the event is durable and says
+   device first, then the recent log, then one message per trace record with what
+   the step may have changed of the device's state (active states, monitors, counts;
+   the chart's events and invokes are in the snapshot only).
+3. A device never waits for a web client: on the device's owner thread a record is
+   only noted, with the device's active states, counts and monitors after it, in a
+   list under a lock held for the append only (the JSON is made on the loop);
+   the first append since the last hand-over wakes the loop with one
+   ``call_soon_threadsafe``. The loop waits ``Limits.gather`` (2 ms) so the records
+   of one step travel together, then numbers the messages and writes them to every
+   stream (``statectl.web.stream``); a stream that falls behind is dropped.
+4. If the loop falls more than ``PENDING_MAX`` messages behind the devices, the
+   messages are discarded and every stream is dropped (each page reconnects and
+   starts from a snapshot): no page ever sees a gap.
+5. Reading is open; posting an event (``POST /api/post``) needs the token printed
+   at start-up and the ``Origin`` and ``Host`` rules of ``statectl.web.app``.
+   With a journal the reply to a post comes once the event is durable and says
    so (``"durable": true``); without one the event is queued (``false``).
 """
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import hmac
 import json
+import logging
 import secrets
+import socket
+import sys
 import threading
-from collections import deque
 from collections.abc import Callable, Iterable
-from http import HTTPStatus
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
-from importlib.resources import files
-from typing import Any
+from typing import Any, NamedTuple
+
+from aiohttp import web
+from aiohttp.http_exceptions import HttpProcessingError
 
 from statectl.errors import StatectlError
 from statectl.observers import extract
@@ -44,38 +55,50 @@ from statectl.runtime.records import (
 )
 from statectl.runtime.subject import Subject
 from statectl.runtime.trace import format_record, kind_of
+from statectl.web.app import Limits, make_app
+from statectl.web.stream import Fanout
 from statectl.web.svg import fallback_svg
 
-__all__ = ["LOG_SIZE", "Dashboard", "PostFn"]
+__all__ = ["LOG_SIZE", "PENDING_MAX", "Dashboard", "Limits", "PostFn"]
 
-#: Messages kept for a page that connects later, and per client queue.
+#: Messages kept for a page that connects later.
 LOG_SIZE = 500
+#: Messages the loop may lag behind the devices before every stream is dropped (rule 4).
+PENDING_MAX = 20_000
 #: ``post(device, event, data)``: returns a ticket-like object with ``seq`` and ``wait()``, or None.
 PostFn = Callable[[str | None, str, Any], Any]
 
-_ASSETS = {
-    "/": ("index.html", "text/html; charset=utf-8"),
-    "/static/app.js": ("app.js", "text/javascript; charset=utf-8"),
-    "/static/style.css": ("style.css", "text/css; charset=utf-8"),
-}
-_HEADERS = {
-    "Content-Security-Policy": (
-        "default-src 'self'; style-src 'self' 'unsafe-inline'; img-src 'self' data:; "
-        "connect-src 'self'; frame-ancestors 'none'"
-    ),
-    "X-Content-Type-Options": "nosniff",
-    "X-Frame-Options": "DENY",
-    "Referrer-Policy": "no-referrer",
-    "Cache-Control": "no-store",
-}
 
+class _Noted(NamedTuple):
+    """A record and the device's state after it, taken on the owner thread.
 
-class _Client:
-    """One SSE connection's queue."""
+    An immutable tuple rather than a frozen dataclass: it is made once per record on the
+    device's thread, where a frozen dataclass's ``__init__`` costs several times more.
+    """
 
-    def __init__(self) -> None:
-        self.queue: deque[str] = deque(maxlen=LOG_SIZE)
-        self.cond = threading.Condition()
+    device: _Device
+    record: Record
+    configuration: frozenset[str]
+    events: int
+    invokes: int
+    calls: int
+    monitors: tuple[tuple[str, str], ...]
+
+    def message(self) -> str:
+        """The record as the page's JSON message (on the loop)."""
+        record = self.record
+        return json.dumps(
+            {
+                "type": "record",
+                "device": record.device,
+                "time": record.time,
+                "kind": kind_of(record),
+                "text": format_record(record),
+                "state": self.device.render_live(
+                    self.configuration, self.events, self.invokes, self.calls, self.monitors
+                ),
+            }
+        )
 
 
 class _Device:
@@ -87,12 +110,13 @@ class _Device:
         diagram = from_chart(chart)
         self.ids = {n.name: n.id for n in diagram.nodes}
         self.monitors: dict[str, str] = {m.state: "idle" for m in extract(chart).monitors}
+        self.monitor_items = tuple(self.monitors.items())  # what records carry, kept current
         self.calls = 0
         self.svg: str | None = None
 
     def state(self) -> dict[str, Any]:
+        """Everything the page shows of the device (the snapshot's part)."""
         s = self.subject
-        active = sorted(s.configuration)
         invokes = []
         for i in s.chart.invokes:
             observer = s.observer_for(i.number)
@@ -105,16 +129,37 @@ class _Device:
                 }
             )
         return {
-            "name": s.name,
+            **self.live(),
             "chart": s.chart.name,
-            "active": active,
-            "active_ids": [self.ids[a] for a in active if a in self.ids],
             "events": list(s.chart.event_names),
             "invokes": invokes,
-            "monitors": [{"state": k, "status": v} for k, v in self.monitors.items()],
-            "events_processed": s.events_processed,
-            "invokes_issued": s.invokes_issued,
-            "observer_calls": self.calls,
+        }
+
+    def live(self) -> dict[str, Any]:
+        """What a step may change (a record's part; the page merges it into the snapshot's)."""
+        s = self.subject
+        return self.render_live(
+            s.configuration, s.events_processed, s.invokes_issued, self.calls,
+            self.monitor_items,
+        )  # fmt: skip
+
+    def render_live(
+        self,
+        configuration: frozenset[str],
+        events: int,
+        invokes: int,
+        calls: int,
+        monitors: tuple[tuple[str, str], ...],
+    ) -> dict[str, Any]:
+        active = sorted(configuration)
+        return {
+            "name": self.subject.name,
+            "active": active,
+            "active_ids": [self.ids[a] for a in active if a in self.ids],
+            "monitors": [{"state": k, "status": v} for k, v in monitors],
+            "events_processed": events,
+            "invokes_issued": invokes,
+            "observer_calls": calls,
         }
 
     def diagram(self) -> str:
@@ -127,6 +172,25 @@ class _Device:
         return self.svg
 
 
+class _HttpLog(logging.Logger):
+    """aiohttp's connection log: a client's fault is one debug line, not a traceback.
+
+    Malformed requests (aiohttp answers 400 and closes) and connections that go away
+    are the client's doing; any other exception is a bug here and keeps its traceback.
+    """
+
+    def exception(self, msg: object, *args: object, exc_info: Any = True, **kw: Any) -> None:
+        exc = exc_info if isinstance(exc_info, BaseException) else sys.exc_info()[1]
+        if isinstance(exc, HttpProcessingError | ConnectionError | asyncio.CancelledError):
+            self.debug("%s: %s", str(msg) % args if args else msg, exc)
+        else:
+            super().exception(msg, *args, exc_info=exc_info, **kw)
+
+
+_LOG = _HttpLog("statectl.web.http")
+_LOG.parent = logging.getLogger("statectl.web")
+
+
 class Dashboard:
     """Serve the dashboard for ``subjects``; ``post`` sends events (journalled or not)."""
 
@@ -136,19 +200,26 @@ class Dashboard:
         *,
         post: PostFn | None = None,
         token: str | None = None,
+        limits: Limits | None = None,
     ) -> None:
         self.devices = {s.name: _Device(s) for s in subjects}
         self.post = post
         self.token = token or secrets.token_urlsafe(18)
-        self.log: deque[str] = deque(maxlen=LOG_SIZE)
-        self._clients: set[_Client] = set()
-        self._lock = threading.Lock()
-        self._server: ThreadingHTTPServer | None = None
-        self._thread: threading.Thread | None = None
-        self._unlisten = [s.listen(self._on_record) for s in self.devices_subjects()]
-        self.stopping = threading.Event()
+        self.limits = limits or Limits()
         self.origins: frozenset[str] = frozenset()
         self.hosts: frozenset[str] = frozenset()
+        self._lock = threading.Lock()
+        self._pending: list[str | _Noted] = []
+        self._overrun = False
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._wake_sent = False
+        self._thread: threading.Thread | None = None
+        self._stop: asyncio.Event | None = None
+        self._port = 0
+        self.fanout = Fanout(
+            streams=self.limits.streams, buffer=self.limits.stream_buffer, log_size=LOG_SIZE
+        )
+        self._unlisten = [d.subject.listen(self._on_record) for d in self.devices.values()]
 
     def devices_subjects(self) -> tuple[Subject, ...]:
         return tuple(d.subject for d in self.devices.values())
@@ -156,39 +227,72 @@ class Dashboard:
     # -- records -> messages (owner threads) ---------------------------------------------
 
     def _on_record(self, record: Record) -> None:
+        """On the owner thread: note the record and what the device is after it (rule 3).
+
+        Only values are taken here (the record, the active states, the counts); turning
+        them into JSON is the loop's work, so a step costs the device a few microseconds.
+        """
         device = self.devices.get(record.device)
         if device is None:
             return
         match record:
             case MonitorStarted(state=state):
                 device.monitors[state] = "running"
+                device.monitor_items = tuple(device.monitors.items())
             case MonitorStopped(state=state):
                 device.monitors[state] = "idle"
+                device.monitor_items = tuple(device.monitors.items())
             case FaultDetected(state=state, detail=detail):
                 device.monitors[state] = f"fault: {detail}"
+                device.monitor_items = tuple(device.monitors.items())
             case ObserverCalled():
                 device.calls += 1
             case _:
                 pass
-        message = {
-            "type": "record",
-            "device": record.device,
-            "time": record.time,
-            "kind": kind_of(record),
-            "text": format_record(record),
-            "state": device.state(),
-        }
-        self.publish(json.dumps(message))
+        s = device.subject
+        self._hand(
+            _Noted(
+                device, record, s.configuration, s.events_processed, s.invokes_issued,
+                device.calls, device.monitor_items,
+            )
+        )  # fmt: skip
 
     def publish(self, text: str) -> None:
-        """Queue ``text`` for every connected page and keep it for later ones."""
+        """Hand ``text`` to every connected page and keep it for later ones (rule 3).
+
+        Any thread may call this; it never blocks on the network.
+        """
+        self._hand(text)
+
+    def _hand(self, item: str | _Noted) -> None:
         with self._lock:
-            self.log.append(text)
-            clients = tuple(self._clients)
-        for c in clients:
-            with c.cond:
-                c.queue.append(text)
-                c.cond.notify()
+            self._pending.append(item)
+            loop = self._loop
+            if loop is None:  # not serving: only the log for later pages matters
+                del self._pending[:-LOG_SIZE]
+                return
+            if len(self._pending) > PENDING_MAX:  # rule 4
+                self._pending.clear()
+                self._overrun = True
+            if self._wake_sent:
+                return
+            self._wake_sent = True
+        with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
+            loop.call_soon_threadsafe(self._gather, loop)
+
+    def _gather(self, loop: asyncio.AbstractEventLoop) -> None:
+        """On the loop: hand over once the step that woke it has likely said everything."""
+        loop.call_later(self.limits.gather, self._hand_over)
+
+    def _hand_over(self) -> None:
+        """On the loop: take every pending message and send it to every stream."""
+        with self._lock:
+            items, self._pending = self._pending, []
+            overrun, self._overrun = self._overrun, False
+            self._wake_sent = False
+        if overrun:
+            self.fanout.drop_all("overrun")
+        self.fanout.publish([i if isinstance(i, str) else i.message() for i in items])
 
     def snapshot(self) -> dict[str, Any]:
         return {
@@ -200,187 +304,110 @@ class Dashboard:
     # -- serving -------------------------------------------------------------------------
 
     def start(self, host: str = "127.0.0.1", port: int = 0) -> str:
-        """Serve on ``host:port`` (0: any free port) on a daemon thread; returns the URL."""
-        if self._server is not None:
+        """Serve on ``host:port`` (0: any free port) on a daemon thread; returns the URL.
+
+        The socket is bound here, so an address in use raises ``OSError`` to the caller.
+        """
+        if self._thread is not None:
             raise StatectlError("the dashboard is running already")
-        server = ThreadingHTTPServer((host, port), _handler(self))
-        server.daemon_threads = True
-        self._server = server
-        bound = server.server_address[1]
-        names = {host, "127.0.0.1", "localhost"} if host in ("127.0.0.1", "localhost") else {host}
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        sock = socket.create_server((host, port), family=family, backlog=self.limits.backlog)
+        bound = int(sock.getsockname()[1])
+        self._port = bound
+        shown = f"[{host}]" if ":" in host else host  # an IPv6 address in a URL or Host
+        names = {host, "127.0.0.1", "localhost"} if host in ("127.0.0.1", "localhost") else {shown}
         self.hosts = frozenset(f"{n}:{bound}" for n in names)
         self.origins = frozenset(f"http://{h}" for h in self.hosts)
+        ready = threading.Event()
+        failure: list[BaseException] = []
         self._thread = threading.Thread(
-            target=server.serve_forever, kwargs={"poll_interval": 0.2}, daemon=True,
+            target=self._serve, args=(sock, ready, failure), daemon=True,
             name="statectl-dashboard",
         )  # fmt: skip
         self._thread.start()
-        return f"http://{host}:{bound}/"
+        ready.wait(10.0)
+        if failure:
+            self._thread.join(2.0)
+            self._thread = None
+            raise StatectlError(f"the dashboard did not start: {failure[0]}")
+        return f"http://{shown}:{bound}/"
+
+    def _serve(
+        self, sock: socket.socket, ready: threading.Event, failure: list[BaseException]
+    ) -> None:
+        loop = asyncio.new_event_loop()
+        try:
+            loop.run_until_complete(self._main(loop, sock, ready))
+        except Exception as exc:  # reported to start(); the devices go on
+            failure.append(exc)
+        finally:
+            with self._lock:
+                self._loop = None
+            loop.run_until_complete(loop.shutdown_default_executor())
+            loop.close()
+            sock.close()
+            ready.set()
+
+    async def _main(
+        self, loop: asyncio.AbstractEventLoop, sock: socket.socket, ready: threading.Event
+    ) -> None:
+        limits = self.limits
+        runner = web.AppRunner(
+            make_app(self, self.fanout, limits),
+            handle_signals=False,
+            access_log=None,
+            logger=_LOG,
+            keepalive_timeout=limits.idle_timeout,
+            lingering_time=limits.linger,
+            handler_cancellation=True,  # a page that goes away ends its handler
+            shutdown_timeout=2.0,
+        )
+        await runner.setup()
+        site = web.SockSite(runner, sock)
+        await site.start()
+        self._stop = asyncio.Event()
+        with self._lock:
+            self._loop = loop
+            self._wake_sent = True
+        self._hand_over()  # what the devices said before the server ran
+        ready.set()
+        beat = loop.create_task(self._heartbeat(limits.heartbeat))
+        try:
+            await self._stop.wait()
+        finally:
+            beat.cancel()
+            with self._lock:
+                self._loop = None
+            for stream in tuple(self.fanout.streams):
+                stream.end("stopping")
+            await asyncio.sleep(0)  # let the stream handlers return their responses
+            await runner.cleanup()
+
+    async def _heartbeat(self, every: float) -> None:
+        loop = asyncio.get_running_loop()
+        while True:
+            await asyncio.sleep(every)
+            self.fanout.heartbeat(loop.time(), self.limits.stall_timeout)
 
     @property
     def port(self) -> int:
-        if self._server is None:
+        if self._thread is None:
             raise StatectlError("the dashboard is not running")
-        return int(self._server.server_address[1])
+        return self._port
 
     def stop(self) -> None:
         """Stop serving, end every event stream and stop listening to the devices."""
-        self.stopping.set()
-        for c in tuple(self._clients):
-            with c.cond:
-                c.cond.notify_all()
-        if self._server is not None:
-            self._server.shutdown()
-            self._server.server_close()
-            self._server = None
-        if self._thread is not None:
-            self._thread.join(2.0)
-            self._thread = None
+        thread, self._thread = self._thread, None
+        with self._lock:
+            loop = self._loop
+        if loop is not None and self._stop is not None:
+            with contextlib.suppress(RuntimeError):
+                loop.call_soon_threadsafe(self._stop.set)
+        if thread is not None:
+            thread.join(10.0)
         for unlisten in self._unlisten:
             unlisten()
         self._unlisten = []
 
-    def subscribe(self) -> _Client:
-        c = _Client()
-        with self._lock:
-            self._clients.add(c)
-        return c
-
-    def unsubscribe(self, c: _Client) -> None:
-        with self._lock:
-            self._clients.discard(c)
-
     def authorised(self, given: str | None) -> bool:
         return given is not None and hmac.compare_digest(given.encode(), self.token.encode())
-
-
-def _asset(name: str) -> bytes:
-    return (files("statectl.web") / "assets" / name).read_bytes()
-
-
-def _handler(dash: Dashboard) -> type[BaseHTTPRequestHandler]:
-    class Handler(BaseHTTPRequestHandler):
-        server_version = "statectl"
-        sys_version = ""
-        protocol_version = "HTTP/1.1"
-
-        def log_message(self, format: str, *args: Any) -> None:
-            pass  # the trace is the log; requests are not
-
-        def _send(self, status: int, body: bytes, ctype: str) -> None:
-            self.send_response(status)
-            self.send_header("Content-Type", ctype)
-            self.send_header("Content-Length", str(len(body)))
-            for k, v in _HEADERS.items():
-                self.send_header(k, v)
-            self.end_headers()
-            self.wfile.write(body)
-
-        def _json(self, status: int, value: Any) -> None:
-            self._send(status, json.dumps(value).encode(), "application/json")
-
-        def _guard(self) -> bool:
-            """Rule 3: the Host must be ours and an Origin, if sent, must be ours."""
-            host = self.headers.get("Host", "")
-            if host not in dash.hosts:
-                self._json(HTTPStatus.FORBIDDEN, {"error": f"host {host!r} is not served here"})
-                return False
-            origin = self.headers.get("Origin")
-            if origin is not None and origin not in dash.origins:
-                self._json(HTTPStatus.FORBIDDEN, {"error": f"origin {origin!r} is refused"})
-                return False
-            return True
-
-        def do_GET(self) -> None:
-            if not self._guard():
-                return
-            path = self.path.split("?", 1)[0]
-            if path in _ASSETS:
-                name, ctype = _ASSETS[path]
-                self._send(HTTPStatus.OK, _asset(name), ctype)
-            elif path == "/api/state":
-                self._json(HTTPStatus.OK, dash.snapshot())
-            elif path.startswith("/api/diagram/") and path.endswith(".svg"):
-                from urllib.parse import unquote
-
-                name = unquote(path[len("/api/diagram/") : -len(".svg")])
-                device = dash.devices.get(name)
-                if device is None:
-                    self._json(HTTPStatus.NOT_FOUND, {"error": f"no device {name!r}"})
-                else:
-                    self._send(HTTPStatus.OK, device.diagram().encode(), "image/svg+xml")
-            elif path == "/api/events":
-                self._stream()
-            else:
-                self._json(HTTPStatus.NOT_FOUND, {"error": f"nothing at {path}"})
-
-        def _stream(self) -> None:
-            self.send_response(HTTPStatus.OK)
-            self.send_header("Content-Type", "text/event-stream")
-            self.send_header("Cache-Control", "no-store")
-            self.send_header("X-Content-Type-Options", "nosniff")
-            self.end_headers()
-            client = dash.subscribe()
-            try:
-                with dash._lock:
-                    backlog = list(dash.log)
-                first = [json.dumps(dash.snapshot()), *backlog]
-                self.wfile.write("".join(f"data: {m}\n\n" for m in first).encode())
-                self.wfile.flush()
-                while not dash.stopping.is_set():
-                    with client.cond:
-                        if not client.queue:
-                            client.cond.wait(0.5)
-                        batch = list(client.queue)
-                        client.queue.clear()
-                    if batch:
-                        self.wfile.write("".join(f"data: {m}\n\n" for m in batch).encode())
-                    else:
-                        self.wfile.write(b": idle\n\n")
-                    self.wfile.flush()
-            except (BrokenPipeError, ConnectionResetError, OSError):
-                pass
-            finally:
-                dash.unsubscribe(client)
-                self.close_connection = True
-
-        def do_POST(self) -> None:
-            if not self._guard():
-                return
-            if self.path != "/api/post":
-                self._json(HTTPStatus.NOT_FOUND, {"error": f"nothing to post at {self.path}"})
-                return
-            if dash.post is None:
-                self._json(HTTPStatus.FORBIDDEN, {"error": "this dashboard is read-only"})
-                return
-            if not dash.authorised(self.headers.get("X-Statectl-Token")):
-                self._json(
-                    HTTPStatus.UNAUTHORIZED,
-                    {"error": "posting needs the token printed at start-up (X-Statectl-Token)"},
-                )
-                return
-            if self.headers.get("Content-Type", "").split(";")[0].strip() != "application/json":
-                self._json(HTTPStatus.UNSUPPORTED_MEDIA_TYPE, {"error": "send application/json"})
-                return
-            try:
-                length = int(self.headers.get("Content-Length", "0"))
-                if not 0 < length <= 65536:
-                    raise ValueError(f"body of {length} bytes")
-                body = json.loads(self.rfile.read(length))
-                if not isinstance(body, dict) or not isinstance(body.get("event"), str):
-                    raise ValueError('the body is {"device": ..., "event": ..., "data": ...}')
-                device = body.get("device")
-                if device is not None and not isinstance(device, str):
-                    raise ValueError("device must be a name")
-                ticket = dash.post(device, body["event"], body.get("data"))
-                durable = False
-                seq = None
-                if ticket is not None:
-                    seq = ticket.seq
-                    durable = bool(ticket.wait(5.0))
-            except (ValueError, StatectlError) as exc:
-                self._json(HTTPStatus.BAD_REQUEST, {"error": str(exc)})
-                return
-            self._json(HTTPStatus.OK, {"accepted": True, "seq": seq, "durable": durable})
-
-    return Handler

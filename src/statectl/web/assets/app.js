@@ -98,7 +98,9 @@ function connect() {
       for (const d of message.devices) show(d);
     } else if (message.type === "record") {
       log(message);
-      show(message.state);
+      // A record carries what a step changes; the rest (events, invokes) is the snapshot's.
+      const known = devices.get(message.state.name);
+      show(known ? { ...known.state, ...message.state } : message.state);
     }
   };
 }
