@@ -34,6 +34,8 @@ Rules:
    so a parent whose children all went goes too.
 6. An event row's old or new state must exist (B201), a parent too (B209), parents
    must not form a cycle (B210), an ignore cell names known events only (B208).
+   States nest at most :data:`MAX_STATE_DEPTH` levels deep (B218), so no later
+   stage (semantics, checks, codegen) meets a hierarchy deeper than it handles.
 7. Guards are checked by :mod:`statectl.expr` against the data names plus
    ``previous`` and ``_event`` (X301-X303).
 8. Any error: no chart, all diagnostics. The chart keeps the device name, the
@@ -91,6 +93,9 @@ __all__ = [
 #: Names a guard may read besides the device's data.
 GUARD_NAMES = frozenset({"previous", "_event"})
 
+#: Deepest state hierarchy a device file may build (B218; docs/limits.md).
+MAX_STATE_DEPTH = 100
+
 CODES = {
     "B201": "an event row's old or new state is not in the State Definition table",
     "B202": "no state is marked default",
@@ -109,6 +114,7 @@ CODES = {
     "B215": "a type that contradicts the rows (atomic with children, compound without)",
     "B216": "an event row leaves a history or a final state",
     "B217": "a default cell on a state that is not a history",
+    "B218": "states nested deeper than the limit (MAX_STATE_DEPTH)",
     "B220": "a chart with executable content, datamodel scripts or non-literal data does not "
     "fit the tables (info)",
     "B221": "a transition the tables cannot hold: eventless, several events or targets, "
@@ -226,17 +232,30 @@ def _order(
         elif s.parent:
             children[s.parent].append(s.name)
     order: list[str] = []
-
-    def visit(name: str) -> None:
-        order.append(name)
-        for child in children[name]:
-            visit(child)
-
+    depth: dict[str, int] = {}
+    for s in states.values():  # depth first, parents before children, without recursion
+        if s.parent and s.parent in states:
+            continue
+        pending = [(s.name, 1)]
+        while pending:
+            name, level = pending.pop()
+            order.append(name)
+            depth[name] = level
+            pending.extend((child, level + 1) for child in reversed(children[name]))
+    too_deep = [n for n in order if depth[n] == MAX_STATE_DEPTH + 1]
+    for name in too_deep:
+        diags.append(
+            _d(
+                "B218",
+                Severity.ERROR,
+                states[name].rows[0],
+                f"state {name!r} is nested {MAX_STATE_DEPTH + 1} levels deep "
+                f"(the limit is {MAX_STATE_DEPTH})",
+                "flatten the parent chain; see docs/limits.md",
+            )
+        )
     for s in states.values():
-        if not s.parent or s.parent not in states:
-            visit(s.name)
-    for s in states.values():
-        if s.name not in order:
+        if s.name not in depth:
             diags.append(
                 _d(
                     "B210",

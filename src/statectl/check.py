@@ -63,6 +63,8 @@ class _Structure:
     by_name: dict[str, State]
     children: dict[str | None, tuple[str, ...]]
     ancestors: dict[str, tuple[str, ...]]
+    outgoing: dict[str, tuple[Transition, ...]]  # a state's own transitions, in chart order
+    descriptors: dict[str, frozenset[str]]  # event descriptors of a state and its ancestors
 
     @classmethod
     def of(cls, chart: Chart) -> _Structure:
@@ -78,23 +80,51 @@ class _Structure:
                 chain.append(p)
                 p = by_name[p].parent
             ancestors[s.name] = tuple(chain)
-        return cls(chart, by_name, {k: tuple(v) for k, v in children.items()}, ancestors)
+        outgoing: dict[str, list[Transition]] = {}
+        for t in chart.transitions:
+            outgoing.setdefault(t.source, []).append(t)
+        own = {name: frozenset(e for t in ts for e in t.events) for name, ts in outgoing.items()}
+        descriptors = {
+            s.name: frozenset().union(*(own.get(a, ()) for a in (s.name, *ancestors[s.name])))
+            for s in chart.states
+        }
+        return cls(
+            chart,
+            by_name,
+            {k: tuple(v) for k, v in children.items()},
+            ancestors,
+            {k: tuple(v) for k, v in outgoing.items()},
+            descriptors,
+        )
+
+    def out(self, name: str) -> tuple[Transition, ...]:
+        return self.outgoing.get(name, ())
 
     def kind(self, name: str) -> StateKind:
         return self.by_name[name].kind
 
     def handles(self, state: str, event: str) -> bool:
         """Whether a transition of ``state`` or an ancestor names ``event``."""
-        return any(
-            name_match(t.events, event)
-            for s in (state, *self.ancestors.get(state, ()))
-            for t in self.chart.transitions_from(s)
-        )
+        mine = self.descriptors.get(state, frozenset())
+        return bool(mine) and any(d in mine for d in _matching(event))
 
     def ignores(self, state: str, event: str) -> bool:
         return any(
             (s, event) in self.chart.ignored for s in (state, *self.ancestors.get(state, ()))
         )
+
+
+def _matching(event: str) -> tuple[str, ...]:
+    """Every descriptor that matches ``event`` (as ``name_match`` decides): ``*``, the
+    name itself, and each dot-prefix with and without ``.*``; a set lookup each, so a
+    rule asks "does any row name this event" without scanning every row."""
+    found = ["*", event]
+    at = event.find(".")
+    while at != -1:
+        prefix = event[:at]
+        found += [prefix, prefix + ".*"]
+        at = event.find(".", at + 1)
+    return tuple(found)
 
 
 def _where(state: State) -> Location:
@@ -157,7 +187,7 @@ def _reachable(st: _Structure) -> set[str]:
         enter(name, None)
     while work:
         name = work.pop()
-        for t in st.chart.transitions_from(name):
+        for t in st.out(name):
             for target in t.targets:
                 enter(target, None)
     return reached
@@ -166,12 +196,17 @@ def _reachable(st: _Structure) -> set[str]:
 def _check_reachable(st: _Structure) -> Iterator[Diagnostic]:
     reached = _reachable(st)
     start = ", ".join(st.chart.initial) or "the first state"
+    unreached_below: dict[str, int] = {}
+    for d, anc in st.ancestors.items():
+        if d not in reached:
+            for a in anc:
+                unreached_below[a] = unreached_below.get(a, 0) + 1
     for s in st.chart.states:
         if s.name in reached or s.kind.is_history:
             continue
         if any(a not in reached for a in st.ancestors[s.name]):
             continue  # reported with its outermost unreachable ancestor
-        below = sum(1 for d, anc in st.ancestors.items() if s.name in anc and d not in reached)
+        below = unreached_below.get(s.name, 0)
         extra = f" (and its {below} substates)" if below else ""
         yield Diagnostic(
             "C401",
@@ -195,7 +230,7 @@ def _check_way_out(st: _Structure) -> Iterator[Diagnostic]:
         leaves = any(
             any(x != s.name for x in t.targets)
             for src in (s.name, *st.ancestors[s.name])
-            for t in st.chart.transitions_from(src)
+            for t in st.out(src)
         )
         if not leaves:
             yield Diagnostic(
@@ -211,10 +246,19 @@ def _check_way_out(st: _Structure) -> Iterator[Diagnostic]:
 
 
 def _check_overlaps(st: _Structure) -> Iterator[Diagnostic]:
-    events: tuple[str | None, ...] = (*st.chart.event_names, None)
+    names = st.chart.event_names
+    position = {e: i for i, e in enumerate(names)}
+    by_descriptor: dict[str, list[str]] = {}  # the event names each descriptor matches
+    for e in names:
+        for d in _matching(e):
+            by_descriptor.setdefault(d, []).append(e)
     seen: set[tuple[int, int]] = set()
     for s in st.chart.states:
-        own = tuple(st.chart.transitions_from(s.name))
+        own = st.out(s.name)
+        if len(own) < 2:
+            continue  # no pair of rows, nothing can overlap
+        candidates = {e for t in own for d in t.events for e in by_descriptor.get(d, ())}
+        events: list[str | None] = [*sorted(candidates, key=position.__getitem__), None]
         for event in events:
             if event is None:
                 rows = [t for t in own if not t.events]
@@ -279,8 +323,9 @@ def _check_missed(st: _Structure) -> Iterator[Diagnostic]:
 
 
 def _check_unused_events(st: _Structure) -> Iterator[Diagnostic]:
+    used = {d for t in st.chart.transitions for d in t.events}
     for e in st.chart.events:
-        if not any(name_match(t.events, e.name) for t in st.chart.transitions):
+        if not any(d in used for d in _matching(e.name)):
             yield Diagnostic(
                 "C405",
                 Severity.WARNING,
