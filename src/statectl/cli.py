@@ -421,7 +421,19 @@ def _missing_input(args: argparse.Namespace) -> str | None:
             paths.append(value)
         elif isinstance(value, list):
             paths.extend(v for v in value if isinstance(v, str))
-    return next((p for p in paths if not Path(p).exists()), None)
+    return next((p for p in paths if not _exists(Path(p))), None)
+
+
+def _exists(path: Path) -> bool:
+    """The file exists, or ``NAME.csv`` names a CSV pair whose states file exists."""
+    if path.exists():
+        return True
+    if path.suffix.lower() != ".csv":
+        return False
+    from statectl.tables.csv_io import csv_paths
+
+    pair = csv_paths(path)
+    return pair is not None and pair.states.exists()
 
 
 def main(argv: Sequence[str] | None = None, out: TextIO | None = None,

@@ -579,6 +579,9 @@ def format_literal(value: object) -> str:
     return text[1:-1].strip()
 
 
+_REPORTED = Bad("malformed literal")  # a cell parse_literal reported already
+
+
 def parse_literal(text: str, where: Location, diags: list[Diagnostic]) -> object | Bad:
     """Read a YAML literal from a cell; an empty cell is null."""
     try:
@@ -588,7 +591,7 @@ def parse_literal(text: str, where: Location, diags: list[Diagnostic]) -> object
         shown = text if len(text) <= 60 else text[:57] + "..."
         message = f"data value {shown!r} is not a YAML literal: {exc.message}"
         diags.append(diag(code, where, message, exc.hint))
-        return Bad("malformed literal", code)
+        return Bad(_REPORTED.found, code)
     return normalize_value(value)
 
 
@@ -621,6 +624,8 @@ def make_data(
         if name in data:
             diags.append(diag("T112", where, f"data name {name!r} is given twice"))
             continue
+        if isinstance(value, Bad) and value.found == _REPORTED.found:
+            continue  # parse_literal has said why
         if isinstance(value, Bad):
             diags.append(
                 diag(
