@@ -67,17 +67,20 @@ def compose(
 
 
 def _compose_with(loader: type[yaml.SafeLoader], text: str, max_depth: int) -> yaml.Node | None:
-    parser = loader(text)
+    parser: Any = None
     try:
+        parser = loader(text)  # the pure-Python reader refuses control characters here
         return _compose(parser, max_depth)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         problem = exc.problem or exc.context or "malformed YAML"
         raise YamlRefused("T101", _line(mark), f"malformed YAML: {problem}") from None
     except yaml.YAMLError as exc:
-        raise YamlRefused("T101", None, f"malformed YAML: {exc}") from None
+        first = (str(exc).splitlines() or ["unreadable"])[0]
+        raise YamlRefused("T101", None, f"malformed YAML: {first}") from None
     finally:
-        parser.dispose()
+        if parser is not None:
+            parser.dispose()
 
 
 def _compose(parser: Any, max_depth: int) -> yaml.Node | None:
