@@ -511,3 +511,45 @@ def test_missing_file_exits_2(tmp_path: Path, command: list[str]) -> None:
     argv = [a.replace("OUT", str(tmp_path / "out")) for a in command] + [str(missing)]
     code, text = _run(argv)
     assert (code, "nowhere.yaml" in text, "Traceback" in text) == (2, True, False), text
+
+
+# -- check: the indexes and limits behind its speed ---------------------------------------------
+
+EVENTS = ["go", "error", "error.execution", "error.execution.deep", "a.b", ".x", "x..y", "*"]
+DESCRIPTORS = [*EVENTS, "error.*", "error.execution.*", "a", "a.*", ".*", "x.", "x.*", "err"]
+
+
+def test_descriptor_index_agrees_with_name_match() -> None:
+    """The descriptors check looks up for an event are exactly those name_match accepts."""
+    from statectl.check import _matching
+    from statectl.semantics import name_match
+
+    disagree = [
+        (d, e) for d in DESCRIPTORS for e in EVENTS if name_match([d], e) != (d in _matching(e))
+    ]
+    assert disagree == []
+
+
+def test_c403_compares_at_most_the_row_limit(tmp_path: Path) -> None:
+    """Beyond MAX_OVERLAP_ROWS rows for one state and event, C403 warns once at the limit."""
+    from statectl.check import MAX_OVERLAP_ROWS, check_paths
+
+    rows = MAX_OVERLAP_ROWS + 50
+    text = DEVICE.replace(
+        "events:\n",
+        "events:\n"
+        + "".join(f"  - {{event: go, old: A, new: B, guard: x == {i}}}\n" for i in range(rows)),
+    )
+    path = write(tmp_path, {"d.yaml": text})
+    found = [d for d in check_paths([str(path)]) if d.code == "C403"]
+    assert [(d.severity, d.where.line, str(MAX_OVERLAP_ROWS) in d.message) for d in found] == [
+        (Severity.WARNING, 10 + MAX_OVERLAP_ROWS, True)
+    ]
+
+
+def test_guard_too_deep_to_walk_is_not_proven() -> None:
+    """A guard nested past the recursion limit is "not proven" exclusive, not a crash."""
+    from statectl.guards import guards_exclusive
+
+    assert guards_exclusive("not " * 5000 + "x", "x") is False
+    assert guards_exclusive("x == 1", "x == 2") is True

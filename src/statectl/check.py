@@ -34,7 +34,6 @@ from statectl.errors import Diagnostic, Location, Severity, has_errors
 from statectl.guards import guards_exclusive
 from statectl.model import Chart, ControlKind, EventKind, State, StateKind, Transition
 from statectl.recovery import check_recovery
-from statectl.semantics import name_match
 from statectl.tables import load
 
 __all__ = ["CODES", "check_chart", "check_paths", "guards_exclusive"]
@@ -244,6 +243,9 @@ def _check_way_out(st: _Structure) -> Iterator[Diagnostic]:
 
 # -- C403 overlapping rows ------------------------------------------------------------------
 
+#: Rows of one state and event compared pair by pair at most (C403 warns beyond it).
+MAX_OVERLAP_ROWS = 256
+
 
 def _check_overlaps(st: _Structure) -> Iterator[Diagnostic]:
     names = st.chart.event_names
@@ -257,13 +259,17 @@ def _check_overlaps(st: _Structure) -> Iterator[Diagnostic]:
         own = st.out(s.name)
         if len(own) < 2:
             continue  # no pair of rows, nothing can overlap
-        candidates = {e for t in own for d in t.events for e in by_descriptor.get(d, ())}
-        events: list[str | None] = [*sorted(candidates, key=position.__getitem__), None]
-        for event in events:
-            if event is None:
-                rows = [t for t in own if not t.events]
-            else:
-                rows = [t for t in own if name_match(t.events, event)]
+        rows_of: dict[str | None, list[Transition]] = {}  # each event's rows, in table order
+        for t in own:
+            matched: set[str | None] = {n for d in t.events for n in by_descriptor.get(d, ())}
+            for name in matched if t.events else {None}:
+                rows_of.setdefault(name, []).append(t)
+        events = sorted((e for e in rows_of if e is not None), key=position.__getitem__)
+        for event in [*events, None]:
+            rows = rows_of.get(event, [])
+            if len(rows) > MAX_OVERLAP_ROWS:
+                yield _too_many_rows(s.name, event, rows)
+                rows = rows[:MAX_OVERLAP_ROWS]
             for i, first in enumerate(rows):
                 for second in rows[i + 1 :]:
                     key = (id(first), id(second))
@@ -273,6 +279,18 @@ def _check_overlaps(st: _Structure) -> Iterator[Diagnostic]:
                     diag = _overlap(s.name, event, first, second)
                     if diag is not None:
                         yield diag
+
+
+def _too_many_rows(state: str, event: str | None, rows: list[Transition]) -> Diagnostic:
+    what = f"event {event!r}" if event is not None else "no event (eventless)"
+    return Diagnostic(
+        "C403",
+        Severity.WARNING,
+        rows[MAX_OVERLAP_ROWS].origin,
+        f"state {state!r} has {len(rows)} rows for {what}: only the first "
+        f"{MAX_OVERLAP_ROWS} were compared pair by pair, so later rows may overlap unseen",
+        "split the rows over substates or events; see docs/limits.md",
+    )
 
 
 def _overlap(
