@@ -553,3 +553,16 @@ def test_guard_too_deep_to_walk_is_not_proven() -> None:
 
     assert guards_exclusive("not " * 5000 + "x", "x") is False
     assert guards_exclusive("x == 1", "x == 2") is True
+
+
+def test_c404_names_at_most_the_listed_events(tmp_path: Path) -> None:
+    """A state missing more than MAX_LISTED events names that many and counts the rest."""
+    from statectl.check import MAX_LISTED, check_paths
+
+    extra = MAX_LISTED + 5
+    text = DEVICE + "".join(f"  - {{event: e{i}, old: B, new: B}}\n" for i in range(extra))
+    path = write(tmp_path, {"d.yaml": text})
+    found = [d for d in check_paths([str(path)]) if d.code == "C404" and "'A'" in d.message]
+    assert len(found) == 1
+    assert found[0].message.count("'e") == MAX_LISTED
+    assert f"and {extra - MAX_LISTED} more" in found[0].message

@@ -243,6 +243,8 @@ def _check_way_out(st: _Structure) -> Iterator[Diagnostic]:
 
 # -- C403 overlapping rows ------------------------------------------------------------------
 
+#: Events a C404 message names at most (it counts the rest).
+MAX_LISTED = 20
 #: Rows of one state and event compared pair by pair at most (C403 warns beyond it).
 MAX_OVERLAP_ROWS = 256
 
@@ -324,20 +326,39 @@ def _overlap(
 
 def _check_missed(st: _Structure) -> Iterator[Diagnostic]:
     events = st.chart.event_names
+    position = {e: i for i, e in enumerate(events)}
+    by_descriptor: dict[str, set[str]] = {}  # the event names each descriptor matches
+    for e in events:
+        for d in _matching(e):
+            by_descriptor.setdefault(d, set()).add(e)
+    ignored: dict[str, set[str]] = {}
+    for state, event in st.chart.ignored:
+        ignored.setdefault(state, set()).add(event)
     for s in st.chart.states:
         if s.kind is not StateKind.ATOMIC:
             continue
-        missed = [e for e in events if not st.handles(s.name, e) and not st.ignores(s.name, e)]
-        if missed:
-            names = ", ".join(repr(e) for e in missed)
-            yield Diagnostic(
-                "C404",
-                Severity.WARNING,
-                _where(s),
-                f"state {s.name!r} neither handles nor ignores {names} (missed transition)",
-                "add an event row with this old state, or list the event in the state's "
-                "ignore column",
-            )
+        lineage = (s.name, *st.ancestors.get(s.name, ()))
+        covered = {e for d in st.descriptors.get(s.name, ()) for e in by_descriptor.get(d, ())}
+        covered.update(e for a in lineage for e in ignored.get(a, ()) if e in position)
+        count = len(events) - len(covered)
+        if count == 0:
+            continue
+        missed: list[str] = []
+        for e in events:  # in event order, stopping at the listed few
+            if e not in covered:
+                missed.append(e)
+                if len(missed) == MAX_LISTED:
+                    break
+        names = ", ".join(repr(e) for e in missed)
+        if count > len(missed):
+            names += f" and {count - len(missed)} more"
+        yield Diagnostic(
+            "C404",
+            Severity.WARNING,
+            _where(s),
+            f"state {s.name!r} neither handles nor ignores {names} (missed transition)",
+            "add an event row with this old state, or list the event in the state's ignore column",
+        )
 
 
 def _check_unused_events(st: _Structure) -> Iterator[Diagnostic]:
