@@ -7,8 +7,11 @@ command given such a file exits 1 (or 2 for a missing file) without a traceback.
 
 from __future__ import annotations
 
+import importlib
+import importlib.util
 import io
 from pathlib import Path
+from typing import Any
 
 import openpyxl
 import pytest
@@ -22,6 +25,12 @@ from statectl.scxml.reader import MAX_SRC_BYTES, MAX_XML_DEPTH, read_scxml
 from statectl.tables.safeyaml import MAX_DEPTH, YamlRefused, compose, load_value
 
 ROOT = Path(__file__).resolve().parents[1]
+
+#: The checker's module: ``statectl.check``, named ``statectl.rules`` on branches where it was
+#: renamed (the facade's ``check()`` function took the name).
+RULES: Any = importlib.import_module(
+    "statectl.rules" if importlib.util.find_spec("statectl.rules") else "statectl.check"
+)
 
 #: 7 levels of 9 aliases: 9**7 (4.8 million) strings once expanded, from 222 bytes.
 BOMB = (
@@ -521,7 +530,7 @@ DESCRIPTORS = [*EVENTS, "error.*", "error.execution.*", "a", "a.*", ".*", "x.", 
 
 def test_descriptor_index_agrees_with_name_match() -> None:
     """The descriptors check looks up for an event are exactly those name_match accepts."""
-    from statectl.check import _matching
+    _matching = RULES._matching
     from statectl.semantics import name_match
 
     disagree = [
@@ -532,7 +541,7 @@ def test_descriptor_index_agrees_with_name_match() -> None:
 
 def test_c403_compares_at_most_the_row_limit(tmp_path: Path) -> None:
     """Beyond MAX_OVERLAP_ROWS rows for one state and event, C403 warns once at the limit."""
-    from statectl.check import MAX_OVERLAP_ROWS, check_paths
+    check_paths, MAX_OVERLAP_ROWS = RULES.check_paths, RULES.MAX_OVERLAP_ROWS
 
     rows = MAX_OVERLAP_ROWS + 50
     text = DEVICE.replace(
@@ -557,7 +566,7 @@ def test_guard_too_deep_to_walk_is_not_proven() -> None:
 
 def test_c404_names_at_most_the_listed_events(tmp_path: Path) -> None:
     """A state missing more than MAX_LISTED events names that many and counts the rest."""
-    from statectl.check import MAX_LISTED, check_paths
+    check_paths, MAX_LISTED = RULES.check_paths, RULES.MAX_LISTED
 
     extra = MAX_LISTED + 5
     text = DEVICE + "".join(f"  - {{event: e{i}, old: B, new: B}}\n" for i in range(extra))
