@@ -242,6 +242,27 @@ def test_hostile_device_file_is_refused_at_its_line(
     assert word.lower() in (found[0].message + " " + found[0].hint).lower(), str(found[0])
 
 
+def zip_bomb() -> bytes:
+    """A valid workbook plus one part of zeros that unpacks past the limit (~70 KiB packed)."""
+    import zipfile
+
+    from statectl.tables.xlsx_io import MAX_UNPACKED_BYTES
+
+    out = io.BytesIO(workbook(None, None))
+    with zipfile.ZipFile(out, "a", compression=zipfile.ZIP_DEFLATED) as archive:
+        archive.writestr("xl/padding.bin", bytes(MAX_UNPACKED_BYTES + 1))
+    return out.getvalue()
+
+
+def test_xlsx_zip_bomb_is_t117(tmp_path: Path) -> None:
+    """A workbook whose parts unpack past the limit is T117 and is never unpacked."""
+    content = zip_bomb()
+    assert len(content) < 1 << 20
+    chart, diags = load_and_build(write(tmp_path, {"d.xlsx": content}))
+    assert chart is None
+    assert [d.code for d in diags] == ["T117"]
+
+
 def test_state_depth_at_the_limit_builds(tmp_path: Path) -> None:
     """A parent chain exactly MAX_STATE_DEPTH deep builds; the limit is not off by one."""
     chart, diags = load_and_build(write(tmp_path, {"d.yaml": parent_chain(MAX_STATE_DEPTH)}))

@@ -177,6 +177,7 @@ CODES: Mapping[str, str] = {
     "T114": "bad recovery row (both an event and redo, data on a redo row, or a bad redo value)",
     "T115": "a YAML alias (*name): refused, so an alias bomb cannot expand",
     "T116": "YAML nested deeper than the limit (MAX_DEPTH): see docs/limits.md",
+    "T117": "a workbook that unpacks to more than the limit (a zip bomb): see docs/limits.md",
 }
 
 
