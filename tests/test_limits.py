@@ -158,6 +158,13 @@ DEVICE_CASES: list[tuple[str, dict[str, str | bytes], str, int, str]] = [
         "month",
     ),
     (
+        "yaml-guard-too-deep",
+        {"d.yaml": DEVICE.replace("new: B\n", "new: B\n    guard: " + "not " * 5000 + "x\n")},
+        "X301",
+        10,
+        "deeply",
+    ),
+    (
         "yaml-parent-chain-4000",
         {"d.yaml": parent_chain(4000)},
         "B218",
@@ -336,8 +343,14 @@ devices:
         (CELL + "links: &l []\nenvironment: *l\n", DEVICE, "T115", 5),
         (CELL + "invariants: " + deep_list(500) + "\n", DEVICE, "T116", 4),
         (CELL.encode("utf-8") + b"x: \xff\xfe\n", DEVICE, "V801", 1),
+        (
+            CELL + 'invariants:\n  - {name: x, holds: "' + "not " * 5000 + "In('d.A')\"}\n",
+            DEVICE,
+            "V810",
+            5,
+        ),
     ],
-    ids=["device-with-alias-bomb", "alias-in-cell", "deep-cell", "not-utf8"],
+    ids=["device-with-alias-bomb", "alias-in-cell", "deep-cell", "not-utf8", "deep-invariant"],
 )
 def test_hostile_cell_file_is_refused(
     tmp_path: Path, cell: str | bytes, device: str, code: str, line: int

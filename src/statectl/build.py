@@ -55,7 +55,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, has_errors
-from statectl.expr import check_names, compile_expression
+from statectl.expr import Expression, check_names, compile_expression
 from statectl.model import (
     Action,
     Chart,
@@ -122,6 +122,23 @@ CODES = {
     "B222": "a guard outside the safe expression language does not fit the tables (info)",
     "B223": "the tables made from a chart would not build the same chart (info)",
 }
+
+
+def _compile(guard: str, where: Location) -> tuple[Expression | None, list[Diagnostic]]:
+    """``compile_expression``, with a guard nested too deeply to compile as X301."""
+    try:
+        return compile_expression(guard, where)
+    except (RecursionError, MemoryError):
+        shown = guard if len(guard) <= 40 else guard[:37] + "..."
+        return None, [
+            _d(
+                "X301",
+                Severity.ERROR,
+                where,
+                f"guard {shown!r} is nested too deeply to analyse",
+                "write it with fewer nested parts; see docs/limits.md",
+            )
+        ]
 
 
 def _d(code: str, severity: Severity, where: Location, message: str, hint: str = "") -> Diagnostic:
@@ -639,7 +656,7 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
                     )
                 )
         if r.guard:
-            expression, problems = compile_expression(r.guard, r.where)
+            expression, problems = _compile(r.guard, r.where)
             diags.extend(problems)
             if expression is not None:
                 diags.extend(check_names(expression, known, r.where))
@@ -852,7 +869,7 @@ def _misfits(chart: Chart) -> list[Diagnostic]:
                 )
             )
         if t.guard:
-            expression, problems = compile_expression(t.guard, t.origin)
+            expression, problems = _compile(t.guard, t.origin)
             if expression is not None:
                 problems = check_names(expression, known, t.origin)
             if problems:

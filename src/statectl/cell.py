@@ -175,7 +175,12 @@ def parse_global(
     source: str, where: Location, charts: Mapping[str, Chart], *, what: str = "expression"
 ) -> tuple[GlobalExpr | None, list[Diagnostic]]:
     """Check a global expression (rule 4) against the cell's devices and their states."""
-    expr, diags = compile_expression(source, where, what=what)
+    try:
+        expr, diags = compile_expression(source, where, what=what)
+    except (RecursionError, MemoryError):
+        shown = source if len(source) <= 40 else source[:37] + "..."
+        message = f"{what} {shown!r} is nested too deeply to analyse"
+        return None, [_d("V810", where, message, "write it with fewer nested parts")]
     if expr is None:
         return None, diags
     tree = ast.parse(source.strip(), mode="eval")
