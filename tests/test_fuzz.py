@@ -9,6 +9,7 @@ check`` (device files), ``verify``'s loader (cells) and ``scxml import`` (SCXML)
 do. The only exceptions allowed are statectl's own (``StatectlError``); each case
 must end within :data:`CASE_SECONDS` (a hang detector, not a speed test). Mutants
 are only loaded, never run, so a python-datamodel document executes nothing.
+``STATECTL_FUZZ_SEEDS=50`` runs more mutants per example file (default 8, about 20 s).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import io
+import os
 import random
 import shutil
 import signal
@@ -43,7 +45,7 @@ RULES: Any = importlib.import_module(
 EXAMPLES = ROOT / "examples"
 PACK = ROOT.parent / "shared" / "conformance" / "w3c-scxml"
 CASE_SECONDS = 10
-SEEDS = 8  # mutants per mutator and example file
+SEEDS = int(os.environ.get("STATECTL_FUZZ_SEEDS", "8"))  # mutants per mutator and file
 PACK_MUTANTS = 7  # mutants per W3C document (mutators drawn at random, each once)
 
 BOMB = (
