@@ -611,3 +611,36 @@ def test_c404_names_at_most_the_listed_events(tmp_path: Path) -> None:
     assert listed.count("'") // 2 == MAX_LISTED
     missed = extra + 1  # every e<i> and 'back'
     assert f"and {missed - MAX_LISTED} more" in found[0].message
+
+
+def ring(states: int, wrong: str = "") -> str:
+    """A device file of ``states`` states in a ring; ``wrong`` replaces one old state."""
+    rows = ["device: D", "states:"]
+    rows += [f"  - {{state: S{i}, control: event trigger required}}" for i in range(states)]
+    rows[2] = "  - {state: S0, control: default}"
+    rows.append("events:")
+    rows += [f"  - {{event: go, old: S{i}, new: S{(i + 1) % states}}}" for i in range(states)]
+    if wrong:
+        rows[-1] = rows[-1].replace(f"old: S{states - 1}", f"old: {wrong}")
+    return "\n".join(rows) + "\n"
+
+
+def test_hints_stay_short_and_still_suggest(tmp_path: Path) -> None:
+    """In a 1,000-state file a wrong name's hint lists 20 names, counts the rest, and the
+    did-you-mean still finds the close one."""
+    chart, diags = load_and_build(write(tmp_path, {"d.yaml": ring(1000, "S99x")}))
+    assert chart is None
+    found = [d for d in diags if d.code == "B201"]
+    assert len(found) == 1
+    assert found[0].hint.startswith("did you mean 'S99'?")
+    assert found[0].hint.endswith("and 980 more")
+
+
+def test_scxml_unknown_target_hint_stays_short() -> None:
+    """An SCXML transition to an unknown state names 20 known states and counts the rest."""
+    states = "".join(f'<state id="s{i}"><transition target="nowhere"/></state>' for i in range(300))
+    chart, diags = read_scxml(f"{SCXML_HEAD}>{states}</scxml>")
+    assert chart is None
+    hints = {d.hint for d in diags if d.code == "S605"}
+    assert len(hints) == 1
+    assert hints.pop().endswith("and 280 more")

@@ -149,9 +149,26 @@ def _rows_text(places: Sequence[Location]) -> str:
     return ", ".join(str(p) for p in places)
 
 
+#: Names a hint lists at most, and candidates a did-you-mean compares at most: a file
+#: with thousands of wrong names gets thousands of short hints, found in linear time.
+_HINT_LISTED = 20
+_HINT_SEARCHED = 200
+
+
+def _listed(names: Sequence[str]) -> str:
+    shown = ", ".join(names[:_HINT_LISTED])
+    return shown + (f" and {len(names) - _HINT_LISTED} more" if len(names) > _HINT_LISTED else "")
+
+
 def _hint(word: str, choices: Sequence[str]) -> str:
-    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
-    known = "known: " + ", ".join(choices)
+    names = list(choices)
+    if len(names) > _HINT_SEARCHED:  # the likeliest: same first letter, similar length
+        near = [n for n in names if n[:1] == word[:1] and abs(len(n) - len(word)) <= 2]
+        names_searched = near[:_HINT_SEARCHED]
+    else:
+        names_searched = names
+    close = difflib.get_close_matches(word, names_searched, n=1, cutoff=0.6)
+    known = "known: " + _listed(names)
     return f"did you mean {close[0]!r}? {known}" if close else known
 
 

@@ -545,6 +545,10 @@ class _Reader:
 
     def check_targets(self, chart: Chart) -> None:
         known = {s.name for s in chart.states}
+        names = sorted(known)
+        listing = "known states: " + ", ".join(names[:20])  # once, and short
+        if len(names) > 20:
+            listing += f" and {len(names) - 20} more"
         for t in chart.transitions:
             for x in t.targets:
                 if x not in known:
@@ -554,7 +558,7 @@ class _Reader:
                             Severity.ERROR,
                             t.origin,
                             f"transition from {t.source!r} targets unknown state {x!r}",
-                            "known states: " + ", ".join(sorted(known)),
+                            listing,
                         )
                     )
         references = [
@@ -570,7 +574,7 @@ class _Reader:
                             Severity.ERROR,
                             origin,
                             f"state {name!r} names unknown initial/default state {x!r}",
-                            "known states: " + ", ".join(sorted(known)),
+                            listing,
                         )
                     )
         for x in chart.initial:
@@ -581,7 +585,7 @@ class _Reader:
                         Severity.ERROR,
                         chart.origin,
                         f"<scxml initial> names unknown state {x!r}",
-                        "known states: " + ", ".join(sorted(known)),
+                        listing,
                     )
                 )
 
