@@ -590,7 +590,7 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
     merged = _merge_states(tables.states, diags)
     order, children = _order(merged, diags)
     removed = _removed(merged, children, tables.events, diags)
-    kept = [n for n in order if n not in removed]
+    kept = [n for n in order if n not in removed]  # removed is a set
 
     kinds = {
         name: _kind(merged[name], [c for c in children[name] if c not in removed], diags)
@@ -704,11 +704,12 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
         )
 
     event_names = [e.name for e in events]
+    declared = set(event_names)
     ignored: set[tuple[str, str]] = set()
     for name in kept:
         m = merged[name]
         for event in m.ignore:
-            if event in event_names:
+            if event in declared:
                 ignored.add((name, event))
             else:
                 diags.append(
