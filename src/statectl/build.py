@@ -34,6 +34,8 @@ Rules:
    so a parent whose children all went goes too.
 6. An event row's old or new state must exist (B201), a parent too (B209), parents
    must not form a cycle (B210), an ignore cell names known events only (B208).
+   States nest at most :data:`MAX_STATE_DEPTH` levels deep (B218), so no later
+   stage (semantics, checks, codegen) meets a hierarchy deeper than it handles.
 7. Guards are checked by :mod:`statectl.expr` against the data names plus
    ``previous`` and ``_event`` (X301-X303).
 8. Any error: no chart, all diagnostics. The chart keeps the device name, the
@@ -53,7 +55,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, has_errors
-from statectl.expr import check_names, compile_expression
+from statectl.expr import Expression, check_names, compile_expression
 from statectl.model import (
     Action,
     Chart,
@@ -91,6 +93,9 @@ __all__ = [
 #: Names a guard may read besides the device's data.
 GUARD_NAMES = frozenset({"previous", "_event"})
 
+#: Deepest state hierarchy a device file may build (B218; docs/limits.md).
+MAX_STATE_DEPTH = 100
+
 CODES = {
     "B201": "an event row's old or new state is not in the State Definition table",
     "B202": "no state is marked default",
@@ -109,6 +114,7 @@ CODES = {
     "B215": "a type that contradicts the rows (atomic with children, compound without)",
     "B216": "an event row leaves a history or a final state",
     "B217": "a default cell on a state that is not a history",
+    "B218": "states nested deeper than the limit (MAX_STATE_DEPTH)",
     "B220": "a chart with executable content, datamodel scripts or non-literal data does not "
     "fit the tables (info)",
     "B221": "a transition the tables cannot hold: eventless, several events or targets, "
@@ -116,6 +122,23 @@ CODES = {
     "B222": "a guard outside the safe expression language does not fit the tables (info)",
     "B223": "the tables made from a chart would not build the same chart (info)",
 }
+
+
+def _compile(guard: str, where: Location) -> tuple[Expression | None, list[Diagnostic]]:
+    """``compile_expression``, with a guard nested too deeply to compile as X301."""
+    try:
+        return compile_expression(guard, where)
+    except (RecursionError, MemoryError):
+        shown = guard if len(guard) <= 40 else guard[:37] + "..."
+        return None, [
+            _d(
+                "X301",
+                Severity.ERROR,
+                where,
+                f"guard {shown!r} is nested too deeply to analyse",
+                "write it with fewer nested parts; see docs/limits.md",
+            )
+        ]
 
 
 def _d(code: str, severity: Severity, where: Location, message: str, hint: str = "") -> Diagnostic:
@@ -126,9 +149,26 @@ def _rows_text(places: Sequence[Location]) -> str:
     return ", ".join(str(p) for p in places)
 
 
+#: Names a hint lists at most, and candidates a did-you-mean compares at most: a file
+#: with thousands of wrong names gets thousands of short hints, found in linear time.
+_HINT_LISTED = 20
+_HINT_SEARCHED = 200
+
+
+def _listed(names: Sequence[str]) -> str:
+    shown = ", ".join(names[:_HINT_LISTED])
+    return shown + (f" and {len(names) - _HINT_LISTED} more" if len(names) > _HINT_LISTED else "")
+
+
 def _hint(word: str, choices: Sequence[str]) -> str:
-    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
-    known = "known: " + ", ".join(choices)
+    names = list(choices)
+    if len(names) > _HINT_SEARCHED:  # the likeliest: same first letter, similar length
+        near = [n for n in names if n[:1] == word[:1] and abs(len(n) - len(word)) <= 2]
+        names_searched = near[:_HINT_SEARCHED]
+    else:
+        names_searched = names
+    close = difflib.get_close_matches(word, names_searched, n=1, cutoff=0.6)
+    known = "known: " + _listed(names)
     return f"did you mean {close[0]!r}? {known}" if close else known
 
 
@@ -226,17 +266,30 @@ def _order(
         elif s.parent:
             children[s.parent].append(s.name)
     order: list[str] = []
-
-    def visit(name: str) -> None:
-        order.append(name)
-        for child in children[name]:
-            visit(child)
-
+    depth: dict[str, int] = {}
+    for s in states.values():  # depth first, parents before children, without recursion
+        if s.parent and s.parent in states:
+            continue
+        pending = [(s.name, 1)]
+        while pending:
+            name, level = pending.pop()
+            order.append(name)
+            depth[name] = level
+            pending.extend((child, level + 1) for child in reversed(children[name]))
+    too_deep = [n for n in order if depth[n] == MAX_STATE_DEPTH + 1]
+    for name in too_deep:
+        diags.append(
+            _d(
+                "B218",
+                Severity.ERROR,
+                states[name].rows[0],
+                f"state {name!r} is nested {MAX_STATE_DEPTH + 1} levels deep "
+                f"(the limit is {MAX_STATE_DEPTH})",
+                "flatten the parent chain; see docs/limits.md",
+            )
+        )
     for s in states.values():
-        if not s.parent or s.parent not in states:
-            visit(s.name)
-    for s in states.values():
-        if s.name not in order:
+        if s.name not in depth:
             diags.append(
                 _d(
                     "B210",
@@ -537,7 +590,7 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
     merged = _merge_states(tables.states, diags)
     order, children = _order(merged, diags)
     removed = _removed(merged, children, tables.events, diags)
-    kept = [n for n in order if n not in removed]
+    kept = [n for n in order if n not in removed]  # removed is a set
 
     kinds = {
         name: _kind(merged[name], [c for c in children[name] if c not in removed], diags)
@@ -620,7 +673,7 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
                     )
                 )
         if r.guard:
-            expression, problems = compile_expression(r.guard, r.where)
+            expression, problems = _compile(r.guard, r.where)
             diags.extend(problems)
             if expression is not None:
                 diags.extend(check_names(expression, known, r.where))
@@ -651,11 +704,12 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
         )
 
     event_names = [e.name for e in events]
+    declared = set(event_names)
     ignored: set[tuple[str, str]] = set()
     for name in kept:
         m = merged[name]
         for event in m.ignore:
-            if event in event_names:
+            if event in declared:
                 ignored.add((name, event))
             else:
                 diags.append(
@@ -833,7 +887,7 @@ def _misfits(chart: Chart) -> list[Diagnostic]:
                 )
             )
         if t.guard:
-            expression, problems = compile_expression(t.guard, t.origin)
+            expression, problems = _compile(t.guard, t.origin)
             if expression is not None:
                 problems = check_names(expression, known, t.origin)
             if problems:

@@ -38,6 +38,7 @@ from statectl.build import load_and_build
 from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, has_errors
 from statectl.expr import compile_expression
 from statectl.model import Chart, ControlKind, EventKind
+from statectl.tables.safeyaml import YamlRefused, compose
 
 __all__ = [
     "CODES",
@@ -174,7 +175,12 @@ def parse_global(
     source: str, where: Location, charts: Mapping[str, Chart], *, what: str = "expression"
 ) -> tuple[GlobalExpr | None, list[Diagnostic]]:
     """Check a global expression (rule 4) against the cell's devices and their states."""
-    expr, diags = compile_expression(source, where, what=what)
+    try:
+        expr, diags = compile_expression(source, where, what=what)
+    except (RecursionError, MemoryError):
+        shown = source if len(source) <= 40 else source[:37] + "..."
+        message = f"{what} {shown!r} is nested too deeply to analyse"
+        return None, [_d("V810", where, message, "write it with fewer nested parts")]
     if expr is None:
         return None, diags
     tree = ast.parse(source.strip(), mode="eval")
@@ -230,8 +236,12 @@ def parse_global(
         elif isinstance(node, ast.Constant):
             if not isinstance(node.value, (bool, str)):
                 diags.append(
-                    _d("V810", where, f"{what} {source!r} uses the constant {node.value!r}",
-                       "use True or False")
+                    _d(
+                        "V810",
+                        where,
+                        f"{what} {source!r} uses the constant {node.value!r}",
+                        "use True or False",
+                    )
                 )
         elif not isinstance(node, allowed):
             diags.append(
@@ -274,8 +284,12 @@ class _Reader:
             key = str(k.value) if isinstance(k, yaml.ScalarNode) else ""
             if key not in keys:
                 self.diags.append(
-                    _d("V802", self.at(k), f"{what}: unknown key {key!r}",
-                       "known keys: " + ", ".join(keys))
+                    _d(
+                        "V802",
+                        self.at(k),
+                        f"{what}: unknown key {key!r}",
+                        "known keys: " + ", ".join(keys),
+                    )
                 )
             elif key in out:
                 self.diags.append(_d("V802", self.at(k), f"{what}: key {key!r} appears twice"))
@@ -307,15 +321,19 @@ class _Reader:
         return list(node.value)
 
 
-def _load_devices(
-    r: _Reader, node: yaml.Node | None, base: Path, at: Location
-) -> list[DeviceRef]:
+def _load_devices(r: _Reader, node: yaml.Node | None, base: Path, at: Location) -> list[DeviceRef]:
     if node is None:
         r.diags.append(_d("V815", at, "the cell has no devices", "add devices: {name: file}"))
         return []
     if not isinstance(node, yaml.MappingNode):
-        r.diags.append(_d("V804", r.at(node), "devices must be a mapping of name: file",
-                          "write e.g. arm: arm.yaml"))
+        r.diags.append(
+            _d(
+                "V804",
+                r.at(node),
+                "devices must be a mapping of name: file",
+                "write e.g. arm: arm.yaml",
+            )
+        )
         return []
     entries: dict[str, yaml.Node] = {}
     for k, v in node.value:
@@ -331,8 +349,12 @@ def _load_devices(
         where = r.at(value)
         if not name.isidentifier():
             r.diags.append(
-                _d("V806", where, f"device name {name!r} is not an identifier",
-                   "use letters, digits and '_' (no dots): In('arm.Moving') splits at the dot")
+                _d(
+                    "V806",
+                    where,
+                    f"device name {name!r} is not an identifier",
+                    "use letters, digits and '_' (no dots): In('arm.Moving') splits at the dot",
+                )
             )
             continue
         if isinstance(value, yaml.MappingNode):
@@ -345,16 +367,29 @@ def _load_devices(
         path = (base / file).resolve()
         if path not in loaded:
             if not path.exists():
-                loaded[path] = (None, [_d("V805", where, f"device file {file!r} does not exist",
-                                          f"looked for {path}")])
+                loaded[path] = (
+                    None,
+                    [
+                        _d(
+                            "V805",
+                            where,
+                            f"device file {file!r} does not exist",
+                            f"looked for {path}",
+                        )
+                    ],
+                )
             else:
                 loaded[path] = load_and_build(path)
         chart, diags = loaded[path]
         if chart is None or has_errors(diags):
             errors = [d for d in diags if d.severity is Severity.ERROR]
             r.diags.append(
-                _d("V805", where, f"device {name!r}: {file!r} does not load "
-                   f"({len(errors)} error(s) follow)", "run: statectl check " + file)
+                _d(
+                    "V805",
+                    where,
+                    f"device {name!r}: {file!r} does not load ({len(errors)} error(s) follow)",
+                    "run: statectl check " + file,
+                )
             )
             r.diags.extend(errors)
             continue
@@ -377,8 +412,12 @@ def _device(r: _Reader, node: yaml.Node | None, what: str, charts: Mapping[str, 
     name = r.text(node, what) or ""
     if node is not None and name and name not in charts:
         r.diags.append(
-            _d("V807", r.at(node), f"{what}: no device named {name!r}",
-               "devices: " + ", ".join(sorted(charts)))
+            _d(
+                "V807",
+                r.at(node),
+                f"{what}: no device named {name!r}",
+                "devices: " + ", ".join(sorted(charts)),
+            )
         )
         return ""
     return name
@@ -390,8 +429,12 @@ def _event(
     event = r.text(node, what) or ""
     if node is not None and event and device and event not in charts[device].event_names:
         r.diags.append(
-            _d("V809", r.at(node), f"{what}: device {device!r} has no event {event!r}",
-               "events: " + ", ".join(charts[device].event_names))
+            _d(
+                "V809",
+                r.at(node),
+                f"{what}: device {device!r} has no event {event!r}",
+                "events: " + ", ".join(charts[device].event_names),
+            )
         )
         return ""
     return event
@@ -411,8 +454,12 @@ def _links(r: _Reader, node: yaml.Node | None, charts: Mapping[str, Chart]) -> l
         guard = _expr(r, f.get("guard"), "link guard", charts) if "guard" in f else None
         if ("enters" in f) == ("raises" in f):
             r.diags.append(
-                _d("V813", at, "a link needs exactly one of 'enters' and 'raises'",
-                   "enters: a state of the source device; raises: one of its events")
+                _d(
+                    "V813",
+                    at,
+                    "a link needs exactly one of 'enters' and 'raises'",
+                    "enters: a state of the source device; raises: one of its events",
+                )
             )
             continue
         trigger = Trigger.ENTERS if "enters" in f else Trigger.RAISES
@@ -421,14 +468,22 @@ def _links(r: _Reader, node: yaml.Node | None, charts: Mapping[str, Chart]) -> l
             chart = charts[source]
             if trigger is Trigger.ENTERS and not chart.has_state(what):
                 r.diags.append(
-                    _d("V808", r.at(f["enters"]), f"link: device {source!r} has no state {what!r}",
-                       "states: " + ", ".join(s.name for s in chart.states))
+                    _d(
+                        "V808",
+                        r.at(f["enters"]),
+                        f"link: device {source!r} has no state {what!r}",
+                        "states: " + ", ".join(s.name for s in chart.states),
+                    )
                 )
                 continue
             if trigger is Trigger.RAISES and what not in chart.event_names:
                 r.diags.append(
-                    _d("V809", r.at(f["raises"]), f"link: device {source!r} has no event {what!r}",
-                       "events: " + ", ".join(chart.event_names))
+                    _d(
+                        "V809",
+                        r.at(f["raises"]),
+                        f"link: device {source!r} has no event {what!r}",
+                        "events: " + ", ".join(chart.event_names),
+                    )
                 )
                 continue
         if source and target and event and what and ("guard" not in f or guard is not None):
@@ -436,9 +491,7 @@ def _links(r: _Reader, node: yaml.Node | None, charts: Mapping[str, Chart]) -> l
     return out
 
 
-def _environment(
-    r: _Reader, node: yaml.Node | None, charts: Mapping[str, Chart]
-) -> list[EnvInput]:
+def _environment(r: _Reader, node: yaml.Node | None, charts: Mapping[str, Chart]) -> list[EnvInput]:
     out: list[EnvInput] = []
     for item in r.items(node, "environment"):
         f = r.mapping(item, "environment entry", ("send", "fault", "to", "when"), ("to",))
@@ -447,8 +500,12 @@ def _environment(
         at = r.at(item)
         if ("send" in f) == ("fault" in f):
             r.diags.append(
-                _d("V803", at, "an environment entry needs exactly one of 'send' and 'fault'",
-                   "send: a command the outside may give; fault: what hardware may raise")
+                _d(
+                    "V803",
+                    at,
+                    "an environment entry needs exactly one of 'send' and 'fault'",
+                    "send: a command the outside may give; fault: what hardware may raise",
+                )
             )
             continue
         kind = InputKind.COMMAND if "send" in f else InputKind.FAULT
@@ -461,16 +518,24 @@ def _environment(
             definition = chart.event(event)
             if definition is not None and definition.kind is not EventKind.FAULT:
                 r.diags.append(
-                    Diagnostic("V812", Severity.WARNING, r.at(f[key]),
-                               f"environment fault {event!r} of {device!r} is a "
-                               f"{definition.kind.value} event",
-                               "faults are raised by monitors; use send: for commands")
+                    Diagnostic(
+                        "V812",
+                        Severity.WARNING,
+                        r.at(f[key]),
+                        f"environment fault {event!r} of {device!r} is a "
+                        f"{definition.kind.value} event",
+                        "faults are raised by monitors; use send: for commands",
+                    )
                 )
             if not any(ControlKind.MONITORING in s.controls for s in chart.states):
                 r.diags.append(
-                    _d("V812", at, f"device {device!r} has no state that requires monitoring, "
-                       f"so fault {event!r} can never be raised",
-                       "mark the watched state 'monitoring required'")
+                    _d(
+                        "V812",
+                        at,
+                        f"device {device!r} has no state that requires monitoring, "
+                        f"so fault {event!r} can never be raised",
+                        "mark the watched state 'monitoring required'",
+                    )
                 )
                 continue
         if device and event and ("when" not in f or when is not None):
@@ -494,8 +559,14 @@ def _named(
             continue
         name = r.text(f.get("name"), f"{what} name") or f"{what}-{i + 1}"
         if name in seen:
-            r.diags.append(_d("V814", r.at(item), f"two properties are named {name!r}",
-                              "give each invariant and recovery goal a distinct name"))
+            r.diags.append(
+                _d(
+                    "V814",
+                    r.at(item),
+                    f"two properties are named {name!r}",
+                    "give each invariant and recovery goal a distinct name",
+                )
+            )
         seen.add(name)
         out.append((name, f, r.at(item)))
     return out
@@ -509,17 +580,30 @@ def load_cell(path: str | os.PathLike[str]) -> tuple[Cell | None, list[Diagnosti
         text = Path(path).read_text(encoding="utf-8")
     except OSError as exc:
         return None, [_d("V801", top, f"cannot read the cell file: {exc.strerror or exc}")]
+    except UnicodeDecodeError as exc:
+        return None, [
+            _d(
+                "V801",
+                top,
+                f"the cell file is not UTF-8 text (byte {exc.start})",
+                "save the file as UTF-8",
+            )
+        ]
     try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-    except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        line = mark.line + 1 if mark is not None else None
-        return None, [_d("V801", Location(file, line), f"malformed YAML: {exc.problem}")]
-    except yaml.YAMLError as exc:
-        return None, [_d("V801", top, f"malformed YAML: {exc}")]
+        root = compose(text)
+    except YamlRefused as exc:
+        code = "V801" if exc.code == "T101" else exc.code
+        where = Location(file, exc.line or 1)
+        return None, [Diagnostic(code, Severity.ERROR, where, exc.message, exc.hint)]
     if not isinstance(root, yaml.MappingNode):
-        return None, [_d("V801", top, "not a cell file: the top level is not a mapping",
-                         "a cell file has cell:, devices:, links:, environment:, invariants:")]
+        return None, [
+            _d(
+                "V801",
+                top,
+                "not a cell file: the top level is not a mapping",
+                "a cell file has cell:, devices:, links:, environment:, invariants:",
+            )
+        ]
     r = _Reader(file)
     f = r.mapping(root, "cell file", TOP_KEYS, ("devices",)) or {}
     name = r.text(f.get("cell"), "cell") or Path(file).stem.removesuffix(".cell")
@@ -535,22 +619,32 @@ def load_cell(path: str | os.PathLike[str]) -> tuple[Cell | None, list[Diagnosti
     environment = _environment(r, f.get("environment"), charts)
     invariants: list[Invariant] = []
     names: set[str] = set()
-    for inv_name, fields, _ in _named(r, f.get("invariants"), "invariant", ("name", "holds"),
-                                       ("holds",), names):
+    for inv_name, fields, _ in _named(
+        r, f.get("invariants"), "invariant", ("name", "holds"), ("holds",), names
+    ):
         expr = _expr(r, fields.get("holds"), f"invariant {inv_name!r}", charts)
         if expr is not None:
             invariants.append(Invariant(inv_name, expr))
     recovery: list[Recovery] = []
-    for rec_name, fields, _ in _named(r, f.get("recovery"), "recovery", ("name", "to", "from"),
-                                       ("to",), names):
+    for rec_name, fields, _ in _named(
+        r, f.get("recovery"), "recovery", ("name", "to", "from"), ("to",), names
+    ):
         target = _expr(r, fields.get("to"), f"recovery {rec_name!r} to", charts)
         source = _expr(r, fields.get("from"), f"recovery {rec_name!r} from", charts)
         if target is not None and ("from" not in fields or source is not None):
             recovery.append(Recovery(rec_name, target, source))
     if has_errors(r.diags):
         return None, r.diags
-    cell = Cell(name, file, tuple(devices), tuple(links), tuple(environment),
-                tuple(invariants), tuple(recovery), completions)
+    cell = Cell(
+        name,
+        file,
+        tuple(devices),
+        tuple(links),
+        tuple(environment),
+        tuple(invariants),
+        tuple(recovery),
+        completions,
+    )
     return cell, r.diags
 
 

@@ -464,6 +464,35 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _command(args: argparse.Namespace) -> str:
+    name = getattr(args, "func", None)
+    return name.__name__.removeprefix("cmd_").replace("_", " ") if name is not None else ""
+
+
+def _missing_input(args: argparse.Namespace) -> str | None:
+    """The first input file named on the command line that does not exist (exit 2)."""
+    paths: list[str] = []
+    for attr in ("file", "files", "cell"):
+        value = getattr(args, attr, None)
+        if isinstance(value, str):
+            paths.append(value)
+        elif isinstance(value, list):
+            paths.extend(v for v in value if isinstance(v, str))
+    return next((p for p in paths if not _exists(Path(p))), None)
+
+
+def _exists(path: Path) -> bool:
+    """The file exists, or ``NAME.csv`` names a CSV pair whose states file exists."""
+    if path.exists():
+        return True
+    if path.suffix.lower() != ".csv":
+        return False
+    from statectl.tables.csv_io import csv_paths
+
+    pair = csv_paths(path)
+    return pair is not None and pair.states.exists()
+
+
 def main(argv: Sequence[str] | None = None, out: TextIO | None = None,
          err: TextIO | None = None) -> int:
     out = out or sys.stdout
@@ -473,6 +502,10 @@ def main(argv: Sequence[str] | None = None, out: TextIO | None = None,
         args = parser.parse_args(argv)
     except SystemExit as exc:
         return int(exc.code) if isinstance(exc.code, int) else USAGE
+    missing = _missing_input(args)
+    if missing is not None:
+        err.write(f"statectl {_command(args)}: {missing}: no such file\n")
+        return USAGE
     try:
         code: int = args.func(args, out, err)
     except DiagnosticError as exc:
@@ -480,6 +513,13 @@ def main(argv: Sequence[str] | None = None, out: TextIO | None = None,
         return PROBLEMS
     except StatectlError as exc:
         err.write(f"statectl: {exc}\n")
+        return PROBLEMS
+    except (RecursionError, MemoryError) as exc:  # last resort: the loaders bound both first
+        what = "too deeply nested" if isinstance(exc, RecursionError) else "too large"
+        err.write(
+            f"statectl {_command(args)}: the input is {what} to handle; "
+            "see docs/limits.md for the limits\n"
+        )
         return PROBLEMS
     except KeyboardInterrupt:
         err.write("statectl: interrupted\n")

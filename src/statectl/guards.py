@@ -16,6 +16,7 @@ Rules:
 from __future__ import annotations
 
 import ast
+import functools
 import operator
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -241,10 +242,13 @@ def _contradictory(conj: _Conj) -> bool:
     return any(_empty(r) for r in ranges.values())
 
 
-def _parse(guard: str) -> ast.expr | None:
+@functools.lru_cache(maxsize=4096)
+def _normal_form(guard: str) -> tuple[_Conj, ...] | None:
+    """The guard's DNF, once per guard text (C403 compares each guard with many);
+    ``None`` when it does not parse, is too deep to walk, or is too big."""
     try:
-        return ast.parse(guard.strip(), mode="eval").body
-    except SyntaxError:
+        return tuple(_dnf(ast.parse(guard.strip(), mode="eval").body))
+    except (SyntaxError, ValueError, RecursionError, MemoryError, _TooBig):
         return None
 
 
@@ -253,13 +257,8 @@ def guards_exclusive(first: str | None, second: str | None) -> bool:
 
     Sound but incomplete: ``True`` is a proof, ``False`` means "not proven".
     """
-    a = _parse(first) if first else ast.Constant(value=True)
-    b = _parse(second) if second else ast.Constant(value=True)
-    if a is None or b is None:
+    left = _normal_form(first) if first else ((),)
+    right = _normal_form(second) if second else ((),)
+    if left is None or right is None:
         return False
-    try:
-        left = _dnf(a) if first else [()]
-        right = _dnf(b) if second else [()]
-        return all(_contradictory(x + y) for x in left for y in right)
-    except _TooBig:
-        return False
+    return all(_contradictory(x + y) for x in left for y in right)

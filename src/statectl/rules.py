@@ -63,6 +63,8 @@ class _Structure:
     by_name: dict[str, State]
     children: dict[str | None, tuple[str, ...]]
     ancestors: dict[str, tuple[str, ...]]
+    outgoing: dict[str, tuple[Transition, ...]]  # a state's own transitions, in chart order
+    descriptors: dict[str, frozenset[str]]  # event descriptors of a state and its ancestors
 
     @classmethod
     def of(cls, chart: Chart) -> _Structure:
@@ -78,23 +80,51 @@ class _Structure:
                 chain.append(p)
                 p = by_name[p].parent
             ancestors[s.name] = tuple(chain)
-        return cls(chart, by_name, {k: tuple(v) for k, v in children.items()}, ancestors)
+        outgoing: dict[str, list[Transition]] = {}
+        for t in chart.transitions:
+            outgoing.setdefault(t.source, []).append(t)
+        own = {name: frozenset(e for t in ts for e in t.events) for name, ts in outgoing.items()}
+        descriptors = {
+            s.name: frozenset().union(*(own.get(a, ()) for a in (s.name, *ancestors[s.name])))
+            for s in chart.states
+        }
+        return cls(
+            chart,
+            by_name,
+            {k: tuple(v) for k, v in children.items()},
+            ancestors,
+            {k: tuple(v) for k, v in outgoing.items()},
+            descriptors,
+        )
+
+    def out(self, name: str) -> tuple[Transition, ...]:
+        return self.outgoing.get(name, ())
 
     def kind(self, name: str) -> StateKind:
         return self.by_name[name].kind
 
     def handles(self, state: str, event: str) -> bool:
         """Whether a transition of ``state`` or an ancestor names ``event``."""
-        return any(
-            name_match(t.events, event)
-            for s in (state, *self.ancestors.get(state, ()))
-            for t in self.chart.transitions_from(s)
-        )
+        mine = self.descriptors.get(state, frozenset())
+        return bool(mine) and any(d in mine for d in _matching(event))
 
     def ignores(self, state: str, event: str) -> bool:
         return any(
             (s, event) in self.chart.ignored for s in (state, *self.ancestors.get(state, ()))
         )
+
+
+def _matching(event: str) -> tuple[str, ...]:
+    """Every descriptor that matches ``event`` (as ``name_match`` decides): ``*``, the
+    name itself, and each dot-prefix with and without ``.*``; a set lookup each, so a
+    rule asks "does any row name this event" without scanning every row."""
+    found = ["*", event]
+    at = event.find(".")
+    while at != -1:
+        prefix = event[:at]
+        found += [prefix, prefix + ".*"]
+        at = event.find(".", at + 1)
+    return tuple(found)
 
 
 def _where(state: State) -> Location:
@@ -121,7 +151,7 @@ def _reachable(st: _Structure) -> set[str]:
     work = list(reached)
     while work:
         name = work.pop()
-        for t in chart.transitions_from(name):
+        for t in st.out(name):
             if not t.targets or not all(x in st.by_name for x in t.targets):
                 continue
             for entered in entry_set(m, [t]):
@@ -134,12 +164,17 @@ def _reachable(st: _Structure) -> set[str]:
 def _check_reachable(st: _Structure) -> Iterator[Diagnostic]:
     reached = _reachable(st)
     start = ", ".join(st.chart.initial) or "the first state"
+    unreached_below: dict[str, int] = {}
+    for d, anc in st.ancestors.items():
+        if d not in reached:
+            for a in anc:
+                unreached_below[a] = unreached_below.get(a, 0) + 1
     for s in st.chart.states:
         if s.name in reached or s.kind.is_history:
             continue
         if any(a not in reached for a in st.ancestors[s.name]):
             continue  # reported with its outermost unreachable ancestor
-        below = sum(1 for d, anc in st.ancestors.items() if s.name in anc and d not in reached)
+        below = unreached_below.get(s.name, 0)
         extra = f" (and its {below} substates)" if below else ""
         yield Diagnostic(
             "C401",
@@ -163,7 +198,7 @@ def _check_way_out(st: _Structure) -> Iterator[Diagnostic]:
         leaves = any(
             any(x != s.name for x in t.targets)
             for src in (s.name, *st.ancestors[s.name])
-            for t in st.chart.transitions_from(src)
+            for t in st.out(src)
         )
         if not leaves:
             yield Diagnostic(
@@ -177,17 +212,35 @@ def _check_way_out(st: _Structure) -> Iterator[Diagnostic]:
 
 # -- C403 overlapping rows ------------------------------------------------------------------
 
+#: Events a C404 message names at most (it counts the rest).
+MAX_LISTED = 20
+#: Rows of one state and event compared pair by pair at most (C403 warns beyond it).
+MAX_OVERLAP_ROWS = 256
+
 
 def _check_overlaps(st: _Structure) -> Iterator[Diagnostic]:
-    events: tuple[str | None, ...] = (*st.chart.event_names, None)
+    names = st.chart.event_names
+    position = {e: i for i, e in enumerate(names)}
+    by_descriptor: dict[str, list[str]] = {}  # the event names each descriptor matches
+    for e in names:
+        for d in _matching(e):
+            by_descriptor.setdefault(d, []).append(e)
     seen: set[tuple[int, int]] = set()
     for s in st.chart.states:
-        own = tuple(st.chart.transitions_from(s.name))
-        for event in events:
-            if event is None:
-                rows = [t for t in own if not t.events]
-            else:
-                rows = [t for t in own if name_match(t.events, event)]
+        own = st.out(s.name)
+        if len(own) < 2:
+            continue  # no pair of rows, nothing can overlap
+        rows_of: dict[str | None, list[Transition]] = {}  # each event's rows, in table order
+        for t in own:
+            matched: set[str | None] = {n for d in t.events for n in by_descriptor.get(d, ())}
+            for name in matched if t.events else {None}:
+                rows_of.setdefault(name, []).append(t)
+        events = sorted((e for e in rows_of if e is not None), key=position.__getitem__)
+        for event in [*events, None]:
+            rows = rows_of.get(event, [])
+            if len(rows) > MAX_OVERLAP_ROWS:
+                yield _too_many_rows(s.name, event, rows)
+                rows = rows[:MAX_OVERLAP_ROWS]
             for i, first in enumerate(rows):
                 for second in rows[i + 1 :]:
                     key = (id(first), id(second))
@@ -197,6 +250,18 @@ def _check_overlaps(st: _Structure) -> Iterator[Diagnostic]:
                     diag = _overlap(s.name, event, first, second)
                     if diag is not None:
                         yield diag
+
+
+def _too_many_rows(state: str, event: str | None, rows: list[Transition]) -> Diagnostic:
+    what = f"event {event!r}" if event is not None else "no event (eventless)"
+    return Diagnostic(
+        "C403",
+        Severity.WARNING,
+        rows[MAX_OVERLAP_ROWS].origin,
+        f"state {state!r} has {len(rows)} rows for {what}: only the first "
+        f"{MAX_OVERLAP_ROWS} were compared pair by pair, so later rows may overlap unseen",
+        "split the rows over substates or events; see docs/limits.md",
+    )
 
 
 def _overlap(
@@ -230,25 +295,45 @@ def _overlap(
 
 def _check_missed(st: _Structure) -> Iterator[Diagnostic]:
     events = st.chart.event_names
+    position = {e: i for i, e in enumerate(events)}
+    by_descriptor: dict[str, set[str]] = {}  # the event names each descriptor matches
+    for e in events:
+        for d in _matching(e):
+            by_descriptor.setdefault(d, set()).add(e)
+    ignored: dict[str, set[str]] = {}
+    for state, event in st.chart.ignored:
+        ignored.setdefault(state, set()).add(event)
     for s in st.chart.states:
         if s.kind is not StateKind.ATOMIC:
             continue
-        missed = [e for e in events if not st.handles(s.name, e) and not st.ignores(s.name, e)]
-        if missed:
-            names = ", ".join(repr(e) for e in missed)
-            yield Diagnostic(
-                "C404",
-                Severity.WARNING,
-                _where(s),
-                f"state {s.name!r} neither handles nor ignores {names} (missed transition)",
-                "add an event row with this old state, or list the event in the state's "
-                "ignore column",
-            )
+        lineage = (s.name, *st.ancestors.get(s.name, ()))
+        covered = {e for d in st.descriptors.get(s.name, ()) for e in by_descriptor.get(d, ())}
+        covered.update(e for a in lineage for e in ignored.get(a, ()) if e in position)
+        count = len(events) - len(covered)
+        if count == 0:
+            continue
+        missed: list[str] = []
+        for e in events:  # in event order, stopping at the listed few
+            if e not in covered:
+                missed.append(e)
+                if len(missed) == MAX_LISTED:
+                    break
+        names = ", ".join(repr(e) for e in missed)
+        if count > len(missed):
+            names += f" and {count - len(missed)} more"
+        yield Diagnostic(
+            "C404",
+            Severity.WARNING,
+            _where(s),
+            f"state {s.name!r} neither handles nor ignores {names} (missed transition)",
+            "add an event row with this old state, or list the event in the state's ignore column",
+        )
 
 
 def _check_unused_events(st: _Structure) -> Iterator[Diagnostic]:
+    used = {d for t in st.chart.transitions for d in t.events}
     for e in st.chart.events:
-        if not any(name_match(t.events, e.name) for t in st.chart.transitions):
+        if not any(d in used for d in _matching(e.name)):
             yield Diagnostic(
                 "C405",
                 Severity.WARNING,

@@ -31,9 +31,10 @@ __all__ = ["export_file", "import_file", "import_text"]
 
 
 def import_text(
-    text: str, file: str = "<memory>", base: str | None = None
+    text: str | bytes, file: str = "<memory>", base: str | None = None
 ) -> tuple[DeviceTables | None, Chart, list[Diagnostic]]:
-    """Read SCXML text; return the tables (``None`` if it stays SCXML), its chart, diagnostics.
+    """Read SCXML text (or a file's bytes); return the tables (``None`` if it stays SCXML),
+    its chart and the diagnostics.
 
     Raises :class:`DiagnosticError` if the document has errors.
     """
@@ -55,7 +56,7 @@ def import_file(
     """
     source = Path(path)
     try:
-        text = source.read_text(encoding="utf-8")
+        content = source.read_bytes()  # decoded by the reader, as the prolog declares
     except OSError as exc:
         raise DiagnosticError(
             [
@@ -68,9 +69,9 @@ def import_file(
                 )
             ]
         ) from exc
-    tables, _, diagnostics = import_text(text, str(source), str(source.parent))
+    tables, _, diagnostics = import_text(content, str(source), str(source.parent))
     if tables is None:
-        return text, diagnostics
+        return content.decode("utf-8", "replace"), diagnostics
     target = Path(out) if out is not None else source.with_suffix(".yaml")
     return save(tables, target), diagnostics
 

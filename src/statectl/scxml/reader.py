@@ -6,7 +6,7 @@ Rules:
    S601 not well-formed XML, S602 root is not ``<scxml>``, S603 missing required
    attribute, S604 duplicate state id, S605 unknown transition/initial target,
    S606 unknown or misplaced element (warning, skipped), S607 ``src`` file not
-   readable.
+   readable (or larger than :data:`MAX_SRC_BYTES`, or not UTF-8).
 2. States get document order, parents before children; a state without ``id``
    gets a generated one (``_state3``), which no document can name.
 3. Executable content becomes model actions (``Raise``, ``Log``, ``Assign``,
@@ -25,6 +25,12 @@ Rules:
    every location must be a declared name, and there is no ``<script>`` (X301-X303,
    from :mod:`statectl.expr`, with the element's line). ``python`` is explicit
    trust and is not checked; ``null`` is checked by its own evaluator at run time.
+7. Hostile or broken documents end in a diagnostic, never an exception: elements
+   nested deeper than :data:`MAX_XML_DEPTH` (S620), bytes in an encoding that
+   cannot be read or an encoding the prolog names but Python does not know
+   (S621), and any entity declaration in a DTD (S622: entity expansion bombs and
+   external entities never reach the parser's expansion). Numbers in attributes
+   are ASCII digits of at most nine places (S603).
 """
 
 from __future__ import annotations
@@ -64,12 +70,56 @@ from statectl.model import (
 )
 from statectl.scxml.safecheck import check_safe
 
-__all__ = ["SCXML_NS", "STATECTL_NS", "read_scxml", "read_scxml_file"]
+__all__ = [
+    "MAX_SRC_BYTES",
+    "MAX_XML_DEPTH",
+    "SCXML_NS",
+    "STATECTL_NS",
+    "read_scxml",
+    "read_scxml_file",
+    "read_src_text",
+]
 
 SCXML_NS = "http://www.w3.org/2005/07/scxml"
 #: Device-table facts SCXML has no word for (controls, notifications) live here.
 STATECTL_NS = "urn:statectl:scxml"
 _SEP = "}"
+
+#: Deepest element nesting a document may have (S620; docs/limits.md).
+MAX_XML_DEPTH = 100
+#: Largest file a ``src`` attribute may name, in bytes (S607).
+MAX_SRC_BYTES = 1 << 20
+
+
+class _Refused(Exception):
+    """Raised inside an expat handler to stop parsing with a diagnostic."""
+
+    def __init__(self, code: str, line: int, message: str, hint: str) -> None:
+        super().__init__(message)
+        self.code, self.line, self.message, self.hint = code, line, message, hint
+
+
+def read_src_text(path: Path) -> str:
+    """A ``src`` file's text, read with a bound: at most :data:`MAX_SRC_BYTES`, UTF-8.
+
+    Raises ``OSError`` if it cannot be read and ``ValueError`` if it is too large
+    (an endless stream such as ``/dev/zero`` stops here) or not UTF-8.
+    """
+    with path.open("rb") as fh:
+        data = fh.read(MAX_SRC_BYTES + 1)
+    if len(data) > MAX_SRC_BYTES:
+        raise ValueError(f"larger than {MAX_SRC_BYTES} bytes (see docs/limits.md)")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"not UTF-8 (byte {exc.start})") from None
+
+
+def _number(text: str | None) -> int | None:
+    """A small non-negative number written in ASCII digits, else ``None``."""
+    if text is None or not text.isascii() or not text.isdigit() or len(text) > 9:
+        return None
+    return int(text)
 
 
 @dataclass(slots=True)
@@ -94,8 +144,11 @@ class _Node:
         return [c for c in self.children if c.ns == SCXML_NS and (not tags or c.tag in tags)]
 
 
-def _parse_xml(text: str, file: str) -> tuple[_Node | None, list[Diagnostic]]:
-    parser = expat.ParserCreate(namespace_separator=_SEP)
+def _parse_xml(text: str | bytes, file: str) -> tuple[_Node | None, list[Diagnostic]]:
+    """Parse text (its prolog's encoding ignored) or bytes (decoded as the prolog says)."""
+    parser = expat.ParserCreate(
+        "UTF-8" if isinstance(text, str) else None, namespace_separator=_SEP
+    )
     stack: list[_Node] = []
     root: list[_Node] = []
 
@@ -106,6 +159,13 @@ def _parse_xml(text: str, file: str) -> tuple[_Node | None, list[Diagnostic]]:
         return "", name
 
     def start(name: str, attrs: dict[str, str]) -> None:
+        if len(stack) >= MAX_XML_DEPTH:
+            raise _Refused(
+                "S620",
+                parser.CurrentLineNumber,
+                f"elements nested deeper than {MAX_XML_DEPTH} levels",
+                "flatten the document; see docs/limits.md",
+            )
         ns, local = split(name)
         plain = {split(k)[1]: v for k, v in attrs.items()}
         node = _Node(ns, local, plain, parser.CurrentLineNumber)
@@ -122,11 +182,36 @@ def _parse_xml(text: str, file: str) -> tuple[_Node | None, list[Diagnostic]]:
         if stack:
             stack[-1].text.append(data)
 
+    def entity(name: str, *_: object) -> None:
+        raise _Refused(
+            "S622",
+            parser.CurrentLineNumber,
+            f"the DTD declares the entity {name!r}: entity declarations are refused",
+            "remove the <!ENTITY> declarations; SCXML needs no DTD",
+        )
+
     parser.StartElementHandler = start
     parser.EndElementHandler = end
     parser.CharacterDataHandler = chars
+    parser.EntityDeclHandler = entity
+    parser.UnparsedEntityDeclHandler = entity
     try:
-        parser.Parse(text.encode("utf-8"), True)
+        data = text.encode("utf-8", "surrogatepass") if isinstance(text, str) else text
+        parser.Parse(data, True)
+    except _Refused as exc:
+        return None, [
+            Diagnostic(exc.code, Severity.ERROR, Location(file, exc.line), exc.message, exc.hint)
+        ]
+    except (LookupError, UnicodeError, ValueError) as exc:  # the prolog's encoding
+        return None, [
+            Diagnostic(
+                "S621",
+                Severity.ERROR,
+                Location(file, parser.CurrentLineNumber or 1),
+                f"the document's encoding cannot be read: {exc}",
+                'save the document as UTF-8 and declare encoding="UTF-8" (or nothing)',
+            )
+        ]
     except expat.ExpatError as exc:
         where = Location(file, exc.lineno)
         return None, [
@@ -222,11 +307,12 @@ class _Reader:
         return tuple(out)
 
     def notify(self, c: _Node) -> Notify:
-        number = c.get("invoke") or "0"
-        if not number.isdigit():
-            self.problem("S603", c, f"notify invoke {number!r} is not a number", "use 0, 1, ...")
-            number = "0"
-        return Notify(int(number), c.get("name") or "", c.get("method") or "", c.get("event") or "")
+        text = c.get("invoke") or "0"
+        number = _number(text)
+        if number is None:
+            self.problem("S603", c, f"notify invoke {text[:20]!r} is not a number", "use 0, 1, ...")
+            number = 0
+        return Notify(number, c.get("name") or "", c.get("method") or "", c.get("event") or "")
 
     def action(self, c: _Node) -> Action | None:
         at = self.at(c)
@@ -305,11 +391,11 @@ class _Reader:
         return text or ""
 
     def read_src(self, node: _Node, src: str) -> str | None:
-        path = self.base / src.removeprefix("file:")
         try:
-            return path.read_text(encoding="utf-8")
-        except OSError as exc:
-            self.problem("S607", node, f"cannot read src {src!r}: {exc.strerror}", "check the path")
+            return read_src_text(self.base / src.removeprefix("file:"))
+        except (OSError, ValueError) as exc:
+            why = getattr(exc, "strerror", None) or str(exc)
+            self.problem("S607", node, f"cannot read src {src!r}: {why}", "check the path")
             return None
 
     def handlers(self, node: _Node, tag: str) -> tuple[Action, ...]:
@@ -433,9 +519,9 @@ class _Reader:
         if tag != "history":
             for t in node.scxml_children("transition"):
                 self.transitions.append(self.transition(name, t))
-                row = t.get("row")
-                if row is not None and row.isdigit():
-                    self.rows[len(self.transitions) - 1] = int(row)
+                row = _number(t.get("row"))
+                if row is not None:
+                    self.rows[len(self.transitions) - 1] = row
         self.states[index] = State(
             name,
             kind,
@@ -459,6 +545,10 @@ class _Reader:
 
     def check_targets(self, chart: Chart) -> None:
         known = {s.name for s in chart.states}
+        names = sorted(known)
+        listing = "known states: " + ", ".join(names[:20])  # once, and short
+        if len(names) > 20:
+            listing += f" and {len(names) - 20} more"
         for t in chart.transitions:
             for x in t.targets:
                 if x not in known:
@@ -468,7 +558,7 @@ class _Reader:
                             Severity.ERROR,
                             t.origin,
                             f"transition from {t.source!r} targets unknown state {x!r}",
-                            "known states: " + ", ".join(sorted(known)),
+                            listing,
                         )
                     )
         references = [
@@ -484,7 +574,7 @@ class _Reader:
                             Severity.ERROR,
                             origin,
                             f"state {name!r} names unknown initial/default state {x!r}",
-                            "known states: " + ", ".join(sorted(known)),
+                            listing,
                         )
                     )
         for x in chart.initial:
@@ -495,7 +585,7 @@ class _Reader:
                         Severity.ERROR,
                         chart.origin,
                         f"<scxml initial> names unknown state {x!r}",
-                        "known states: " + ", ".join(sorted(known)),
+                        listing,
                     )
                 )
 
@@ -538,11 +628,12 @@ class _Reader:
                 )
                 apis.append(Api(self.need(c, "method"), uses, self.at(c)))
             elif c.tag == "invoke":
-                number = c.get("number") or ""
-                if not number.isdigit():
-                    self.problem("S603", c, f"invoke number {number!r} is not a number", "0, 1")
-                    number = "0"
-                invokes.append(Invoke(int(number), self.need(c, "name"), self.need(c, "method")))
+                text = c.get("number") or ""
+                number = _number(text)
+                if number is None:
+                    self.problem("S603", c, f"invoke number {text[:20]!r} is not a number", "0, 1")
+                    number = 0
+                invokes.append(Invoke(number, self.need(c, "name"), self.need(c, "method")))
         return tuple(events), tuple(apis), tuple(invokes)
 
     def chart(self, root: _Node, default_name: str) -> Chart:
@@ -579,9 +670,13 @@ class _Reader:
 
 
 def read_scxml(
-    text: str, file: str = "<memory>", base: str | None = None
+    text: str | bytes, file: str = "<memory>", base: str | None = None
 ) -> tuple[Chart | None, list[Diagnostic]]:
-    """Parse SCXML text; return the chart (``None`` on errors) and every diagnostic."""
+    """Parse SCXML text or bytes; return the chart (``None`` on errors) and every diagnostic.
+
+    Text is parsed as it is (an ``encoding`` in its prolog is ignored); bytes are
+    decoded as the prolog declares (UTF-8 when it declares nothing).
+    """
     root, diagnostics = _parse_xml(text, file)
     if root is None:
         return None, diagnostics
@@ -609,7 +704,7 @@ def read_scxml(
 def read_scxml_file(path: str) -> Chart:
     """Read a file; raise :class:`DiagnosticError` with every problem if it has errors."""
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = Path(path).read_bytes()
     except OSError as exc:
         raise DiagnosticError(
             [

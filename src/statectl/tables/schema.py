@@ -47,6 +47,7 @@ import yaml
 
 from statectl.errors import Diagnostic, Location, Severity
 from statectl.model import ControlKind, EventKind, StateKind
+from statectl.tables.safeyaml import YamlRefused, load_value
 
 __all__ = [
     "CODES",
@@ -174,6 +175,9 @@ CODES: Mapping[str, str] = {
     "T112": "bad data entry (name not an identifier, or given twice)",
     "T113": "bad type value (none of atomic, compound, parallel, final, history, deep history)",
     "T114": "bad recovery row (both an event and redo, data on a redo row, or a bad redo value)",
+    "T115": "a YAML alias (*name): refused, so an alias bomb cannot expand",
+    "T116": "YAML nested deeper than the limit (MAX_DEPTH): see docs/limits.md",
+    "T117": "a workbook that unpacks to more than the limit (a zip bomb): see docs/limits.md",
 }
 
 
@@ -258,9 +262,13 @@ def strip_locations(tables: DeviceTables) -> DeviceTables:
 
 @dataclass(frozen=True, slots=True)
 class Bad:
-    """A cell of the wrong type (T108): names what was found instead of text."""
+    """A cell of the wrong type (T108): names what was found instead of text.
+
+    ``code`` is T115 or T116 for YAML the safe reader refused (an alias, too deep).
+    """
 
     found: str
+    code: str = "T108"
 
 
 Cell = str | tuple[str, ...] | Bad
@@ -572,24 +580,28 @@ def format_literal(value: object) -> str:
     return text[1:-1].strip()
 
 
+_REPORTED = Bad("malformed literal")  # a cell parse_literal reported already
+
+
 def parse_literal(text: str, where: Location, diags: list[Diagnostic]) -> object | Bad:
     """Read a YAML literal from a cell; an empty cell is null."""
     try:
-        value = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        diags.append(
-            diag("T108", where, f"data value {text!r} is not a YAML literal: {exc}".split("\n")[0])
-        )
-        return Bad("malformed literal")
+        value = load_value(text)
+    except YamlRefused as exc:
+        code = exc.code if exc.code in ("T115", "T116") else "T108"
+        shown = text if len(text) <= 60 else text[:57] + "..."
+        message = f"data value {shown!r} is not a YAML literal: {exc.message}"
+        diags.append(diag(code, where, message, exc.hint))
+        return Bad(_REPORTED.found, code)
     return normalize_value(value)
 
 
 def parse_payload(text: str) -> object | Bad:
     """Read a recovery row's data cell (a YAML flow value); an empty cell is null."""
     try:
-        value = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        return Bad("malformed YAML: " + str(exc).split("\n")[0])
+        value = load_value(text)
+    except YamlRefused as exc:
+        return Bad(exc.message, exc.code if exc.code in ("T115", "T116") else "T108")
     return normalize_payload(value)
 
 
@@ -613,10 +625,12 @@ def make_data(
         if name in data:
             diags.append(diag("T112", where, f"data name {name!r} is given twice"))
             continue
+        if isinstance(value, Bad) and value.found == _REPORTED.found:
+            continue  # parse_literal has said why
         if isinstance(value, Bad):
             diags.append(
                 diag(
-                    "T108",
+                    value.code,
                     where,
                     f"data {name!r} must be a literal (got {value.found})",
                     "use null, true/false, a number, a string or a list of them",
@@ -686,7 +700,7 @@ def recovery_row(row: RawRow, diags: list[Diagnostic]) -> RecoveryRow:
         if isinstance(value, Bad):
             diags.append(
                 diag(
-                    "T108",
+                    value.code,
                     where,
                     f"recovery data must be a plain value (got {value.found})",
                     "use null, true/false, numbers, text, lists and mappings with text keys",

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import datetime
 import io
+import zipfile
 from collections.abc import Iterable
 from typing import Any
 
@@ -102,10 +103,38 @@ def _table(table: str, ws: Any, file: str, diags: list[Diagnostic]) -> RawTable 
     return RawTable(table, where, tuple(raw))
 
 
+#: Largest total a workbook's parts may unpack to (T117): a zip bomb stops here.
+MAX_UNPACKED_BYTES = 64 << 20
+
+
+def _unpacked_size(content: bytes) -> int:
+    """What the workbook's zip says its parts unpack to (0 if it is no zip: T101 follows).
+
+    Python's zip reader never returns more than a part's declared size, so the
+    declared total bounds what openpyxl can read.
+    """
+    try:
+        with zipfile.ZipFile(io.BytesIO(content)) as archive:
+            return sum(info.file_size for info in archive.infolist())
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError):
+        return 0
+
+
 def read_xlsx(content: bytes, file: str, stem: str) -> tuple[DeviceTables | None, list[Diagnostic]]:
     """Read a workbook's bytes; ``stem`` names the device when there is no Device sheet."""
     diags: list[Diagnostic] = []
     source = Location(file)
+    unpacked = _unpacked_size(content)
+    if unpacked > MAX_UNPACKED_BYTES:
+        return None, [
+            diag(
+                "T117",
+                source,
+                f"the workbook unpacks to {unpacked:,} bytes, more than the limit of "
+                f"{MAX_UNPACKED_BYTES:,}",
+                "a device workbook is small; see docs/limits.md",
+            )
+        ]
     try:
         wb = openpyxl.load_workbook(io.BytesIO(content), read_only=True, data_only=True)
     except Exception as exc:  # openpyxl raises many kinds for a damaged workbook

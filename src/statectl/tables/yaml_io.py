@@ -5,7 +5,8 @@ Rules:
    optional ``data`` mapping and an optional ``recovery`` list of rows
    (``state`` with ``event`` and ``data``, or ``redo: yes``); anything else at
    the top is T102 or T103.
-2. The node tree is composed (not constructed) so every row and cell keeps its
+2. The node tree is composed (not constructed, :mod:`statectl.tables.safeyaml`:
+   no aliases, bounded nesting) so every row and cell keeps its
    1-based line; only ``data`` values and a recovery row's ``data`` are
    constructed, as YAML values.
 3. A cell is a scalar (its text as written; ``null`` is empty) or, for the list
@@ -23,6 +24,7 @@ from typing import Any
 import yaml
 
 from statectl.errors import Diagnostic, Location
+from statectl.tables.safeyaml import YamlRefused, compose, construct
 from statectl.tables.schema import (
     Bad,
     Cell,
@@ -129,9 +131,9 @@ def _table(
 def _construct(node: yaml.Node) -> object:
     """The node as a YAML value, or :class:`Bad` naming why it cannot be one."""
     try:
-        return yaml.SafeLoader("").construct_object(node, deep=True)
-    except yaml.YAMLError as exc:
-        return Bad(f"an unreadable value: {str(exc).splitlines()[0]}")
+        return construct(node)
+    except YamlRefused as exc:
+        return Bad(exc.message)
 
 
 def _payload(node: yaml.Node) -> Cell:
@@ -167,14 +169,9 @@ def read_yaml(text: str, file: str) -> tuple[DeviceTables | None, list[Diagnosti
     diags: list[Diagnostic] = []
     source = Location(file, 1)
     try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-    except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        line = mark.line + 1 if mark is not None else None
-        problem = exc.problem or exc.context or "malformed YAML"
-        return None, [diag("T101", Location(file, line), f"malformed YAML: {problem}")]
-    except yaml.YAMLError as exc:
-        return None, [diag("T101", source, f"malformed YAML: {exc}")]
+        root = compose(text)
+    except YamlRefused as exc:
+        return None, [diag(exc.code, Location(file, exc.line or 1), exc.message, exc.hint)]
     if root is None:
         return None, [
             diag("T102", source, "the file is empty", "write device:, states: and events:")

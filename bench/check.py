@@ -1,0 +1,157 @@
+"""Benchmark loading, building and checking large but legitimate inputs.
+
+Usage: python bench/check.py [--rows 20000] [--states 20000] [--keep DIR]
+
+Two generated inputs, written to a temporary directory:
+
+- a YAML device file with ``--rows`` event rows: ``rows / 4`` states in a ring,
+  each handling ``e0`` and ``e1`` unguarded and ``e2`` twice under exclusive guards
+  (``mode == 1``, ``mode == 2``), so every rule of ``statectl check`` has work and
+  the file checks clean. Timed: load (tables), build (chart), check (rules).
+- an SCXML document with ``--states`` states in a ring (one transition each),
+  timed through the reader, and then the first step of a session
+  (``statectl scxml run``'s start).
+
+A baseline of 1,000 rows (and 1,000 states) is timed in the same run, so the ratio
+shows whether the work grows linearly (ratio near rows / 1,000) or worse.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import importlib.util
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+
+from statectl.build import build
+from statectl.scxml import read_scxml
+from statectl.tables import load
+
+# ``statectl.check`` is ``statectl.rules`` where the facade's check() took the name
+check_chart = importlib.import_module(
+    "statectl.rules" if importlib.util.find_spec("statectl.rules") else "statectl.check"
+).check_chart
+
+
+def device_text(rows: int) -> str:
+    """A device file with ``rows`` event rows that builds and checks clean."""
+    states = max(2, rows // 4)
+    out = ["device: Big", "data:", "  mode: 0", "states:"]
+    for s in range(states):
+        out.append(f"  - state: S{s}")
+        out.append("    control: default" if s == 0 else "    control: event trigger required")
+    out.append("events:")
+    for i in range(rows):
+        s, k = divmod(i, 4)
+        s %= states
+        event = f"e{min(k, 2)}"
+        out.append(f"  - event: {event}")
+        out.append(f"    old: S{s}")
+        out.append(f"    new: S{(s + 1 + k) % states}")
+        if k >= 2:
+            out.append(f"    guard: mode == {k - 1}")
+    return "\n".join(out) + "\n"
+
+
+def scxml_text(states: int) -> str:
+    """An SCXML document of ``states`` states in a ring, one transition each."""
+    out = ['<scxml xmlns="http://www.w3.org/2005/07/scxml" version="1.0" initial="s0">']
+    for s in range(states):
+        out.append(f'  <state id="s{s}"><transition event="go" target="s{(s + 1) % states}"/>')
+        out.append("  </state>")
+    out.append("</scxml>")
+    return "\n".join(out) + "\n"
+
+
+def timed(work: Callable[[], object]) -> tuple[float, object]:
+    start = time.perf_counter()
+    result = work()
+    return time.perf_counter() - start, result
+
+
+def bench_device(path: Path) -> tuple[float, float, float, int]:
+    """Seconds to load, build and check ``path``, and the number of diagnostics."""
+    t_load, got = timed(lambda: load(path))
+    tables, diags = got  # type: ignore[misc]
+    assert tables is not None, diags
+    t_build, built = timed(lambda: build(tables))
+    chart, bdiags = built  # type: ignore[misc]
+    assert chart is not None, bdiags
+    t_check, found = timed(lambda: list(check_chart(chart)))
+    return t_load, t_build, t_check, len(found)  # type: ignore[arg-type]
+
+
+def bench_scxml(path: Path) -> tuple[float, float]:
+    """Seconds to read ``path`` and to start a session on it (to its first stable state)."""
+    from statectl.scxml import Scheduler, Session, SimulatedClock
+
+    text = path.read_text(encoding="utf-8")
+    t_read, got = timed(lambda: read_scxml(text, str(path), str(path.parent)))
+    chart, diags = got  # type: ignore[misc]
+    assert chart is not None, diags
+
+    def start() -> object:
+        clock = SimulatedClock()
+        scheduler = Scheduler(clock, None, None)
+        session = Session(chart, scheduler, base=path.parent)
+        return scheduler.run(session, clock.now() + 0.0)
+
+    t_start, _ = timed(start)
+    return t_read, t_start
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rows", type=int, default=20_000)
+    parser.add_argument("--states", type=int, default=20_000)
+    parser.add_argument("--keep", help="write the generated files here and keep them")
+    args = parser.parse_args()
+    where = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="statectl-bench-"))
+    where.mkdir(parents=True, exist_ok=True)
+    print(f"$ python bench/check.py --rows {args.rows} --states {args.states}")
+    print(f"Python {sys.version.split()[0]}; files in {where}")
+    print(f"{'input':<28} {'load s':>8} {'build s':>8} {'check s':>8} {'total s':>8} {'diags':>6}")
+    totals: list[float] = []
+    for rows in (1_000, args.rows):
+        path = where / f"big{rows}.yaml"
+        path.write_text(device_text(rows), encoding="utf-8")
+        t_load, t_build, t_check, n = bench_device(path)
+        total = t_load + t_build + t_check
+        totals.append(total)
+        label = f"device, {rows:,} rows"
+        print(f"{label:<28} {t_load:8.2f} {t_build:8.2f} {t_check:8.2f} {total:8.2f} {n:6}")
+    print(
+        f"ratio total {args.rows:,} / 1,000 rows: {totals[1] / totals[0]:.1f} "
+        f"(linear would be {args.rows / 1000:.0f})"
+    )
+
+    cli = [sys.executable, "-m", "statectl", "check", str(where / f"big{args.rows}.yaml")]
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1] / "src"))
+    t_cli, _ = timed(lambda: subprocess.run(cli, env=env, capture_output=True, check=False))
+    print(f"$ statectl check big{args.rows}.yaml (a new process, end to end): {t_cli:.2f} s")
+    print(f"{'input':<28} {'read s':>8} {'start s':>8}")
+    reads: list[float] = []
+    for states in (1_000, args.states):
+        path = where / f"ring{states}.scxml"
+        path.write_text(scxml_text(states), encoding="utf-8")
+        t_read, t_start = bench_scxml(path)
+        reads.append(t_read + t_start)
+        label = f"SCXML, {states:,} states"
+        print(f"{label:<28} {t_read:8.2f} {t_start:8.2f}")
+    print(
+        f"ratio read+start {args.states:,} / 1,000 states: {reads[1] / reads[0]:.1f} "
+        f"(linear would be {args.states / 1000:.0f})"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

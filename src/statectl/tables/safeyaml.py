@@ -1,0 +1,175 @@
+"""YAML read with bounded work: no aliases, a nesting limit, the C parser when present.
+
+Rules:
+1. A device file, a cell file or a data cell is composed by :func:`compose`, an
+   iterative composer over the parser's events: an alias (``*name``) is refused
+   (T115) because no statectl file needs one and an alias bomb ("billion laughs")
+   expands a few hundred bytes into gigabytes; nesting deeper than
+   :data:`MAX_DEPTH` is refused (T116) before any recursive code sees it.
+2. The events come from libyaml (``yaml.CSafeLoader``) when PyYAML was built with
+   it, from the pure-Python parser otherwise; the tags are resolved the same way,
+   so both give the very same nodes and the very same refusals.
+3. :func:`construct` turns a node into a plain value with the safe constructor;
+   any failure (an unknown tag, a number with too many digits, a date that does
+   not exist) is a :class:`YamlRefused` carrying a line, never another exception.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import yaml
+
+__all__ = [
+    "MAX_DEPTH",
+    "YamlRefused",
+    "compose",
+    "construct",
+    "load_value",
+]
+
+#: Deepest nesting of sequences and mappings a file or a cell may have (T116).
+MAX_DEPTH = 64
+
+_Loader: type[yaml.SafeLoader] = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+class YamlRefused(Exception):
+    """YAML that is refused or cannot be read: a code, a 1-based line, why, what to do."""
+
+    def __init__(self, code: str, line: int | None, message: str, hint: str = "") -> None:
+        super().__init__(message)
+        self.code = code
+        self.line = line
+        self.message = message
+        self.hint = hint
+
+
+def _line(mark: Any) -> int | None:
+    return mark.line + 1 if mark is not None else None
+
+
+def compose(
+    text: str, loader: type[yaml.SafeLoader] | None = None, max_depth: int = MAX_DEPTH
+) -> yaml.Node | None:
+    """The node tree of a one-document YAML text (``None`` when it is empty).
+
+    Raises :class:`YamlRefused`: T101 malformed, T115 an alias, T116 too deep. A
+    malformed text is read again by the pure-Python parser, so the line and message
+    do not depend on whether libyaml is installed.
+    """
+    try:
+        return _compose_with(loader or _Loader, text, max_depth)
+    except YamlRefused as refused:
+        if refused.code != "T101" or loader is not None or _Loader is yaml.SafeLoader:
+            raise
+    return _compose_with(yaml.SafeLoader, text, max_depth)
+
+
+def _compose_with(loader: type[yaml.SafeLoader], text: str, max_depth: int) -> yaml.Node | None:
+    parser: Any = None
+    try:
+        parser = loader(text)  # the pure-Python reader refuses control characters here
+        return _compose(parser, max_depth)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        problem = exc.problem or exc.context or "malformed YAML"
+        raise YamlRefused("T101", _line(mark), f"malformed YAML: {problem}") from None
+    except yaml.YAMLError as exc:
+        first = (str(exc).splitlines() or ["unreadable"])[0]
+        raise YamlRefused("T101", None, f"malformed YAML: {first}") from None
+    finally:
+        if parser is not None:
+            parser.dispose()
+
+
+def _compose(parser: Any, max_depth: int) -> yaml.Node | None:
+    parser.get_event()  # StreamStart
+    if parser.check_event(yaml.StreamEndEvent):
+        return None
+    parser.get_event()  # DocumentStart
+    root: yaml.Node | None = None
+    stack: list[yaml.SequenceNode | yaml.MappingNode] = []
+    items: list[list[yaml.Node]] = []
+    while True:
+        event: Any = parser.get_event()
+        start: Any = event.start_mark  # libyaml's marks are typed apart from PyYAML's
+        end: Any = event.end_mark
+        node: yaml.Node | None = None
+        if isinstance(event, yaml.AliasEvent):
+            raise YamlRefused(
+                "T115",
+                _line(event.start_mark),
+                f"YAML alias '*{event.anchor}' refused",
+                "write the value out in full; statectl files do not use anchors and aliases",
+            )
+        if isinstance(event, yaml.ScalarEvent):
+            tag = event.tag
+            if tag is None or tag == "!":
+                tag = parser.resolve(yaml.ScalarNode, event.value, event.implicit)
+            node = yaml.ScalarNode(tag, event.value, start, end, style=event.style)
+        elif isinstance(event, yaml.SequenceStartEvent | yaml.MappingStartEvent):
+            if len(stack) >= max_depth:
+                raise YamlRefused(
+                    "T116",
+                    _line(event.start_mark),
+                    f"YAML nested deeper than {max_depth} levels",
+                    "flatten the value; see docs/limits.md",
+                )
+            seq = isinstance(event, yaml.SequenceStartEvent)
+            kind = yaml.SequenceNode if seq else yaml.MappingNode
+            tag = event.tag
+            if tag is None or tag == "!":
+                tag = parser.resolve(kind, None, event.implicit)
+            stack.append(kind(tag, [], start, end, flow_style=event.flow_style))
+            items.append([])
+            continue
+        elif isinstance(event, yaml.SequenceEndEvent | yaml.MappingEndEvent):
+            node = stack.pop()
+            node.end_mark = end
+            values = items.pop()
+            if isinstance(node, yaml.MappingNode):
+                node.value = list(zip(values[::2], values[1::2], strict=True))
+            else:
+                node.value = values
+        elif isinstance(event, yaml.DocumentEndEvent):
+            break
+        if node is None:
+            continue
+        if stack:
+            items[-1].append(node)
+        else:
+            root = node
+    if not parser.check_event(yaml.StreamEndEvent):
+        extra: Any = parser.get_event()
+        raise YamlRefused(
+            "T101",
+            _line(extra.start_mark),
+            "malformed YAML: a second document in the file",
+            "remove the '---' that starts it",
+        )
+    return root
+
+
+def construct(node: yaml.Node) -> object:
+    """The node as a plain YAML value; raises :class:`YamlRefused` (T108) if it is none."""
+    try:
+        return yaml.SafeLoader("").construct_object(node, deep=True)
+    except yaml.MarkedYAMLError as exc:
+        problem = exc.problem or exc.context or "unreadable"
+        line = _line(exc.problem_mark) or _line(node.start_mark)
+        raise YamlRefused("T108", line, f"an unreadable value: {problem}") from None
+    except (yaml.YAMLError, ValueError, OverflowError, TypeError) as exc:
+        first = (str(exc).splitlines() or [type(exc).__name__])[0]
+        raise YamlRefused(
+            "T108",
+            _line(node.start_mark),
+            f"an unreadable value: {first}",
+            "numbers are limited to 4300 digits; dates must exist",
+        ) from None
+
+
+def load_value(text: str, loader: type[yaml.SafeLoader] | None = None) -> object:
+    """One YAML value (a data cell): compose with the limits, then construct."""
+    node = compose(text, loader)
+    return None if node is None else construct(node)
