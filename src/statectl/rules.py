@@ -34,7 +34,7 @@ from statectl.errors import Diagnostic, Location, Severity, has_errors
 from statectl.guards import guards_exclusive
 from statectl.model import Chart, ControlKind, EventKind, State, StateKind, Transition
 from statectl.recovery import check_recovery
-from statectl.semantics import entry_set, name_match, structural
+from statectl.semantics import entry_set, structural
 from statectl.tables import load
 
 __all__ = ["CODES", "check_chart", "check_paths", "guards_exclusive"]
