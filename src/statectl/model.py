@@ -16,6 +16,7 @@ from __future__ import annotations
 import enum
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import Any
 
 from statectl.errors import Location
 
@@ -324,27 +325,49 @@ class Chart:
     origin: Location = field(default=NOWHERE)
     binding: str = "early"  # SCXML data binding: "early" or "late"
     script: tuple[Action, ...] = ()  # SCXML top-level ``<script>``, run once at start
+    #: lookups by name, built on first use: a cache, not part of the value
+    _index: dict[str, dict[Any, Any]] = field(
+        default_factory=dict, init=False, repr=False, compare=False, hash=False
+    )
+
+    def _lookup(self) -> dict[str, dict[Any, Any]]:
+        """State, event, children and transitions by name, built once (linear lookups)."""
+        index = self._index
+        if not index:
+            children: dict[str | None, list[State]] = {}
+            by_source: dict[str, list[Transition]] = {}
+            for st in self.states:
+                children.setdefault(st.parent, []).append(st)
+            for t in self.transitions:
+                by_source.setdefault(t.source, []).append(t)
+            events: dict[str, EventDef] = {}
+            for e in self.events:
+                events.setdefault(e.name, e)  # the first of a name, as a scan finds it
+            states: dict[str, State] = {}
+            for st in self.states:
+                states.setdefault(st.name, st)
+            index.update(
+                states=states,
+                events=events,
+                children={k: tuple(v) for k, v in children.items()},
+                by_source={k: tuple(v) for k, v in by_source.items()},
+            )
+        return index
 
     def state(self, name: str) -> State:
-        for s in self.states:
-            if s.name == name:
-                return s
-        raise KeyError(name)
+        return self._lookup()["states"][name]  # type: ignore[no-any-return]  # typed by _lookup
 
     def has_state(self, name: str) -> bool:
-        return any(s.name == name for s in self.states)
+        return name in self._lookup()["states"]
 
     def event(self, name: str) -> EventDef | None:
-        for e in self.events:
-            if e.name == name:
-                return e
-        return None
+        return self._lookup()["events"].get(name)
 
     def children(self, name: str | None) -> Iterator[State]:
-        return (s for s in self.states if s.parent == name)
+        return iter(self._lookup()["children"].get(name, ()))
 
     def transitions_from(self, name: str) -> Iterator[Transition]:
-        return (t for t in self.transitions if t.source == name)
+        return iter(self._lookup()["by_source"].get(name, ()))
 
     @property
     def default_states(self) -> tuple[str, ...]:
