@@ -68,7 +68,7 @@ from statectl.model import (
     StateKind,
     Transition,
 )
-from statectl.scxml.safecheck import check_safe
+from statectl.scxml.safecheck import check_safe, src_escapes
 
 __all__ = [
     "MAX_SRC_BYTES",
@@ -241,6 +241,7 @@ class _Reader:
     def __init__(self, file: str, base: Path) -> None:
         self.file = file
         self.base = base
+        self.trusted = False  # a python document may read any src; others stay in base
         self.diagnostics: list[Diagnostic] = []
         self.states: list[State] = []
         self.transitions: list[Transition] = []
@@ -391,8 +392,24 @@ class _Reader:
         return text or ""
 
     def read_src(self, node: _Node, src: str) -> str | None:
+        """A ``<content src>`` or ``<script src>`` read at load, bounded; an untrusted
+        (safe or null) document reads only regular files inside its own directory."""
+        path = self.base / src.strip().removeprefix("file:")
+        why = None if self.trusted else src_escapes(src)
+        if why is None and not self.trusted:
+            try:
+                inside = path.resolve().is_relative_to(self.base.resolve())
+            except (OSError, RuntimeError):
+                inside = False
+            if not inside:
+                why = "leaves the document's directory through a link"
+            elif not path.is_file():
+                why = "is not a regular file"
+        if why is not None:
+            self.problem("S607", node, f"src {src!r} {why}", "keep src files beside the document")
+            return None
         try:
-            return read_src_text(self.base / src.removeprefix("file:"))
+            return read_src_text(path)
         except (OSError, ValueError) as exc:
             why = getattr(exc, "strerror", None) or str(exc)
             self.problem("S607", node, f"cannot read src {src!r}: {why}", "check the path")
@@ -637,6 +654,7 @@ class _Reader:
         return tuple(events), tuple(apis), tuple(invokes)
 
     def chart(self, root: _Node, default_name: str) -> Chart:
+        self.trusted = root.get("datamodel") == "python"
         scripts = tuple(
             Script(self.script_source(s), self.at(s)) for s in root.scxml_children("script")
         )
