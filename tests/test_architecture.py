@@ -30,7 +30,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     "render": ("errors", "model", "observers", "semantics"),
     "scxml": ("errors", "model", "expr", "semantics", "observers", "runtime"),
     "runtime": ("errors", "model", "expr", "semantics", "observers"),
-    "devices": ("errors", "model", "expr", "semantics", "observers", "runtime"),
+    "devices": ("errors", "model", "expr", "semantics", "observers", "runtime", "tables"),
     "codegen": ("errors", "model", "expr", "semantics", "observers", "tables", "build"),
     "cell": ("errors", "model", "expr", "semantics", "observers", "tables", "build"),
     "explore": (

@@ -42,8 +42,6 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, TextIO
 
-import yaml
-
 from statectl.cell import Cell, load_cell
 from statectl.devices import (
     MIN_TOKEN,
@@ -73,6 +71,7 @@ from statectl.model import Chart
 from statectl.runtime import Clock, SimClock, TraceWriter, WallClock, format_data
 from statectl.runtime.trace import format_record
 from statectl.system import DeviceSetup, System
+from statectl.tables import safeyaml
 
 __all__ = [
     "DeviceSetup",
@@ -108,9 +107,9 @@ def parse_event_line(line: str) -> tuple[str | None, str, Any] | float | None:
     brace = min((i for i in (text.find("{"), text.find("[")) if i >= 0), default=-1)
     if brace >= 0:
         try:
-            data = yaml.safe_load(text[brace:])
-        except yaml.YAMLError as exc:
-            raise StatectlError(f"event data is not YAML flow style ({exc})") from None
+            data = safeyaml.load_value(text[brace:])
+        except safeyaml.YamlRefused as exc:
+            raise StatectlError(f"event data is not YAML flow style ({exc.message})") from None
         text = text[:brace]
     event = " ".join(text.split())
     if not event:
@@ -192,9 +191,9 @@ def is_cell(path: str) -> bool:
     if Path(path).suffix.lower() not in (".yaml", ".yml"):
         return False
     try:
-        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError):
-        return False
+        data = safeyaml.load_value(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, safeyaml.YamlRefused):
+        return False  # loaded as a device file, whose loader says what is wrong
     return isinstance(data, dict) and "devices" in data and "states" not in data
 
 

@@ -44,6 +44,7 @@ from statectl.devices.stepper import SimStepper
 from statectl.devices.twin import SimTwin, twin_option_problems
 from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, StatectlError
 from statectl.model import Chart
+from statectl.tables import safeyaml
 
 __all__ = [
     "DRIVERS",
@@ -211,22 +212,17 @@ def load_run_config(path: str | Path) -> RunConfig:
     except (OSError, UnicodeDecodeError) as exc:
         error("D501", None, f"cannot read driver config ({exc})", "check the path")
         raise DiagnosticError(diags) from None
-    loader = yaml.SafeLoader(text)
-    try:
-        root = loader.get_single_node()
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = mark.line + 1 if mark is not None else None
-        error("D502", line, f"not valid YAML ({getattr(exc, 'problem', exc)})")
+    try:  # no aliases, bounded depth: a config file may come from elsewhere too
+        root = safeyaml.compose(text)
+    except safeyaml.YamlRefused as exc:
+        error("D502", exc.line, f"not valid YAML here ({exc.message})", exc.hint)
         raise DiagnosticError(diags) from None
-    finally:
-        loader.dispose()
 
     def line_of(node: yaml.Node) -> int:
         return int(node.start_mark.line) + 1
 
     def value(node: yaml.Node) -> Any:
-        return yaml.SafeLoader("").construct_object(node, deep=True)
+        return safeyaml.construct(node)
 
     result: DriverConfig = {}
     devices_node: yaml.Node | None = None

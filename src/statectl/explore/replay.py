@@ -29,8 +29,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
-import yaml
-
 from statectl.cell import Cell, InputKind, Link, Trigger, load_cell
 from statectl.errors import Severity, StatectlError
 from statectl.explore.compose import Composed, Stimulus
@@ -43,6 +41,7 @@ from statectl.runtime import (
     TraceWriter,
     TransitionTaken,
 )
+from statectl.tables import safeyaml
 
 __all__ = ["CellLinks", "CellRun", "ReplayStep", "load_replay", "run_cell", "run_main"]
 
@@ -60,9 +59,12 @@ class ReplayStep:
 def load_replay(path: str | os.PathLike[str]) -> list[ReplayStep]:
     """The stimuli of a trace file; raises :class:`StatectlError` saying what is wrong."""
     try:
-        doc: Any = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError) as exc:
+        doc: Any = safeyaml.load_value(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
         raise StatectlError(f"{path}: cannot read the trace: {exc}") from exc
+    except safeyaml.YamlRefused as exc:
+        where = f"{path}:{exc.line}" if exc.line else str(path)
+        raise StatectlError(f"{where}: {exc.code}: {exc.message}") from None
     steps = doc.get("steps") if isinstance(doc, dict) else doc
     if not isinstance(steps, list):
         raise StatectlError(f"{path}: a trace is a mapping with 'steps:' (a list)")

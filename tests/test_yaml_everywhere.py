@@ -1,0 +1,63 @@
+"""Every YAML statectl reads goes through the safe loader: run configs, event lines, traces.
+
+Device and cell files were closed first (tests/test_limits.py); these are the other
+places a user hands statectl YAML, each refusing an alias bomb or a deep nesting
+with a message, in bounded time, never a traceback.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from statectl.devices import load_run_config
+from statectl.errors import DiagnosticError, StatectlError
+from statectl.explore.replay import load_replay
+from statectl.runner import is_cell, parse_event_line
+
+#: A small alias bomb: nine references per level, seven levels (4.7 million leaves).
+BOMB = (
+    "[&a [x,x,x,x,x,x,x,x,x]"
+    + "".join(
+        f", &{b} [{', '.join(['*' + a] * 9)}]" for a, b in zip("abcdef", "bcdefg", strict=True)
+    )
+    + "]"
+)
+DEEP = "[" * 5000 + "]" * 5000
+
+
+@pytest.mark.parametrize(("name", "body"), [("bomb", BOMB), ("deep", DEEP)])
+def test_a_run_config_is_refused_with_d502_at_its_line(
+    tmp_path: Path, name: str, body: str
+) -> None:
+    """A hostile --config file is D502 with a line, not an expansion or a RecursionError."""
+    path = tmp_path / "run.yaml"
+    path.write_text(f"devices:\n  Motor: {{driver: sim-motor, options: {{x: {body}}}}}\n")
+    with pytest.raises(DiagnosticError) as caught:
+        load_run_config(path)
+    codes = [(d.code, d.where.line) for d in caught.value.diagnostics]
+    assert codes == [("D502", 2)], codes
+
+
+@pytest.mark.parametrize("body", [BOMB, DEEP])
+def test_event_data_on_a_line_is_refused(body: str) -> None:
+    """An event line whose data is hostile YAML is a StatectlError the run reports per line."""
+    with pytest.raises(StatectlError, match="event data is not YAML flow style"):
+        parse_event_line(f"Motor: Movement {body}")
+
+
+@pytest.mark.parametrize("body", [BOMB, DEEP])
+def test_a_trace_file_is_refused_at_its_line(tmp_path: Path, body: str) -> None:
+    """A replay trace with hostile YAML names the file, the line and the code."""
+    path = tmp_path / "trace.yaml"
+    path.write_text(f"steps:\n  - {body}\n")
+    with pytest.raises(StatectlError, match=r"trace\.yaml:2: T11[56]"):
+        load_replay(path)
+
+
+def test_a_hostile_file_is_not_taken_for_a_cell(tmp_path: Path) -> None:
+    """is_cell() says no (the device loader then reports the file) instead of expanding it."""
+    path = tmp_path / "c.yaml"
+    path.write_text(f"devices: {BOMB}\n")
+    assert is_cell(str(path)) is False
