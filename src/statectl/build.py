@@ -746,7 +746,9 @@ def _strip(value: Any) -> Any:
     if isinstance(value, tuple):
         return tuple(_strip(v) for v in value)
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        changes = {f.name: _strip(getattr(value, f.name)) for f in dataclasses.fields(value)}
+        changes = {
+            f.name: _strip(getattr(value, f.name)) for f in dataclasses.fields(value) if f.init
+        }
         return dataclasses.replace(value, **changes)
     return value
 
@@ -1021,7 +1023,7 @@ def chart_to_tables(chart: Chart) -> tuple[DeviceTables | None, list[Diagnostic]
         field = next(
             f.name
             for f in dataclasses.fields(Chart)
-            if getattr(want, f.name) != getattr(got, f.name)
+            if f.compare and getattr(want, f.name) != getattr(got, f.name)
         )
         return None, [
             _info(
