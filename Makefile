@@ -18,6 +18,7 @@ dev:
 
 lint:
 	$(PY) -m ruff check .
+	$(PY) -m ruff format --check .
 
 types:
 	$(PY) -m mypy

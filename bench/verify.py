@@ -72,9 +72,20 @@ def run_spin(pml: Path, max_states: int) -> dict[str, float | int | str]:
     t1 = time.perf_counter()
     memlim = 2048
     subprocess.run(
-        ["gcc", "-O2", "-DBFS", "-DSAFETY", "-DNOREDUCE", f"-DMEMLIM={memlim}", "-o", "pan",
-         "pan.c"],
-        cwd=folder, check=True, capture_output=True,
+        [
+            "gcc",
+            "-O2",
+            "-DBFS",
+            "-DSAFETY",
+            "-DNOREDUCE",
+            f"-DMEMLIM={memlim}",
+            "-o",
+            "pan",
+            "pan.c",
+        ],
+        cwd=folder,
+        check=True,
+        capture_output=True,
     )
     t2 = time.perf_counter()
     pan = subprocess.run(["./pan", "-E", "-w24"], cwd=folder, capture_output=True, text=True)
@@ -87,8 +98,15 @@ def run_spin(pml: Path, max_states: int) -> dict[str, float | int | str]:
         if "total actual memory usage" in line:
             memory = line.split()[0]
     errors = "errors: 0" not in pan.stdout
-    return {"generate_s": t1 - t0, "compile_s": t2 - t1, "pan_s": t3 - t2,
-            "total_s": t3 - t0, "stored": stored, "memory_mb": memory, "errors": int(errors)}
+    return {
+        "generate_s": t1 - t0,
+        "compile_s": t2 - t1,
+        "pan_s": t3 - t2,
+        "total_s": t3 - t0,
+        "stored": stored,
+        "memory_mb": memory,
+        "errors": int(errors),
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -114,10 +132,12 @@ def main(argv: list[str] | None = None) -> int:
         printer.done()
     seconds = time.perf_counter() - t0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    print(f"statectl: {args.devices} devices, {report.states:,} global states, "
-          f"{report.transitions:,} transitions, {seconds:.1f} s, "
-          f"{report.states / seconds:,.0f} states/s, peak RSS {peak:,.0f} MiB, "
-          f"verdict {report.verdict}")
+    print(
+        f"statectl: {args.devices} devices, {report.states:,} global states, "
+        f"{report.transitions:,} transitions, {seconds:.1f} s, "
+        f"{report.states / seconds:,.0f} states/s, peak RSS {peak:,.0f} MiB, "
+        f"verdict {report.verdict}"
+    )
     if args.no_spin:
         return 0
     pml = folder / "cell.pml"
@@ -126,11 +146,15 @@ def main(argv: list[str] | None = None) -> int:
     if "skipped" in spin:
         print(f"spin: skipped ({spin['skipped']})")
         return 0
-    print(f"spin:     {spin['stored']:,} states stored, pan {spin['pan_s']:.1f} s, "
-          f"total with spin -a and gcc {spin['total_s']:.1f} s, memory {spin['memory_mb']} MB, "
-          f"errors {spin['errors']}")
-    print(f"ratio:    statectl / spin total = {seconds / float(spin['total_s']):.2f}, "
-          f"statectl / pan only = {seconds / float(spin['pan_s']):.2f}")
+    print(
+        f"spin:     {spin['stored']:,} states stored, pan {spin['pan_s']:.1f} s, "
+        f"total with spin -a and gcc {spin['total_s']:.1f} s, memory {spin['memory_mb']} MB, "
+        f"errors {spin['errors']}"
+    )
+    print(
+        f"ratio:    statectl / spin total = {seconds / float(spin['total_s']):.2f}, "
+        f"statectl / pan only = {seconds / float(spin['pan_s']):.2f}"
+    )
     return 0
 
 

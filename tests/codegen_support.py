@@ -189,8 +189,11 @@ def driver_source(chart: Chart, fields: Sequence[str], field_idents: Mapping[str
         for k, f in enumerate(fields)
     )
     return (
-        _DRIVER.replace("@BASE@", ns).replace("@NS@", ns).replace("@CLS@", cls)
-        .replace("@METHODS@", method_text).replace("@ATTACH@", attach or "    (void)api;")
+        _DRIVER.replace("@BASE@", ns)
+        .replace("@NS@", ns)
+        .replace("@CLS@", cls)
+        .replace("@METHODS@", method_text)
+        .replace("@ATTACH@", attach or "    (void)api;")
         .replace("@ASSIGN@", assign)
     )
 
@@ -224,8 +227,17 @@ class CppDevice:
         self.events = list(flat.events)
         (workdir / "driver.cpp").write_text(driver_source(chart, self.fields, idents))
         self.binary = workdir / "driver"
-        cmd = [compiler or GXX or "g++", *FLAGS, "-O0", "-DSTATECTL_TRACE=1", "-I", str(workdir),
-               str(workdir / "driver.cpp"), "-o", str(self.binary)]
+        cmd = [
+            compiler or GXX or "g++",
+            *FLAGS,
+            "-O0",
+            "-DSTATECTL_TRACE=1",
+            "-I",
+            str(workdir),
+            str(workdir / "driver.cpp"),
+            "-o",
+            str(self.binary),
+        ]
         done = subprocess.run(cmd, capture_output=True, text=True, check=False)
         assert done.returncode == 0, done.stderr
 
@@ -236,8 +248,12 @@ class CppDevice:
             idx = " ".join(str(self.events.index(e)) for e in events)
             lines.append(f"{values} ; {idx}\n")
         done = subprocess.run(
-            [str(self.binary)], input="".join(lines), capture_output=True, text=True,
-            check=True, timeout=60,
+            [str(self.binary)],
+            input="".join(lines),
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=60,
         )
         chunks = done.stdout.split("---\n")
         return [c.splitlines() for c in chunks[: len(sequences)]]

@@ -83,7 +83,7 @@ def test_rules_are_read(tmp_path: Path) -> None:
         (("{send: Movement, to: left,", "{to: left,"), "V803"),
         (("links:\n", "links: 3\nx:\n"), "V804"),
         (("In('left.Returning')", "In('left.Flying')"), "V808"),
-        (("holds: \"not", "holds: \"1 +"), "V810"),
+        (('holds: "not', 'holds: "1 +'), "V810"),
     ],
 )
 def test_problem_codes(tmp_path: Path, change: tuple[str, str], code: str) -> None:

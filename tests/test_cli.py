@@ -87,7 +87,10 @@ def test_observers_json() -> None:
     data = json.loads(out)
     assert code == 0
     assert [(i["number"], i["name"], i["method"]) for i in data["invokes"]] == [
-        (0, "Moving", "Movement"), (1, "Returning", "Initialization"), (2, "Error", "Error")]
+        (0, "Moving", "Movement"),
+        (1, "Returning", "Initialization"),
+        (2, "Error", "Error"),
+    ]
     covered = sorted(e for o in data["observers"] for e in o["events"])
     assert len(covered) == 6
 
@@ -111,7 +114,8 @@ def test_tables_converts_and_reloads(tmp_path: Path) -> None:
     md.write_text(out, encoding="utf-8")
     a, b = load_chart(MOTOR), load_chart(str(md))
     assert [(t.source, t.events, t.targets, t.guard) for t in a.transitions] == [
-        (t.source, t.events, t.targets, t.guard) for t in b.transitions]
+        (t.source, t.events, t.targets, t.guard) for t in b.transitions
+    ]
 
 
 def test_malformed_file_is_a_clean_failure(tmp_path: Path) -> None:

@@ -50,18 +50,37 @@ EVENTS = ("go", "stop", "tick", "go fast")
 RAISED = ("ping", "pong")
 #: Guards over the int fields x and y, the previous state and In(); state names are S<n>.
 GUARDS = (
-    None, None, None,
-    "x > 1", "y == 0", "x + y < 3", "not x", "x if y else 1", "x * 2 >= y - 1 > -1",
-    "previous == 'S1'", "In('S2')", "x > 0 and In('S3')", "previous != 'S2' or y",
+    None,
+    None,
+    None,
+    "x > 1",
+    "y == 0",
+    "x + y < 3",
+    "not x",
+    "x if y else 1",
+    "x * 2 >= y - 1 > -1",
+    "previous == 'S1'",
+    "In('S2')",
+    "x > 0 and In('S3')",
+    "previous != 'S2' or y",
 )
 #: Guards of eventless transitions: mostly ones that stop holding once taken.
 EVENTLESS_GUARDS = (None, "x > 1", "y == 0", "previous == 'S1'", "In('S2')", "not In('S3')")
 ENTRY: tuple[tuple[Action, ...], ...] = (
-    (), (), (), (Notify(0, "Alpha", "Start", "entry"),), (Raise("ping"),),
+    (),
+    (),
+    (),
+    (Notify(0, "Alpha", "Start", "entry"),),
+    (Raise("ping"),),
     (Notify(0, "Alpha", "Start", "entry"), Raise("pong")),
 )
 EXIT: tuple[tuple[Action, ...], ...] = (
-    (), (), (), (), (Notify(1, "Beta", "Stop", "exit"),), (Raise("pong"),),
+    (),
+    (),
+    (),
+    (),
+    (Notify(1, "Beta", "Stop", "exit"),),
+    (Raise("pong"),),
 )
 #: How many random charts; the generator may refuse at most half of them (G7xx).
 EXAMPLES = 60
@@ -91,8 +110,15 @@ def random_chart(seed: int) -> Chart:
             kinds += [StateKind.COMPOUND, StateKind.COMPOUND, StateKind.PARALLEL]
         kind = rnd.choice(kinds)
         on_exit = rnd.choice(EXIT) if kind is not StateKind.FINAL else ()
-        add(State(name, kind, parent.name if parent else None, on_entry=rnd.choice(ENTRY),
-                  on_exit=on_exit))
+        add(
+            State(
+                name,
+                kind,
+                parent.name if parent else None,
+                on_entry=rnd.choice(ENTRY),
+                on_exit=on_exit,
+            )
+        )
         if kind in (StateKind.ATOMIC, StateKind.FINAL):
             return
         for _ in range(rnd.randint(2, 3)):
@@ -129,8 +155,11 @@ def random_chart(seed: int) -> Chart:
     ] + [()] * 3
     # every atomic state (and some composite ones) first gets a way out on an external
     # event, mostly unguarded, so runs go somewhere; then transitions of every kind
-    ways_out = [(s, (rnd.choice(EVENTS),)) for s in sources
-                if states[where[s]].kind is StateKind.ATOMIC or rnd.random() < 0.3]
+    ways_out = [
+        (s, (rnd.choice(EVENTS),))
+        for s in sources
+        if states[where[s]].kind is StateKind.ATOMIC or rnd.random() < 0.3
+    ]
     transitions = []
     targets: tuple[str, ...]
     for i in range(len(ways_out) + rnd.randint(2, 8)):
@@ -146,19 +175,20 @@ def random_chart(seed: int) -> Chart:
             # Eventless or raised: one that re-entered its source or went back in document
             # order would often loop for ever, and an eventless targetless one always
             # would; the generator refuses such charts (G707), so most are drawn not to.
-            away = [n for n in names[where[source] + 1:] if not _related(states, n, source)]
+            away = [n for n in names[where[source] + 1 :] if not _related(states, n, source)]
             if not away:
                 events = RAISED[-1:]
             targets = (rnd.choice(away),) if away and (not events or rnd.random() < 0.9) else ()
             guard = rnd.choice(GUARDS if events else EVENTLESS_GUARDS)
         # an event only raises later ones (in RAISED's order), so raising rarely loops
-        later = RAISED[RAISED.index(events[0]) + 1:] if events and events[0] in RAISED else RAISED
+        later = RAISED[RAISED.index(events[0]) + 1 :] if events and events[0] in RAISED else RAISED
         notify = Notify(1, "Beta", "Stop", events[0] if events else "eventless")
         actions = rnd.choice(
             [(), (), (notify,)] + [(Raise(e),) for e in later] + [(notify, Raise(e)) for e in later]
         )
-        transitions.append(Transition(source, events, targets, guard,
-                                      internal=rnd.random() < 0.5, actions=actions))
+        transitions.append(
+            Transition(source, events, targets, guard, internal=rnd.random() < 0.5, actions=actions)
+        )
     tops = [s.name for s in states if s.parent is None and s.kind is not StateKind.FINAL]
     return Chart(
         "Random Dev",
@@ -167,8 +197,9 @@ def random_chart(seed: int) -> Chart:
         (rnd.choice(tops),),
         events=tuple(EventDef(e) for e in EVENTS),
         invokes=INVOKES,
-        ignored=frozenset((rnd.choice(names), rnd.choice(EVENTS))
-                          for _ in range(rnd.randint(0, 3))),
+        ignored=frozenset(
+            (rnd.choice(names), rnd.choice(EVENTS)) for _ in range(rnd.randint(0, 3))
+        ),
         data=(DataItem("x", "1"), DataItem("y", "0")),
     )
 
@@ -213,8 +244,12 @@ def test_random_charts_trace_like_python() -> None:
     """
     tally: Counter[str] = Counter()
 
-    @settings(max_examples=EXAMPLES, deadline=None, database=None,
-              suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+    @settings(
+        max_examples=EXAMPLES,
+        deadline=None,
+        database=None,
+        suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+    )
     @given(chart=charts, data=st.data())
     def check(chart: Chart, data: st.DataObject) -> None:
         with tempfile.TemporaryDirectory() as tmp:
@@ -237,8 +272,18 @@ def test_random_charts_trace_like_python() -> None:
 MOTOR_RUNS: list[tuple[dict[str, int], list[str]]] = [
     ({}, ["Movement", "Movement completion", "Initialization", "Initialization completion"]),
     ({}, ["Movement", "Error", "Error completion", "Initialization", "Movement"]),
-    ({}, ["Initialization", "Error", "Movement completion", "Movement", "Movement",
-          "Error completion", "Error"]),
+    (
+        {},
+        [
+            "Initialization",
+            "Error",
+            "Movement completion",
+            "Movement",
+            "Movement",
+            "Error completion",
+            "Error",
+        ],
+    ),
     ({}, []),
 ]
 
@@ -260,14 +305,21 @@ def _final_and_raise() -> Chart:
     )
     transitions = (
         Transition("Work", ("finish",), ("Done",), actions=(Raise("ping"),)),
-        Transition("Job", ("done.state.Job",), ("Idle",), actions=(Notify(0, "Alpha", "Start",
-                                                                          "done"),)),
+        Transition(
+            "Job", ("done.state.Job",), ("Idle",), actions=(Notify(0, "Alpha", "Start", "done"),)
+        ),
         Transition("Idle", ("ping",), ("End",)),
         Transition("Idle", ("again",), ("Job",), guard="x > 2"),
     )
-    return Chart("Job Runner", states, transitions, ("Job",),
-                 events=(EventDef("finish"), EventDef("again")), invokes=INVOKES[:1],
-                 data=(DataItem("x", "3"),))
+    return Chart(
+        "Job Runner",
+        states,
+        transitions,
+        ("Job",),
+        events=(EventDef("finish"), EventDef("again")),
+        invokes=INVOKES[:1],
+        data=(DataItem("x", "3"),),
+    )
 
 
 @pytest.mark.parametrize(

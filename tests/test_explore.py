@@ -149,8 +149,10 @@ def test_recovery_from_restricts_the_start(tmp_path: Path) -> None:
     )
     report = run(cell_of(tmp_path, {"m": TRAP}, body))
     assert Kind.RECOVERY not in kinds(report)
-    assert ("recovery home: always able to reach In('m.Idle') from In('m.Running')",
-            "holds") in report.properties
+    assert (
+        "recovery home: always able to reach In('m.Idle') from In('m.Running')",
+        "holds",
+    ) in report.properties
 
 
 def test_unreached_device_state(tmp_path: Path) -> None:
@@ -198,7 +200,10 @@ def test_unanticipated_counts(tmp_path: Path) -> None:
     body = "environment:\n" + sends
     report = run(cell_of(tmp_path, {"m": TRAP.replace(", ignore: [Stop, Poke]", "")}, body))
     assert {(u.state, u.event) for u in report.unanticipated} == {
-        ("Idle", "Stop"), ("Idle", "Break"), ("Broken", "Break")}
+        ("Idle", "Stop"),
+        ("Idle", "Break"),
+        ("Broken", "Break"),
+    }
 
 
 @pytest.mark.parametrize(
@@ -224,8 +229,9 @@ def test_replay_reproduces_the_counterexample(tmp_path: Path) -> None:
     written = write_traces(report, tmp_path)
     trace = next(p for p in written if p.name.endswith(".trace.json") and "invariant" in p.name)
     out = io.StringIO()
-    assert run_main(str(PICK / "cell-buggy.yaml"), replay=str(trace), out=out,
-                    err=io.StringIO()) == 0
+    assert (
+        run_main(str(PICK / "cell-buggy.yaml"), replay=str(trace), out=out, err=io.StringIO()) == 0
+    )
     assert "invariant belt-still-while-arm-reaches fails" in out.getvalue()
 
 
@@ -245,7 +251,9 @@ def test_json_report() -> None:
     assert code == 1 and doc["verdict"] == "fails"
     steps = doc["findings"][0]["trace"]["steps"]
     assert [(s["source"], s["to"], s["event"]) for s in steps][:2] == [
-        ("environment", "conveyor", "Start"), ("environment", "sensor", "Part in")]
+        ("environment", "conveyor", "Start"),
+        ("environment", "sensor", "Part in"),
+    ]
 
 
 @pytest.mark.parametrize(

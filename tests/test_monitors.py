@@ -36,7 +36,6 @@ class Device:
         return "overcurrent" if self.polls in self.fault_at else None
 
 
-
 def setup(chart: Chart, device: Device, period: float = 0.1) -> tuple[Subject, list[Record]]:
     subject = Subject(chart, clock=SimClock())
     records: list[Record] = []

@@ -42,11 +42,19 @@ def test_motor_gives_the_papers_three_invokes() -> None:
         # a method with only completions is named after itself
         ([EventSpec("Done", D, "Drive", "Idle")], [(0, "Drive", "Drive")]),
         # events without an API get no observer method
-        ([EventSpec("Tick", C, None, "Idle"), EventSpec("Go", C, "Drive", "Run")],
-         [(0, "Run", "Drive")]),
+        (
+            [EventSpec("Tick", C, None, "Idle"), EventSpec("Go", C, "Drive", "Run")],
+            [(0, "Run", "Drive")],
+        ),
         # numbers follow the first appearance of each API
-        ([EventSpec("B", C, "Beta", "S2"), EventSpec("A", C, "Alpha", "S1"),
-          EventSpec("B2", D, "Beta", "S0")], [(0, "S2", "Beta"), (1, "S1", "Alpha")]),
+        (
+            [
+                EventSpec("B", C, "Beta", "S2"),
+                EventSpec("A", C, "Alpha", "S1"),
+                EventSpec("B2", D, "Beta", "S0"),
+            ],
+            [(0, "S2", "Beta"), (1, "S1", "Alpha")],
+        ),
     ],
 )
 def test_invoke_naming_rules(rows: list[EventSpec], expected: list[tuple[int, str, str]]) -> None:

@@ -30,8 +30,12 @@ def spin(text: str, folder: Path, flag: str) -> tuple[bool, int]:
     """Run SPIN breadth-first; (an error was found, stimuli in its trail)."""
     (folder / "m.pml").write_text(text, encoding="utf-8")
     subprocess.run(["spin", "-a", "m.pml"], cwd=folder, check=True, capture_output=True)
-    subprocess.run(["gcc", "-O2", "-DBFS", "-DSAFETY", "-DNOREDUCE", "-o", "pan", "pan.c"],
-                   cwd=folder, check=True, capture_output=True)
+    subprocess.run(
+        ["gcc", "-O2", "-DBFS", "-DSAFETY", "-DNOREDUCE", "-o", "pan", "pan.c"],
+        cwd=folder,
+        check=True,
+        capture_output=True,
+    )
     pan = subprocess.run(["./pan", flag], cwd=folder, capture_output=True, text=True)
     failed = "errors: 0" not in pan.stdout
     if not failed:
@@ -47,10 +51,14 @@ def test_export_names_every_device() -> None:
     for name in ("l_conveyor", "l_arm", "l_gripper", "l_sensor"):
         assert f"byte {name};" in text
     assert text.count(f'printf("{STEP_MARK}') == sum(
-        1 for s in model.stimuli if any(
-            model.enabled_locally(s, lid) and any(o.handled for o in model.spaces[s.device]
-                                                  .outcomes(lid, s.event))
-            for lid in range(len(model.spaces[s.device].snapshots))))
+        1
+        for s in model.stimuli
+        if any(
+            model.enabled_locally(s, lid)
+            and any(o.handled for o in model.spaces[s.device].outcomes(lid, s.event))
+            for lid in range(len(model.spaces[s.device].snapshots))
+        )
+    )
 
 
 @needs_spin
@@ -84,8 +92,9 @@ def test_spin_agrees_on_deadlock(tmp_path: Path, cell: str, deadlock: bool) -> N
     if cell == "oneshot":
         (tmp_path / "shot.yaml").write_text(ONESHOT, encoding="utf-8")
         path = tmp_path / "cell.yaml"
-        path.write_text("devices: {shot: shot.yaml}\nenvironment:\n  - {send: Go, to: shot}\n",
-                        encoding="utf-8")
+        path.write_text(
+            "devices: {shot: shot.yaml}\nenvironment:\n  - {send: Go, to: shot}\n", encoding="utf-8"
+        )
     else:
         path = PICK / cell
     loaded = load_cell_or_raise(path)

@@ -22,7 +22,6 @@ HAS_DOT = shutil.which("dot") is not None
 NEEDS_DOT = pytest.mark.skipif(not HAS_DOT, reason="Graphviz 'dot' is not installed")
 
 
-
 def _formats() -> list[object]:
     return [pytest.param(f, marks=NEEDS_DOT) if f == "svg" else f for f in FORMATS]
 

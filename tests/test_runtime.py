@@ -42,8 +42,6 @@ EVENTS = (
 )
 
 
-
-
 def running(chart: Chart, **kw: Any) -> tuple[Subject, list[Record]]:
     subject = Subject(chart, clock=SimClock(), **kw)
     records: list[Record] = []

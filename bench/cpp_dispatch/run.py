@@ -29,8 +29,17 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
-FLAGS = ["-std=c++17", "-O2", "-DNDEBUG", "-Wall", "-Wextra", "-Wpedantic", "-Werror",
-         "-fno-exceptions", "-fno-rtti"]
+FLAGS = [
+    "-std=c++17",
+    "-O2",
+    "-DNDEBUG",
+    "-Wall",
+    "-Wextra",
+    "-Wpedantic",
+    "-Werror",
+    "-fno-exceptions",
+    "-fno-rtti",
+]
 LINE = re.compile(r"^(\w+) p50=([\d.]+) p99=([\d.]+) max=([\d.]+)")
 SIZES = re.compile(r"^sizeof generated=(\d+) handwritten=(\d+)")
 TOTALS = re.compile(r"^totals:\s*(\d+)", re.MULTILINE)
@@ -45,9 +54,20 @@ def _instructions(binary: Path, count: int) -> dict[str, float]:
     result: dict[str, float] = {}
     for name in NAMES:
         out = binary.parent / f"callgrind.{name}"
-        subprocess.run([valgrind, "--tool=callgrind", f"--callgrind-out-file={out}",
-                        f"--toggle-collect=*run_{name}*", str(binary), "--count", str(count)],
-                       capture_output=True, text=True, check=True)
+        subprocess.run(
+            [
+                valgrind,
+                "--tool=callgrind",
+                f"--callgrind-out-file={out}",
+                f"--toggle-collect=*run_{name}*",
+                str(binary),
+                "--count",
+                str(count),
+            ],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
         found = TOTALS.search(out.read_text())
         if found is None:
             return {}
@@ -58,8 +78,9 @@ def _instructions(binary: Path, count: int) -> dict[str, float]:
 def _symbol_sizes(binary: Path) -> dict[str, int]:
     """Sizes of the two batch loops (each inlines one implementation's dispatch)."""
     try:
-        out = subprocess.run(["nm", "-C", "-S", str(binary)], capture_output=True, text=True,
-                             check=True).stdout
+        out = subprocess.run(
+            ["nm", "-C", "-S", str(binary)], capture_output=True, text=True, check=True
+        ).stdout
     except (OSError, subprocess.CalledProcessError):
         return {}
     sizes: dict[str, int] = {}
@@ -75,8 +96,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cxx", default="g++")
     parser.add_argument("--runs", type=int, default=3)
-    parser.add_argument("--count", type=int, default=160_000,
-                        help="dispatches per implementation under callgrind")
+    parser.add_argument(
+        "--count", type=int, default=160_000, help="dispatches per implementation under callgrind"
+    )
     args = parser.parse_args(argv)
     sys.path.insert(0, str(ROOT / "src"))
     from statectl.build import load_chart
@@ -89,13 +111,14 @@ def main(argv: list[str] | None = None) -> int:
             print("\n".join(str(d) for d in diags), file=sys.stderr)
             return 1
         binary = out / "bench"
-        subprocess.run([args.cxx, *FLAGS, "-I", str(out), str(HERE / "bench.cpp"), "-o",
-                        str(binary)], check=True)
+        subprocess.run(
+            [args.cxx, *FLAGS, "-I", str(out), str(HERE / "bench.cpp"), "-o", str(binary)],
+            check=True,
+        )
         rows: dict[str, list[tuple[float, float, float]]] = {name: [] for name in NAMES}
         sizeof: tuple[int, int] = (0, 0)
         for _ in range(args.runs):
-            text = subprocess.run([str(binary)], capture_output=True, text=True,
-                                  check=True).stdout
+            text = subprocess.run([str(binary)], capture_output=True, text=True, check=True).stdout
             for line in text.splitlines():
                 if m := LINE.match(line):
                     rows[m[1]].append((float(m[2]), float(m[3]), float(m[4])))
@@ -104,28 +127,39 @@ def main(argv: list[str] | None = None) -> int:
         code = _symbol_sizes(binary)
         size = binary.stat().st_size
         instructions = _instructions(binary, args.count)
-    print(f"{'implementation':<14} {'p50 ns':>8} {'p99 ns':>8} {'max ns':>9} {'Ir/dispatch':>12} "
-          f"{'sizeof':>7} {'loop code B':>12}")
+    print(
+        f"{'implementation':<14} {'p50 ns':>8} {'p99 ns':>8} {'max ns':>9} {'Ir/dispatch':>12} "
+        f"{'sizeof':>7} {'loop code B':>12}"
+    )
     for i, (name, samples) in enumerate(rows.items()):
         p50 = statistics.median(s[0] for s in samples)
         p99 = statistics.median(s[1] for s in samples)
         mx = max(s[2] for s in samples)
         ir = f"{instructions[name]:.2f}" if name in instructions else "-"
-        print(f"{name:<14} {p50:>8.2f} {p99:>8.2f} {mx:>9.1f} {ir:>12} {sizeof[i]:>7} "
-              f"{code.get(name, 0):>12}")
+        print(
+            f"{name:<14} {p50:>8.2f} {p99:>8.2f} {mx:>9.1f} {ir:>12} {sizeof[i]:>7} "
+            f"{code.get(name, 0):>12}"
+        )
     ratios = [g[0] / h[0] for g, h in zip(rows["generated"], rows["handwritten"], strict=True)]
     gen = statistics.median(s[0] for s in rows["generated"])
     hand = statistics.median(s[0] for s in rows["handwritten"])
-    print(f"ratio p50 generated/handwritten: {gen / hand:.2f} (per run: "
-          + ", ".join(f"{r:.2f}" for r in ratios) + ")")
+    print(
+        f"ratio p50 generated/handwritten: {gen / hand:.2f} (per run: "
+        + ", ".join(f"{r:.2f}" for r in ratios)
+        + ")"
+    )
     if instructions:
-        print(f"ratio instructions generated/handwritten: "
-              f"{instructions['generated'] / instructions['handwritten']:.3f} "
-              f"(callgrind, {args.count} dispatches each)")
+        print(
+            f"ratio instructions generated/handwritten: "
+            f"{instructions['generated'] / instructions['handwritten']:.3f} "
+            f"(callgrind, {args.count} dispatches each)"
+        )
     else:
         print("instructions: valgrind not found, not counted")
-    print(f"binary {size} bytes; {args.cxx} {' '.join(FLAGS[:3])}, contracts on; {args.runs} runs "
-          "x 5 repeats x 2000 batches of 1024 dispatches")
+    print(
+        f"binary {size} bytes; {args.cxx} {' '.join(FLAGS[:3])}, contracts on; {args.runs} runs "
+        "x 5 repeats x 2000 batches of 1024 dispatches"
+    )
     return 0
 
 

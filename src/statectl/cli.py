@@ -91,8 +91,10 @@ def cmd_build(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     if chart is None or has_errors(diags):
         err.write(f"{args.file}: not built: {_summary(diags)}\n")
         return PROBLEMS
-    out.write(f"chart {chart.name}: {len(chart.states)} states, "
-              f"{len(chart.transitions)} transitions, initial {', '.join(chart.initial)}\n")
+    out.write(
+        f"chart {chart.name}: {len(chart.states)} states, "
+        f"{len(chart.transitions)} transitions, initial {', '.join(chart.initial)}\n"
+    )
     for t in chart.transitions:
         out.write(f"  {t.source} + {t.label} = {' '.join(t.targets) or '(targetless)'}\n")
     return OK
@@ -116,8 +118,10 @@ def cmd_observers(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     out.write("Observers (device + API):\n")
     for api in model.apis:
         inv = model.invoke_for_method(api.method)
-        out.write(f"  {api.method}()  <- invoke {inv.name} ({inv.number}); "
-                  f"events: {', '.join(api.events)}\n")
+        out.write(
+            f"  {api.method}()  <- invoke {inv.name} ({inv.number}); "
+            f"events: {', '.join(api.events)}\n"
+        )
     out.write("Notifications (events whose transition calls the device):\n")
     for event, number in model.notifying:
         out.write(f"  {event} -> invoke {number}\n")
@@ -335,8 +339,11 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     s = sub.add_parser("demo", help="run the paper's Motor case study on a simulated motor")
-    s.add_argument("--driver", default="sim-motor", help="driver for the Motor (sim-motor, "
-                   "sim-stepper, or package.module:Class)")
+    s.add_argument(
+        "--driver",
+        default="sim-motor",
+        help="driver for the Motor (sim-motor, sim-stepper, or package.module:Class)",
+    )
     s.add_argument("--config", help="driver configuration YAML (overrides --driver)")
     s.set_defaults(func=cmd_demo)
 
@@ -358,8 +365,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("render", help="draw the statechart")
     s.add_argument("file", metavar="FILE")
-    s.add_argument("--format", default="mermaid",
-                   choices=("mermaid", "dot", "plantuml", "svg", "md"))
+    s.add_argument(
+        "--format", default="mermaid", choices=("mermaid", "dot", "plantuml", "svg", "md")
+    )
     s.add_argument("--out", help="write to this file instead of standard output")
     s.set_defaults(func=cmd_render)
 
@@ -382,8 +390,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--export", choices=("promela",), help="write the composed model instead")
     s.add_argument("-o", "--output", help="where --export writes (default: standard output)")
     s.add_argument("--traces", metavar="DIR", help="write each counterexample (json, mmd, puml)")
-    s.add_argument("--diagrams", choices=("mermaid", "plantuml"),
-                   help="print each counterexample as a sequence diagram")
+    s.add_argument(
+        "--diagrams",
+        choices=("mermaid", "plantuml"),
+        help="print each counterexample as a sequence diagram",
+    )
     s.add_argument("--progress", action="store_true", help="show progress even when piped")
     s.set_defaults(func=cmd_verify)
 
@@ -397,24 +408,46 @@ def build_parser() -> argparse.ArgumentParser:
         "verify --traces (--replay).",
     )
     s.add_argument("file", metavar="FILE", help="device file or cell file")
-    s.add_argument("--driver", help="driver for every device: sim-twin (the default), sim-motor, "
-                   "sim-stepper or package.module:Class")
+    s.add_argument(
+        "--driver",
+        help="driver for every device: sim-twin (the default), sim-motor, "
+        "sim-stepper or package.module:Class",
+    )
     s.add_argument("--config", help="run configuration YAML: drivers, dashboard settings")
     s.add_argument("--dashboard", action="store_true", help="serve the live dashboard")
     s.add_argument("--host", help="dashboard address (default: the config's, else loopback)")
     s.add_argument("--port", type=int, help="dashboard port (default: the config's, else any free)")
-    s.add_argument("--token", help="token that allows sending events from the dashboard "
-                   "(default: $STATECTL_DASHBOARD_TOKEN, the config's, else a new one printed)")
+    s.add_argument(
+        "--token",
+        help="token that allows sending events from the dashboard "
+        "(default: $STATECTL_DASHBOARD_TOKEN, the config's, else a new one printed)",
+    )
     s.add_argument("--journal", metavar="DB", help="journal every event to this SQLite file")
-    s.add_argument("--resume", action="store_true", help="resume from the journal first; "
-                   "a journal that cannot be trusted is refused (see --fresh)")
-    s.add_argument("--fresh", action="store_true", help="start a new journal, the old one set "
-                   "aside with a timestamp suffix; with --resume only if it cannot be trusted")
-    s.add_argument("--sync", default="normal", choices=("normal", "full"),
-                   help="journal durability: normal (process crash) or full (power loss)")
-    s.add_argument("--guarantee", default="prompt", choices=("prompt", "durable-first"),
-                   help="when a journalled event reaches its device: prompt = at once, "
-                   "acknowledged once durable; durable-first = only after its commit")
+    s.add_argument(
+        "--resume",
+        action="store_true",
+        help="resume from the journal first; "
+        "a journal that cannot be trusted is refused (see --fresh)",
+    )
+    s.add_argument(
+        "--fresh",
+        action="store_true",
+        help="start a new journal, the old one set "
+        "aside with a timestamp suffix; with --resume only if it cannot be trusted",
+    )
+    s.add_argument(
+        "--sync",
+        default="normal",
+        choices=("normal", "full"),
+        help="journal durability: normal (process crash) or full (power loss)",
+    )
+    s.add_argument(
+        "--guarantee",
+        default="prompt",
+        choices=("prompt", "durable-first"),
+        help="when a journalled event reaches its device: prompt = at once, "
+        "acknowledged once durable; durable-first = only after its commit",
+    )
     s.add_argument("--realtime", action="store_true", help="run on the wall clock")
     s.add_argument("--replay", metavar="TRACE", help="cells: a .trace.json from verify --traces")
     s.add_argument("--walk", type=int, metavar="N", help="cells: a seeded random walk of N steps")
@@ -435,8 +468,12 @@ def build_parser() -> argparse.ArgumentParser:
             s.add_argument("--since", help="epoch seconds or ISO 8601")
             s.add_argument("--until", help="epoch seconds or ISO 8601")
         if name == "export":
-            s.add_argument("-o", "--out", metavar="FILE",
-                           help="write to FILE (whole or not at all) instead of standard output")
+            s.add_argument(
+                "-o",
+                "--out",
+                metavar="FILE",
+                help="write to FILE (whole or not at all) instead of standard output",
+            )
         s.set_defaults(func=cmd_journal)
 
     scxml = sub.add_parser("scxml", help="SCXML documents")
@@ -493,8 +530,9 @@ def _exists(path: Path) -> bool:
     return pair is not None and pair.states.exists()
 
 
-def main(argv: Sequence[str] | None = None, out: TextIO | None = None,
-         err: TextIO | None = None) -> int:
+def main(
+    argv: Sequence[str] | None = None, out: TextIO | None = None, err: TextIO | None = None
+) -> int:
     out = out or sys.stdout
     err = err or sys.stderr
     parser = build_parser()
