@@ -168,3 +168,27 @@ def test_work_only_deadline_skips_background_timers() -> None:
     assert clock.next_deadline(work_only=True) == 3.0
     work.cancel()
     assert clock.next_deadline(work_only=True) is None
+
+
+def test_cancelled_timers_do_not_pile_up_while_time_stands_still() -> None:
+    """A timer started and cancelled per event (a monitor) keeps the heap within 2x live."""
+    clock = SimClock()
+    keep = [clock.call_later(5.0, lambda: None) for _ in range(10)]
+    for _ in range(100_000):
+        clock.call_later(1.0, lambda: None, background=True).cancel()
+    assert len(clock._heap) <= max(64, 2 * 10) + 1  # the private heap: the point of the test
+    assert clock.pending == 10
+    assert all(not t.cancelled for t in keep)
+
+
+def test_compacting_keeps_the_firing_order() -> None:
+    """Timers that survive a compaction fire in (time, scheduling) order."""
+    clock = SimClock()
+    fired: list[int] = []
+    for i in range(200):
+        t = clock.call_later(float(i % 7), lambda i=i: fired.append(i))
+        if i % 3 == 0:
+            t.cancel()
+    clock.advance(10.0)
+    expected = sorted((i for i in range(200) if i % 3), key=lambda i: (i % 7, i))
+    assert fired == expected

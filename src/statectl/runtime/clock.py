@@ -58,6 +58,10 @@ class Clock(Protocol):
     ) -> Timer: ...
 
 
+#: Heap size below which a SimClock never compacts.
+_COMPACT_MIN = 64
+
+
 def _check_delay(delay: float) -> float:
     if not delay >= 0:  # also refuses NaN
         raise StatectlError(f"timer delay must be a number >= 0 (got {delay!r})")
@@ -71,6 +75,7 @@ class SimClock:
         self._now = float(start)
         self._heap: list[tuple[float, int, Timer]] = []
         self._seq = itertools.count()
+        self._compact_at = _COMPACT_MIN
 
     def now(self) -> float:
         return self._now
@@ -79,8 +84,23 @@ class SimClock:
         self, delay: float, fn: Callable[[], object], *, background: bool = False
     ) -> Timer:
         timer = Timer(self._now + _check_delay(delay), fn, background=background)
-        heapq.heappush(self._heap, (timer.when, next(self._seq), timer))
+        heap = self._heap
+        if len(heap) >= self._compact_at:
+            self._compact()
+        heapq.heappush(heap, (timer.when, next(self._seq), timer))
         return timer
+
+    def _compact(self) -> None:
+        """Drop cancelled timers, which otherwise wait in the heap until time passes them.
+
+        A monitor's poll is cancelled each time its state is left; while time stands
+        still (events only) they would pile up. Compacting when the heap has doubled
+        keeps it within twice the live timers, at amortised constant cost.
+        """
+        live = [entry for entry in self._heap if not entry[2].cancelled]
+        heapq.heapify(live)
+        self._heap[:] = live
+        self._compact_at = max(_COMPACT_MIN, 2 * len(live))
 
     def next_deadline(self, *, work_only: bool = False) -> float | None:
         """When the earliest live timer is due, or ``None`` when none is pending.
