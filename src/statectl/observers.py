@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, NamedTuple, Protocol
 
 from statectl.model import Api, Chart, ControlKind, EventKind, Invoke
 
@@ -78,9 +78,14 @@ def derive_invokes(rows: Sequence[EventSpec]) -> tuple[tuple[Api, ...], tuple[In
     return apis, tuple(invokes)
 
 
-@dataclass(frozen=True, slots=True)
-class Notification:
-    """The typed record an observer receives: which invoke, for which event, with what data."""
+class Notification(NamedTuple):
+    """The typed record an observer receives: which invoke, for which event, with what data.
+
+    Immutable like the other records, but a named tuple rather than a frozen
+    dataclass: one is built for every notification that carries event data, and a
+    frozen dataclass costs three times as much to build (each field is set through
+    ``object.__setattr__``).
+    """
 
     device: str
     invoke: int
