@@ -242,6 +242,20 @@ def system_rate(devices: int, threads: int, cycles: int) -> tuple[float, int]:
     return total / took, done()
 
 
+def statectl_nested_queued() -> tuple[Fire, int]:
+    subject = Subject(nested_chart(), clock=SimClock())
+    subject.start()
+    post, run = subject.post, subject.run_until_idle
+    _, cycle = nested_rows()
+
+    def fire() -> None:
+        for e in cycle:
+            post(e)
+            run()
+
+    return fire, len(cycle)
+
+
 def statectl_nested() -> tuple[Fire, int]:
     subject = Subject(nested_chart(), clock=SimClock())
     subject.start()
@@ -680,6 +694,7 @@ def build(libs: Sequence[str]) -> tuple[list[Contender], list[str]]:
         ("motor", "python-statemachine", "python-statemachine", psm_motor),
         ("motor", "sismic", "sismic", sismic_motor),
         ("nested", "statectl", "statectl dispatch()", statectl_nested),
+        ("nested", "statectl", "statectl post()+run_until_idle()", statectl_nested_queued),
         ("nested", "dict", "dict baseline (flattened by hand)", dict_nested),
         ("nested", "transitions", "transitions (HierarchicalMachine)", transitions_nested),
         ("nested", "python-statemachine", "python-statemachine", psm_nested),

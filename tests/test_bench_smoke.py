@@ -41,6 +41,7 @@ def output() -> str:
         "| paper cycle | statectl bare post()+run_until_idle() |",
         "| paper cycle | dict baseline |",
         "| 50 states, 2 levels | statectl dispatch() |",
+        "| 50 states, 2 levels | statectl post()+run_until_idle() |",
         "| 50 states, 2 levels | dict baseline (flattened by hand) |",
         "| new started instance | statectl |",
         "| new started instance | dict |",

@@ -120,7 +120,10 @@ class Driver:
             self._fault = (detail, self.clock.now() + (after or 0.0))
 
     def log_call(self, function: str, *args: Any) -> None:
-        self._api_log.append(ApiCall(self.clock.now(), type(self).__name__, function, args))
+        clock = self._clock
+        if clock is None:
+            raise StatectlError(f"{type(self).__name__} is not bound; call bind() or connect()")
+        self._api_log.append(ApiCall(clock.now(), type(self).__name__, function, args))
 
     def report(self, event: str, data: Any = None) -> None:
         if self._report is None:

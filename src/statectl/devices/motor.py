@@ -15,8 +15,7 @@ Rules:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 from statectl.devices.base import Driver, requested_target
 from statectl.errors import StatectlError
@@ -25,8 +24,9 @@ from statectl.runtime.clock import Timer
 __all__ = ["SimMotor"]
 
 
-@dataclass(frozen=True, slots=True)
-class _Motion:
+class _Motion(NamedTuple):
+    """A movement under way (a named tuple: one is made per API call)."""
+
     start_time: float
     start: float
     target: float

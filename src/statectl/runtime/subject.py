@@ -855,6 +855,13 @@ class Subject:
         if route is None:
             return
         observer, logging = route
+        if not listening:
+            observer.update(
+                Notification(
+                    self.name, action.invoke, action.name, action.method, action.event, data
+                )
+            )
+            return
         log = cast(ApiLogging, observer).api_log if logging else None
         before = len(log) if log is not None else 0
         observer.update(
