@@ -62,6 +62,23 @@ def make_cell(folder: Path, n: int) -> Path:
     return path
 
 
+def _unfinished(returncode: int, output: str, stored: int) -> str:
+    """Why pan's search did not run to its end, or "" when it did.
+
+    A search cut short by its memory bound or a hash table that filled up counts
+    fewer states than there are, so its time would flatter SPIN: such a run is an
+    error of the benchmark, never a figure.
+    """
+    if returncode != 0:
+        return f"pan exited {returncode}"
+    for sign in ("out of memory", "MEMLIM", "search not completed", "max search depth too small"):
+        if sign.lower() in output.lower():
+            return f"pan says {sign!r}"
+    if stored == 0:
+        return "pan reported no stored states"
+    return ""
+
+
 def run_spin(pml: Path, max_states: int) -> dict[str, float | int | str]:
     """spin -a, gcc and pan (BFS, safety); wall times and pan's state count."""
     if shutil.which("spin") is None or shutil.which("gcc") is None:
@@ -98,6 +115,9 @@ def run_spin(pml: Path, max_states: int) -> dict[str, float | int | str]:
         if "total actual memory usage" in line:
             memory = line.split()[0]
     errors = "errors: 0" not in pan.stdout
+    unfinished = _unfinished(pan.returncode, pan.stdout + pan.stderr, stored)
+    if unfinished:
+        return {"failed": unfinished, "pan_s": t3 - t2, "total_s": t3 - t0}
     return {
         "generate_s": t1 - t0,
         "compile_s": t2 - t1,
@@ -146,8 +166,20 @@ def main(argv: list[str] | None = None) -> int:
     if "skipped" in spin:
         print(f"spin: skipped ({spin['skipped']})")
         return 0
+    if "failed" in spin:
+        print(
+            f"spin: DID NOT FINISH ({spin['failed']}) after {float(spin['pan_s']):.1f} s: "
+            "no comparison; raise --max-states or the memory bound",
+            file=sys.stderr,
+        )
+        return 1
     print(
-        f"spin:     {spin['stored']:,} states stored, pan {spin['pan_s']:.1f} s, "
+        f"note: SPIN stored {int(spin['stored']):,} states, statectl found "
+        f"{report.states:,} (the models count the same cell; a difference means one "
+        "of them explored another space)"
+    )
+    print(
+        f"spin:     {spin['stored']:,} states stored, search (pan) {spin['pan_s']:.1f} s, "
         f"total with spin -a and gcc {spin['total_s']:.1f} s, memory {spin['memory_mb']} MB, "
         f"errors {spin['errors']}"
     )
