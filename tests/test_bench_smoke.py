@@ -70,3 +70,26 @@ def test_quick_run_reports_many_devices_on_one_system(output: str) -> None:
     line = next(x for x in output.splitlines() if "Motors on one System" in x)
     fed = line.split("(")[1].split()[0]
     assert int(fed.replace(",", "")) == 100 * 2 * 7  # devices x cycles x events
+
+
+@pytest.mark.parametrize(
+    ("code", "output", "stored", "finished"),
+    [
+        (0, "State-vector 40 byte\nerrors: 0\n4098 states, stored", 4098, True),
+        (0, "pan: reached -DMEMLIM bound\nerrors: 0", 900, False),
+        (0, "pan: out of memory", 900, False),
+        (1, "", 4098, False),
+        (0, "errors: 0", 0, False),
+    ],
+)
+def test_verify_bench_refuses_an_unfinished_spin_search(
+    code: int, output: str, stored: int, finished: bool
+) -> None:
+    """bench/verify.py gives no SPIN figure for a search that did not run to its end."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("verify_bench", ROOT / "bench" / "verify.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert (module._unfinished(code, output, stored) == "") is finished
