@@ -358,20 +358,24 @@ class Subject:
 
     def emit(self, record: Record) -> None:
         """Deliver ``record`` to every listener, after any record being delivered now."""
-        pending = self._pending
-        if pending is None:
-            pending = self._pending = deque()
-        pending.append(record)
-        if self._emitting:
+        if self._emitting:  # a listener emitted: deliver after the current record
+            pending = self._pending
+            if pending is None:
+                pending = self._pending = deque()
+            pending.append(record)
             return
         self._emitting = True
         try:
+            for callback in self._listeners:
+                callback(record)
+            pending = self._pending
             while pending:
                 r = pending.popleft()
                 for callback in self._listeners:
                     callback(r)
         except BaseException:
-            pending.clear()
+            if self._pending:
+                self._pending.clear()
             raise
         finally:
             self._emitting = False
