@@ -47,67 +47,34 @@ import sys
 import threading
 import traceback
 from collections import deque
-from collections.abc import Callable, Iterable, Mapping, Sequence
-from typing import Any, Literal, Protocol, cast, runtime_checkable
+from collections.abc import Callable, Iterable, Mapping
+from typing import Any
 
-from statectl.errors import StatectlError, UnhandledEventError
+from statectl.errors import StatectlError
 from statectl.expr import compile_expression
 from statectl.model import Action, Chart, Invoke, Notify
-from statectl.observers import Notification, Observer
+from statectl.observers import Observer
 from statectl.runtime.clock import Clock, SimClock
+from statectl.runtime.hooks import (
+    ApiLogging,
+    ErrorHandler,
+    Listener,
+    Policy,
+    StateWatcher,
+    StepListener,
+)
+from statectl.runtime.perform import _EVENTS, _INVOKES, Performer, _Call
 from statectl.runtime.records import (
-    ApiCall,
-    EventIgnored,
     EventReceived,
-    EventRejected,
     Finished,
-    IgnoreReason,
-    InvokeIssued,
-    ObserverCalled,
     Record,
     Started,
     StateEntered,
-    StateExited,
-    TransitionTaken,
 )
 from statectl.semantics import Plan, Snapshot, Step, Unhandled, compiled, initial, step
 
 __all__ = ["ApiLogging", "Listener", "Policy", "StateWatcher", "StepListener", "Subject"]
 
-Policy = Literal["ignore", "error"]
-Listener = Callable[[Record], None]
-#: ``(event, data, outcome)`` after an event ran; outcome is ``"handled"`` or the
-#: :class:`~statectl.semantics.Unhandled` reason (a ``str`` enum: stored as its value).
-StepListener = Callable[[str, Any, str], None]
-ErrorHandler = Callable[[BaseException], None]
-
-
-class StateWatcher(Protocol):
-    """Hears the states it watches entered and exited, and the end of the run; no records.
-
-    A monitor is one: it polls its device only while its state is active. Calls
-    come on the owner, inside the step, in the order a trace would show them.
-    """
-
-    def entered(self, state: str) -> None: ...
-    def exited(self, state: str) -> None: ...
-    def finished(self) -> None: ...
-
-
-@runtime_checkable
-class ApiLogging(Protocol):
-    """An observer that logs the device API calls it makes (every driver does)."""
-
-    @property
-    def api_log(self) -> Sequence[ApiCall]: ...
-
-
-#: What the plan path calls for a data-less plan: (counted first, callable or None, argument).
-_Call = tuple[int, Callable[[Any], object] | None, Any]
-#: ``Subject._counts`` holds both counters: events in the low bits, invokes above them.
-_INVOKES = 48
-_EVENTS = (1 << _INVOKES) - 1
-_ONE_INVOKE = 1 << _INVOKES
 #: The plan table of a Subject not started yet: empty, never written.
 _NO_PLANS: dict[str, Plan] = {}
 
@@ -120,29 +87,20 @@ def _print_error(exc: BaseException) -> None:
     traceback.print_exception(exc, file=sys.stderr)
 
 
-def _nobody(note: Notification) -> None:
-    """The call for a notification no observer is attached for: it is only counted."""
-
-
 def _describe_invoke(i: Invoke) -> str:
     return f"#{i.number} {i.name} ({i.method}())"
 
 
-class Subject:
+class Subject(Performer):
     """A device's chart running on a clock; observers get the notifications meant for them."""
 
     __slots__ = (
         "_busy",
-        "_calls",
         "_closed",
-        "_counts",
         "_data",
-        "_emitting",
         "_fast",
-        "_finished",
         "_listeners",
         "_name",
-        "_pending",
         "_queue",
         "_queued_hook",
         "_routes",
@@ -355,30 +313,6 @@ class Subject:
         )
         if self._queue:
             self._fast = False
-
-    def emit(self, record: Record) -> None:
-        """Deliver ``record`` to every listener, after any record being delivered now."""
-        if self._emitting:  # a listener emitted: deliver after the current record
-            pending = self._pending
-            if pending is None:
-                pending = self._pending = deque()
-            pending.append(record)
-            return
-        self._emitting = True
-        try:
-            for callback in self._listeners:
-                callback(record)
-            pending = self._pending
-            while pending:
-                r = pending.popleft()
-                for callback in self._listeners:
-                    callback(r)
-        except BaseException:
-            if self._pending:
-                self._pending.clear()
-            raise
-        finally:
-            self._emitting = False
 
     # -- state -----------------------------------------------------------------------------
 
@@ -670,52 +604,6 @@ class Subject:
         self._table = self.machine.plans(target)
         self._refresh()
 
-    def _call_for(self, plan: Plan) -> _Call:
-        """What the plan path calls for ``plan`` without data, worked out once per instance.
-
-        A single notification is prebuilt for the observer routed now (attach and
-        rename drop these); several go through :meth:`_issue`, which looks each route
-        up when it is due, as the full path does (an observer may attach another).
-        """
-        calls = self._calls
-        if calls is None:
-            calls = self._calls = {}
-        entry: _Call
-        watch = self._watch
-        if watch and any(s in watch for s in (*plan.exited, *plan.entered)):
-            entry = (1, self._perform_unheard, plan)  # watchers hear it between notifications
-        elif not plan.notifies:
-            entry = (1, None, None)
-        elif len(plan.notifies) == 1:
-            action = plan.notifies[0][1]
-            route = self._routes.get(action.invoke)
-            note = Notification(
-                self._name, action.invoke, action.name, action.method, action.event, None
-            )
-            entry = (1 + _ONE_INVOKE, route[0].update if route is not None else _nobody, note)
-        else:
-            entry = (1, self._issue_all, plan)
-        calls[plan] = entry
-        return entry
-
-    def _issue_all(self, plan: Plan) -> None:
-        self._issue(plan, None)
-
-    def _perform_unheard(self, plan: Plan) -> None:
-        self._perform(plan.step, None, 0.0, False)
-
-    def _issue(self, plan: Plan, data: Any) -> None:
-        """Issue the notifications of ``plan`` in order, as :meth:`_notify` does unheard."""
-        for _, action in plan.notifies:
-            self._counts += _ONE_INVOKE
-            route = self._routes.get(action.invoke)
-            if route is not None:
-                route[0].update(
-                    Notification(
-                        self._name, action.invoke, action.name, action.method, action.event, data
-                    )
-                )
-
     def _process(self, event: str, data: Any) -> None:
         """The one path of an event (rule 6): the plan if there is one, else the kernel."""
         plan = self._table.get(event)
@@ -795,86 +683,3 @@ class Subject:
         self._perform(decision, data, now, listening)
         for callback in self._steppers:
             callback(event, data, "handled")
-
-    def _unhandled(
-        self, event: str, data: Any, reason: IgnoreReason, now: float, snap: Snapshot
-    ) -> None:
-        for callback in self._steppers:
-            callback(event, data, reason)
-        if self.policy == "ignore" or reason is Unhandled.DECLARED_IGNORED:
-            if self._listeners:
-                self.emit(EventIgnored(self.name, now, event, reason))
-            return
-        active = ", ".join(sorted(snap.active))
-        if self._listeners:
-            self.emit(EventRejected(self.name, now, event, reason))
-        raise UnhandledEventError(
-            f"{self.name}: event {event!r} is not handled in [{active}] ({reason}); "
-            "add a transition or declare it ignored in the state table, or use policy 'ignore'"
-        )
-
-    def _perform(self, decision: Step, data: Any, now: float, listening: bool) -> None:
-        name = self.name
-        watch = self._watch
-        for micro in decision.microsteps:
-            if listening:
-                for s in micro.exited:
-                    self.emit(StateExited(name, now, s))
-                    for w in watch.get(s, ()):
-                        w.exited(s)
-                for t in micro.transitions:
-                    self.emit(
-                        TransitionTaken(name, now, micro.event, (t.source,), t.targets, t.label)
-                    )
-                for s in micro.entered:
-                    self.emit(StateEntered(name, now, s))
-                    for w in watch.get(s, ()):
-                        w.entered(s)
-            elif watch:
-                for s in micro.exited:
-                    for w in watch.get(s, ()):
-                        w.exited(s)
-                for s in micro.entered:
-                    for w in watch.get(s, ()):
-                        w.entered(s)
-            for action in micro.actions:
-                if isinstance(action, Notify):
-                    self._notify(action, data, now, listening)
-        if decision.final and not self._finished:
-            self._finish(now, listening)
-
-    def _finish(self, now: float, listening: bool) -> None:
-        self._finished = True
-        for w in self._watchers:
-            w.finished()
-        if listening:
-            self.emit(Finished(self.name, now))
-
-    def _notify(self, action: Notify, data: Any, now: float, listening: bool) -> None:
-        self._counts += _ONE_INVOKE
-        if listening:
-            a = action
-            self.emit(InvokeIssued(self.name, now, a.invoke, a.name, a.method, a.event))
-        route = self._routes.get(action.invoke)
-        if route is None:
-            return
-        observer, logging = route
-        if not listening:
-            observer.update(
-                Notification(
-                    self.name, action.invoke, action.name, action.method, action.event, data
-                )
-            )
-            return
-        log = cast(ApiLogging, observer).api_log if logging else None
-        before = len(log) if log is not None else 0
-        observer.update(
-            Notification(self.name, action.invoke, action.name, action.method, action.event, data)
-        )
-        if listening:
-            if log is None:
-                api = f"{type(observer).__name__}.update(#{action.invoke})"
-                self.emit(ObserverCalled(self.name, now, action.method, api))
-            else:
-                for call in log[before:]:
-                    self.emit(ObserverCalled(self.name, now, action.method, str(call)))

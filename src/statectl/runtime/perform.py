@@ -1,0 +1,221 @@
+"""Performing a step the kernel decided: watchers, notifications, records, in one order.
+
+The :class:`~statectl.runtime.subject.Subject` decides *which* step to take (a
+memoised plan, or the kernel's answer); this mixin performs it, as rules 2-4 of
+the Subject say: per microstep the states exited, the transitions taken and the
+states entered (records for listeners, calls for watchers), then the microstep's
+notifications, each to the one observer attached for its invoke number. What the
+plan path calls for a plan without data is worked out once here (:meth:`_call_for`).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable
+from typing import Any, cast
+
+from statectl.errors import UnhandledEventError
+from statectl.model import Chart, Notify
+from statectl.observers import Notification, Observer
+from statectl.runtime.clock import Clock
+from statectl.runtime.hooks import ApiLogging, Listener, Policy, StateWatcher, StepListener
+from statectl.runtime.records import (
+    EventIgnored,
+    EventRejected,
+    Finished,
+    IgnoreReason,
+    InvokeIssued,
+    ObserverCalled,
+    Record,
+    StateEntered,
+    StateExited,
+    TransitionTaken,
+)
+from statectl.semantics import Plan, Snapshot, Step, Unhandled
+
+__all__ = ["Performer"]
+
+#: What the plan path calls for a data-less plan: (counted first, callable or None, argument).
+_Call = tuple[int, Callable[[Any], object] | None, Any]
+#: ``Subject._counts`` holds both counters: events in the low bits, invokes above them.
+_INVOKES = 48
+_EVENTS = (1 << _INVOKES) - 1
+_ONE_INVOKE = 1 << _INVOKES
+
+
+def _nobody(note: Notification) -> None:
+    """The call for a notification no observer is attached for: it is only counted."""
+
+
+class Performer:
+    """The Subject's performing half; the slots it writes live here, the rest on the Subject."""
+
+    __slots__ = ("_calls", "_counts", "_emitting", "_finished", "_pending")
+
+    chart: Chart
+    clock: Clock
+    policy: Policy
+    _name: str
+    _routes: dict[int, tuple[Observer, bool]]
+    _calls: dict[Plan, _Call] | None
+    _listeners: tuple[Listener, ...]
+    _steppers: tuple[StepListener, ...]
+    _watch: dict[str, tuple[StateWatcher, ...]]
+    _watchers: tuple[StateWatcher, ...]
+    _pending: deque[Record] | None
+    _emitting: bool
+    _counts: int
+    _finished: bool
+
+    def emit(self, record: Record) -> None:
+        """Deliver ``record`` to every listener, after any record being delivered now."""
+        if self._emitting:  # a listener emitted: deliver after the current record
+            pending = self._pending
+            if pending is None:
+                pending = self._pending = deque()
+            pending.append(record)
+            return
+        self._emitting = True
+        try:
+            for callback in self._listeners:
+                callback(record)
+            pending = self._pending
+            while pending:
+                r = pending.popleft()
+                for callback in self._listeners:
+                    callback(r)
+        except BaseException:
+            if self._pending:
+                self._pending.clear()
+            raise
+        finally:
+            self._emitting = False
+
+    def _call_for(self, plan: Plan) -> _Call:
+        """What the plan path calls for ``plan`` without data, worked out once per instance.
+
+        A single notification is prebuilt for the observer routed now (attach and
+        rename drop these); several go through :meth:`_issue`, which looks each route
+        up when it is due, as the full path does (an observer may attach another).
+        """
+        calls = self._calls
+        if calls is None:
+            calls = self._calls = {}
+        entry: _Call
+        watch = self._watch
+        if watch and any(s in watch for s in (*plan.exited, *plan.entered)):
+            entry = (1, self._perform_unheard, plan)  # watchers hear it between notifications
+        elif not plan.notifies:
+            entry = (1, None, None)
+        elif len(plan.notifies) == 1:
+            action = plan.notifies[0][1]
+            route = self._routes.get(action.invoke)
+            note = Notification(
+                self._name, action.invoke, action.name, action.method, action.event, None
+            )
+            entry = (1 + _ONE_INVOKE, route[0].update if route is not None else _nobody, note)
+        else:
+            entry = (1, self._issue_all, plan)
+        calls[plan] = entry
+        return entry
+
+    def _issue_all(self, plan: Plan) -> None:
+        self._issue(plan, None)
+
+    def _perform_unheard(self, plan: Plan) -> None:
+        self._perform(plan.step, None, 0.0, False)
+
+    def _issue(self, plan: Plan, data: Any) -> None:
+        """Issue the notifications of ``plan`` in order, as :meth:`_notify` does unheard."""
+        for _, action in plan.notifies:
+            self._counts += _ONE_INVOKE
+            route = self._routes.get(action.invoke)
+            if route is not None:
+                route[0].update(
+                    Notification(
+                        self._name, action.invoke, action.name, action.method, action.event, data
+                    )
+                )
+
+    def _unhandled(
+        self, event: str, data: Any, reason: IgnoreReason, now: float, snap: Snapshot
+    ) -> None:
+        for callback in self._steppers:
+            callback(event, data, reason)
+        if self.policy == "ignore" or reason is Unhandled.DECLARED_IGNORED:
+            if self._listeners:
+                self.emit(EventIgnored(self._name, now, event, reason))
+            return
+        active = ", ".join(sorted(snap.active))
+        if self._listeners:
+            self.emit(EventRejected(self._name, now, event, reason))
+        raise UnhandledEventError(
+            f"{self._name}: event {event!r} is not handled in [{active}] ({reason}); "
+            "add a transition or declare it ignored in the state table, or use policy 'ignore'"
+        )
+
+    def _perform(self, decision: Step, data: Any, now: float, listening: bool) -> None:
+        name = self._name
+        watch = self._watch
+        for micro in decision.microsteps:
+            if listening:
+                for s in micro.exited:
+                    self.emit(StateExited(name, now, s))
+                    for w in watch.get(s, ()):
+                        w.exited(s)
+                for t in micro.transitions:
+                    self.emit(
+                        TransitionTaken(name, now, micro.event, (t.source,), t.targets, t.label)
+                    )
+                for s in micro.entered:
+                    self.emit(StateEntered(name, now, s))
+                    for w in watch.get(s, ()):
+                        w.entered(s)
+            elif watch:
+                for s in micro.exited:
+                    for w in watch.get(s, ()):
+                        w.exited(s)
+                for s in micro.entered:
+                    for w in watch.get(s, ()):
+                        w.entered(s)
+            for action in micro.actions:
+                if isinstance(action, Notify):
+                    self._notify(action, data, now, listening)
+        if decision.final and not self._finished:
+            self._finish(now, listening)
+
+    def _finish(self, now: float, listening: bool) -> None:
+        self._finished = True
+        for w in self._watchers:
+            w.finished()
+        if listening:
+            self.emit(Finished(self._name, now))
+
+    def _notify(self, action: Notify, data: Any, now: float, listening: bool) -> None:
+        self._counts += _ONE_INVOKE
+        if listening:
+            a = action
+            self.emit(InvokeIssued(self._name, now, a.invoke, a.name, a.method, a.event))
+        route = self._routes.get(action.invoke)
+        if route is None:
+            return
+        observer, logging = route
+        if not listening:
+            observer.update(
+                Notification(
+                    self._name, action.invoke, action.name, action.method, action.event, data
+                )
+            )
+            return
+        log = cast(ApiLogging, observer).api_log if logging else None
+        before = len(log) if log is not None else 0
+        observer.update(
+            Notification(self._name, action.invoke, action.name, action.method, action.event, data)
+        )
+        if listening:
+            if log is None:
+                api = f"{type(observer).__name__}.update(#{action.invoke})"
+                self.emit(ObserverCalled(self._name, now, action.method, api))
+            else:
+                for call in log[before:]:
+                    self.emit(ObserverCalled(self._name, now, action.method, str(call)))
