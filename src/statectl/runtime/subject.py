@@ -43,9 +43,7 @@ Rules:
 
 from __future__ import annotations
 
-import sys
 import threading
-import traceback
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
@@ -57,13 +55,12 @@ from statectl.observers import Observer
 from statectl.runtime.clock import Clock, SimClock
 from statectl.runtime.hooks import (
     ApiLogging,
-    ErrorHandler,
     Listener,
     Policy,
     StateWatcher,
     StepListener,
 )
-from statectl.runtime.perform import _EVENTS, _INVOKES, Performer, _Call
+from statectl.runtime.perform import _EVENTS, _INVOKES, _Call
 from statectl.runtime.records import (
     EventReceived,
     Finished,
@@ -71,6 +68,7 @@ from statectl.runtime.records import (
     Started,
     StateEntered,
 )
+from statectl.runtime.worker import Worker
 from statectl.semantics import Plan, Snapshot, Step, Unhandled, compiled, initial, step
 
 __all__ = ["ApiLogging", "Listener", "Policy", "StateWatcher", "StepListener", "Subject"]
@@ -83,36 +81,27 @@ _NO_PLANS: dict[str, Plan] = {}
 _Item = tuple[str | None, Any, Callable[..., object] | None]
 
 
-def _print_error(exc: BaseException) -> None:
-    traceback.print_exception(exc, file=sys.stderr)
-
-
 def _describe_invoke(i: Invoke) -> str:
     return f"#{i.number} {i.name} ({i.method}())"
 
 
-class Subject(Performer):
+class Subject(Worker):
     """A device's chart running on a clock; observers get the notifications meant for them."""
 
     __slots__ = (
         "_busy",
         "_closed",
         "_data",
-        "_fast",
         "_listeners",
         "_name",
         "_queue",
         "_queued_hook",
         "_routes",
-        "_serving",
         "_snapshot",
         "_steppers",
-        "_stopping",
         "_table",
-        "_wake",
         "_watch",
         "_watchers",
-        "_worker",
         "chart",
         "clock",
         "machine",
@@ -385,20 +374,7 @@ class Subject(Performer):
         if hook is not None:
             hook(self)
 
-    def _ensure_wake(self) -> threading.Event:
-        """The worker's wake-up event, made when an owner loop first needs it.
-
-        A post that found no event queued its item first, so a queue that is not
-        empty here sets the new event and nothing posted is slept through.
-        """
-        wake = self._wake
-        if wake is None:
-            wake = self._wake = threading.Event()
-            if self._queue:
-                wake.set()
-        return wake
-
-    # -- owning (one thread) -----------------------------------------------------------------
+    # -- owning (one thread; the worker loop is in runtime/worker.py) ------------------------
 
     def start(self) -> None:
         """Enter the initial configuration (records ``Started`` and the entered states)."""
@@ -530,51 +506,6 @@ class Subject(Performer):
         self.clock.advance(seconds, settle=self.run_until_idle)
         return count + self.run_until_idle()
 
-    def serve_forever(self, on_error: ErrorHandler = _print_error) -> None:
-        """Be the owner on this thread until :meth:`stop`; errors go to ``on_error``."""
-        if self._snapshot is None:
-            self.start()
-        wake = self._ensure_wake()
-        self._serving = True
-        self._fast = False
-        try:
-            while not self._stopping:
-                wake.wait()
-                wake.clear()
-                while self._queue and not self._stopping:
-                    try:
-                        self.run_until_idle()
-                    except Exception as exc:  # record + callback; a worker never dies of an event
-                        on_error(exc)
-        finally:
-            self._serving = False
-            self._stopping = False
-            self._refresh()
-
-    def start_worker(self, on_error: ErrorHandler = _print_error) -> threading.Thread:
-        """Run :meth:`serve_forever` on a daemon thread, which becomes the owner."""
-        if self._worker is not None:
-            raise StatectlError(f"{self.name} has a worker already")
-        self._ensure_wake()
-        self._serving = True  # so a stop() before the thread runs is not lost
-        self._fast = False
-        self._worker = threading.Thread(
-            target=self.serve_forever, args=(on_error,), name=f"statectl-{self.name}", daemon=True
-        )
-        self._worker.start()
-        return self._worker
-
-    def stop(self, timeout: float | None = 1.0) -> None:
-        """Stop the owner loop after the event in progress; queued events stay queued."""
-        if self._serving:
-            self._stopping = True
-            self._ensure_wake().set()
-        worker = self._worker
-        if worker is not None and worker is not threading.current_thread():
-            worker.join(timeout)
-        self._worker = None
-        self._refresh()
-
     def close(self) -> None:
         """Stop the owner, record ``Finished``; later posts are refused."""
         if self._closed:
@@ -588,14 +519,6 @@ class Subject(Performer):
                 w.finished()
             if self._listeners:
                 self.emit(Finished(self.name, self.clock.now()))
-
-    def _check_owner(self) -> None:
-        worker = self._worker
-        if worker is not None and worker.is_alive() and worker is not threading.current_thread():
-            raise StatectlError(
-                f"{self.name} is owned by its worker thread; post() events instead of "
-                "processing them here"
-            )
 
     # -- one event -------------------------------------------------------------------------
 
