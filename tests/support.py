@@ -22,3 +22,11 @@ class Recorder:
         self.seen.append(notification)
         if self.then is not None:
             self.then(notification)
+
+
+def record_keys(records: Any) -> list[tuple[Any, ...]]:
+    """Each record as (kind, its fields but device and time): what a trace compares."""
+    return [
+        (type(r).__name__, *(getattr(r, f) for f in r._fields if f not in ("device", "time")))
+        for r in records
+    ]

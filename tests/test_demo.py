@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import io
 import re
 from pathlib import Path
@@ -13,6 +12,7 @@ import pytest
 import statectl
 from statectl.demo import FAULT, run_demo
 from statectl.runtime import Record, Subject
+from support import record_keys
 
 ROOT = Path(__file__).parent.parent
 EXAMPLES = ROOT / "examples" / "motor"
@@ -82,14 +82,7 @@ EXPECTED: list[tuple[Any, ...]] = [
 ]
 
 
-def keys(records: list[Record]) -> list[tuple[Any, ...]]:
-    out = []
-    for r in records:
-        fields = tuple(
-            getattr(r, f.name) for f in dataclasses.fields(r) if f.name not in ("device", "time")
-        )
-        out.append((type(r).__name__, *fields))
-    return out
+keys = record_keys
 
 
 def demo(**kw: Any) -> tuple[list[Record], str, Subject]:

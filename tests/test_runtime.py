@@ -29,7 +29,7 @@ from statectl.runtime import (
     WallClock,
 )
 from statectl.semantics import Machine, initial, step
-from support import Recorder
+from support import Recorder, record_keys
 
 MOTOR = Path(__file__).parent.parent / "examples" / "motor" / "motor.yaml"
 EVENTS = (
@@ -50,15 +50,7 @@ def running(chart: Chart, **kw: Any) -> tuple[Subject, list[Record]]:
     return subject, records
 
 
-def keys(records: list[Record]) -> list[tuple[Any, ...]]:
-    """Each record as (type name, key fields), without device and time."""
-    out = []
-    for r in records:
-        fields = tuple(
-            getattr(r, f.name) for f in dataclasses.fields(r) if f.name not in ("device", "time")
-        )
-        out.append((type(r).__name__, *fields))
-    return out
+keys = record_keys
 
 
 def test_start_enters_the_initial_configuration(motor: Chart) -> None:

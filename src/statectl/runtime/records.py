@@ -1,8 +1,11 @@
 """The typed trace records a running device emits, and the API call value they describe.
 
 Rules:
-1. The set of records is closed (:data:`Record`); every record is a frozen,
-   slotted value carrying the ``device`` it is about and the clock ``time``.
+1. The set of records is closed (:data:`Record`); every record is an immutable
+   value carrying the ``device`` it is about and the clock ``time``. Records are
+   named tuples whose equality also compares their kind (a ``StateEntered`` never
+   equals a ``StateExited`` with the same fields): a listener gets several per
+   event, and a frozen dataclass costs three times as much to build.
 2. Listeners receive records in the order things happened, never strings;
    formatting is :mod:`statectl.runtime.trace`'s job.
 3. For one event the order is: ``EventReceived``, then per microstep
@@ -13,7 +16,6 @@ Rules:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 from statectl.semantics import Unhandled
@@ -43,22 +45,31 @@ __all__ = [
 IgnoreReason = Unhandled
 
 
-@dataclass(frozen=True, slots=True)
-class Started:
+def _same_kind_eq(self: tuple[Any, ...], other: object) -> bool:
+    return type(self) is type(other) and tuple.__eq__(self, other)
+
+
+def _same_kind_ne(self: tuple[Any, ...], other: object) -> bool:
+    return not _same_kind_eq(self, other)
+
+
+def _same_kind_hash(self: tuple[Any, ...]) -> int:
+    return hash((type(self).__name__, *self))
+
+
+class Started(NamedTuple):
     device: str
     time: float
 
 
-@dataclass(frozen=True, slots=True)
-class EventReceived:
+class EventReceived(NamedTuple):
     device: str
     time: float
     event: str
     data: Any = None
 
 
-@dataclass(frozen=True, slots=True)
-class TransitionTaken:
+class TransitionTaken(NamedTuple):
     """One transition of a microstep; ``event`` is ``None`` for an eventless one."""
 
     device: str
@@ -69,22 +80,19 @@ class TransitionTaken:
     label: str
 
 
-@dataclass(frozen=True, slots=True)
-class StateExited:
+class StateExited(NamedTuple):
     device: str
     time: float
     state: str
 
 
-@dataclass(frozen=True, slots=True)
-class StateEntered:
+class StateEntered(NamedTuple):
     device: str
     time: float
     state: str
 
 
-@dataclass(frozen=True, slots=True)
-class InvokeIssued:
+class InvokeIssued(NamedTuple):
     device: str
     time: float
     invoke: int
@@ -93,8 +101,7 @@ class InvokeIssued:
     event: str
 
 
-@dataclass(frozen=True, slots=True)
-class ObserverCalled:
+class ObserverCalled(NamedTuple):
     """The observer method ran and called ``api`` (e.g. ``SimMotor.move_to(10.0)``)."""
 
     device: str
@@ -103,16 +110,14 @@ class ObserverCalled:
     api: str
 
 
-@dataclass(frozen=True, slots=True)
-class EventIgnored:
+class EventIgnored(NamedTuple):
     device: str
     time: float
     event: str
     reason: IgnoreReason
 
 
-@dataclass(frozen=True, slots=True)
-class EventRejected:
+class EventRejected(NamedTuple):
     """An unhandled event under the ``error`` policy."""
 
     device: str
@@ -121,22 +126,19 @@ class EventRejected:
     reason: IgnoreReason
 
 
-@dataclass(frozen=True, slots=True)
-class MonitorStarted:
+class MonitorStarted(NamedTuple):
     device: str
     time: float
     state: str
 
 
-@dataclass(frozen=True, slots=True)
-class MonitorStopped:
+class MonitorStopped(NamedTuple):
     device: str
     time: float
     state: str
 
 
-@dataclass(frozen=True, slots=True)
-class FaultDetected:
+class FaultDetected(NamedTuple):
     """A monitor found a fault while ``state`` was active and raises ``event``."""
 
     device: str
@@ -146,8 +148,7 @@ class FaultDetected:
     detail: str
 
 
-@dataclass(frozen=True, slots=True)
-class Finished:
+class Finished(NamedTuple):
     device: str
     time: float
 
@@ -167,6 +168,26 @@ Record = (
     | FaultDetected
     | Finished
 )
+
+
+for _kind in (
+    Started,
+    EventReceived,
+    TransitionTaken,
+    StateExited,
+    StateEntered,
+    InvokeIssued,
+    ObserverCalled,
+    EventIgnored,
+    EventRejected,
+    MonitorStarted,
+    MonitorStopped,
+    FaultDetected,
+    Finished,
+):  # rule 1: a record equals only a record of its own kind
+    _kind.__eq__ = _same_kind_eq  # type: ignore[method-assign]  # see rule 1
+    _kind.__ne__ = _same_kind_ne  # type: ignore[assignment,method-assign]  # see rule 1
+    _kind.__hash__ = _same_kind_hash  # type: ignore[method-assign]  # see rule 1
 
 
 def format_args(args: tuple[Any, ...]) -> str:
