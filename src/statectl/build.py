@@ -50,10 +50,11 @@ import dataclasses
 import difflib
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from statectl.codes import family
 from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, has_errors
 from statectl.expr import Expression, check_names, compile_expression
 from statectl.model import (
@@ -96,32 +97,8 @@ GUARD_NAMES = frozenset({"previous", "_event"})
 #: Deepest state hierarchy a device file may build (B218; docs/limits.md).
 MAX_STATE_DEPTH = 100
 
-CODES = {
-    "B201": "an event row's old or new state is not in the State Definition table",
-    "B202": "no state is marked default",
-    "B203": "several states are marked default at one level",
-    "B204": "identical event rows merged into one transition (info)",
-    "B205": "several rows for one state merged (info)",
-    "B206": "rows for one event disagree on kind or API",
-    "B207": "a state without control that no event touches was removed (warning)",
-    "B208": "an ignore cell names an unknown event",
-    "B209": "a parent names an unknown state",
-    "B210": "parents form a cycle",
-    "B211": "one API has two explicit invoke names",
-    "B212": "a history state at the top, with children or a control, or a default outside",
-    "B213": "a final state with children",
-    "B214": "a parallel state with fewer than two regions",
-    "B215": "a type that contradicts the rows (atomic with children, compound without)",
-    "B216": "an event row leaves a history or a final state",
-    "B217": "a default cell on a state that is not a history",
-    "B218": "states nested deeper than the limit (MAX_STATE_DEPTH)",
-    "B220": "a chart with executable content, datamodel scripts or non-literal data does not "
-    "fit the tables (info)",
-    "B221": "a transition the tables cannot hold: eventless, several events or targets, "
-    "targetless or internal (info)",
-    "B222": "a guard outside the safe expression language does not fit the tables (info)",
-    "B223": "the tables made from a chart would not build the same chart (info)",
-}
+#: Code -> one-line summary of every B2xx code (a view of statectl.codes.REGISTRY).
+CODES: Mapping[str, str] = family("B2")
 
 
 def _compile(guard: str, where: Location) -> tuple[Expression | None, list[Diagnostic]]:

@@ -35,6 +35,7 @@ from pathlib import Path
 import yaml
 
 from statectl.build import load_and_build
+from statectl.codes import family
 from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, has_errors
 from statectl.expr import compile_expression
 from statectl.model import Chart, ControlKind, EventKind
@@ -56,23 +57,8 @@ __all__ = [
     "parse_global",
 ]
 
-CODES = {
-    "V801": "the cell file cannot be read or is not a YAML mapping",
-    "V802": "an unknown key",
-    "V803": "a required key is missing",
-    "V804": "a value has the wrong shape (text, list or mapping expected)",
-    "V805": "a device file does not load",
-    "V806": "a device instance name is invalid or used twice",
-    "V807": "a rule names an unknown device",
-    "V808": "a rule names a state the device does not have",
-    "V809": "a rule names an event the device does not know",
-    "V810": "a global expression uses something other than In(), and, or, not",
-    "V811": "In() does not name 'device.State'",
-    "V812": "an environment fault is not a fault event, or the device has no monitored state",
-    "V813": "a link needs exactly one of 'enters' and 'raises'",
-    "V814": "two invariants or recovery goals share a name",
-    "V815": "the cell has no devices",
-}
+#: Code -> one-line summary of every V8xx code (a view of statectl.codes.REGISTRY).
+CODES: Mapping[str, str] = family("V8")
 
 TOP_KEYS = ("cell", "devices", "links", "environment", "invariants", "recovery", "completions")
 

@@ -40,10 +40,11 @@ from __future__ import annotations
 import ast
 import enum
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from statectl.codes import family
 from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, StatectlError
 from statectl.expr import FUNCTIONS, Expression, compile_expression
 from statectl.model import (
@@ -87,17 +88,8 @@ MAX_CONFIGURATIONS = 4096
 #: Bound on guard paths of one step (2**12: twelve independent runtime guards).
 MAX_PATHS = 4096
 
-CODES = {
-    "G701": "executable content the generated code cannot perform (Script, Assign, Send, ...)",
-    "G702": "a guard that does not translate to C++",
-    "G703": "a guard reads _event (event data does not exist in generated code)",
-    "G704": "a guard reads a context field that is not an integer",
-    "G705": "a datamodel other than 'safe'",
-    "G706": "too many configurations or guard paths for flat tables",
-    "G707": "a step that does not settle (livelock) or fails in the semantics",
-    "G708": "a Log action the generated code skips (warning)",
-    "G709": "a Notify of an invoke number the chart does not declare",
-}
+#: Code -> one-line summary of every G7xx code (a view of statectl.codes.REGISTRY).
+CODES: Mapping[str, str] = family("G7")
 
 
 class EffectKind(enum.Enum):

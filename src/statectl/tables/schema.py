@@ -45,6 +45,7 @@ from dataclasses import dataclass, field, replace
 
 import yaml
 
+from statectl.codes import family
 from statectl.errors import Diagnostic, Location, Severity
 from statectl.model import ControlKind, EventKind, StateKind
 from statectl.tables.safeyaml import YamlRefused, load_value
@@ -159,26 +160,8 @@ CONTROL_WORDS: Mapping[str, ControlKind] = {
     "trigger": ControlKind.TRIGGER,
 }
 
-#: Every code the tables layer reports (T109 and the B2xx codes come from build).
-CODES: Mapping[str, str] = {
-    "T101": "malformed file (YAML, CSV, XLSX or Markdown syntax)",
-    "T102": "not a device file, or the wrong top-level type",
-    "T103": "unknown column",
-    "T104": "missing required column, key or cell",
-    "T105": "empty table",
-    "T106": "bad control value",
-    "T107": "bad kind value",
-    "T108": "wrong cell type (e.g. a mapping where text is expected)",
-    "T109": "state rows for one state that contradict each other",
-    "T110": "file not found, unreadable or not writable",
-    "T111": "an event name contains a comma",
-    "T112": "bad data entry (name not an identifier, or given twice)",
-    "T113": "bad type value (none of atomic, compound, parallel, final, history, deep history)",
-    "T114": "bad recovery row (both an event and redo, data on a redo row, or a bad redo value)",
-    "T115": "a YAML alias (*name): refused, so an alias bomb cannot expand",
-    "T116": "YAML nested deeper than the limit (MAX_DEPTH): see docs/limits.md",
-    "T117": "a workbook that unpacks to more than the limit (a zip bomb): see docs/limits.md",
-}
+#: Code -> one-line summary of every T1xx code (a view of statectl.codes.REGISTRY).
+CODES: Mapping[str, str] = family("T1")
 
 
 @dataclass(frozen=True, slots=True)
