@@ -21,7 +21,7 @@ CODE = re.compile(r"[A-Z][0-9]{3}")
 
 #: Helpers that create a Diagnostic at a fixed severity from a code given first.
 FIXED: dict[str, Severity] = {
-    "diag": Severity.ERROR,  # tables.schema
+    "diag": Severity.ERROR,  # tables.rows (re-exported by tables.schema)
     "_d": Severity.ERROR,  # cell (build's _d takes the severity: read from its arguments)
     "error": Severity.ERROR,  # devices.config
     "_info": Severity.INFO,  # build
