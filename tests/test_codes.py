@@ -176,6 +176,18 @@ def test_docs_explain_every_code_at_its_anchor(code: codes.Code) -> None:
     assert re.search(rf"\b{code.code}\b", text), f"{code.doc} does not mention {code.code}"
 
 
+def test_docs_name_only_registered_codes() -> None:
+    """A code the docs or README mention is a registered one (no stale or invented code)."""
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    named = {
+        (page.name, code)
+        for page in pages
+        for code in re.findall(r"\b[A-Z][0-9]{3}\b", page.read_text(encoding="utf-8"))
+    }
+    assert len(named) > 50, "the scan no longer finds the codes in the docs"
+    assert sorted((page, code) for page, code in named if code not in REGISTRY) == []
+
+
 SLUGS = [
     ("C401 — unreachable state (error)", "c401--unreachable-state-error"),
     ("Builder codes reported through `check`", "builder-codes-reported-through-check"),
