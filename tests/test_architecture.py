@@ -24,7 +24,8 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     "semantics": ("errors", "model", "expr"),
     "observers": ("errors", "model"),
     "tables": ("errors", "model"),
-    "build": ("errors", "model", "expr", "observers", "tables"),
+    "build": ("errors", "model", "expr", "observers", "tables", "builder"),
+    "builder": ("errors", "model", "expr", "observers", "tables"),  # build's parts
     "recovery": ("errors", "model", "expr", "semantics", "tables"),
     "guards": (),
     "rules": (
