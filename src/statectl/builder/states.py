@@ -1,6 +1,6 @@
 """Step 2 for the State Definition table: rows merged per state (B205, T109), the
-hierarchy ordered and checked (B209, B210, B218), defaults (B202, B203), removals (B207),
-each state's kind (B212-B215) and history defaults (B212, B217). Split from
+hierarchy ordered and checked (B209, B210, B218), defaults at one level (B203), removals
+(B207), each state's kind (B212-B215) and history defaults (B212, B217). Split from
 :mod:`statectl.builder.chart` because the hierarchy is its own set of rules.
 """
 

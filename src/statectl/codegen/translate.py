@@ -1,7 +1,7 @@
 """Runtime guards to C++ expressions (rule 4 of :mod:`statectl.codegen.flatten`):
 ``previous`` and ``In()`` folded away, integer context fields with ``+ - *``,
-comparisons, ``and/or/not`` and ``a if c else b``; anything else is untranslatable
-(G702). Its own module because it is a small compiler of its own.
+comparisons, ``and/or/not`` and ``a if c else b``; anything else is untranslatable,
+which the flattener reports as G702. Its own module: it is a small compiler of its own.
 """
 
 from __future__ import annotations
