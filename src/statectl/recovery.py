@@ -26,8 +26,9 @@ J608 (given)  A state left only by ``completion`` events (it waits for its devic
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
+from statectl.codes import family
 from statectl.errors import Diagnostic, Severity
 from statectl.model import Action, Block, Chart, ControlKind, EventKind, If, Notify, Transition
 from statectl.semantics import entry_set, structural
@@ -35,15 +36,8 @@ from statectl.tables.schema import RecoveryRow
 
 __all__ = ["CODES", "check_recovery", "redo_sources", "waits_for_device"]
 
-#: Every code this module reports, with a one-line summary (docs/check.md expands them).
-CODES: dict[str, str] = {
-    "J603": "a recovery rule names a state the chart does not have",
-    "J604": "a recovery rule's event does not leave its state by any transition",
-    "J605": "two recovery rules for one state",
-    "J606": "a monitored state has no recovery rule",
-    "J607": "a redo rule for a state no transition enters with a device API call",
-    "J608": "a state left only by completion events has no recovery rule",
-}
+#: Code -> one-line summary of every J6xx code (a view of statectl.codes.REGISTRY).
+CODES: Mapping[str, str] = family("J6")
 
 
 def _notifies(actions: tuple[Action, ...]) -> bool:

@@ -26,10 +26,11 @@ Recovery table with :func:`statectl.recovery.check_recovery` (J603-J605 errors, 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 
 from statectl.build import build
+from statectl.codes import family
 from statectl.errors import Diagnostic, Location, Severity, has_errors
 from statectl.guards import guards_exclusive
 from statectl.model import Chart, ControlKind, EventKind, State, StateKind, Transition
@@ -39,17 +40,8 @@ from statectl.tables import load
 
 __all__ = ["CODES", "check_chart", "check_paths", "guards_exclusive"]
 
-#: Every code this module reports, with a one-line summary (docs/check.md expands them).
-CODES: dict[str, str] = {
-    "C401": "unreachable state",
-    "C402": "state with no way out",
-    "C403": "two rows for the same state and event may both fire",
-    "C404": "event neither handled nor ignored by a state (missed transition)",
-    "C405": "event declared but used by no transition",
-    "C406": "ignore entry for an event the state handles",
-    "C407": "monitoring-required state with no fault event leaving it",
-    "C408": "fault event leaving a state that is not monitoring required",
-}
+#: Code -> one-line summary of every C4xx code (a view of statectl.codes.REGISTRY).
+CODES: Mapping[str, str] = family("C4")
 
 
 # -- chart structure ------------------------------------------------------------------------

@@ -33,25 +33,40 @@ here, at generation time, and the C++ only looks the decision up. Rules:
    an integer, G705 a non-``safe`` datamodel, G706 too many configurations or
    guard paths, G707 a step that does not settle, G708 a ``Log`` the generated code
    skips (warning), G709 a ``Notify`` of an invoke number the chart does not declare.
+
+This module explores; the values it produces are in :mod:`statectl.codegen.flat`, the
+checks before exploring in :mod:`~statectl.codegen.checks`, guard translation in
+:mod:`~statectl.codegen.translate` and C++ names in :mod:`~statectl.codegen.cpp_names`.
+Their public names are re-exported here as before the split.
 """
 
 from __future__ import annotations
 
 import ast
-import enum
 from collections import deque
-from collections.abc import Iterable
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping
 from typing import Any
 
+from statectl.codegen.checks import _check_actions, _context
+from statectl.codegen.cpp_names import identifiers
+from statectl.codegen.flat import (
+    Configuration,
+    ContextField,
+    Decision,
+    Effect,
+    EffectKind,
+    FlatChart,
+    Outcome,
+    RuntimeGuard,
+    Tree,
+)
+from statectl.codegen.translate import _Translator, _Untranslatable
+from statectl.codes import family
 from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, StatectlError
-from statectl.expr import FUNCTIONS, Expression, compile_expression
+from statectl.expr import Expression, compile_expression
 from statectl.model import (
-    Action,
     Chart,
-    Log,
     Notify,
-    Raise,
     Transition,
 )
 from statectl.semantics import (
@@ -80,6 +95,7 @@ __all__ = [
     "Tree",
     "Unhandled",
     "flatten",
+    "identifiers",
 ]
 
 #: Bound on reachable configurations; beyond it the flat tables would not be small.
@@ -87,400 +103,8 @@ MAX_CONFIGURATIONS = 4096
 #: Bound on guard paths of one step (2**12: twelve independent runtime guards).
 MAX_PATHS = 4096
 
-CODES = {
-    "G701": "executable content the generated code cannot perform (Script, Assign, Send, ...)",
-    "G702": "a guard that does not translate to C++",
-    "G703": "a guard reads _event (event data does not exist in generated code)",
-    "G704": "a guard reads a context field that is not an integer",
-    "G705": "a datamodel other than 'safe'",
-    "G706": "too many configurations or guard paths for flat tables",
-    "G707": "a step that does not settle (livelock) or fails in the semantics",
-    "G708": "a Log action the generated code skips (warning)",
-    "G709": "a Notify of an invoke number the chart does not declare",
-}
-
-
-class EffectKind(enum.Enum):
-    EXIT = "exit"
-    TAKE = "take"
-    ENTER = "enter"
-    INVOKE = "invoke"
-
-
-@dataclass(frozen=True, slots=True)
-class Effect:
-    """One traced thing a step does; ``index`` is a state, transition or invoke number."""
-
-    kind: EffectKind
-    index: int
-
-
-@dataclass(frozen=True, slots=True)
-class Outcome:
-    handled: bool
-    target: int  # configuration index; the source itself when not handled
-    effects: tuple[Effect, ...]
-    unhandled: Unhandled | None = None  # the kernel's reason; None when handled
-    final: bool = False  # a top-level final state was reached
-
-
-@dataclass(frozen=True, slots=True)
-class Decision:
-    """Evaluate runtime guard ``guard``; continue in ``if_true`` or ``if_false``."""
-
-    guard: int
-    if_true: Tree
-    if_false: Tree
-
-
-Tree = Outcome | Decision
-
-
-@dataclass(frozen=True, slots=True)
-class Configuration:
-    index: int
-    snapshot: Snapshot
-    active: tuple[str, ...]  # document order
-
-    @property
-    def label(self) -> str:
-        previous = self.snapshot.previous or "-"
-        text = ", ".join(self.active) + f" (previous {previous})"
-        if self.snapshot.history:
-            text += " history " + "; ".join(f"{h}={'+'.join(v)}" for h, v in self.snapshot.history)
-        return text
-
-
-@dataclass(frozen=True, slots=True)
-class RuntimeGuard:
-    """A guard specialised to where it is evaluated; ``cpp`` is its C++ expression."""
-
-    index: int
-    source: str
-    previous: str | None
-    cpp: str
-
-
-@dataclass(frozen=True, slots=True)
-class ContextField:
-    name: str
-    ident: str  # the C++ member name
-    initial: int
-
-
-@dataclass(frozen=True, slots=True)
-class FlatChart:
-    chart: Chart
-    states: tuple[str, ...]  # every chart state, document order
-    events: tuple[str, ...]  # external events, the chart's order
-    transitions: tuple[Transition, ...]
-    configurations: tuple[Configuration, ...]
-    start: Tree
-    dispatch: tuple[tuple[Tree, ...], ...]  # [configuration][event]
-    guards: tuple[RuntimeGuard, ...]
-    context: tuple[ContextField, ...]
-
-
-# -- identifiers -------------------------------------------------------------------------------
-
-_CPP_KEYWORDS = frozenset(
-    (
-        "alignas",
-        "alignof",
-        "and",
-        "and_eq",
-        "asm",
-        "auto",
-        "bitand",
-        "bitor",
-        "bool",
-        "break",
-        "case",
-        "catch",
-        "char",
-        "char16_t",
-        "char32_t",
-        "class",
-        "compl",
-        "const",
-        "constexpr",
-        "const_cast",
-        "continue",
-        "decltype",
-        "default",
-        "delete",
-        "do",
-        "double",
-        "dynamic_cast",
-        "else",
-        "enum",
-        "explicit",
-        "export",
-        "extern",
-        "false",
-        "float",
-        "for",
-        "friend",
-        "goto",
-        "if",
-        "inline",
-        "int",
-        "long",
-        "mutable",
-        "namespace",
-        "new",
-        "noexcept",
-        "not",
-        "not_eq",
-        "nullptr",
-        "operator",
-        "or",
-        "or_eq",
-        "private",
-        "protected",
-        "public",
-        "register",
-        "reinterpret_cast",
-        "return",
-        "short",
-        "signed",
-        "sizeof",
-        "static",
-        "static_assert",
-        "static_cast",
-        "struct",
-        "switch",
-        "template",
-        "this",
-        "thread_local",
-        "throw",
-        "true",
-        "try",
-        "typedef",
-        "typeid",
-        "typename",
-        "union",
-        "unsigned",
-        "using",
-        "virtual",
-        "void",
-        "volatile",
-        "wchar_t",
-        "while",
-        "xor",
-        "xor_eq",
-    )
-)
-
-
-def identifiers(names: Iterable[str], *, lower: bool = False) -> dict[str, str]:
-    """A distinct C++ identifier per name: ``Movement completion`` -> ``MovementCompletion``."""
-    out: dict[str, str] = {}
-    used: set[str] = set()
-    for name in names:
-        words = "".join(c if c.isalnum() else " " for c in name).split()
-        if lower:
-            base = "_".join(w.lower() for w in words) or "x"
-        else:
-            base = "".join(w[:1].upper() + w[1:] for w in words) or "X"
-        if base[0].isdigit() or base in _CPP_KEYWORDS or base.startswith("_"):
-            base = ("s_" if lower else "S") + base
-        ident, n = base, 2
-        while ident in used:
-            ident, n = f"{base}{n}", n + 1
-        used.add(ident)
-        out[name] = ident
-    return out
-
-
-# -- checks before exploring -------------------------------------------------------------------
-
-
-def _walk_actions(actions: Iterable[Action]) -> Iterable[Action]:
-    for a in actions:
-        yield a
-        inner = getattr(a, "actions", None)
-        if isinstance(inner, tuple):
-            yield from _walk_actions(inner)
-
-
-def _check_actions(chart: Chart, where: Location, diags: list[Diagnostic]) -> None:
-    numbers = {i.number for i in chart.invokes}
-    blocks: list[tuple[str, Location, tuple[Action, ...]]] = []
-    for s in chart.states:
-        at = s.origin
-        blocks += [
-            (f"onentry of state {s.name!r}", at, s.on_entry),
-            (f"onexit of state {s.name!r}", at, s.on_exit),
-            (f"initial content of state {s.name!r}", at, s.initial_actions),
-            (f"history content of state {s.name!r}", at, s.history_actions),
-        ]
-        if s.invokes:
-            diags.append(
-                Diagnostic(
-                    "G701",
-                    Severity.ERROR,
-                    s.invokes[0].origin if s.invokes else at,
-                    f"state {s.name!r} has <invoke>, which generated code cannot start",
-                    "model the child session as its own device",
-                )
-            )
-    for t in chart.transitions:
-        blocks.append((f"transition {t.source} + {t.label}", t.origin, t.actions))
-    blocks.append(("top-level <script>", where, chart.script))
-    for what, at, actions in blocks:
-        for a in actions:
-            if isinstance(a, Raise):
-                continue
-            if isinstance(a, Notify):
-                if a.invoke not in numbers:
-                    diags.append(
-                        Diagnostic(
-                            "G709",
-                            Severity.ERROR,
-                            at,
-                            f"{what} notifies invoke #{a.invoke} ({a.name}), which the chart "
-                            "does not declare",
-                            "declare the invoke (an API in the Event Definition table)",
-                        )
-                    )
-                continue
-            if isinstance(a, Log):
-                diags.append(
-                    Diagnostic(
-                        "G708",
-                        Severity.WARNING,
-                        a.origin if a.origin.line else at,
-                        f"{what} has a Log action ({a.label!r}); generated code skips it, "
-                        "as the Python Subject does",
-                        "use a trace hook in C++ to log",
-                    )
-                )
-                continue
-            origin = getattr(a, "origin", None)
-            diags.append(
-                Diagnostic(
-                    "G701",
-                    Severity.ERROR,
-                    origin if isinstance(origin, Location) and origin.line else at,
-                    f"{what} has a {type(a).__name__} action, which generated C++ cannot perform",
-                    "keep executable content to Notify and Raise for a C++ target",
-                )
-            )
-
-
-def _context(chart: Chart, diags: list[Diagnostic]) -> tuple[dict[str, Any], list[ContextField]]:
-    """The chart's data items evaluated in order, as the Python Subject does."""
-    values: dict[str, Any] = {}
-    for item in chart.data:
-        value: Any = None
-        if item.expr:
-            expr, problems = compile_expression(item.expr, item.origin, what="data")
-            if expr is None:
-                diags.extend(problems)
-                continue
-            try:
-                value = expr.evaluate(values)
-            except Exception as exc:  # reported, not raised: bad input never gives a traceback
-                diags.append(
-                    Diagnostic(
-                        "G704",
-                        Severity.ERROR,
-                        item.origin,
-                        f"data item {item.name!r} = {item.expr!r} fails: {exc}",
-                        "give it an integer literal",
-                    )
-                )
-                continue
-        values[item.name] = value
-    fields: list[ContextField] = []
-    idents = identifiers([n for n, v in values.items() if _is_int(v)], lower=True)
-    for name, value in values.items():
-        if _is_int(value):
-            fields.append(ContextField(name, idents[name], int(value)))
-    return values, fields
-
-
-def _is_int(value: object) -> bool:
-    return isinstance(value, int) and -(2**63) <= int(value) < 2**63
-
-
-# -- guard translation -------------------------------------------------------------------------
-
-
-class _Untranslatable(Exception):
-    pass
-
-
-_SAFE: dict[str, Any] = {"__builtins__": {}, **FUNCTIONS}
-_CMP = {ast.Eq: "==", ast.NotEq: "!=", ast.Lt: "<", ast.LtE: "<=", ast.Gt: ">", ast.GtE: ">="}
-_ARITH = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*"}
-
-
-def _names(node: ast.AST) -> set[str]:
-    return {n.id for n in ast.walk(node) if isinstance(n, ast.Name)}
-
-
-def _literal(value: object) -> str:
-    if isinstance(value, bool):
-        return "V(1)" if value else "V(0)"
-    if _is_int(value):
-        return f"V({value})"
-    raise _Untranslatable(f"the constant {value!r} is not an integer or boolean")
-
-
-class _Translator:
-    """Python guard AST -> C++ over ``c`` (the context), with ``previous``/``In`` folded."""
-
-    def __init__(self, fields: dict[str, str], env: dict[str, Any]) -> None:
-        self.fields = fields
-        self.env = env
-
-    def cpp(self, node: ast.expr) -> str:
-        if not (_names(node) & self.fields.keys()):
-            return _literal(self._fold(node))
-        match node:
-            case ast.Name(id=name):
-                return f"c.{self.fields[name]}"
-            case ast.BoolOp(op=op, values=values):
-                return self._boolop(isinstance(op, ast.And), [self.cpp(v) for v in values])
-            case ast.UnaryOp(op=ast.Not(), operand=x):
-                return f"V(!({self.cpp(x)}))"
-            case ast.UnaryOp(op=ast.USub(), operand=x):
-                return f"(-({self.cpp(x)}))"
-            case ast.UnaryOp(op=ast.UAdd(), operand=x):
-                return f"(+({self.cpp(x)}))"
-            case ast.BinOp(op=op, left=left, right=right) if type(op) in _ARITH:
-                return f"(({self.cpp(left)}) {_ARITH[type(op)]} ({self.cpp(right)}))"
-            case ast.Compare(left=left, ops=ops, comparators=comps) if all(
-                type(o) in _CMP for o in ops
-            ):
-                operands = [self.cpp(x) for x in (left, *comps)]
-                parts = [
-                    f"(({a}) {_CMP[type(o)]} ({b}))"
-                    for a, o, b in zip(operands, ops, operands[1:], strict=False)
-                ]
-                return f"V({' && '.join(parts)})"
-            case ast.IfExp(test=test, body=body, orelse=orelse):
-                return f"(({self.cpp(test)}) ? ({self.cpp(body)}) : ({self.cpp(orelse)}))"
-        raise _Untranslatable(f"{ast.unparse(node)!r} ({type(node).__name__}) reads context fields")
-
-    @staticmethod
-    def _boolop(is_and: bool, values: list[str]) -> str:
-        head = values[0]
-        if len(values) == 1:
-            return head
-        rest = _Translator._boolop(is_and, values[1:])
-        if is_and:
-            return f"(({head}) ? ({rest}) : ({head}))"
-        return f"(({head}) ? ({head}) : ({rest}))"
-
-    def _fold(self, node: ast.expr) -> Any:
-        code = compile(ast.fix_missing_locations(ast.Expression(node)), "<guard>", "eval")
-        try:
-            return eval(code, _SAFE, dict(self.env))  # checked by compile_expression already
-        except Exception as exc:
-            raise _Untranslatable(f"{ast.unparse(node)!r} fails when folded: {exc}") from exc
+#: Code -> one-line summary of every G7xx code (a view of statectl.codes.REGISTRY).
+CODES: Mapping[str, str] = family("G7")
 
 
 # -- exploring ---------------------------------------------------------------------------------

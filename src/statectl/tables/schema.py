@@ -34,31 +34,85 @@ Rules:
 6. Format readers turn a file into :class:`RawTable` values (cells with their
    locations); :func:`make_tables` turns those into :class:`DeviceTables` and
    reports every problem as a T1xx diagnostic, never stopping at the first.
+
+This module assembles whole tables and checks them for writing; the values live in
+:mod:`statectl.tables.rows`, the data literals in :mod:`statectl.tables.literals` and
+the cell checks in :mod:`statectl.tables.cells`. Every name is re-exported here, so
+``from statectl.tables.schema import ...`` works as before the split.
 """
 
 from __future__ import annotations
 
-import difflib
-import math
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Sequence
 
-import yaml
+from statectl.errors import Diagnostic, Location
+from statectl.tables.cells import (
+    check_header,
+    event_row,
+    recovery_row,
+    state_row,
+)
+from statectl.tables.literals import (
+    format_literal,
+    make_data,
+    normalize_payload,
+    normalize_value,
+    parse_literal,
+    parse_payload,
+    to_plain,
+)
+from statectl.tables.rows import (
+    ALIASES,
+    CODES,
+    COLUMNS,
+    CONTROL_WORDS,
+    DATA_COLUMNS,
+    EVENT_COLUMNS,
+    FLAT_RECOVERY_COLUMNS,
+    FLAT_STATE_COLUMNS,
+    NOWHERE,
+    RECOVERY_COLUMNS,
+    REDO_WORDS,
+    REQUIRED,
+    STATE_COLUMNS,
+    TYPE_NAMES,
+    TYPE_WORDS,
+    Bad,
+    Cell,
+    DataValue,
+    DeviceTables,
+    EventRow,
+    RawRow,
+    RawTable,
+    RecoveryRow,
+    StateRow,
+    diag,
+    did_you_mean,
+    normalize_column,
+    strip_locations,
+    unknown_column,
+)
 
-from statectl.errors import Diagnostic, Location, Severity
-from statectl.model import ControlKind, EventKind, StateKind
-from statectl.tables.safeyaml import YamlRefused, load_value
-
+#: Every public name, those defined in rows, literals and cells too (re-exported).
 __all__ = [
+    "ALIASES",
     "CODES",
+    "COLUMNS",
+    "CONTROL_WORDS",
     "DATA_COLUMNS",
     "EVENT_COLUMNS",
+    "FLAT_RECOVERY_COLUMNS",
+    "FLAT_STATE_COLUMNS",
     "NOWHERE",
     "RECOVERY_COLUMNS",
+    "REDO_WORDS",
+    "REQUIRED",
     "STATE_COLUMNS",
     "TYPE_NAMES",
     "TYPE_WORDS",
     "Bad",
+    "Cell",
+    "DataValue",
     "DeviceTables",
     "EventRow",
     "RawRow",
@@ -67,659 +121,27 @@ __all__ = [
     "StateRow",
     "check_header",
     "diag",
+    "did_you_mean",
+    "event_row",
     "format_literal",
+    "make_data",
     "make_tables",
+    "normalize_column",
+    "normalize_payload",
+    "normalize_value",
     "parse_literal",
     "parse_payload",
     "recovery_cells",
     "recovery_columns",
+    "recovery_row",
     "state_cells",
     "state_columns",
+    "state_row",
     "strip_locations",
+    "to_plain",
+    "unknown_column",
     "validate_for_writing",
 ]
-
-NOWHERE = Location()
-
-STATE_COLUMNS = (
-    "component",
-    "api",
-    "state",
-    "control",
-    "description",
-    "ignore",
-    "parent",
-    "type",
-    "default",
-)
-#: The columns every writer emits; ``type`` and ``default`` only when a row uses them.
-FLAT_STATE_COLUMNS = STATE_COLUMNS[:7]
-EVENT_COLUMNS = ("event", "condition", "guard", "old", "new", "kind", "api", "invoke")
-DATA_COLUMNS = ("name", "value")
-RECOVERY_COLUMNS = ("state", "event", "data", "redo")
-#: The recovery columns every writer emits; ``redo`` only when a row uses it.
-FLAT_RECOVERY_COLUMNS = RECOVERY_COLUMNS[:3]
-#: Spellings accepted in the ``redo`` column, after lowering (empty: no).
-REDO_WORDS: Mapping[str, bool] = {"yes": True, "true": True, "no": False, "false": False}
-COLUMNS: Mapping[str, tuple[str, ...]] = {
-    "states": STATE_COLUMNS,
-    "events": EVENT_COLUMNS,
-    "data": DATA_COLUMNS,
-    "recovery": RECOVERY_COLUMNS,
-}
-REQUIRED: Mapping[str, tuple[str, ...]] = {
-    "states": ("state",),
-    "events": ("event", "old", "new"),
-    "data": ("name",),
-    "recovery": ("state",),  # and per row an event or redo: yes (rule 5a)
-}
-#: The paper's and spreadsheet-friendly names for the columns.
-ALIASES: Mapping[str, str] = {
-    "controls": "control",
-    "required state control": "control",
-    "state control": "control",
-    "component name": "component",
-    "component name/api": "component",
-    "condition for the trigger": "condition",
-    "old state": "old",
-    "new state": "new",
-    "ignored": "ignore",
-    "ignores": "ignore",
-    "state type": "type",
-    "history default": "default",
-}
-#: Spellings accepted in the ``type`` column, after lowering and collapsing spaces.
-TYPE_WORDS: Mapping[str, StateKind] = {
-    "atomic": StateKind.ATOMIC,
-    "compound": StateKind.COMPOUND,
-    "parallel": StateKind.PARALLEL,
-    "final": StateKind.FINAL,
-    "history": StateKind.HISTORY_SHALLOW,
-    "shallow history": StateKind.HISTORY_SHALLOW,
-    "deep history": StateKind.HISTORY_DEEP,
-}
-#: How writers spell each type (the first spelling above).
-TYPE_NAMES: Mapping[StateKind, str] = {
-    StateKind.ATOMIC: "atomic",
-    StateKind.COMPOUND: "compound",
-    StateKind.PARALLEL: "parallel",
-    StateKind.FINAL: "final",
-    StateKind.HISTORY_SHALLOW: "history",
-    StateKind.HISTORY_DEEP: "deep history",
-}
-#: Spellings accepted in the ``control`` column, after lowering and collapsing spaces.
-CONTROL_WORDS: Mapping[str, ControlKind] = {
-    "default": ControlKind.DEFAULT,
-    "monitoring required": ControlKind.MONITORING,
-    "monitoring": ControlKind.MONITORING,
-    "monitor": ControlKind.MONITORING,
-    "event trigger required": ControlKind.TRIGGER,
-    "event trigger": ControlKind.TRIGGER,
-    "trigger required": ControlKind.TRIGGER,
-    "trigger": ControlKind.TRIGGER,
-}
-
-#: Every code the tables layer reports (T109 and the B2xx codes come from build).
-CODES: Mapping[str, str] = {
-    "T101": "malformed file (YAML, CSV, XLSX or Markdown syntax)",
-    "T102": "not a device file, or the wrong top-level type",
-    "T103": "unknown column",
-    "T104": "missing required column, key or cell",
-    "T105": "empty table",
-    "T106": "bad control value",
-    "T107": "bad kind value",
-    "T108": "wrong cell type (e.g. a mapping where text is expected)",
-    "T109": "state rows for one state that contradict each other",
-    "T110": "file not found, unreadable or not writable",
-    "T111": "an event name contains a comma",
-    "T112": "bad data entry (name not an identifier, or given twice)",
-    "T113": "bad type value (none of atomic, compound, parallel, final, history, deep history)",
-    "T114": "bad recovery row (both an event and redo, data on a redo row, or a bad redo value)",
-    "T115": "a YAML alias (*name): refused, so an alias bomb cannot expand",
-    "T116": "YAML nested deeper than the limit (MAX_DEPTH): see docs/limits.md",
-    "T117": "a workbook that unpacks to more than the limit (a zip bomb): see docs/limits.md",
-}
-
-
-@dataclass(frozen=True, slots=True)
-class StateRow:
-    """One row of the State Definition table (the paper's Table 1)."""
-
-    component: str
-    api: str
-    state: str
-    controls: tuple[ControlKind, ...]
-    description: str
-    ignore: tuple[str, ...]
-    parent: str = ""  # the compound or parallel state this one is in (empty: top level)
-    where: Location = NOWHERE
-    type: StateKind | None = None  # None: atomic, or compound when it has children
-    default: tuple[str, ...] = ()  # a history state's targets before it recorded anything
-
-    @property
-    def type_text(self) -> str:
-        """The ``type`` cell as writers spell it (empty for an implied type)."""
-        return TYPE_NAMES[self.type] if self.type is not None else ""
-
-
-@dataclass(frozen=True, slots=True)
-class EventRow:
-    """One row of the Event Definition table (the paper's Table 2)."""
-
-    event: str
-    condition: str
-    guard: str
-    old: str
-    new: str
-    kind: EventKind
-    api: str
-    invoke: str = ""  # explicit invoke name; empty: derived (observers rule 5)
-    where: Location = NOWHERE
-
-
-@dataclass(frozen=True, slots=True)
-class RecoveryRow:
-    """One row of the Recovery table: what a device resuming in ``state`` does first.
-
-    Either it posts ``event`` with ``data`` (a Motor that was Moving is not moving
-    any more: Error brings its chart back in line), or, with ``redo``, it issues
-    again the device API calls of the step that entered ``state`` (a Motor that
-    was Returning must be told to return again, or its completion never comes).
-    """
-
-    state: str
-    event: str = ""  # empty on a redo row
-    data: object = None  # the event's payload: a plain value, lists and dicts (rule 5a)
-    origin: Location = NOWHERE
-    redo: bool = False  # re-issue the entering step's notifications instead of an event
-
-
-@dataclass(frozen=True, slots=True)
-class DeviceTables:
-    """A device's tables as read from one file (or one CSV pair)."""
-
-    device: str
-    states: tuple[StateRow, ...]
-    events: tuple[EventRow, ...]
-    data: tuple[tuple[str, object], ...] = ()
-    source: Location = NOWHERE
-    recovery: tuple[RecoveryRow, ...] = ()  # the third table; empty: none (rule 5a)
-
-
-def strip_locations(tables: DeviceTables) -> DeviceTables:
-    """The same tables with every location dropped: what a lossless conversion keeps."""
-    return replace(
-        tables,
-        states=tuple(replace(s, where=NOWHERE) for s in tables.states),
-        events=tuple(replace(e, where=NOWHERE) for e in tables.events),
-        source=NOWHERE,
-        recovery=tuple(replace(r, origin=NOWHERE) for r in tables.recovery),
-    )
-
-
-# --- raw tables, as format readers deliver them ---------------------------------------
-
-
-@dataclass(frozen=True, slots=True)
-class Bad:
-    """A cell of the wrong type (T108): names what was found instead of text.
-
-    ``code`` is T115 or T116 for YAML the safe reader refused (an alias, too deep).
-    """
-
-    found: str
-    code: str = "T108"
-
-
-Cell = str | tuple[str, ...] | Bad
-DataValue = object
-
-
-@dataclass(frozen=True, slots=True)
-class RawRow:
-    """A row's cells by normalized column name, each with where it was found."""
-
-    where: Location
-    cells: Mapping[str, tuple[Cell, Location]] = field(default_factory=dict)
-
-
-@dataclass(frozen=True, slots=True)
-class RawTable:
-    """A table before checking; ``rows`` of the data table carry ``name`` and ``value``."""
-
-    table: str  # "states" | "events" | "data" | "recovery"
-    where: Location
-    rows: tuple[RawRow, ...]
-
-
-def diag(code: str, where: Location, message: str, hint: str = "") -> Diagnostic:
-    """An error diagnostic; the tables layer only reports errors."""
-    return Diagnostic(code, Severity.ERROR, where, message, hint)
-
-
-def did_you_mean(word: str, choices: Sequence[str]) -> str:
-    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
-    return f"did you mean {close[0]!r}? " if close else ""
-
-
-def normalize_column(name: str) -> str:
-    key = " ".join(name.strip().lower().replace("_", " ").split())
-    return ALIASES.get(key, key)
-
-
-def unknown_column(table: str, name: str, where: Location) -> Diagnostic:
-    known = COLUMNS[table]
-    return diag(
-        "T103",
-        where,
-        f"unknown column {name!r} in the {table} table",
-        did_you_mean(normalize_column(name), known) + "known columns: " + ", ".join(known),
-    )
-
-
-def check_header(
-    table: str, header: Sequence[tuple[str, Location]], where: Location, diags: list[Diagnostic]
-) -> list[str | None] | None:
-    """Map header cells to column names; ``None`` for the whole table if it is unusable.
-
-    Unknown columns are reported (T103) and their cells dropped; a missing
-    required column (T104) makes every row unreadable, so it is reported once here.
-    """
-    columns: list[str | None] = []
-    seen: set[str] = set()
-    for text, at in header:
-        name = normalize_column(text)
-        if not name:
-            columns.append(None)
-        elif name not in COLUMNS[table]:
-            diags.append(unknown_column(table, text, at))
-            columns.append(None)
-        elif name in seen:
-            diags.append(diag("T101", at, f"column {name!r} appears twice in the {table} header"))
-            columns.append(None)
-        else:
-            seen.add(name)
-            columns.append(name)
-    missing = [c for c in REQUIRED[table] if c not in seen]
-    for c in missing:
-        diags.append(
-            diag(
-                "T104",
-                where,
-                f"the {table} table has no {c!r} column",
-                "columns: " + ", ".join(COLUMNS[table]),
-            )
-        )
-    return None if missing else columns
-
-
-# --- cells ------------------------------------------------------------------------------
-
-
-def _text(row: RawRow, column: str, diags: list[Diagnostic]) -> str:
-    got = row.cells.get(column)
-    if got is None:
-        return ""
-    value, where = got
-    if isinstance(value, Bad):
-        diags.append(diag("T108", where, f"{column!r} must be text (got {value.found})"))
-        return ""
-    if isinstance(value, tuple):
-        diags.append(
-            diag("T108", where, f"{column!r} must be text (got a list)", "write one value")
-        )
-        return ""
-    return value.strip()
-
-
-def _required(row: RawRow, column: str, table: str, diags: list[Diagnostic]) -> str:
-    text = _text(row, column, diags)
-    if not text and not (column in row.cells and isinstance(row.cells[column][0], Bad | tuple)):
-        diags.append(
-            diag(
-                "T104", row.where, f"{table} row has no {column!r}", f"fill in the {column!r} cell"
-            )
-        )
-    return text
-
-
-def _items(row: RawRow, column: str, diags: list[Diagnostic]) -> tuple[tuple[str, ...], Location]:
-    got = row.cells.get(column)
-    if got is None:
-        return (), row.where
-    value, where = got
-    if isinstance(value, Bad):
-        diags.append(diag("T108", where, f"{column!r} must be text or a list (got {value.found})"))
-        return (), where
-    if isinstance(value, str):
-        parts: Sequence[str] = value.split(",")
-    else:
-        parts = value
-        for item in value:
-            if "," in item:
-                diags.append(
-                    diag(
-                        "T111",
-                        where,
-                        f"{column!r} item {item!r} contains a comma",
-                        "event names must not contain commas",
-                    )
-                )
-    return tuple(p.strip() for p in parts if p.strip()), where
-
-
-def _controls(row: RawRow, diags: list[Diagnostic]) -> tuple[ControlKind, ...]:
-    items, where = _items(row, "control", diags)
-    kinds: list[ControlKind] = []
-    for item in items:
-        kind = CONTROL_WORDS.get(" ".join(item.lower().replace("_", " ").replace("-", " ").split()))
-        if kind is None:
-            accepted = [k.value for k in ControlKind]
-            diags.append(
-                diag(
-                    "T106",
-                    where,
-                    f"unknown control {item!r}",
-                    did_you_mean(item.lower(), accepted) + "accepted: " + ", ".join(accepted),
-                )
-            )
-        elif kind not in kinds:
-            kinds.append(kind)
-    return tuple(kinds)
-
-
-def _kind(row: RawRow, diags: list[Diagnostic]) -> EventKind:
-    text = _text(row, "kind", diags).lower()
-    if not text:
-        return EventKind.COMMAND
-    for kind in EventKind:
-        if kind.value == text:
-            return kind
-    accepted = [k.value for k in EventKind]
-    where = row.cells["kind"][1]
-    diags.append(
-        diag(
-            "T107",
-            where,
-            f"unknown event kind {text!r}",
-            did_you_mean(text, accepted) + "accepted: " + ", ".join(accepted),
-        )
-    )
-    return EventKind.COMMAND
-
-
-def _type(row: RawRow, diags: list[Diagnostic]) -> StateKind | None:
-    text = " ".join(_text(row, "type", diags).lower().replace("_", " ").replace("-", " ").split())
-    if not text:
-        return None
-    kind = TYPE_WORDS.get(text)
-    if kind is None:
-        accepted = list(TYPE_NAMES.values())
-        diags.append(
-            diag(
-                "T113",
-                row.cells["type"][1],
-                f"unknown state type {text!r}",
-                did_you_mean(text, accepted)
-                + "accepted: "
-                + ", ".join(accepted)
-                + " (or leave it empty)",
-            )
-        )
-    return kind
-
-
-def _check_keys(table: str, row: RawRow, diags: list[Diagnostic]) -> None:
-    for name, (_, where) in row.cells.items():
-        if name not in COLUMNS[table]:
-            diags.append(unknown_column(table, name, where))
-
-
-def state_row(row: RawRow, diags: list[Diagnostic]) -> StateRow:
-    _check_keys("states", row, diags)
-    return StateRow(
-        component=_text(row, "component", diags),
-        api=_text(row, "api", diags),
-        state=_required(row, "state", "states", diags),
-        controls=_controls(row, diags),
-        description=_text(row, "description", diags),
-        ignore=_items(row, "ignore", diags)[0],
-        parent=_text(row, "parent", diags),
-        where=row.where,
-        type=_type(row, diags),
-        default=_items(row, "default", diags)[0],
-    )
-
-
-def event_row(row: RawRow, diags: list[Diagnostic]) -> EventRow:
-    _check_keys("events", row, diags)
-    event = _required(row, "event", "events", diags)
-    if "," in event:
-        diags.append(
-            diag(
-                "T111",
-                row.cells["event"][1],
-                f"event name {event!r} contains a comma",
-                "commas separate the names in 'ignore' cells: rename the event",
-            )
-        )
-    return EventRow(
-        event=event,
-        condition=_text(row, "condition", diags),
-        guard=_text(row, "guard", diags),
-        old=_required(row, "old", "events", diags),
-        new=_required(row, "new", "events", diags),
-        kind=_kind(row, diags),
-        api=_text(row, "api", diags),
-        invoke=_text(row, "invoke", diags),
-        where=row.where,
-    )
-
-
-# --- data literals ----------------------------------------------------------------------
-
-
-def normalize_value(value: object) -> object | Bad:
-    """A YAML literal as the tables keep it (lists become tuples), or what is wrong."""
-    if value is None or isinstance(value, bool | int | float | str):
-        return value
-    if isinstance(value, list | tuple):
-        items = [normalize_value(v) for v in value]
-        for item in items:
-            if isinstance(item, Bad):
-                return item
-        return tuple(items)
-    if isinstance(value, dict):
-        return Bad("a mapping")
-    return Bad(f"a {type(value).__name__}")
-
-
-def normalize_payload(value: object) -> object | Bad:
-    """A recovery row's data as the tables keep it (plain lists and dicts), or what is wrong."""
-    if value is None or isinstance(value, bool | int | float | str):
-        return value
-    if isinstance(value, list | tuple):
-        items = [normalize_payload(v) for v in value]
-        bad = next((i for i in items if isinstance(i, Bad)), None)
-        return bad if bad is not None else items
-    if isinstance(value, dict):
-        out: dict[str, object] = {}
-        for key, item in value.items():
-            if not isinstance(key, str):
-                return Bad(f"a mapping key {key!r} that is not text")
-            got = normalize_payload(item)
-            if isinstance(got, Bad):
-                return got
-            out[key] = got
-        return out
-    return Bad(f"a {type(value).__name__}")
-
-
-def _plain(value: object) -> object:
-    if isinstance(value, tuple | list):
-        return [_plain(v) for v in value]
-    if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
-    return value
-
-
-def to_plain(value: object) -> object:
-    """The value as YAML writes it (tuples become lists)."""
-    return _plain(value)
-
-
-def format_literal(value: object) -> str:
-    """One value as a YAML flow literal, for a CSV, XLSX or Markdown cell."""
-    text = yaml.safe_dump(
-        [_plain(value)],
-        default_flow_style=True,
-        allow_unicode=True,
-        width=math.inf,
-        sort_keys=False,
-    ).strip()
-    return text[1:-1].strip()
-
-
-_REPORTED = Bad("malformed literal")  # a cell parse_literal reported already
-
-
-def parse_literal(text: str, where: Location, diags: list[Diagnostic]) -> object | Bad:
-    """Read a YAML literal from a cell; an empty cell is null."""
-    try:
-        value = load_value(text)
-    except YamlRefused as exc:
-        code = exc.code if exc.code in ("T115", "T116") else "T108"
-        shown = text if len(text) <= 60 else text[:57] + "..."
-        message = f"data value {shown!r} is not a YAML literal: {exc.message}"
-        diags.append(diag(code, where, message, exc.hint))
-        return Bad(_REPORTED.found, code)
-    return normalize_value(value)
-
-
-def parse_payload(text: str) -> object | Bad:
-    """Read a recovery row's data cell (a YAML flow value); an empty cell is null."""
-    try:
-        value = load_value(text)
-    except YamlRefused as exc:
-        return Bad(exc.message, exc.code if exc.code in ("T115", "T116") else "T108")
-    return normalize_payload(value)
-
-
-def make_data(
-    entries: Sequence[tuple[str, object, Location]], diags: list[Diagnostic]
-) -> tuple[tuple[str, object], ...]:
-    """Check data entries: identifier names, each once, literal values."""
-    data: dict[str, object] = {}
-    for name, value, where in entries:
-        if not name.isidentifier() or name.startswith("_"):
-            diags.append(
-                diag(
-                    "T112",
-                    where,
-                    f"data name {name!r} is not a usable name",
-                    "use a name like speed or target_position (letters, digits, _; "
-                    "not starting with _ or a digit)",
-                )
-            )
-            continue
-        if name in data:
-            diags.append(diag("T112", where, f"data name {name!r} is given twice"))
-            continue
-        if isinstance(value, Bad) and value.found == _REPORTED.found:
-            continue  # parse_literal has said why
-        if isinstance(value, Bad):
-            diags.append(
-                diag(
-                    value.code,
-                    where,
-                    f"data {name!r} must be a literal (got {value.found})",
-                    "use null, true/false, a number, a string or a list of them",
-                )
-            )
-            continue
-        data[name] = value
-    return tuple(data.items())
-
-
-def _unreadable(row: RawRow, column: str) -> bool:
-    """The cell is there but not text (already reported as T108)."""
-    got = row.cells.get(column)
-    return got is not None and isinstance(got[0], Bad | tuple)
-
-
-def _redo(row: RawRow, diags: list[Diagnostic]) -> bool:
-    text = _text(row, "redo", diags).lower()
-    if not text:
-        return False
-    value = REDO_WORDS.get(text)
-    if value is None:
-        diags.append(
-            diag(
-                "T114",
-                row.cells["redo"][1],
-                f"recovery 'redo' must be yes or no (got {text!r})",
-                "write redo: yes to redo the entering step's device calls; leave it empty for no",
-            )
-        )
-        return False
-    return value
-
-
-def recovery_row(row: RawRow, diags: list[Diagnostic]) -> RecoveryRow:
-    """A Recovery row: an event (data a YAML flow value) or ``redo: yes`` (rule 5a)."""
-    _check_keys("recovery", row, diags)
-    state = _required(row, "state", "recovery", diags)
-    event = _text(row, "event", diags)
-    redo = _redo(row, diags)
-    if redo and event:
-        diags.append(
-            diag(
-                "T114",
-                row.where,
-                f"recovery row for {state!r} has both an event ({event!r}) and redo: yes",
-                "a row either posts an event or redoes the entering step: keep one",
-            )
-        )
-    elif not redo and not event and not _unreadable(row, "event"):
-        diags.append(
-            diag(
-                "T104",
-                row.where,
-                f"recovery row for {state!r} has neither an 'event' nor redo: yes",
-                "name the event to post on resume, or write redo: yes",
-            )
-        )
-    data: object = None
-    got = row.cells.get("data")
-    if got is not None:
-        cell, where = got
-        if isinstance(cell, str):
-            value = parse_payload(cell)
-        else:  # a list of names cannot come from any reader; a Bad cell stays Bad
-            value = list(cell) if isinstance(cell, tuple) else cell
-        if isinstance(value, Bad):
-            diags.append(
-                diag(
-                    value.code,
-                    where,
-                    f"recovery data must be a plain value (got {value.found})",
-                    "use null, true/false, numbers, text, lists and mappings with text keys",
-                )
-            )
-        else:
-            data = value
-        if redo and data is not None:
-            diags.append(
-                diag(
-                    "T114",
-                    where,
-                    f"recovery row for {state!r} redoes its entering step and takes no data",
-                    "the redone calls get the data of the step that entered the state: "
-                    "delete the data cell",
-                )
-            )
-    return RecoveryRow(state, event, data, row.where, redo)
-
 
 # --- whole tables -----------------------------------------------------------------------
 

@@ -1,0 +1,106 @@
+"""Global expressions (rule 4 of :mod:`statectl.cell`): the safe expression language
+restricted to ``In('device.State')``, ``and``, ``or``, ``not``, ``True`` and ``False``,
+checked against the cell's devices (V807, V808, V810, V811). Its own module because
+every host of a cell (the explorer, SPIN) relies on this one check.
+"""
+
+from __future__ import annotations
+
+import ast
+from collections.abc import Mapping
+
+from statectl.cell.values import GlobalExpr
+from statectl.errors import Diagnostic, Location, Severity
+from statectl.expr import compile_expression
+from statectl.model import Chart
+
+
+def _d(code: str, where: Location, message: str, hint: str = "") -> Diagnostic:
+    return Diagnostic(code, Severity.ERROR, where, message, hint)
+
+
+def parse_global(
+    source: str, where: Location, charts: Mapping[str, Chart], *, what: str = "expression"
+) -> tuple[GlobalExpr | None, list[Diagnostic]]:
+    """Check a global expression (rule 4) against the cell's devices and their states."""
+    try:
+        expr, diags = compile_expression(source, where, what=what)
+    except (RecursionError, MemoryError):
+        shown = source if len(source) <= 40 else source[:37] + "..."
+        message = f"{what} {shown!r} is nested too deeply to analyse"
+        return None, [_d("V810", where, message, "write it with fewer nested parts")]
+    if expr is None:
+        return None, diags
+    tree = ast.parse(source.strip(), mode="eval")
+    refs: list[tuple[str, str]] = []
+    allowed = (ast.Expression, ast.BoolOp, ast.And, ast.Or, ast.UnaryOp, ast.Not, ast.Load)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call):
+            arg = node.args[0] if len(node.args) == 1 else None
+            ok = isinstance(arg, ast.Constant) and isinstance(arg.value, str)
+            if not (isinstance(node.func, ast.Name) and node.func.id == "In") or not ok:
+                diags.append(
+                    _d(
+                        "V811",
+                        where,
+                        f"{what} {source!r}: {ast.unparse(node)} is not In('device.State')",
+                        "write In('arm.Moving'): one text argument naming device and state",
+                    )
+                )
+                continue
+            assert isinstance(arg, ast.Constant)
+            device, dot, state = str(arg.value).partition(".")
+            chart = charts.get(device)
+            if not dot or chart is None:
+                diags.append(
+                    _d(
+                        "V807",
+                        where,
+                        f"{what} {source!r}: In({arg.value!r}) names no device of the cell",
+                        "devices: " + ", ".join(sorted(charts)),
+                    )
+                )
+            elif not chart.has_state(state):
+                diags.append(
+                    _d(
+                        "V808",
+                        where,
+                        f"{what} {source!r}: device {device!r} has no state {state!r}",
+                        "states: " + ", ".join(s.name for s in chart.states),
+                    )
+                )
+            else:
+                refs.append((device, state))
+        elif isinstance(node, ast.Name):
+            if node.id != "In":
+                diags.append(
+                    _d(
+                        "V810",
+                        where,
+                        f"{what} {source!r} reads {node.id!r}; the cell tracks only states",
+                        "use In('device.State'), and, or, not, True, False",
+                    )
+                )
+        elif isinstance(node, ast.Constant):
+            if not isinstance(node.value, (bool, str)):
+                diags.append(
+                    _d(
+                        "V810",
+                        where,
+                        f"{what} {source!r} uses the constant {node.value!r}",
+                        "use True or False",
+                    )
+                )
+        elif not isinstance(node, allowed):
+            diags.append(
+                _d(
+                    "V810",
+                    where,
+                    f"{what} {source!r} uses {type(node).__name__}, which a global "
+                    "expression does not allow",
+                    "use In('device.State'), and, or, not, True, False",
+                )
+            )
+    if diags:
+        return None, diags
+    return GlobalExpr(source.strip(), tuple(dict.fromkeys(refs)), where), diags

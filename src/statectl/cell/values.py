@@ -1,0 +1,109 @@
+"""A cell's values: devices, links, environment inputs, invariants, recovery goals and
+the Cell that holds them, plus the V8xx codes. Split from the loader so the explorer,
+the SPIN writer and the runner import the values without the YAML reading.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from statectl.codes import family
+from statectl.errors import Location
+from statectl.model import Chart
+
+#: Code -> one-line summary of every V8xx code (a view of statectl.codes.REGISTRY).
+CODES: Mapping[str, str] = family("V8")
+
+TOP_KEYS = ("cell", "devices", "links", "environment", "invariants", "recovery", "completions")
+
+
+class Trigger(enum.Enum):
+    ENTERS = "enters"  # the source device entered a state
+    RAISES = "raises"  # the source device took a transition on an event
+
+
+class InputKind(enum.Enum):
+    COMMAND = "environment"  # the operator or a sensor sends it
+    FAULT = "fault"  # hardware raises it in a monitored state
+    COMPLETION = "completion"  # the device reports it back itself
+
+
+@dataclass(frozen=True, slots=True)
+class GlobalExpr:
+    """A checked global expression and the ``(device, state)`` pairs it reads."""
+
+    source: str
+    refs: tuple[tuple[str, str], ...]
+    where: Location
+
+
+@dataclass(frozen=True, slots=True)
+class DeviceRef:
+    name: str
+    path: str
+    chart: Chart
+    where: Location
+
+
+@dataclass(frozen=True, slots=True)
+class Link:
+    """``when source <trigger> what [guard]: send event to target``."""
+
+    source: str
+    trigger: Trigger
+    what: str
+    target: str
+    event: str
+    guard: GlobalExpr | None
+    where: Location
+
+    @property
+    def label(self) -> str:
+        text = f"{self.source} {self.trigger.value} {self.what} -> {self.target}.{self.event}"
+        if self.guard is not None:
+            text += f" [{self.guard.source}]"
+        return text
+
+
+@dataclass(frozen=True, slots=True)
+class EnvInput:
+    kind: InputKind
+    device: str
+    event: str
+    when: GlobalExpr | None
+    where: Location
+
+
+@dataclass(frozen=True, slots=True)
+class Invariant:
+    name: str
+    expr: GlobalExpr
+
+
+@dataclass(frozen=True, slots=True)
+class Recovery:
+    """From every reachable state where ``source`` holds, some path must reach ``target``."""
+
+    name: str
+    target: GlobalExpr
+    source: GlobalExpr | None
+
+
+@dataclass(frozen=True, slots=True)
+class Cell:
+    name: str
+    path: str
+    devices: tuple[DeviceRef, ...]
+    links: tuple[Link, ...] = ()
+    environment: tuple[EnvInput, ...] = ()
+    invariants: tuple[Invariant, ...] = ()
+    recovery: tuple[Recovery, ...] = ()
+    completions: bool = True
+
+    def device(self, name: str) -> DeviceRef:
+        for d in self.devices:
+            if d.name == name:
+                return d
+        raise KeyError(name)
