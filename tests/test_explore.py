@@ -9,9 +9,10 @@ from pathlib import Path
 import pytest
 
 from statectl.cell import load_cell_or_raise
+from statectl.cli.replay import run_main
+from statectl.cli.verify import verify_main
 from statectl.explore import Kind, Report, explore, to_mermaid, to_plantuml, write_traces
-from statectl.explore.replay import run_cell, run_main
-from statectl.explore.verify import verify_main
+from statectl.explore.replay import run_cell
 
 PICK = Path(__file__).resolve().parents[1] / "examples" / "pick-and-place"
 

@@ -205,13 +205,13 @@ def cmd_scxml_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
 
 
 def cmd_codegen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
-    from statectl.codegen import run_codegen
+    from statectl.cli.codegen import run_codegen
 
     return run_codegen(args.file, args.out, args.target, out, err)
 
 
 def cmd_verify(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
-    from statectl.explore.verify import verify_main
+    from statectl.cli.verify import verify_main
 
     return verify_main(
         args.cell,
@@ -228,13 +228,14 @@ def cmd_verify(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
 
 
 def cmd_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
-    from statectl.runner import is_cell, run
+    from statectl.cli.run import run
+    from statectl.runner import is_cell
 
     if args.replay is not None or args.walk is not None:
         if not is_cell(args.file):
             err.write("statectl run: --replay and --walk take a cell file\n")
             return USAGE
-        from statectl.explore.replay import run_main
+        from statectl.cli.replay import run_main
 
         return run_main(
             args.file, replay=args.replay, walk=args.walk or 0, seed=args.seed, out=out, err=err
@@ -259,7 +260,7 @@ def cmd_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
 
 
 def cmd_journal(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
-    from statectl.runner import journal_export, journal_replay, journal_show
+    from statectl.cli.journal import journal_export, journal_replay, journal_show
 
     if args.journal_command == "replay":
         return journal_replay(args.db, device=args.device, out=out, err=err)

@@ -26,7 +26,6 @@ from __future__ import annotations
 import os
 from importlib.resources import files
 from pathlib import Path
-from typing import TextIO
 
 from statectl.codegen.cpp_header import (
     _header,
@@ -36,10 +35,10 @@ from statectl.codegen.flatten import (
     flatten,
     identifiers,
 )
-from statectl.errors import Diagnostic, DiagnosticError, Severity, has_errors
+from statectl.errors import Diagnostic, has_errors
 from statectl.model import Chart
 
-__all__ = ["RUNTIME_HEADERS", "generate", "render", "run_codegen"]
+__all__ = ["RUNTIME_HEADERS", "generate", "render"]
 
 #: The shared runtime headers, copied to ``<out>/statectl/``.
 RUNTIME_HEADERS = ("contract.hpp", "observer.hpp", "runtime.hpp", "spsc_queue.hpp", "trace.hpp")
@@ -160,32 +159,3 @@ def generate(chart: Chart, out_dir: str | os.PathLike[str]) -> tuple[list[Path],
             path.write_text(text, encoding="utf-8")
         written.append(path)
     return written, diags
-
-
-def run_codegen(path: str, out_dir: str, target: str, out: TextIO, err: TextIO) -> int:
-    """``statectl codegen FILE --target cpp --out DIR``: 0 written, 1 diagnostics, 2 usage."""
-    if target != "cpp":
-        err.write(f"statectl codegen: unknown target {target!r} (available: cpp)\n")
-        return 2
-    from statectl.build import load_and_build  # outer ring: codegen reads tables via build
-
-    try:
-        chart, diags = load_and_build(path)
-    except DiagnosticError as exc:
-        chart, diags = None, list(exc.diagnostics)
-    except OSError as exc:
-        err.write(f"statectl codegen: cannot read {path}: {exc.strerror or exc}\n")
-        return 2
-    if chart is None:
-        for d in diags:
-            err.write(f"{d}\n")
-        return 1
-    written, gen_diags = generate(chart, out_dir)
-    for d in (*diags, *gen_diags):
-        if d.severity is not Severity.INFO:
-            err.write(f"{d}\n")
-    if not written:
-        return 1
-    for p in written:
-        out.write(f"{p}\n")
-    return 0

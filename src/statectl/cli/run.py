@@ -1,8 +1,35 @@
-"""``statectl run``: devices or a cell on one System, fed event lines, optionally journalled.
+"""``statectl run DEVICE|CELL`` for real: one System fed event lines, optionally journalled.
 
-The run command's own concerns (drivers, dashboard settings, the journal it
-opens, the feed of lines) live here; the journal commands and the event-line
-grammar have their own modules beside it."""
+The command's own concerns (drivers, dashboard settings, the journal it opens,
+the feed of lines, what is printed and the exit code); the library under it is
+:mod:`statectl.system` and :mod:`statectl.runner`.
+
+Rules:
+1. A run is a :class:`~statectl.system.System` (devices on one clock and one
+   owner; journalled, a cell; see :mod:`statectl.system` for its own rules).
+2. An existing journal is checked before the run uses it (journal/check.py): one
+   that cannot be trusted is refused and nothing starts, unless ``--fresh`` sets it
+   aside (renamed with a timestamp) for a new one. A journal that stops taking
+   writes (a full disk) stops the run with a message; nothing more is accepted.
+3. Time: ``--realtime`` runs on a :class:`WallClock`; otherwise a
+   :class:`SimClock`, which a live run (``--dashboard``) moves in step with the
+   wall clock and a batch run (events from a file or stdin) moves only to let
+   each event's consequences settle, so a batch run is deterministic.
+4. A cell file runs the same way, its links sent by the System.
+5. Events come as lines ``[DEVICE:] EVENT [DATA]`` (DATA in YAML flow style, e.g.
+   ``Movement {amount: 10}``); ``+SECONDS`` lets simulated time pass; ``#``
+   starts a comment. A bad line is reported with its number and skipped. A
+   batch run reads them from stdin, and so does a live run without a dashboard.
+6. Drivers: a ``--config`` file, else ``--driver`` for every device, else a
+   :class:`~statectl.devices.SimTwin` with defaults for each device, derived
+   from its tables (the banner says so), so every device reports its
+   completions on the clock. A twin's notes appear in the trace as ``twin``.
+7. The dashboard's host, port and token: the flags, else (the token) the
+   ``STATECTL_DASHBOARD_TOKEN`` environment variable, else the config file's
+   ``dashboard:`` section, else loopback, any free port and a new token, which
+   is printed; a token from elsewhere is not echoed. A token shorter than 16
+   characters is refused.
+"""
 
 from __future__ import annotations
 
@@ -17,6 +44,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from statectl.cell import Cell, load_cell
+from statectl.cli.commands import OK, PROBLEMS, USAGE
 from statectl.devices import (
     MIN_TOKEN,
     DashboardConfig,
@@ -27,7 +55,7 @@ from statectl.devices import (
     load_run_config,
     make_driver,
 )
-from statectl.errors import Diagnostic, DiagnosticError, Severity, StatectlError
+from statectl.errors import DiagnosticError, Severity, StatectlError
 from statectl.journal import (
     Guarantee,
     Journal,
@@ -37,12 +65,10 @@ from statectl.journal import (
     load_device,
     set_aside,
 )
+from statectl.runner.cells import is_cell, load_setups, relevant_warnings
 from statectl.runner.events import parse_event_line
 from statectl.runtime import Clock, SimClock, TraceWriter, WallClock
 from statectl.system import DeviceSetup, System
-from statectl.tables import safeyaml
-
-OK, PROBLEMS, USAGE = 0, 1, 2
 
 
 def _drivers(
@@ -100,17 +126,6 @@ def _show_notes(drivers: Mapping[str, DeviceDriver], out: TextIO, width: int) ->
             d.on_note = writer(name)
 
 
-def is_cell(path: str) -> bool:
-    """A YAML file with a ``devices`` section and no ``states`` table is a cell file."""
-    if Path(path).suffix.lower() not in (".yaml", ".yml"):
-        return False
-    try:
-        data = safeyaml.load_value(Path(path).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, safeyaml.YamlRefused):
-        return False  # loaded as a device file, whose loader says what is wrong
-    return isinstance(data, dict) and "devices" in data and "states" not in data
-
-
 def _feed(system: System, lines: Iterable[str], err: TextIO, *, batch: bool) -> None:
     """Post each event line; a batch run settles after each (rule 3)."""
     for number, line in enumerate(lines, 1):
@@ -137,51 +152,20 @@ def _feed(system: System, lines: Iterable[str], err: TextIO, *, batch: bool) -> 
             err.write(f"line {number}: {exc}\n")
 
 
-#: Recovery warnings matter only when there is a journal to recover from.
-JOURNAL_ONLY_WARNINGS = frozenset({"J606", "J608"})
-
-
-def _warn(warnings: Iterable[Diagnostic], err: TextIO | None, journalled: bool) -> None:
-    if err is None:
-        return
-    for d in warnings:
-        if journalled or d.code not in JOURNAL_ONLY_WARNINGS:
-            err.write(f"{d}\n")
-
-
-def cell_setups(
-    cell: Cell, err: TextIO | None = None, *, journalled: bool = True
-) -> tuple[DeviceSetup, ...]:
-    """One setup per device instance of ``cell``, with its device file's recovery rules.
-
-    Raises one :class:`DiagnosticError` for every device file whose rules do not
-    load; warnings go to ``err`` (recovery warnings only for a ``journalled`` run).
-    """
-    setups: list[DeviceSetup] = []
-    problems: list[Diagnostic] = []
-    for ref in cell.devices:
-        try:
-            dev = load_device(ref.path)
-        except DiagnosticError as exc:
-            problems.extend(exc.diagnostics)
-            continue
-        _warn(dev.warnings, err, journalled)
-        setups.append(DeviceSetup(ref.name, ref.chart, dev.rules, ref.path))
-    if problems:
-        raise DiagnosticError(problems)
-    return tuple(setups)
-
-
 def _load_cell(path: str, err: TextIO, journalled: bool) -> tuple[Cell, tuple[DeviceSetup, ...]]:
     cell, diags = load_cell(path)
     if cell is None:
         raise DiagnosticError([d for d in diags if d.severity is not Severity.INFO])
-    return cell, cell_setups(cell, err, journalled=journalled)
+    setups, warnings = load_setups(cell, journalled=journalled)
+    for d in warnings:
+        err.write(f"{d}\n")
+    return cell, setups
 
 
 def _load_device(path: str, err: TextIO, journalled: bool) -> tuple[DeviceSetup, ...]:
     device = load_device(path)
-    _warn(device.warnings, err, journalled)
+    for d in relevant_warnings(device.warnings, journalled):
+        err.write(f"{d}\n")
     chart = device.chart
     return (DeviceSetup(chart.name, chart, device.rules, os.path.abspath(path)),)
 

@@ -15,6 +15,7 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import TextIO
 
+from statectl.cli.commands import OK, PROBLEMS, USAGE
 from statectl.errors import DiagnosticError, StatectlError
 from statectl.journal import (
     JournalError,
@@ -25,11 +26,6 @@ from statectl.journal import (
 )
 from statectl.journal.check import sqlite_problem
 from statectl.model import Chart
-from statectl.runner.command import (
-    OK,
-    PROBLEMS,
-    USAGE,
-)
 from statectl.runner.events import (
     parse_time,
 )
