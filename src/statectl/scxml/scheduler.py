@@ -2,57 +2,45 @@
 
 Apart from :mod:`statectl.scxml.session` because it knows nothing of a
 document: it runs whatever is ready, fires timers in due order and owns the
-wall-clock deadline that bounds a whole run (rule 5 there)."""
+wall-clock deadline that bounds a whole run (rule 5 there).
+
+Time is the runtime's :class:`~statectl.runtime.clock.Clock` (one protocol for
+devices and documents): a delayed send is a ``call_later`` timer whose callback
+only hands the delivery back to the scheduler's thread, so sessions never run on
+a timer thread. On a :class:`~statectl.runtime.clock.SimClock` the scheduler
+moves time itself to the next timer (deterministic and instant, and shared with
+any device on the same clock); on any other clock (a
+:class:`~statectl.runtime.clock.WallClock`) it waits for the timer to fire.
+``SimulatedClock`` and ``RealClock`` are the old names of those two clocks.
+"""
 
 from __future__ import annotations
 
-import heapq
-import itertools
 import re
+import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING
 
 from statectl.errors import StatectlError
+from statectl.runtime.clock import Clock, SimClock, Timer, WallClock
 from statectl.scxml.datamodel import EvaluationError
 
 if TYPE_CHECKING:
     from statectl.scxml.session import Session
 
+#: The old name of :class:`~statectl.runtime.clock.SimClock` for SCXML runs.
+SimulatedClock = SimClock
+#: The old name of :class:`~statectl.runtime.clock.WallClock` for SCXML runs.
+RealClock = WallClock
+
+__all__ = ["Clock", "RealClock", "Scheduler", "SessionTimeout", "SimulatedClock", "parse_delay"]
+
 
 class SessionTimeout(StatectlError):
     """The run passed its wall-clock deadline; the session stops where it is."""
-
-
-class Clock(Protocol):
-    def now(self) -> float: ...
-    def sleep_until(self, when: float) -> None: ...
-
-
-class RealClock:
-    """Wall-clock time; ``sleep_until`` really sleeps."""
-
-    def now(self) -> float:
-        return time.monotonic()
-
-    def sleep_until(self, when: float) -> None:
-        delay = when - time.monotonic()
-        if delay > 0:
-            time.sleep(delay)
-
-
-class SimulatedClock:
-    """Time that moves only when the scheduler waits: timed runs are deterministic."""
-
-    def __init__(self, start: float = 0.0) -> None:
-        self.time = start
-
-    def now(self) -> float:
-        return self.time
-
-    def sleep_until(self, when: float) -> None:
-        self.time = max(self.time, when)
 
 
 _DELAY = re.compile(r"^\s*(\d+(?:\.\d*)?|\.\d+)\s*(ms|s|min|h)?\s*$")
@@ -67,14 +55,15 @@ def parse_delay(text: str) -> float:
     return float(match.group(1)) * {"ms": 0.001, "s": 1.0, "min": 60.0, "h": 3600.0}[unit]
 
 
-@dataclass(order=True, slots=True)
-class _Timer:
-    due: float
-    seq: int
-    session: Session = field(compare=False)
-    sendid: str = field(compare=False)
-    deliver: Callable[[], None] = field(compare=False)
-    cancelled: bool = field(default=False, compare=False)
+@dataclass(eq=False, slots=True)
+class _Send:
+    """A delayed send: the clock's timer and what to deliver when it fires."""
+
+    session: Session
+    sendid: str
+    deliver: Callable[[], None]
+    timer: Timer | None = field(default=None)
+    cancelled: bool = False  # by <cancel>, also after the timer fired but before delivery
 
 
 class Scheduler:
@@ -86,12 +75,14 @@ class Scheduler:
         log: Callable[[str], None] | None = None,
         trace: Callable[[str], None] | None = None,
     ) -> None:
-        self.clock: Clock = clock or SimulatedClock()
+        self.clock: Clock = clock or SimClock()
         self.log = log or (lambda text: None)  # what <log> writes
         self.trace = trace or (lambda text: None)  # why an error event was raised
         self.sessions: dict[str, Session] = {}
-        self.timers: list[_Timer] = []
-        self._seq = itertools.count()
+        #: Delayed sends not yet delivered nor cancelled, in the order they were sent.
+        self.pending: list[_Send] = []
+        self._fired: deque[_Send] = deque()  # timers that fired, waiting for this thread
+        self._cond = threading.Condition()
         #: ``time.monotonic()`` after which every session stops with :class:`SessionTimeout`.
         self.wall_deadline: float | None = None
 
@@ -103,14 +94,23 @@ class Scheduler:
     def add_timer(
         self, session: Session, delay: float, sendid: str, deliver: Callable[[], None]
     ) -> None:
-        heapq.heappush(
-            self.timers, _Timer(self.clock.now() + delay, next(self._seq), session, sendid, deliver)
-        )
+        send = _Send(session, sendid, deliver)
+        send.timer = self.clock.call_later(delay, lambda: self._fire(send))
+        self.pending.append(send)
+
+    def _fire(self, send: _Send) -> None:
+        """The clock's callback (maybe on its thread): queue the send for the scheduler."""
+        with self._cond:
+            self._fired.append(send)
+            self._cond.notify()
 
     def cancel_timers(self, session: Session, sendid: str) -> None:
-        for t in self.timers:
-            if t.session is session and t.sendid == sendid:
-                t.cancelled = True
+        for send in self.pending:
+            if send.session is session and send.sendid == sendid:
+                send.cancelled = True
+                if send.timer is not None:
+                    send.timer.cancel()
+        self.pending = [s for s in self.pending if not s.cancelled]
 
     def run_ready(self) -> bool:
         """Let every session with work do it; return whether any did."""
@@ -131,16 +131,42 @@ class Scheduler:
             self.run_ready()
             if not root.running:
                 return root.final_state
-            while self.timers and self.timers[0].cancelled:
-                heapq.heappop(self.timers)
-            if not self.timers:
+            if not self.pending:
                 return None
-            due = self.timers[0].due
+            if not self._wait(deadline):
+                return None
+            self._deliver_fired()
+
+    def _wait(self, deadline: float | None) -> bool:
+        """Let time pass until a delayed send fires; ``False`` if ``deadline`` comes first."""
+        clock = self.clock
+        if isinstance(clock, SimClock):
+            due = min(s.timer.when for s in self.pending if s.timer is not None)
             if deadline is not None and due > deadline:
-                self.clock.sleep_until(deadline)
-                return None
-            self.clock.sleep_until(due)
-            while self.timers and self.timers[0].due <= self.clock.now():
-                timer = heapq.heappop(self.timers)
-                if not timer.cancelled and timer.session.running:
-                    timer.deliver()
+                clock.run_until(max(deadline, clock.now()))
+                return bool(self._fired)
+            clock.run_until(max(due, clock.now()))
+            return True
+        with self._cond:
+            while not self._fired:
+                waits = []
+                if deadline is not None:
+                    waits.append(deadline - clock.now())
+                if self.wall_deadline is not None:
+                    waits.append(self.wall_deadline - time.monotonic())
+                wait = min(waits) if waits else None
+                if wait is not None and wait <= 0:
+                    return False
+                self._cond.wait(wait)
+            return True
+
+    def _deliver_fired(self) -> None:
+        """Deliver every send whose timer fired, in firing order (due time, then send order)."""
+        with self._cond:
+            fired = list(self._fired)
+            self._fired.clear()
+        done = {id(s) for s in fired}
+        self.pending = [s for s in self.pending if id(s) not in done]
+        for send in fired:
+            if not send.cancelled and send.session.running:
+                send.deliver()

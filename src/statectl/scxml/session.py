@@ -12,8 +12,10 @@ microstep by microstep and performs the executable content it hands over. Rules:
    internal queue at once; an undeliverable send puts ``error.communication``.
 3. A :class:`Scheduler` runs every session of a document (parent and invoked
    children) in one thread, round-robin until all are idle, then advances the
-   :class:`Clock` to the next delayed send. A :class:`SimulatedClock` makes a
-   timed run deterministic and instant; :class:`RealClock` really waits.
+   runtime's :class:`~statectl.runtime.clock.Clock` to the next delayed send. A
+   :class:`~statectl.runtime.clock.SimClock` (alias ``SimulatedClock``) makes a
+   timed run deterministic and instant; a :class:`~statectl.runtime.clock.WallClock`
+   (alias ``RealClock``) really waits.
 4. Send targets: none (own external queue), ``#_internal``, ``#_parent``,
    ``#_<invokeid>``, ``#_scxml_<sessionid>``; other targets are
    ``error.execution``, unreachable sessions ``error.communication``.
