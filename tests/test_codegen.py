@@ -12,7 +12,8 @@ import pytest
 
 from codegen_support import CLANG, FLAGS, GXX, needs_gxx
 from statectl.build import load_chart
-from statectl.codegen import flatten, generate, run_codegen
+from statectl.cli.codegen import run_codegen
+from statectl.codegen import flatten, generate
 from statectl.codegen.flatten import Decision, Outcome, Unhandled, identifiers
 from statectl.demo import run_demo
 from statectl.errors import Severity

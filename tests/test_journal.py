@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from statectl.cli.journal import journal_export, journal_replay, journal_show
+from statectl.cli.run import run
 from statectl.demo import motor_chart
 from statectl.devices import SimMotor
 from statectl.errors import DiagnosticError
@@ -26,15 +28,7 @@ from statectl.journal import (
     load_device,
     replay,
 )
-from statectl.runner import (
-    DeviceSetup,
-    System,
-    journal_export,
-    journal_replay,
-    journal_show,
-    parse_event_line,
-    run,
-)
+from statectl.runner import DeviceSetup, System, parse_event_line
 from statectl.runtime import SimClock
 from statectl.tables import load
 

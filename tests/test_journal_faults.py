@@ -25,6 +25,7 @@ from pathlib import Path
 import pytest
 
 from statectl.cli import BROKEN_PIPE, main
+from statectl.cli.run import run
 from statectl.journal import (
     Journal,
     JournalDamaged,
@@ -35,7 +36,7 @@ from statectl.journal import (
     load_device,
     replay,
 )
-from statectl.runner import DeviceSetup, System, run
+from statectl.runner import DeviceSetup, System
 from statectl.runtime import SimClock
 from statectl.semantics import Snapshot
 

@@ -14,7 +14,8 @@ from typing import Any
 
 import pytest
 
-from statectl.runner import System, run
+from statectl.cli.run import run
+from statectl.runner import System
 
 CELL = Path(__file__).parent.parent / "examples" / "pick-and-place" / "cell.yaml"
 DEVICES = ("conveyor", "arm", "gripper", "sensor")

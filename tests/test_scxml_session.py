@@ -224,3 +224,41 @@ def test_system_variables_are_read_only() -> None:
         '</state><final id="pass"/>'
     )
     assert run(body)[0] == "pass"
+
+
+TIMED = (
+    '<state id="s"><onentry><send event="go" delay="2s"/></onentry>'
+    '<transition event="go" target="done"/></state><final id="done"/>'
+)
+
+
+def test_a_document_and_a_device_timer_share_the_runtimes_simclock() -> None:
+    """On the runtime's SimClock a document's timers and a device's fire in time order."""
+    from statectl.runtime import SimClock
+
+    clock = SimClock()
+    fired: list[tuple[str, float]] = []
+    clock.call_later(1.0, lambda: fired.append(("device", clock.now())))
+    clock.call_later(3.0, lambda: fired.append(("late device", clock.now())))
+    chart, diagnostics = read_scxml(f'<scxml xmlns="{SCXML_NS}" version="1.0">{TIMED}</scxml>')
+    assert chart is not None, diagnostics
+    scheduler = Scheduler(clock)
+    final = scheduler.run(Session(chart, scheduler), 10.0)
+    assert (final, fired, clock.now(), clock.pending) == ("done", [("device", 1.0)], 2.0, 1)
+
+
+def test_a_document_on_the_wall_clock_really_waits() -> None:
+    """On a WallClock a delayed send fires on the clock's thread; the scheduler delivers it."""
+    from statectl.runtime import WallClock
+
+    clock = WallClock()
+    body = TIMED.replace('delay="2s"', 'delay="50ms"')
+    chart, diagnostics = read_scxml(f'<scxml xmlns="{SCXML_NS}" version="1.0">{body}</scxml>')
+    assert chart is not None, diagnostics
+    scheduler = Scheduler(clock)
+    try:
+        final = scheduler.run(Session(chart, scheduler), clock.now() + 5.0)
+        elapsed = clock.now()
+    finally:
+        clock.stop()
+    assert final == "done" and 0.05 <= elapsed < 5.0

@@ -10,13 +10,13 @@ from typing import Any
 import pytest
 
 from statectl.build import load_chart
+from statectl.cli.run import run
 from statectl.demo import run_demo
 from statectl.devices import SimMotor, SimTwin, connect, load_driver_config, make_driver
 from statectl.devices.base import Driver
 from statectl.errors import DiagnosticError, StatectlError
 from statectl.model import Chart
 from statectl.observers import Notification
-from statectl.runner import run
 from statectl.runtime import Record, SimClock, Subject
 from statectl.runtime.records import TransitionTaken
 

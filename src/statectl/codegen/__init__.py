@@ -1,6 +1,6 @@
 """Code generation: chart -> flat tables (:mod:`.flatten`) -> plain C++17 (:mod:`.cpp`)."""
 
-from statectl.codegen.cpp import generate, run_codegen
+from statectl.codegen.cpp import generate
 from statectl.codegen.flatten import CODES, FlatChart, flatten
 
-__all__ = ["CODES", "FlatChart", "flatten", "generate", "run_codegen"]
+__all__ = ["CODES", "FlatChart", "flatten", "generate"]

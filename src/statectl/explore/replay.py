@@ -10,13 +10,14 @@ Rules:
    --traces``: JSON, or YAML with the same ``steps``); without it, a seeded random
    walk over the stimuli the explorer says are enabled.
 3. After every step the devices' states are compared with what the trace (or the
-   explorer) expects; a difference is reported as a divergence (exit 1). A free
+   explorer) expects; a difference is reported as a divergence (the command,
+   :mod:`statectl.cli.replay`, then exits 1). A free
    choice the runtime cannot make the trace's way shows up there.
 4. Invariants are checked after every step and reported when they fail, so a
    replayed counterexample shows its failure on the simulated devices.
 5. :class:`CellLinks` is rule 1's link part alone, for any host of running
    Subjects: this runner, and ``statectl run CELL --dashboard/--journal``
-   (:mod:`statectl.runner`).
+   (:mod:`statectl.cli.run`).
 """
 
 from __future__ import annotations
@@ -29,8 +30,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
-from statectl.cell import Cell, InputKind, Link, Trigger, load_cell
-from statectl.errors import Severity, StatectlError
+from statectl.cell import Cell, InputKind, Link, Trigger
+from statectl.errors import StatectlError
 from statectl.explore.compose import Composed, Stimulus
 from statectl.runtime import (
     EventIgnored,
@@ -43,9 +44,7 @@ from statectl.runtime import (
 )
 from statectl.tables import safeyaml
 
-__all__ = ["CellLinks", "CellRun", "ReplayStep", "load_replay", "run_cell", "run_main"]
-
-OK, PROBLEMS, USAGE = 0, 1, 2
+__all__ = ["CellLinks", "CellRun", "ReplayStep", "load_replay", "run_cell"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -89,10 +88,6 @@ class CellRun:
     divergences: tuple[str, ...]
     violations: tuple[str, ...]
     unhandled: tuple[str, ...]
-
-    @property
-    def exit_code(self) -> int:
-        return PROBLEMS if self.divergences else OK
 
 
 class CellLinks:
@@ -271,27 +266,3 @@ def run_cell(
         out.write(f"diverged: {text}\n")
     out.write(f"{done} step(s); final: {m.describe(r.state())}\n")
     return result
-
-
-def run_main(
-    cell: str, *, replay: str | None = None, walk: int = 20, seed: int = 0, out: TextIO, err: TextIO
-) -> int:
-    """The whole ``statectl run CELL [--replay TRACE]`` command; returns the exit code."""
-    if not Path(cell).is_file():
-        err.write(f"statectl run: {cell}: no such file\n")
-        return USAGE
-    if replay is not None and not Path(replay).is_file():
-        err.write(f"statectl run: {replay}: no such trace file\n")
-        return USAGE
-    loaded, diags = load_cell(cell)
-    if loaded is None:
-        for d in diags:
-            if d.severity is not Severity.INFO:
-                err.write(f"{d}\n")
-        return PROBLEMS
-    try:
-        steps = load_replay(replay) if replay is not None else None
-    except StatectlError as exc:
-        err.write(f"statectl run: {exc}\n")
-        return USAGE
-    return run_cell(loaded, out, replay=steps, walk=walk, seed=seed).exit_code

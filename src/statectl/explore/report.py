@@ -188,11 +188,6 @@ class Report:
         return "holds" if self.complete else "incomplete"
 
     @property
-    def exit_code(self) -> int:
-        """0 every property holds; 1 one fails or the bounded search could not tell."""
-        return 0 if self.verdict == "holds" else 1
-
-    @property
     def rate(self) -> float:
         return self.states / self.seconds if self.seconds > 0 else float(self.states)
 

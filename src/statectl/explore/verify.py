@@ -1,11 +1,8 @@
-"""``statectl verify CELL``: load, explore, report; the functions the CLI calls.
+"""What ``statectl verify CELL`` builds on: explore a cell, write its failing traces.
 
-Rules:
-1. A cell that does not load prints every diagnostic and exits 1; a missing
-   file or a bad option is a usage error (2).
-2. Exit 0 only when every property holds over the complete state space.
-3. The progress display goes to stderr, only when stderr is a terminal or the
-   caller asks for it; ``--json`` writes one JSON document to stdout.
+The command itself (options, printing, exit codes: rules in
+:mod:`statectl.cli.verify`) is in the CLI; these functions return values and
+write only the files they are asked to.
 """
 
 from __future__ import annotations
@@ -14,19 +11,14 @@ import json
 import os
 from collections.abc import Callable
 from pathlib import Path
-from typing import TextIO
 
-from statectl.cell import Cell, load_cell
-from statectl.errors import Diagnostic, Severity
-from statectl.explore.compose import Composed
+from statectl.cell import load_cell
+from statectl.errors import Diagnostic
 from statectl.explore.diagrams import to_mermaid, to_plantuml
-from statectl.explore.promela import export_promela
 from statectl.explore.report import Report
-from statectl.explore.search import Progress, ProgressPrinter, explore
+from statectl.explore.search import Progress, explore
 
-__all__ = ["verify_cell", "verify_main", "write_traces"]
-
-OK, PROBLEMS, USAGE = 0, 1, 2
+__all__ = ["verify_cell", "write_traces"]
 
 
 def verify_cell(
@@ -66,70 +58,3 @@ def write_traces(report: Report, directory: str | os.PathLike[str]) -> list[Path
             path.write_text(text, encoding="utf-8")
             written.append(path)
     return written
-
-
-def verify_main(
-    cell: str,
-    *,
-    as_json: bool = False,
-    max_states: int | None = None,
-    export: str | None = None,
-    output: str | None = None,
-    traces: str | None = None,
-    diagrams: str | None = None,
-    progress: bool | None = None,
-    out: TextIO,
-    err: TextIO,
-) -> int:
-    """The whole ``statectl verify`` command; returns the exit code.
-
-    ``export="promela"`` writes the composed model (to ``output`` or stdout) instead
-    of exploring; ``traces`` names a folder for the failing traces and diagrams;
-    ``diagrams`` ("mermaid" or "plantuml") prints each failing trace's diagram.
-    """
-    if not Path(cell).is_file():
-        err.write(f"statectl verify: {cell}: no such file\n")
-        return USAGE
-    if export not in (None, "promela") or diagrams not in (None, "mermaid", "plantuml"):
-        err.write("statectl verify: --export takes promela; --diagrams mermaid or plantuml\n")
-        return USAGE
-    if max_states is not None and max_states < 1:
-        err.write("statectl verify: --max-states must be at least 1\n")
-        return USAGE
-    loaded, diags = load_cell(cell)
-    for d in diags:
-        if d.severity is not Severity.INFO and (loaded is None or d.severity is Severity.WARNING):
-            err.write(f"{d}\n")
-    if loaded is None:
-        err.write(f"{cell}: not loaded\n")
-        return PROBLEMS
-    if export == "promela":
-        return _export(loaded, output, out)
-    show = err.isatty() if progress is None else progress
-    printer = ProgressPrinter(err) if show else None
-    report = explore(loaded, max_states=max_states, progress=printer)
-    if printer is not None:
-        printer.done()
-    if as_json:
-        json.dump(report.to_json(), out, indent=2)
-        out.write("\n")
-    else:
-        out.write(report.to_text())
-        for f in report.failures if diagrams else ():
-            if f.trace is not None:
-                title = f"{f.kind.value} {f.name}"
-                draw = to_mermaid if diagrams == "mermaid" else to_plantuml
-                out.write(f"\n{draw(f.trace, title)}")
-    if traces:
-        for p in write_traces(report, traces):
-            err.write(f"wrote {p}\n")
-    return report.exit_code
-
-
-def _export(cell: Cell, output: str | None, out: TextIO) -> int:
-    text = export_promela(Composed(cell))
-    if output:
-        Path(output).write_text(text, encoding="utf-8")
-    else:
-        out.write(text)
-    return OK

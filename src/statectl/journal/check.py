@@ -36,7 +36,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from statectl.journal.store import _SCHEMA, SCHEMA_VERSION, JournalError, StepKind
+from statectl.journal.format import _SCHEMA, SCHEMA_VERSION, JournalError, StepKind
 
 __all__ = [
     "COLUMNS",

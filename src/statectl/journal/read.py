@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from statectl.journal.check import check_journal, connect_ro, sqlite_problem
-from statectl.journal.store import JournalError, StepKind, decode_snapshot
+from statectl.journal.format import JournalError, StepKind, decode_snapshot
 from statectl.journal.subjects import restore_subject
 from statectl.model import Chart
 from statectl.runtime.clock import SimClock

@@ -52,4 +52,8 @@ def run_file(
     scheduler = Scheduler(clock, log, log)
     scheduler.wall_deadline = time.monotonic() + timeout
     session = Session(chart, scheduler, base=Path(path).resolve().parent, allow_src=allow_src)
-    return scheduler.run(session, clock.now() + timeout)
+    try:
+        return scheduler.run(session, clock.now() + timeout)
+    finally:
+        if isinstance(clock, RealClock):
+            clock.stop()  # its timer thread, started by the first delayed send

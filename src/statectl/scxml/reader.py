@@ -36,39 +36,35 @@ Rules:
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
 from pathlib import Path
-from xml.parsers import expat
 
 from statectl.errors import Diagnostic, DiagnosticError, Location, Severity
 from statectl.model import (
     Action,
     Api,
-    Assign,
-    Block,
-    Cancel,
     Chart,
-    Content,
     ControlKind,
-    DataItem,
     DoneData,
     EventDef,
     EventKind,
-    Foreach,
-    If,
     Invoke,
-    InvokeDef,
-    Log,
-    Notify,
-    Param,
-    Raise,
     Script,
-    Send,
     State,
     StateKind,
     Transition,
 )
-from statectl.scxml.safecheck import check_safe, src_escapes
+from statectl.scxml.executable import ContentReader
+from statectl.scxml.safecheck import check_safe
+from statectl.scxml.xmltree import (
+    MAX_SRC_BYTES,
+    MAX_XML_DEPTH,
+    SCXML_NS,
+    STATECTL_NS,
+    _Node,
+    _number,
+    _parse_xml,
+    read_src_text,
+)
 
 __all__ = [
     "MAX_SRC_BYTES",
@@ -80,377 +76,9 @@ __all__ = [
     "read_src_text",
 ]
 
-SCXML_NS = "http://www.w3.org/2005/07/scxml"
-#: Device-table facts SCXML has no word for (controls, notifications) live here.
-STATECTL_NS = "urn:statectl:scxml"
-_SEP = "}"
 
-#: Deepest element nesting a document may have (S620; docs/limits.md).
-MAX_XML_DEPTH = 100
-#: Largest file a ``src`` attribute may name, in bytes (S607).
-MAX_SRC_BYTES = 1 << 20
-
-
-class _Refused(Exception):
-    """Raised inside an expat handler to stop parsing with a diagnostic."""
-
-    def __init__(self, code: str, line: int, message: str, hint: str) -> None:
-        super().__init__(message)
-        self.code, self.line, self.message, self.hint = code, line, message, hint
-
-
-def read_src_text(path: Path) -> str:
-    """A ``src`` file's text, read with a bound: at most :data:`MAX_SRC_BYTES`, UTF-8.
-
-    Raises ``OSError`` if it cannot be read and ``ValueError`` if it is too large
-    (an endless stream such as ``/dev/zero`` stops here) or not UTF-8.
-    """
-    with path.open("rb") as fh:
-        data = fh.read(MAX_SRC_BYTES + 1)
-    if len(data) > MAX_SRC_BYTES:
-        raise ValueError(f"larger than {MAX_SRC_BYTES} bytes (see docs/limits.md)")
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise ValueError(f"not UTF-8 (byte {exc.start})") from None
-
-
-def _number(text: str | None) -> int | None:
-    """A small non-negative number written in ASCII digits, else ``None``."""
-    if text is None or not text.isascii() or not text.isdigit() or len(text) > 9:
-        return None
-    return int(text)
-
-
-@dataclass(slots=True)
-class _Node:
-    """A parsed element: namespace, local name, attributes, children, text, line."""
-
-    ns: str
-    tag: str
-    attrs: dict[str, str]
-    line: int
-    children: list[_Node] = field(default_factory=list)
-    text: list[str] = field(default_factory=list)  # text chunks, including between children
-
-    def get(self, name: str) -> str | None:
-        return self.attrs.get(name)
-
-    @property
-    def content_text(self) -> str:
-        return "".join(self.text)
-
-    def scxml_children(self, *tags: str) -> list[_Node]:
-        return [c for c in self.children if c.ns == SCXML_NS and (not tags or c.tag in tags)]
-
-
-def _parse_xml(text: str | bytes, file: str) -> tuple[_Node | None, list[Diagnostic]]:
-    """Parse text (its prolog's encoding ignored) or bytes (decoded as the prolog says)."""
-    parser = expat.ParserCreate(
-        "UTF-8" if isinstance(text, str) else None, namespace_separator=_SEP
-    )
-    stack: list[_Node] = []
-    root: list[_Node] = []
-
-    def split(name: str) -> tuple[str, str]:
-        if _SEP in name:
-            ns, local = name.split(_SEP, 1)
-            return ns, local
-        return "", name
-
-    def start(name: str, attrs: dict[str, str]) -> None:
-        if len(stack) >= MAX_XML_DEPTH:
-            raise _Refused(
-                "S620",
-                parser.CurrentLineNumber,
-                f"elements nested deeper than {MAX_XML_DEPTH} levels",
-                "flatten the document; see docs/limits.md",
-            )
-        ns, local = split(name)
-        plain = {split(k)[1]: v for k, v in attrs.items()}
-        node = _Node(ns, local, plain, parser.CurrentLineNumber)
-        if stack:
-            stack[-1].children.append(node)
-        else:
-            root.append(node)
-        stack.append(node)
-
-    def end(name: str) -> None:
-        stack.pop()
-
-    def chars(data: str) -> None:
-        if stack:
-            stack[-1].text.append(data)
-
-    def entity(name: str, *_: object) -> None:
-        raise _Refused(
-            "S622",
-            parser.CurrentLineNumber,
-            f"the DTD declares the entity {name!r}: entity declarations are refused",
-            "remove the <!ENTITY> declarations; SCXML needs no DTD",
-        )
-
-    parser.StartElementHandler = start
-    parser.EndElementHandler = end
-    parser.CharacterDataHandler = chars
-    parser.EntityDeclHandler = entity
-    parser.UnparsedEntityDeclHandler = entity
-    try:
-        data = text.encode("utf-8", "surrogatepass") if isinstance(text, str) else text
-        parser.Parse(data, True)
-    except _Refused as exc:
-        return None, [
-            Diagnostic(exc.code, Severity.ERROR, Location(file, exc.line), exc.message, exc.hint)
-        ]
-    except (LookupError, UnicodeError, ValueError) as exc:  # the prolog's encoding
-        return None, [
-            Diagnostic(
-                "S621",
-                Severity.ERROR,
-                Location(file, parser.CurrentLineNumber or 1),
-                f"the document's encoding cannot be read: {exc}",
-                'save the document as UTF-8 and declare encoding="UTF-8" (or nothing)',
-            )
-        ]
-    except expat.ExpatError as exc:
-        where = Location(file, exc.lineno)
-        return None, [
-            Diagnostic(
-                "S601",
-                Severity.ERROR,
-                where,
-                f"the document is not well-formed XML: {expat.errors.messages[exc.code]}",
-                "fix the XML syntax at that line (unclosed tag, stray '<' or '&')",
-            )
-        ]
-    return root[0], []
-
-
-def serialise(node: _Node, parent_ns: str | None = None) -> str:
-    """Write a parsed element back as XML text (for inline ``<content>``)."""
-    from xml.sax.saxutils import escape, quoteattr
-
-    attrs = "".join(f" {k}={quoteattr(v)}" for k, v in node.attrs.items())
-    if node.ns != parent_ns and node.ns:
-        attrs = f" xmlns={quoteattr(node.ns)}" + attrs
-    inner = escape("".join(node.text)) + "".join(serialise(c, node.ns) for c in node.children)
-    return f"<{node.tag}{attrs}>{inner}</{node.tag}>"
-
-
-class _Reader:
-    def __init__(self, file: str, base: Path) -> None:
-        self.file = file
-        self.base = base
-        self.trusted = False  # a python document may read any src; others stay in base
-        self.diagnostics: list[Diagnostic] = []
-        self.states: list[State] = []
-        self.transitions: list[Transition] = []
-        self.ids: set[str] = set()
-        self.generated = 0
-        self.references: list[tuple[str, tuple[str, ...], Location]] = []  # initial/default
-        self.ignored: set[tuple[str, str]] = set()
-        self.rows: dict[int, int] = {}  # transition index -> statectl:row (the chart's order)
-
-    def at(self, node: _Node) -> Location:
-        return Location(self.file, node.line)
-
-    def problem(
-        self, code: str, node: _Node, message: str, hint: str, *, warn: bool = False
-    ) -> None:
-        severity = Severity.WARNING if warn else Severity.ERROR
-        self.diagnostics.append(Diagnostic(code, severity, self.at(node), message, hint))
-
-    def need(self, node: _Node, attr: str) -> str:
-        value = node.get(attr)
-        if value is None:
-            self.problem(
-                "S603",
-                node,
-                f"<{node.tag}> has no '{attr}' attribute",
-                f'add {attr}="..." to the <{node.tag}> element',
-            )
-            return ""
-        return value
-
-    # -- executable content -------------------------------------------------------------------
-
-    def content_of(self, node: _Node | None) -> Content | None:
-        if node is None:
-            return None
-        elements = [c for c in node.children]
-        body: str | None
-        if elements:
-            body = "".join(serialise(c) for c in elements)
-        else:
-            text = node.content_text
-            body = text if text.strip() or node.get("expr") is None else None
-        if node.get("expr") is not None:
-            body = None
-        return Content(node.get("expr"), body, self.at(node))
-
-    def params_of(self, node: _Node) -> tuple[Param, ...]:
-        return tuple(
-            Param(self.need(p, "name"), p.get("expr"), p.get("location"), self.at(p))
-            for p in node.scxml_children("param")
-        )
-
-    def executable(self, node: _Node) -> tuple[Action, ...]:
-        out: list[Action] = []
-        for c in node.children:
-            if c.ns == STATECTL_NS and c.tag == "notify":
-                out.append(self.notify(c))
-                continue
-            if c.ns != SCXML_NS:
-                continue
-            action = self.action(c)
-            if action is not None:
-                out.append(action)
-        return tuple(out)
-
-    def notify(self, c: _Node) -> Notify:
-        text = c.get("invoke") or "0"
-        number = _number(text)
-        if number is None:
-            self.problem("S603", c, f"notify invoke {text[:20]!r} is not a number", "use 0, 1, ...")
-            number = 0
-        return Notify(number, c.get("name") or "", c.get("method") or "", c.get("event") or "")
-
-    def action(self, c: _Node) -> Action | None:
-        at = self.at(c)
-        tag = c.tag
-        if tag == "raise":
-            return Raise(self.need(c, "event"))
-        if tag == "log":
-            return Log(c.get("label") or "", c.get("message") or "", c.get("expr"), at)
-        if tag == "assign":
-            body = (
-                None
-                if c.get("expr") is not None
-                else ("".join(serialise(x) for x in c.children) or c.content_text)
-            )
-            return Assign(self.need(c, "location"), c.get("expr"), body, at)
-        if tag == "script":
-            return Script(self.script_source(c), at)
-        if tag == "if":
-            return self.if_action(c)
-        if tag == "foreach":
-            return Foreach(
-                self.need(c, "array"), self.need(c, "item"), c.get("index"), self.executable(c), at
-            )
-        if tag == "send":
-            content = c.scxml_children("content")
-            return Send(
-                event=c.get("event"),
-                eventexpr=c.get("eventexpr"),
-                target=c.get("target"),
-                targetexpr=c.get("targetexpr"),
-                type=c.get("type"),
-                typeexpr=c.get("typeexpr"),
-                id=c.get("id"),
-                idlocation=c.get("idlocation"),
-                delay=c.get("delay"),
-                delayexpr=c.get("delayexpr"),
-                namelist=tuple((c.get("namelist") or "").split()),
-                params=self.params_of(c),
-                content=self.content_of(content[0] if content else None),
-                origin=at,
-            )
-        if tag == "cancel":
-            return Cancel(c.get("sendid"), c.get("sendidexpr"), at)
-        self.problem(
-            "S606",
-            c,
-            f"<{tag}> is not executable content; it was skipped",
-            "use raise, log, assign, script, if, foreach, send or cancel",
-            warn=True,
-        )
-        return None
-
-    def if_action(self, c: _Node) -> If:
-        branches: list[tuple[str | None, tuple[Action, ...]]] = []
-        cond: str | None = self.need(c, "cond")
-        current: list[Action] = []
-        for x in c.children:
-            if x.ns != SCXML_NS:
-                continue
-            if x.tag in ("elseif", "else"):
-                branches.append((cond, tuple(current)))
-                cond = self.need(x, "cond") if x.tag == "elseif" else None
-                current = []
-                continue
-            action = self.action(x)
-            if action is not None:
-                current.append(action)
-        branches.append((cond, tuple(current)))
-        return If(tuple(branches), self.at(c))
-
-    def script_source(self, c: _Node) -> str:
-        src = c.get("src")
-        if src is None:
-            return c.content_text
-        text = self.read_src(c, src)
-        return text or ""
-
-    def read_src(self, node: _Node, src: str) -> str | None:
-        """A ``<content src>`` or ``<script src>`` read at load, bounded; an untrusted
-        (safe or null) document reads only regular files inside its own directory."""
-        path = self.base / src.strip().removeprefix("file:")
-        why = None if self.trusted else src_escapes(src)
-        if why is None and not self.trusted:
-            try:
-                inside = path.resolve().is_relative_to(self.base.resolve())
-            except (OSError, RuntimeError):
-                inside = False
-            if not inside:
-                why = "leaves the document's directory through a link"
-            elif not path.is_file():
-                why = "is not a regular file"
-        if why is not None:
-            self.problem("S607", node, f"src {src!r} {why}", "keep src files beside the document")
-            return None
-        try:
-            return read_src_text(path)
-        except (OSError, ValueError) as exc:
-            why = getattr(exc, "strerror", None) or str(exc)
-            self.problem("S607", node, f"cannot read src {src!r}: {why}", "check the path")
-            return None
-
-    def handlers(self, node: _Node, tag: str) -> tuple[Action, ...]:
-        blocks = [self.executable(h) for h in node.scxml_children(tag)]
-        if len(blocks) == 1:
-            return blocks[0]
-        return tuple(Block(b) for b in blocks)
-
-    def data_items(self, node: _Node) -> tuple[DataItem, ...]:
-        items: list[DataItem] = []
-        for dm in node.scxml_children("datamodel"):
-            for d in dm.scxml_children("data"):
-                body: str | None = None
-                if d.get("expr") is None and d.get("src") is None:
-                    body = "".join(serialise(x) for x in d.children) or d.content_text
-                    body = body if body.strip() else None
-                items.append(
-                    DataItem(self.need(d, "id"), d.get("expr"), self.at(d), d.get("src"), body)
-                )
-        return tuple(items)
-
-    def invoke_def(self, c: _Node) -> InvokeDef:
-        content = c.scxml_children("content")
-        finalize = c.scxml_children("finalize")
-        return InvokeDef(
-            type=c.get("type"),
-            typeexpr=c.get("typeexpr"),
-            src=c.get("src"),
-            srcexpr=c.get("srcexpr"),
-            id=c.get("id"),
-            idlocation=c.get("idlocation"),
-            namelist=tuple((c.get("namelist") or "").split()),
-            autoforward=(c.get("autoforward") or "false").strip() == "true",
-            params=self.params_of(c),
-            content=self.content_of(content[0] if content else None),
-            finalize=self.executable(finalize[0]) if finalize else (),
-            origin=self.at(c),
-        )
+class _Reader(ContentReader):
+    """Adds states, transitions, targets and the chart to the content reader."""
 
     # -- states -------------------------------------------------------------------------------
 

@@ -12,8 +12,10 @@ microstep by microstep and performs the executable content it hands over. Rules:
    internal queue at once; an undeliverable send puts ``error.communication``.
 3. A :class:`Scheduler` runs every session of a document (parent and invoked
    children) in one thread, round-robin until all are idle, then advances the
-   :class:`Clock` to the next delayed send. A :class:`SimulatedClock` makes a
-   timed run deterministic and instant; :class:`RealClock` really waits.
+   runtime's :class:`~statectl.runtime.clock.Clock` to the next delayed send. A
+   :class:`~statectl.runtime.clock.SimClock` (alias ``SimulatedClock``) makes a
+   timed run deterministic and instant; a :class:`~statectl.runtime.clock.WallClock`
+   (alias ``RealClock``) really waits.
 4. Send targets: none (own external queue), ``#_internal``, ``#_parent``,
    ``#_<invokeid>``, ``#_scxml_<sessionid>``; other targets are
    ``error.execution``, unreachable sessions ``error.communication``.
@@ -33,18 +35,14 @@ microstep by microstep and performs the executable content it hands over. Rules:
 
 from __future__ import annotations
 
-import heapq
 import itertools
-import re
-import time
 import uuid
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
-from statectl.errors import StatectlError
 from statectl.model import (
     Action,
     Assign,
@@ -63,14 +61,27 @@ from statectl.model import (
     State,
     Transition,
 )
+from statectl.scxml import sending
 from statectl.scxml.datamodel import (
     Datamodel,
     EvaluationError,
     inline_value,
     make_datamodel,
 )
-from statectl.scxml.reader import read_scxml
 from statectl.scxml.safecheck import src_escapes
+from statectl.scxml.scheduler import (
+    Clock,
+    RealClock,
+    Scheduler,
+    SessionTimeout,
+    SimulatedClock,
+)
+from statectl.scxml.sending import (
+    MAX_INVOKE_DEPTH,
+    MAX_SESSIONS,
+    SCXML_IO,
+    SendError,
+)
 from statectl.semantics import (
     Event,
     Machine,
@@ -95,52 +106,9 @@ __all__ = [
     "SimulatedClock",
 ]
 
-#: Deepest chain of invoked sessions (a document invoking itself stops here).
-MAX_INVOKE_DEPTH = 16
-#: Most sessions running at once in one scheduler (a document and its invoked children).
-MAX_SESSIONS = 256
+
 #: Largest ``src`` file a ``<data>`` or ``<invoke>`` reads.
 MAX_SRC_BYTES = 1 << 20
-
-
-class SessionTimeout(StatectlError):
-    """The run passed its wall-clock deadline; the session stops where it is."""
-
-
-SCXML_IO = "http://www.w3.org/TR/scxml/#SCXMLEventProcessor"
-SCXML_INVOKE = "http://www.w3.org/TR/scxml/"
-_SCXML_TYPES = frozenset({SCXML_IO, "scxml"})
-_INVOKE_TYPES = frozenset({SCXML_INVOKE, SCXML_INVOKE.rstrip("/"), "scxml"})
-
-
-class Clock(Protocol):
-    def now(self) -> float: ...
-    def sleep_until(self, when: float) -> None: ...
-
-
-class RealClock:
-    """Wall-clock time; ``sleep_until`` really sleeps."""
-
-    def now(self) -> float:
-        return time.monotonic()
-
-    def sleep_until(self, when: float) -> None:
-        delay = when - time.monotonic()
-        if delay > 0:
-            time.sleep(delay)
-
-
-class SimulatedClock:
-    """Time that moves only when the scheduler waits: timed runs are deterministic."""
-
-    def __init__(self, start: float = 0.0) -> None:
-        self.time = start
-
-    def now(self) -> float:
-        return self.time
-
-    def sleep_until(self, when: float) -> None:
-        self.time = max(self.time, when)
 
 
 class EventData(dict[str, Any]):
@@ -153,109 +121,9 @@ class EventData(dict[str, Any]):
             raise AttributeError(name) from exc
 
 
-class SendError(EvaluationError):
-    """A send that cannot be dispatched: ends the block with ``event`` carrying the sendid."""
-
-    def __init__(self, message: str, event: str, sendid: str) -> None:
-        super().__init__(message)
-        self.event = event
-        self.sendid = sendid
-
-
 @dataclass(frozen=True, slots=True)
 class IOProcessor:
     location: str
-
-
-_DELAY = re.compile(r"^\s*(\d+(?:\.\d*)?|\.\d+)\s*(ms|s|min|h)?\s*$")
-
-
-def parse_delay(text: str) -> float:
-    """A CSS2 time (``'2s'``, ``'500ms'``) in seconds."""
-    match = _DELAY.match(text)
-    if match is None:
-        raise EvaluationError(f"delay {text!r} is not a time such as '1s' or '500ms'")
-    unit = match.group(2) or "s"
-    return float(match.group(1)) * {"ms": 0.001, "s": 1.0, "min": 60.0, "h": 3600.0}[unit]
-
-
-@dataclass(order=True, slots=True)
-class _Timer:
-    due: float
-    seq: int
-    session: Session = field(compare=False)
-    sendid: str = field(compare=False)
-    deliver: Callable[[], None] = field(compare=False)
-    cancelled: bool = field(default=False, compare=False)
-
-
-class Scheduler:
-    """Runs sessions round-robin in one thread and fires delayed sends from a clock."""
-
-    def __init__(
-        self,
-        clock: Clock | None = None,
-        log: Callable[[str], None] | None = None,
-        trace: Callable[[str], None] | None = None,
-    ) -> None:
-        self.clock: Clock = clock or SimulatedClock()
-        self.log = log or (lambda text: None)  # what <log> writes
-        self.trace = trace or (lambda text: None)  # why an error event was raised
-        self.sessions: dict[str, Session] = {}
-        self.timers: list[_Timer] = []
-        self._seq = itertools.count()
-        #: ``time.monotonic()`` after which every session stops with :class:`SessionTimeout`.
-        self.wall_deadline: float | None = None
-
-    def check_deadline(self) -> None:
-        """Raise :class:`SessionTimeout` once the wall-clock deadline has passed."""
-        if self.wall_deadline is not None and time.monotonic() > self.wall_deadline:
-            raise SessionTimeout("the run passed its wall-clock deadline")
-
-    def add_timer(
-        self, session: Session, delay: float, sendid: str, deliver: Callable[[], None]
-    ) -> None:
-        heapq.heappush(
-            self.timers, _Timer(self.clock.now() + delay, next(self._seq), session, sendid, deliver)
-        )
-
-    def cancel_timers(self, session: Session, sendid: str) -> None:
-        for t in self.timers:
-            if t.session is session and t.sendid == sendid:
-                t.cancelled = True
-
-    def run_ready(self) -> bool:
-        """Let every session with work do it; return whether any did."""
-        progressed = False
-        busy = True
-        while busy:
-            busy = False
-            for s in list(self.sessions.values()):
-                if s.ready:
-                    s.run_available()
-                    busy = progressed = True
-        return progressed
-
-    def run(self, root: Session, deadline: float | None = None) -> str | None:
-        """Run until ``root`` stops or nothing can happen before ``deadline`` (clock time)."""
-        while True:
-            self.check_deadline()
-            self.run_ready()
-            if not root.running:
-                return root.final_state
-            while self.timers and self.timers[0].cancelled:
-                heapq.heappop(self.timers)
-            if not self.timers:
-                return None
-            due = self.timers[0].due
-            if deadline is not None and due > deadline:
-                self.clock.sleep_until(deadline)
-                return None
-            self.clock.sleep_until(due)
-            while self.timers and self.timers[0].due <= self.clock.now():
-                timer = heapq.heappop(self.timers)
-                if not timer.cancelled and timer.session.running:
-                    timer.deliver()
 
 
 class Session:
@@ -614,133 +482,14 @@ class Session:
         return f"{prefix}.{self.sessionid[:8]}.{next(self._ids)}"
 
     def send(self, s: Send) -> None:
-        dm = self.datamodel
-        sendid = s.id or ""
-        if s.idlocation is not None:
-            sendid = self.new_id("send")
-            dm.assign(s.idlocation, sendid)
-        name = s.event if s.eventexpr is None else str(dm.evaluate(s.eventexpr))
-        target = s.target if s.targetexpr is None else str(dm.evaluate(s.targetexpr))
-        kind = s.type if s.typeexpr is None else str(dm.evaluate(s.typeexpr))
-        delay = 0.0
-        if s.delayexpr is not None:
-            delay = parse_delay(str(dm.evaluate(s.delayexpr)))
-        elif s.delay is not None:
-            delay = parse_delay(s.delay)
-        if s.content is not None:
-            data: Any = self.content_value(s.content)
-        elif s.namelist or s.params:
-            data = self.params_value(s.namelist, s.params)
-        else:
-            data = None
-        if kind is not None and kind not in _SCXML_TYPES:
-            raise EvaluationError(f"send type {kind!r} is not supported")
-        if name is None:
-            raise EvaluationError("<send> names no event")
-        event = Event(
-            name,
-            data,
-            "external",
-            sendid,
-            self.origin,
-            SCXML_IO,
-            self.invokeid if target == "#_parent" else "",
-        )
-        deliver = self.route(target, event, sendid)
-        if deliver is None:
-            return
-        if delay > 0:
-            self.scheduler.add_timer(self, delay, sendid, deliver)
-        else:
-            deliver()
+        sending.send(self, s)
 
     def route(self, target: str | None, event: Event, sendid: str) -> Callable[[], None] | None:
         """Where a send goes, as a function that delivers it; errors are raised here."""
-        if target is None or target == "":
-            return lambda: self.post(event)
-        if target == "#_internal":
-            return lambda: self.run.raise_event(replace(event, type="internal"))
-        if target == "#_parent":
-            parent = self.parent
-            if parent is None:
-                self.error("error.communication", sendid)
-                return None
-            return lambda: parent.post(event)
-        if target.startswith("#_scxml_"):
-            other = self.scheduler.sessions.get(target.removeprefix("#_scxml_"))
-            if other is None:
-                self.error("error.communication", sendid)
-                return None
-            return lambda: other.post(event)
-        if target.startswith("#_"):
-            invokeid = target.removeprefix("#_")
-
-            def to_child() -> None:
-                entry = self.invocations.get(invokeid)
-                if entry is None or entry[2] is None or not entry[2].running:
-                    self.error("error.communication", sendid)
-                    return
-                entry[2].post(event)
-
-            if invokeid not in self.invocations:
-                self.error("error.communication", sendid)
-                return None
-            return to_child
-        raise SendError(f"send target {target!r} is not supported", "error.execution", sendid)
-
-    # -- invoke ---------------------------------------------------------------------------------
+        return sending.route(self, target, event, sendid)
 
     def check_invoke_bounds(self) -> None:
-        """Refuse an invoke past :data:`MAX_INVOKE_DEPTH` or :data:`MAX_SESSIONS`."""
-        if self.depth + 1 > MAX_INVOKE_DEPTH:
-            raise EvaluationError(
-                f"invokes nest deeper than {MAX_INVOKE_DEPTH} sessions (a document invoking "
-                "itself?)"
-            )
-        running = sum(1 for s in self.scheduler.sessions.values() if s.running)
-        if running >= MAX_SESSIONS:
-            raise EvaluationError(f"more than {MAX_SESSIONS} sessions would run at once")
+        sending.check_invoke_bounds(self)
 
     def invoke(self, state: str, d: InvokeDef) -> None:
-        dm = self.datamodel
-        invokeid = d.id or f"{state}.{self.new_id('invoke')}"
-        try:
-            if d.idlocation is not None:
-                dm.assign(d.idlocation, invokeid)
-            kind = d.type if d.typeexpr is None else str(dm.evaluate(d.typeexpr))
-            if kind is not None and kind not in _INVOKE_TYPES:
-                raise EvaluationError(f"invoke type {kind!r} is not supported")
-            if d.content is not None:
-                text = self.content_value(d.content)
-                base = self.base
-            else:
-                src = d.src if d.srcexpr is None else str(dm.evaluate(d.srcexpr))
-                if src is None:
-                    raise EvaluationError("<invoke> has neither src, srcexpr nor content")
-                text, base = self.read_src(src)
-            values = self.params_value(d.namelist, d.params)
-            self.check_invoke_bounds()
-        except EvaluationError as exc:
-            self.scheduler.trace(f"invoke failed: {exc}")
-            self.error("error.execution")
-            return
-        if not isinstance(text, str):
-            self.error("error.execution")
-            return
-        chart, _diagnostics = read_scxml(text, f"<invoke {invokeid}>", str(base))
-        if chart is None:
-            self.error("error.execution")
-            return
-        if chart.datamodel == "python" and not self.trusted:
-            # Trust is never gained: only a document that is itself trusted (python)
-            # may start a python child; a safe or null parent gets error.execution.
-            self.scheduler.trace(
-                f"invoke {invokeid!r} refused: a {self.chart.datamodel!r} document "
-                "cannot invoke a 'python' datamodel child (trust is never gained)"
-            )
-            self.error("error.execution")
-            return
-        child = Session(
-            chart, self.scheduler, base=base, parent=self, invokeid=invokeid, initial_data=values
-        )
-        self.invocations[invokeid] = (state, d, child)
+        sending.invoke(self, state, d)

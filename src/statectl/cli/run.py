@@ -1,4 +1,8 @@
-"""``statectl run DEVICE`` for real, and ``statectl journal show|replay|export``.
+"""``statectl run DEVICE|CELL`` for real: one System fed event lines, optionally journalled.
+
+The command's own concerns (drivers, dashboard settings, the journal it opens,
+the feed of lines, what is printed and the exit code); the library under it is
+:mod:`statectl.system` and :mod:`statectl.runner`.
 
 Rules:
 1. A run is a :class:`~statectl.system.System` (devices on one clock and one
@@ -30,19 +34,17 @@ Rules:
 from __future__ import annotations
 
 import contextlib
-import datetime as dt
-import heapq
 import os
-import sqlite3
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, TextIO
 
 from statectl.cell import Cell, load_cell
+from statectl.cli.commands import OK, PROBLEMS, USAGE
 from statectl.devices import (
     MIN_TOKEN,
     DashboardConfig,
@@ -53,82 +55,20 @@ from statectl.devices import (
     load_run_config,
     make_driver,
 )
-from statectl.errors import Diagnostic, DiagnosticError, Severity, StatectlError
+from statectl.errors import DiagnosticError, Severity, StatectlError
 from statectl.journal import (
     Guarantee,
     Journal,
     JournalDamaged,
     JournalError,
-    JournalReader,
     Sync,
-    export_jsonl,
     load_device,
-    replay,
     set_aside,
 )
-from statectl.journal.check import sqlite_problem
-from statectl.model import Chart
-from statectl.runtime import Clock, SimClock, TraceWriter, WallClock, format_data
-from statectl.runtime.trace import format_record
+from statectl.runner.cells import is_cell, load_setups, relevant_warnings
+from statectl.runner.events import parse_event_line
+from statectl.runtime import Clock, SimClock, TraceWriter, WallClock
 from statectl.system import DeviceSetup, System
-from statectl.tables import safeyaml
-
-__all__ = [
-    "DeviceSetup",
-    "System",
-    "cell_setups",
-    "is_cell",
-    "journal_export",
-    "journal_replay",
-    "journal_show",
-    "parse_event_line",
-    "parse_time",
-    "run",
-]
-
-OK, PROBLEMS, USAGE = 0, 1, 2
-
-
-def parse_event_line(line: str) -> tuple[str | None, str, Any] | float | None:
-    """``[DEVICE:] EVENT [DATA]`` -> (device, event, data); ``+S`` -> seconds; blank -> None."""
-    text = line.split("#", 1)[0].strip()
-    if not text:
-        return None
-    if text.startswith("+"):
-        try:
-            return float(text[1:])
-        except ValueError:
-            raise StatectlError(f"'+' needs seconds, e.g. '+1.5' (got {text!r})") from None
-    device = None
-    head, colon, rest = text.partition(":")
-    if colon and "{" not in head and "[" not in head and rest.startswith(" "):
-        device, text = head.strip(), rest.strip()
-    data: Any = None
-    brace = min((i for i in (text.find("{"), text.find("[")) if i >= 0), default=-1)
-    if brace >= 0:
-        try:
-            data = safeyaml.load_value(text[brace:])
-        except safeyaml.YamlRefused as exc:
-            raise StatectlError(f"event data is not YAML flow style ({exc.message})") from None
-        text = text[:brace]
-    event = " ".join(text.split())
-    if not event:
-        raise StatectlError("no event name")
-    return device, event, data
-
-
-def parse_time(text: str) -> float:
-    """Seconds since the epoch, or an ISO 8601 date-time (local time if it has no zone)."""
-    try:
-        return float(text)
-    except ValueError:
-        pass
-    try:
-        return dt.datetime.fromisoformat(text).timestamp()
-    except ValueError:
-        raise StatectlError(
-            f"not a time: {text!r}; give seconds since the epoch or ISO 8601 (2024-05-01T12:00:00)"
-        ) from None
 
 
 def _drivers(
@@ -186,17 +126,6 @@ def _show_notes(drivers: Mapping[str, DeviceDriver], out: TextIO, width: int) ->
             d.on_note = writer(name)
 
 
-def is_cell(path: str) -> bool:
-    """A YAML file with a ``devices`` section and no ``states`` table is a cell file."""
-    if Path(path).suffix.lower() not in (".yaml", ".yml"):
-        return False
-    try:
-        data = safeyaml.load_value(Path(path).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, safeyaml.YamlRefused):
-        return False  # loaded as a device file, whose loader says what is wrong
-    return isinstance(data, dict) and "devices" in data and "states" not in data
-
-
 def _feed(system: System, lines: Iterable[str], err: TextIO, *, batch: bool) -> None:
     """Post each event line; a batch run settles after each (rule 3)."""
     for number, line in enumerate(lines, 1):
@@ -223,51 +152,20 @@ def _feed(system: System, lines: Iterable[str], err: TextIO, *, batch: bool) -> 
             err.write(f"line {number}: {exc}\n")
 
 
-#: Recovery warnings matter only when there is a journal to recover from.
-JOURNAL_ONLY_WARNINGS = frozenset({"J606", "J608"})
-
-
-def _warn(warnings: Iterable[Diagnostic], err: TextIO | None, journalled: bool) -> None:
-    if err is None:
-        return
-    for d in warnings:
-        if journalled or d.code not in JOURNAL_ONLY_WARNINGS:
-            err.write(f"{d}\n")
-
-
-def cell_setups(
-    cell: Cell, err: TextIO | None = None, *, journalled: bool = True
-) -> tuple[DeviceSetup, ...]:
-    """One setup per device instance of ``cell``, with its device file's recovery rules.
-
-    Raises one :class:`DiagnosticError` for every device file whose rules do not
-    load; warnings go to ``err`` (recovery warnings only for a ``journalled`` run).
-    """
-    setups: list[DeviceSetup] = []
-    problems: list[Diagnostic] = []
-    for ref in cell.devices:
-        try:
-            dev = load_device(ref.path)
-        except DiagnosticError as exc:
-            problems.extend(exc.diagnostics)
-            continue
-        _warn(dev.warnings, err, journalled)
-        setups.append(DeviceSetup(ref.name, ref.chart, dev.rules, ref.path))
-    if problems:
-        raise DiagnosticError(problems)
-    return tuple(setups)
-
-
 def _load_cell(path: str, err: TextIO, journalled: bool) -> tuple[Cell, tuple[DeviceSetup, ...]]:
     cell, diags = load_cell(path)
     if cell is None:
         raise DiagnosticError([d for d in diags if d.severity is not Severity.INFO])
-    return cell, cell_setups(cell, err, journalled=journalled)
+    setups, warnings = load_setups(cell, journalled=journalled)
+    for d in warnings:
+        err.write(f"{d}\n")
+    return cell, setups
 
 
 def _load_device(path: str, err: TextIO, journalled: bool) -> tuple[DeviceSetup, ...]:
     device = load_device(path)
-    _warn(device.warnings, err, journalled)
+    for d in relevant_warnings(device.warnings, journalled):
+        err.write(f"{d}\n")
     chart = device.chart
     return (DeviceSetup(chart.name, chart, device.rules, os.path.abspath(path)),)
 
@@ -474,182 +372,3 @@ def _close(system: System, err: TextIO, failed: str) -> None:
     except JournalError as exc:
         if str(exc) not in failed:
             err.write(f"statectl run: {exc}\n")
-
-
-# -- statectl journal ------------------------------------------------------------------------
-
-
-def _reader(command: str, path: str, err: TextIO) -> JournalReader | int:
-    """The checked journal, or the exit code: 2 if there is none, 1 if it cannot be trusted.
-
-    The whole journal is checked before anything is written (journal/check.py), so
-    a damaged journal gives a message and no partial output.
-    """
-    if not Path(path).exists():
-        err.write(f"statectl journal {command}: no journal at {path}\n")
-        return USAGE
-    try:
-        return JournalReader(path)
-    except JournalError as exc:
-        err.write(f"statectl journal {command}: {exc}\n")
-        return PROBLEMS
-
-
-def _reader_in_window(
-    command: str, path: str, since: str | None, until: str | None, err: TextIO
-) -> tuple[JournalReader, float | None, float | None] | int:
-    """The journal and the time window a ``journal show|export`` asks for, or the exit code."""
-    try:
-        lo = parse_time(since) if since is not None else None
-        hi = parse_time(until) if until is not None else None
-    except StatectlError as exc:
-        err.write(f"statectl journal {command}: {exc}\n")
-        return USAGE
-    reader = _reader(command, path, err)
-    return reader if isinstance(reader, int) else (reader, lo, hi)
-
-
-@contextlib.contextmanager
-def _reading(command: str, path: str, err: TextIO) -> Iterator[list[int]]:
-    """Turn a failure while the journal is read (damage SQLite meets late, I/O) into exit 1.
-
-    Yields a one-element list holding the exit code: 0, or 1 after a failure.
-    """
-    code = [OK]
-    try:
-        yield code
-    except (JournalError, sqlite3.Error) as exc:
-        text = exc if isinstance(exc, JournalError) else sqlite_problem(exc)
-        err.write(f"statectl journal {command}: journal {path}: {text}\n")
-        code[0] = PROBLEMS
-
-
-def journal_show(
-    path: str,
-    *,
-    device: str | None = None,
-    since: str | None = None,
-    until: str | None = None,
-    out: TextIO = sys.stdout,
-    err: TextIO = sys.stderr,
-) -> int:
-    """``statectl journal show``: one line per accepted event and step, in order."""
-    opened = _reader_in_window("show", path, since, until, err)
-    if isinstance(opened, int):
-        return opened
-    reader, lo, hi = opened
-
-    def accepted() -> Iterator[tuple[float, int, str]]:
-        for r in reader.inbox(device, lo, hi):
-            data = "" if r.data is None else " " + format_data(r.data)
-            yield r.wall, 0, f"#{r.seq:<6} {r.device}  accepted  {r.event}{data}"
-
-    def steps() -> Iterator[tuple[float, int, str]]:
-        for s in reader.steps(device, lo, hi):
-            what = s.event or ""
-            if s.data is not None:
-                what += " " + format_data(s.data)
-            via = f" (#{s.inbox})" if s.inbox else ""
-            state = ", ".join(sorted(s.snapshot.active))
-            text = f"step {s.id:<4} {s.device}  {s.kind.value:<8} {what}{via} -> [{state}]"
-            if s.outcome and s.outcome != "handled":
-                text += f"  {s.outcome}"
-            yield s.wall, 1, text
-
-    with reader, _reading("show", path, err) as code:
-        # Both come in journal order, which is wall-clock order: merged as they stream, so
-        # a journal of millions of rows is shown without being held in memory.
-        for wall, _, text in heapq.merge(accepted(), steps(), key=lambda x: (x[0], x[1])):
-            stamp = dt.datetime.fromtimestamp(wall).isoformat(timespec="milliseconds")
-            out.write(f"{stamp}  {text}\n")
-    return code[0]
-
-
-def journal_export(
-    path: str,
-    *,
-    device: str | None = None,
-    since: str | None = None,
-    until: str | None = None,
-    to: str | None = None,
-    out: TextIO = sys.stdout,
-    err: TextIO = sys.stderr,
-) -> int:
-    """``statectl journal export``: JSON Lines (accepted events, then steps).
-
-    ``to`` (``--out FILE``): written to a temporary file beside it and renamed
-    over it once complete, so a failure (a damaged row, a full disk) leaves no
-    partial file and an existing FILE untouched.
-    """
-    opened = _reader_in_window("export", path, since, until, err)
-    if isinstance(opened, int):
-        return opened
-    reader, lo, hi = opened
-    with reader, _reading("export", path, err) as code:
-        if to is None:
-            export_jsonl(reader, out, device=device, since=lo, until=hi)
-            return OK
-        target = Path(to)
-        tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
-        try:
-            with tmp.open("w", encoding="utf-8") as f:
-                n = export_jsonl(reader, f, device=device, since=lo, until=hi)
-            tmp.replace(target)
-        except OSError as exc:
-            err.write(f"statectl journal export: cannot write {to}: {sqlite_problem(exc)}\n")
-            code[0] = PROBLEMS
-        finally:
-            tmp.unlink(missing_ok=True)
-        if code[0] == OK:
-            out.write(f"wrote {n} line(s) to {to}\n")
-    return code[0]
-
-
-def journal_replay(
-    path: str,
-    *,
-    device: str | None = None,
-    model: Mapping[str, str] | None = None,
-    out: TextIO = sys.stdout,
-    err: TextIO = sys.stderr,
-) -> int:
-    """``statectl journal replay``: rerun the journal on the model; 1 if it disagrees.
-
-    The charts come from the device files the journal names, or ``model``
-    (device -> file) where given.
-    """
-    reader = _reader("replay", path, err)
-    if isinstance(reader, int):
-        return reader
-    with reader, _reading("replay", path, err) as code:
-        charts: dict[str, Chart] = {}
-        for d in reader.devices():
-            if device is not None and d.name != device:
-                continue
-            source = (model or {}).get(d.name, d.source)
-            try:
-                charts[d.name] = load_device(source).chart
-            except DiagnosticError as exc:
-                err.write(f"statectl journal replay: {d.name}: cannot load {source}\n")
-                for diag in exc.diagnostics:
-                    err.write(f"{diag}\n")
-                return PROBLEMS
-        width = max((len(n) for n in charts), default=0)
-        try:
-            result = replay(
-                reader,
-                charts,
-                device=device,
-                listener=lambda r: print(format_record(r, device_width=width), file=out),
-            )
-        except JournalError as exc:
-            err.write(f"statectl journal replay: {exc}\n")
-            return PROBLEMS
-    if code[0] != OK:
-        return code[0]
-    for m in result.mismatches:
-        out.write(f"MISMATCH {m}\n")
-    for name, snap in sorted(result.final.items()):
-        out.write(f"final {name}: {', '.join(sorted(snap.active))}\n")
-    out.write(f"{result.steps} step(s) replayed; {len(result.mismatches)} mismatch(es)\n")
-    return OK if result.ok else PROBLEMS

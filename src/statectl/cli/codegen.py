@@ -1,0 +1,40 @@
+"""``statectl codegen FILE --target cpp --out DIR``: build, generate, print what was written.
+
+The target choice, the messages and the exit code (0 written, 1 diagnostics,
+2 usage); :func:`statectl.codegen.generate` writes the files."""
+
+from __future__ import annotations
+
+from typing import TextIO
+
+from statectl.codegen.cpp import generate
+from statectl.errors import DiagnosticError, Severity
+
+
+def run_codegen(path: str, out_dir: str, target: str, out: TextIO, err: TextIO) -> int:
+    """``statectl codegen FILE --target cpp --out DIR``: 0 written, 1 diagnostics, 2 usage."""
+    if target != "cpp":
+        err.write(f"statectl codegen: unknown target {target!r} (available: cpp)\n")
+        return 2
+    from statectl.build import load_and_build  # outer ring: codegen reads tables via build
+
+    try:
+        chart, diags = load_and_build(path)
+    except DiagnosticError as exc:
+        chart, diags = None, list(exc.diagnostics)
+    except OSError as exc:
+        err.write(f"statectl codegen: cannot read {path}: {exc.strerror or exc}\n")
+        return 2
+    if chart is None:
+        for d in diags:
+            err.write(f"{d}\n")
+        return 1
+    written, gen_diags = generate(chart, out_dir)
+    for d in (*diags, *gen_diags):
+        if d.severity is not Severity.INFO:
+            err.write(f"{d}\n")
+    if not written:
+        return 1
+    for p in written:
+        out.write(f"{p}\n")
+    return 0

@@ -1,0 +1,209 @@
+"""``statectl journal show|export|replay``: reading a journal back, never writing it.
+
+Separate from the run command: these open a journal read-only (checked first,
+refused when it cannot be trusted) and share nothing with a live run."""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as dt
+import heapq
+import os
+import sqlite3
+import sys
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import TextIO
+
+from statectl.cli.commands import OK, PROBLEMS, USAGE
+from statectl.errors import DiagnosticError, StatectlError
+from statectl.journal import (
+    JournalError,
+    JournalReader,
+    export_jsonl,
+    load_device,
+    replay,
+)
+from statectl.journal.check import sqlite_problem
+from statectl.model import Chart
+from statectl.runner.events import (
+    parse_time,
+)
+from statectl.runtime import format_data
+from statectl.runtime.trace import format_record
+
+
+def _reader(command: str, path: str, err: TextIO) -> JournalReader | int:
+    """The checked journal, or the exit code: 2 if there is none, 1 if it cannot be trusted.
+
+    The whole journal is checked before anything is written (journal/check.py), so
+    a damaged journal gives a message and no partial output.
+    """
+    if not Path(path).exists():
+        err.write(f"statectl journal {command}: no journal at {path}\n")
+        return USAGE
+    try:
+        return JournalReader(path)
+    except JournalError as exc:
+        err.write(f"statectl journal {command}: {exc}\n")
+        return PROBLEMS
+
+
+def _reader_in_window(
+    command: str, path: str, since: str | None, until: str | None, err: TextIO
+) -> tuple[JournalReader, float | None, float | None] | int:
+    """The journal and the time window a ``journal show|export`` asks for, or the exit code."""
+    try:
+        lo = parse_time(since) if since is not None else None
+        hi = parse_time(until) if until is not None else None
+    except StatectlError as exc:
+        err.write(f"statectl journal {command}: {exc}\n")
+        return USAGE
+    reader = _reader(command, path, err)
+    return reader if isinstance(reader, int) else (reader, lo, hi)
+
+
+@contextlib.contextmanager
+def _reading(command: str, path: str, err: TextIO) -> Iterator[list[int]]:
+    """Turn a failure while the journal is read (damage SQLite meets late, I/O) into exit 1.
+
+    Yields a one-element list holding the exit code: 0, or 1 after a failure.
+    """
+    code = [OK]
+    try:
+        yield code
+    except (JournalError, sqlite3.Error) as exc:
+        text = exc if isinstance(exc, JournalError) else sqlite_problem(exc)
+        err.write(f"statectl journal {command}: journal {path}: {text}\n")
+        code[0] = PROBLEMS
+
+
+def journal_show(
+    path: str,
+    *,
+    device: str | None = None,
+    since: str | None = None,
+    until: str | None = None,
+    out: TextIO = sys.stdout,
+    err: TextIO = sys.stderr,
+) -> int:
+    """``statectl journal show``: one line per accepted event and step, in order."""
+    opened = _reader_in_window("show", path, since, until, err)
+    if isinstance(opened, int):
+        return opened
+    reader, lo, hi = opened
+
+    def accepted() -> Iterator[tuple[float, int, str]]:
+        for r in reader.inbox(device, lo, hi):
+            data = "" if r.data is None else " " + format_data(r.data)
+            yield r.wall, 0, f"#{r.seq:<6} {r.device}  accepted  {r.event}{data}"
+
+    def steps() -> Iterator[tuple[float, int, str]]:
+        for s in reader.steps(device, lo, hi):
+            what = s.event or ""
+            if s.data is not None:
+                what += " " + format_data(s.data)
+            via = f" (#{s.inbox})" if s.inbox else ""
+            state = ", ".join(sorted(s.snapshot.active))
+            text = f"step {s.id:<4} {s.device}  {s.kind.value:<8} {what}{via} -> [{state}]"
+            if s.outcome and s.outcome != "handled":
+                text += f"  {s.outcome}"
+            yield s.wall, 1, text
+
+    with reader, _reading("show", path, err) as code:
+        # Both come in journal order, which is wall-clock order: merged as they stream, so
+        # a journal of millions of rows is shown without being held in memory.
+        for wall, _, text in heapq.merge(accepted(), steps(), key=lambda x: (x[0], x[1])):
+            stamp = dt.datetime.fromtimestamp(wall).isoformat(timespec="milliseconds")
+            out.write(f"{stamp}  {text}\n")
+    return code[0]
+
+
+def journal_export(
+    path: str,
+    *,
+    device: str | None = None,
+    since: str | None = None,
+    until: str | None = None,
+    to: str | None = None,
+    out: TextIO = sys.stdout,
+    err: TextIO = sys.stderr,
+) -> int:
+    """``statectl journal export``: JSON Lines (accepted events, then steps).
+
+    ``to`` (``--out FILE``): written to a temporary file beside it and renamed
+    over it once complete, so a failure (a damaged row, a full disk) leaves no
+    partial file and an existing FILE untouched.
+    """
+    opened = _reader_in_window("export", path, since, until, err)
+    if isinstance(opened, int):
+        return opened
+    reader, lo, hi = opened
+    with reader, _reading("export", path, err) as code:
+        if to is None:
+            export_jsonl(reader, out, device=device, since=lo, until=hi)
+            return OK
+        target = Path(to)
+        tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+        try:
+            with tmp.open("w", encoding="utf-8") as f:
+                n = export_jsonl(reader, f, device=device, since=lo, until=hi)
+            tmp.replace(target)
+        except OSError as exc:
+            err.write(f"statectl journal export: cannot write {to}: {sqlite_problem(exc)}\n")
+            code[0] = PROBLEMS
+        finally:
+            tmp.unlink(missing_ok=True)
+        if code[0] == OK:
+            out.write(f"wrote {n} line(s) to {to}\n")
+    return code[0]
+
+
+def journal_replay(
+    path: str,
+    *,
+    device: str | None = None,
+    model: Mapping[str, str] | None = None,
+    out: TextIO = sys.stdout,
+    err: TextIO = sys.stderr,
+) -> int:
+    """``statectl journal replay``: rerun the journal on the model; 1 if it disagrees.
+
+    The charts come from the device files the journal names, or ``model``
+    (device -> file) where given.
+    """
+    reader = _reader("replay", path, err)
+    if isinstance(reader, int):
+        return reader
+    with reader, _reading("replay", path, err) as code:
+        charts: dict[str, Chart] = {}
+        for d in reader.devices():
+            if device is not None and d.name != device:
+                continue
+            source = (model or {}).get(d.name, d.source)
+            try:
+                charts[d.name] = load_device(source).chart
+            except DiagnosticError as exc:
+                err.write(f"statectl journal replay: {d.name}: cannot load {source}\n")
+                for diag in exc.diagnostics:
+                    err.write(f"{diag}\n")
+                return PROBLEMS
+        width = max((len(n) for n in charts), default=0)
+        try:
+            result = replay(
+                reader,
+                charts,
+                device=device,
+                listener=lambda r: print(format_record(r, device_width=width), file=out),
+            )
+        except JournalError as exc:
+            err.write(f"statectl journal replay: {exc}\n")
+            return PROBLEMS
+    if code[0] != OK:
+        return code[0]
+    for m in result.mismatches:
+        out.write(f"MISMATCH {m}\n")
+    for name, snap in sorted(result.final.items()):
+        out.write(f"final {name}: {', '.join(sorted(snap.active))}\n")
+    out.write(f"{result.steps} step(s) replayed; {len(result.mismatches)} mismatch(es)\n")
+    return OK if result.ok else PROBLEMS

@@ -1,0 +1,54 @@
+"""Event lines (``[DEVICE:] EVENT [DATA]``, ``+SECONDS``) and times, as runs read them.
+
+Kept apart from the commands so the grammar of a line is in one small place
+that tests and the dashboard can use without the run's machinery."""
+
+from __future__ import annotations
+
+import datetime as dt
+from typing import Any
+
+from statectl.errors import StatectlError
+from statectl.tables import safeyaml
+
+
+def parse_event_line(line: str) -> tuple[str | None, str, Any] | float | None:
+    """``[DEVICE:] EVENT [DATA]`` -> (device, event, data); ``+S`` -> seconds; blank -> None."""
+    text = line.split("#", 1)[0].strip()
+    if not text:
+        return None
+    if text.startswith("+"):
+        try:
+            return float(text[1:])
+        except ValueError:
+            raise StatectlError(f"'+' needs seconds, e.g. '+1.5' (got {text!r})") from None
+    device = None
+    head, colon, rest = text.partition(":")
+    if colon and "{" not in head and "[" not in head and rest.startswith(" "):
+        device, text = head.strip(), rest.strip()
+    data: Any = None
+    brace = min((i for i in (text.find("{"), text.find("[")) if i >= 0), default=-1)
+    if brace >= 0:
+        try:
+            data = safeyaml.load_value(text[brace:])
+        except safeyaml.YamlRefused as exc:
+            raise StatectlError(f"event data is not YAML flow style ({exc.message})") from None
+        text = text[:brace]
+    event = " ".join(text.split())
+    if not event:
+        raise StatectlError("no event name")
+    return device, event, data
+
+
+def parse_time(text: str) -> float:
+    """Seconds since the epoch, or an ISO 8601 date-time (local time if it has no zone)."""
+    try:
+        return float(text)
+    except ValueError:
+        pass
+    try:
+        return dt.datetime.fromisoformat(text).timestamp()
+    except ValueError:
+        raise StatectlError(
+            f"not a time: {text!r}; give seconds since the epoch or ISO 8601 (2024-05-01T12:00:00)"
+        ) from None
