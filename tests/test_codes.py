@@ -280,3 +280,25 @@ def test_lookup_returns_the_record() -> None:
     assert record.doc == "docs/tables.md#diagnostics"
     with pytest.raises(AttributeError):
         record.summary = "changed"  # type: ignore[misc]
+
+
+@pytest.mark.parametrize(
+    ("argv", "status", "stream", "text"),
+    [
+        (["check", "--explain", "C403"], 0, "out", "C403 error (or warning)"),
+        (["check", "--explain", "t110"], 0, "out", "see docs/tables.md#"),
+        (["check", "--explain", "C999"], 2, "err", "unknown diagnostic code 'C999'"),
+        (["check"], 2, "err", "name at least one FILE"),
+    ],
+)
+def test_check_explain_on_the_command_line(
+    argv: list[str], status: int, stream: str, text: str
+) -> None:
+    """`statectl check --explain CODE` prints the registry's entry; unknown is a usage error."""
+    import io
+
+    from statectl.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    assert main(argv, out, err) == status
+    assert text in (out if stream == "out" else err).getvalue()

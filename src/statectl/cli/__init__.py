@@ -77,7 +77,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_demo)
 
     s = sub.add_parser("check", help="report every problem in device files")
-    s.add_argument("files", nargs="+", metavar="FILE")
+    s.add_argument("files", nargs="*", metavar="FILE")
+    s.add_argument(
+        "--explain",
+        metavar="CODE",
+        help="say what a diagnostic code means and where it is documented",
+    )
     s.add_argument("--json", action="store_true", help="machine-readable diagnostics")
     s.add_argument("--strict", action="store_true", help="warnings fail the check too")
     s.add_argument("-v", "--verbose", action="store_true", help="also show info (merges)")

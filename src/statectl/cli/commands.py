@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
-from statectl.errors import Diagnostic, Severity, has_errors
+from statectl.errors import Diagnostic, Severity, StatectlError, has_errors
 
 if TYPE_CHECKING:  # the pipeline is imported inside each command, to keep --help fast
     from statectl.model import Chart
@@ -52,6 +52,18 @@ def _load_chart(path: str, err: TextIO) -> Chart | None:
 def cmd_check(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     from statectl.rules import check_paths
 
+    if args.explain is not None:
+        from statectl.codes import explain
+
+        try:
+            out.write(explain(args.explain))
+        except StatectlError as exc:
+            err.write(f"statectl check --explain: {exc}\n")
+            return USAGE
+        return OK if not args.files else cmd_check(_without_explain(args), out, err)
+    if not args.files:
+        err.write("statectl check: name at least one FILE (or --explain CODE)\n")
+        return USAGE
     for p in args.files:
         if not Path(p).exists():
             err.write(f"statectl check: {p}: no such file\n")
@@ -66,6 +78,10 @@ def cmd_check(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         verdict = "problems found" if failed else "ok"
         out.write(f"{len(args.files)} file(s) checked: {_summary(diags)}: {verdict}\n")
     return PROBLEMS if failed else OK
+
+
+def _without_explain(args: argparse.Namespace) -> argparse.Namespace:
+    return argparse.Namespace(**{**vars(args), "explain": None})
 
 
 def cmd_build(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
