@@ -1,0 +1,197 @@
+"""The device under test: a Subject on a SimClock wired to a driver, with a recorder.
+
+Rules:
+1. The Subject runs the chart (the kernel decides); the driver is whatever the
+   test was given, the tables' simulated twin by default. Time stands still
+   unless the test calls :meth:`DeviceUnderTest.advance`, so nothing the driver
+   schedules on the clock (its completions, its monitors' polls) happens behind
+   the test's back.
+2. :meth:`DeviceUnderTest.send` processes one event and keeps the records it
+   produced; :meth:`DeviceUnderTest.expect` compares them with the tables: the
+   states reached, the invoke numbers issued and their observer methods, the
+   device API the driver called for each (``api``: observer method -> API
+   function; by default the driver's own ``methods`` table, else the method's
+   name as the twin calls it), or why the event changed nothing and that the
+   driver was not called.
+3. Every failure says what was sent, what was expected and what happened.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
+
+from statectl.devices import SimTwin, connect
+from statectl.model import Chart, StateKind
+from statectl.observers import Observer
+from statectl.runtime import (
+    ApiLogging,
+    EventIgnored,
+    EventRejected,
+    InvokeIssued,
+    ObserverCalled,
+    Record,
+    SimClock,
+    Subject,
+)
+
+__all__ = ["DeviceUnderTest", "Recorder", "api_function"]
+
+
+class Recorder:
+    """Keeps every record the Subject emits, and marks where the last event began."""
+
+    def __init__(self) -> None:
+        self.records: list[Record] = []
+        self.mark = 0
+
+    def __call__(self, record: Record) -> None:
+        self.records.append(record)
+
+    def since_mark(self) -> list[Record]:
+        return self.records[self.mark :]
+
+
+def api_function(call: str) -> str:
+    """``SimMotor.move_to(10.0)`` -> ``move_to``: the function an ObserverCalled names."""
+    return call.split("(", 1)[0].rsplit(".", 1)[-1]
+
+
+def _default_api(driver: Observer) -> dict[str, str] | None:
+    table = getattr(type(driver), "methods", None)
+    if isinstance(table, Mapping) and table:
+        return {str(k): str(v) for k, v in table.items()}
+    return None
+
+
+class DeviceUnderTest:
+    """A started device whose every event is checked against what its tables say."""
+
+    def __init__(
+        self,
+        chart: Chart,
+        driver: Observer | None = None,
+        *,
+        data: Mapping[str, Any] | None = None,
+        event_data: Mapping[str, Any] | None = None,
+        api: Mapping[str, str | None] | None = None,
+    ) -> None:
+        self.chart = chart
+        self.clock = SimClock()
+        self.subject = Subject(chart, clock=self.clock, data=data)
+        self.driver: Observer = driver if driver is not None else SimTwin(chart)
+        self.event_data = dict(event_data or {})
+        given = _default_api(self.driver) if api is None else dict(api)
+        self.api: Mapping[str, str | None] | None = given
+        self.recorder = Recorder()
+        self.subject.listen(self.recorder)
+        if hasattr(self.driver, "bind") and hasattr(self.driver, "poll_fault"):
+            connect(self.subject, self.driver)  # type: ignore[arg-type]  # a DeviceDriver
+        else:
+            self.subject.attach(self.driver)  # a plain observer: no monitors to poll it
+        self.sent: list[str] = []
+        self.subject.start()
+
+    # -- driving -------------------------------------------------------------------------------
+
+    @property
+    def states(self) -> tuple[str, ...]:
+        """The active atomic states in document order: the state reached."""
+        m = self.subject.machine
+        return tuple(
+            s
+            for s in sorted(self.subject.configuration, key=m.order.__getitem__)
+            if m.kind[s] in (StateKind.ATOMIC, StateKind.FINAL)
+        )
+
+    def send(self, event: str, data: Any = None) -> None:
+        """Process ``event`` (with ``data``, else ``event_data[event]``) to completion."""
+        self.recorder.mark = len(self.recorder.records)
+        self.sent.append(event)
+        self.subject.dispatch(event, data if data is not None else self.event_data.get(event))
+
+    def given(self, *events: str) -> None:
+        """Send each event in turn; each must be handled (the path to the case's state)."""
+        __tracebackhide__ = True
+        for e in events:
+            self.send(e)
+            reason = self._unhandled()
+            if reason is not None:
+                raise AssertionError(
+                    f"{self._path()}: {e!r} was not handled in the path to the case "
+                    f"({reason}); the device is in {list(self.states)}"
+                )
+            problems = self._check_calls(self._issued())
+            if problems:
+                raise AssertionError(f"{self._path()}: " + "; ".join(problems))
+
+    def advance(self, seconds: float) -> int:
+        """Move the simulated clock on (the driver's completions and monitors run)."""
+        return self.subject.advance(seconds)
+
+    # -- checking ------------------------------------------------------------------------------
+
+    def _path(self) -> str:
+        return "after " + (" -> ".join(self.sent) if self.sent else "the start")
+
+    def _unhandled(self) -> str | None:
+        for r in self.recorder.since_mark():
+            if isinstance(r, EventIgnored | EventRejected):
+                return r.reason.value
+        return None
+
+    def _issued(self) -> list[tuple[int, str]]:
+        return [
+            (r.invoke, r.method) for r in self.recorder.since_mark() if isinstance(r, InvokeIssued)
+        ]
+
+    def _called(self) -> list[tuple[str, str]]:
+        return [
+            (r.method, r.api) for r in self.recorder.since_mark() if isinstance(r, ObserverCalled)
+        ]
+
+    def expect(
+        self,
+        *,
+        states: Sequence[str],
+        invokes: Iterable[Sequence[Any]] = (),
+        unhandled: str | None = None,
+    ) -> None:
+        """Compare the last event's outcome with the tables' (rule 2)."""
+        __tracebackhide__ = True
+        problems: list[str] = []
+        if tuple(states) != self.states:
+            problems.append(f"state: expected {list(states)}, device is in {list(self.states)}")
+        reason = self._unhandled()
+        if reason != unhandled:
+            want = f"unhandled ({unhandled})" if unhandled else "handled"
+            got = f"unhandled ({reason})" if reason else "handled"
+            problems.append(f"outcome: expected {want}, it was {got}")
+        wanted = [(int(n), str(m)) for n, m in invokes]
+        issued = self._issued()
+        if issued != wanted:
+            problems.append(f"invokes: expected {wanted}, issued {issued}")
+        problems += self._check_calls(wanted)
+        if problems:
+            raise AssertionError(f"{self._path()}: " + "; ".join(problems))
+
+    def _check_calls(self, wanted: list[tuple[int, str]]) -> list[str]:
+        called = self._called()
+        if not wanted:
+            if called:
+                return [f"the driver was called though nothing was notified: {called}"]
+            return []
+        if not isinstance(self.driver, ApiLogging):
+            return []  # a plain observer: the Subject notes update(#n), nothing to compare
+        problems = []
+        for _, method in wanted:
+            calls = [api for m, api in called if m == method]
+            if not calls:
+                problems.append(f"{method}(): the driver made no API call")
+                continue
+            expected = self.api.get(method, method) if self.api is not None else method
+            if expected is not None and expected not in [api_function(c) for c in calls]:
+                problems.append(
+                    f"{method}(): expected the API call {expected}(), the driver called {calls}"
+                )
+        return problems

@@ -1,0 +1,110 @@
+"""The statectl pytest plugin: fixtures for tests of a device against its tables.
+
+Registered under the ``pytest11`` entry point, so ``pip install statectl`` makes
+these fixtures available to every test suite; generated modules use nothing else.
+
+- ``statectl_chart``: the chart of the module's ``STATECTL_TABLES`` (a path
+  relative to the module), loaded once per module.
+- ``statectl_driver``: the driver under test; ``None`` (the default) means the
+  simulated twin derived from the tables. Override it in a conftest.py to test a
+  real driver.
+- ``statectl_event_data``: event name -> the data sent with it (default: none),
+  for drivers that need it (a SimMotor's Movement needs ``{"amount": x}``).
+- ``statectl_api``: observer method -> the API function the driver must call
+  (``None``: the driver's own ``methods`` table, else the method's name).
+- ``statectl_device``: a started :class:`~statectl.testgen.harness.DeviceUnderTest`
+  (the Subject wired to the driver); the ``statectl_data(name=value, ...)``
+  marker gives the datamodel values it starts with.
+- ``statectl_recorder``: that device's record list, in order.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from statectl.build import load_chart
+from statectl.model import Chart
+from statectl.runtime import Record
+from statectl.testgen.harness import DeviceUnderTest
+
+__all__ = [
+    "pytest_configure",
+    "statectl_api",
+    "statectl_chart",
+    "statectl_device",
+    "statectl_driver",
+    "statectl_event_data",
+    "statectl_recorder",
+]
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line(
+        "markers", "statectl_data(**values): datamodel values the statectl_device starts with"
+    )
+
+
+@pytest.fixture(scope="module")
+def statectl_chart(request: pytest.FixtureRequest) -> Chart:
+    """The chart of the test module's ``STATECTL_TABLES`` (relative to the module)."""
+    tables = getattr(request.module, "STATECTL_TABLES", None)
+    if not isinstance(tables, str):
+        pytest.fail(
+            f"{request.module.__name__}: set STATECTL_TABLES to the device file "
+            "(relative to the module) or override the statectl_chart fixture",
+            pytrace=False,
+        )
+    path = Path(request.module.__file__).parent / tables
+    if not path.exists():
+        pytest.fail(
+            f"{request.module.__name__}: STATECTL_TABLES {path}: no such file", pytrace=False
+        )
+    return load_chart(path)
+
+
+@pytest.fixture
+def statectl_driver() -> Any:
+    """The driver under test; ``None`` means the tables' simulated twin."""
+    return None
+
+
+@pytest.fixture
+def statectl_event_data() -> Mapping[str, Any]:
+    """Event name -> the data sent with it."""
+    return {}
+
+
+@pytest.fixture
+def statectl_api() -> Mapping[str, str | None] | None:
+    """Observer method -> the API function the driver must call (``None``: its own table)."""
+    return None
+
+
+@pytest.fixture
+def statectl_device(
+    request: pytest.FixtureRequest,
+    statectl_chart: Chart,
+    statectl_driver: Any,
+    statectl_event_data: Mapping[str, Any],
+    statectl_api: Mapping[str, str | None] | None,
+) -> DeviceUnderTest:
+    """A started device on a simulated clock, wired to the driver under test."""
+    marker = request.node.get_closest_marker("statectl_data")
+    data = dict(marker.kwargs) if marker is not None else None
+    return DeviceUnderTest(
+        statectl_chart,
+        statectl_driver,
+        data=data,
+        event_data=statectl_event_data,
+        api=statectl_api,
+    )
+
+
+@pytest.fixture
+def statectl_recorder(statectl_device: DeviceUnderTest) -> list[Record]:
+    """Every record the device emitted, in order (the notifications among them)."""
+    return statectl_device.recorder.records

@@ -1,0 +1,282 @@
+"""statectl testgen, its pytest plugin and statectl coverage (docs/testgen.md)."""
+
+from __future__ import annotations
+
+import ast
+import io
+import os
+import re
+import subprocess
+import sys
+import textwrap
+import tomllib
+from pathlib import Path
+
+import pytest
+
+import statectl
+from statectl.cli import main
+from statectl.testgen import generate
+from support import MOTOR, ROOT
+
+EXAMPLES = ROOT / "examples"
+GANTRY = EXAMPLES / "gantry" / "gantry.yaml"
+PICK = [EXAMPLES / "pick-and-place" / f"{n}.yaml" for n in ("arm", "conveyor", "gripper", "sensor")]
+SRC = Path(statectl.__file__).resolve().parents[1]
+
+#: A device whose guard reads the datamodel: testgen must find data for both outcomes.
+GUARDED = """\
+device: Press
+data:
+  limit: 3
+states:
+  - {state: Idle, control: default, ignore: [Done]}
+  - {state: Pressing, control: event trigger required, api: Press(), ignore: [Press]}
+events:
+  - {event: Press, condition: the limit allows a stroke, guard: limit > 2, old: Idle,
+     new: Pressing, kind: command, api: Press}
+  - {event: Done, condition: the stroke is done, old: Pressing, new: Idle, kind: completion,
+     api: Press}
+"""
+
+
+PLUGIN = ("-p", "statectl.testgen.plugin", "-p", "no:cacheprovider")
+
+
+def run_pytest(directory: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    """The generated tests in a fresh interpreter, with the plugin named explicitly.
+
+    ``-p`` is a no-op once ``pip install`` has registered the plugin's entry point
+    (which has the module's name), so this works installed or not.
+    """
+    env = {**os.environ, "PYTHONPATH": str(SRC)}
+    return subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", *PLUGIN, *args, str(directory)],
+        cwd=directory,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+def counts(result: subprocess.CompletedProcess[str]) -> dict[str, int]:
+    found = re.findall(r"(\d+) (passed|failed|error|skipped)", result.stdout)
+    return {kind: int(n) for n, kind in found}
+
+
+def functions(path: Path) -> dict[str, str]:
+    """Test function name -> docstring, read from a generated module."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    return {
+        f.name: ast.get_docstring(f) or ""
+        for f in tree.body
+        if isinstance(f, ast.FunctionDef) and f.name.startswith("test_")
+    }
+
+
+def test_generated_modules_pass_against_the_twin(tmp_path: Path) -> None:
+    """Every criterion's module for the Motor, the gantry and pick-and-place passes on the twin."""
+    total = 0
+    for file in (MOTOR, GANTRY, *PICK):
+        for criterion in ("rows", "transitions", "states", "pairs"):
+            made = generate(file, criterion, tmp_path)
+            assert made.tests > 0, (file, criterion)
+            total += made.tests
+    result = run_pytest(tmp_path)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-2000:]
+    assert counts(result) == {"passed": total}
+
+
+@pytest.mark.parametrize(
+    ("name", "where"),
+    [
+        ("test_row_01_movement_blocked_to_moving", "Row 1, motor.yaml:35: Movement ["),
+        ("test_row_02_movement_completion_moving_to_blocked", "motor.yaml:41"),
+        ("test_row_03_initialization_blocked_to_returning", "Blocked -> Returning"),
+        ("test_row_03_initialization_blocked_to_returning_guard_false", "is false here"),
+        ("test_row_04_initialization_completion_returning_to_blocked", "motor.yaml:54"),
+        ("test_row_05_error_moving_to_returning", "Error [error during Moving]"),
+        ("test_row_06_error_completion_returning_to_blocked", "motor.yaml:66"),
+        ("test_unhandled_in_moving", "In Moving, each event"),
+    ],
+)
+def test_rows_module_names_each_row_in_the_papers_words(
+    tmp_path: Path, name: str, where: str
+) -> None:
+    """The rows module has a test per Event Definition row whose docstring cites file:line."""
+    made = generate(MOTOR, "rows", tmp_path)
+    found = functions(made.path)
+    assert name in found, sorted(found)
+    assert where in " ".join(found[name].split())
+
+
+def test_guard_over_data_gets_data_for_both_outcomes(tmp_path: Path) -> None:
+    """A guard over the datamodel is tested true with the defaults and false with set data."""
+    tables = tmp_path / "press.yaml"
+    tables.write_text(GUARDED, encoding="utf-8")
+    out = tmp_path / "gen"
+    made = generate(tables, "rows", out)
+    text = made.path.read_text(encoding="utf-8")
+    false_case = text.split("def test_row_01_press_idle_to_pressing_guard_false")[0]
+    assert "@pytest.mark.statectl_data(limit=2)" in false_case.rsplit("\n\n\n", 1)[-1]
+    result = run_pytest(out)
+    assert result.returncode == 0, result.stdout[-3000:]
+    assert counts(result) == {"passed": made.tests}
+
+
+#: Seeded driver bugs: (name, conftest body, what a failure must say).
+BROKEN = [
+    (
+        "wrong API method",
+        """
+        class Broken(SimTwin):
+            def log_call(self, function, *args):  # Movement() calls the Error API
+                super().log_call("Error" if function == "Movement" else function, *args)
+        """,
+        "expected the API call Movement(), the driver called ['Broken.Error()']",
+    ),
+    (
+        "a method that calls nothing",
+        """
+        class Broken(SimTwin):
+            def update(self, notification):
+                if notification.method != "Initialization":
+                    super().update(notification)
+        """,
+        "Initialization(): the driver made no API call",
+    ),
+    (
+        "a completion reported before the work is done",
+        """
+        class Broken(SimTwin):
+            def update(self, notification):
+                super().update(notification)
+                if notification.method == "Movement":
+                    self.report("Movement completion")  # at once, not on arrival
+        """,
+        "after Movement: state: expected ['Moving'], device is in ['Blocked']",
+    ),
+]
+
+
+@pytest.mark.parametrize(("bug", "body", "message"), BROKEN, ids=[b[0] for b in BROKEN])
+def test_generated_tests_fail_against_a_broken_driver(
+    tmp_path: Path, bug: str, body: str, message: str
+) -> None:
+    """The Motor's rows tests, unchanged, fail when a conftest supplies a driver with a bug."""
+    generate(MOTOR, "rows", tmp_path)
+    conftest = "import pytest\nfrom statectl.devices import SimTwin\n"
+    conftest += textwrap.dedent(body)
+    conftest += (
+        "\n\n@pytest.fixture\ndef statectl_driver(statectl_chart):\n"
+        "    return Broken(statectl_chart)\n"
+    )
+    (tmp_path / "conftest.py").write_text(conftest, encoding="utf-8")
+    result = run_pytest(tmp_path)
+    assert result.returncode == 1, result.stdout[-3000:]
+    assert counts(result).get("failed", 0) >= 1
+    assert message in result.stdout, result.stdout[-3000:]
+
+
+def test_a_real_driver_runs_through_the_fixture(tmp_path: Path) -> None:
+    """The same tests pass on the SimMotor driver, given its event data through a fixture."""
+    made = generate(MOTOR, "rows", tmp_path)
+    (tmp_path / "conftest.py").write_text(
+        "import pytest\nfrom statectl.devices import SimMotor\n\n\n"
+        "@pytest.fixture\ndef statectl_driver():\n    return SimMotor()\n\n\n"
+        "@pytest.fixture\ndef statectl_event_data():\n"
+        "    return {'Movement': {'amount': 5.0}}\n",
+        encoding="utf-8",
+    )
+    result = run_pytest(tmp_path)
+    assert result.returncode == 0, result.stdout[-3000:]
+    assert counts(result) == {"passed": made.tests}
+
+
+def test_pyproject_registers_the_plugin() -> None:
+    """The pytest11 entry point names the plugin module by its own name (so -p is a no-op)."""
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    points = project["project"]["entry-points"]["pytest11"]
+    assert points == {"statectl.testgen.plugin": "statectl.testgen.plugin"}
+
+
+# -- the commands ----------------------------------------------------------------------------
+
+
+def cli(*argv: str) -> tuple[int, str, str]:
+    out, err = io.StringIO(), io.StringIO()
+    code = main(list(argv), out, err)
+    return code, out.getvalue(), err.getvalue()
+
+
+@pytest.mark.parametrize(
+    ("argv", "code", "said"),
+    [
+        (["testgen", str(MOTOR), "--out", "{tmp}/gen"], 0, "wrote {tmp}/gen/test_motor_rows.py"),
+        (["testgen", "{tmp}/nope.yaml", "--out", "{tmp}"], 2, "nope.yaml: no such file"),
+        (["testgen", str(MOTOR), "--criterion", "paths", "--out", "{tmp}"], 2, "invalid choice"),
+        (["testgen", str(MOTOR), "--out", "{tmp}/file.txt/x"], 1, "cannot write"),
+        (["testgen", "{tmp}/bad.yaml", "--out", "{tmp}"], 1, "bad.yaml"),
+        (["coverage", "{tmp}/none.db", str(MOTOR)], 2, "none.db: no such file"),
+    ],
+)
+def test_cli_exit_codes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str], code: int, said: str
+) -> None:
+    """testgen and coverage: 0 done, 1 bad input with a message, 2 usage; never a traceback."""
+    (tmp_path / "file.txt").write_text("not a directory\n", encoding="utf-8")
+    (tmp_path / "bad.yaml").write_text("device: X\nstates: 3\n", encoding="utf-8")
+    args = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    got, out, err = cli(*args)
+    err += capsys.readouterr().err  # argparse's usage errors go to sys.stderr
+    assert got == code, (out, err)
+    assert said.replace("{tmp}", str(tmp_path)) in out + err
+    assert "Traceback" not in err
+    assert not list(tmp_path.rglob(".*.tmp"))
+
+
+@pytest.fixture(scope="module")
+def journal(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A Motor run journalled: Movement, completion, Initialization, completion."""
+    db = tmp_path_factory.mktemp("cov") / "run.db"
+    subprocess.run(
+        [sys.executable, "-m", "statectl", "run", str(MOTOR), "--journal", str(db)],
+        input="Movement {amount: 5}\n+2\nInitialization\n+2\n",
+        env={**os.environ, "PYTHONPATH": str(SRC)},
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    )
+    return db
+
+
+def test_coverage_lists_rows_never_taken(journal: Path) -> None:
+    """The table counts rows, states and transitions; rows never taken are named by file:line."""
+    code, out, _ = cli("coverage", str(journal), str(MOTOR))
+    assert code == 0
+    assert "rows 4 of 6 (66%), states 3 of 3 (100%), transitions 4 of 6 (66%)" in out
+    never = out.split("rows never taken: 2\n")[1]
+    assert never.splitlines() == [
+        "  motor.yaml:60: row 5: Error [error during Moving]: Moving -> Returning",
+        "  motor.yaml:66: row 6: Error completion [Returning after the error has been dealt "
+        "with]: Returning -> Blocked",
+    ]
+
+
+def test_coverage_mermaid_highlights_taken_rows(journal: Path) -> None:
+    """In the Mermaid diagram the taken rows are solid green, the others dashed red."""
+    code, out, _ = cli("coverage", str(journal), str(MOTOR), "--format", "mermaid")
+    assert code == 0
+    styles = dict(re.findall(r"linkStyle (\d+) (\S+)", out))
+    green = {n for n, s in styles.items() if s.startswith("stroke:#2a2")}
+    assert green == {"0", "1", "2", "3"}
+    assert '-->|"Error x0"|' in out
+
+
+def test_coverage_of_a_chart_the_journal_never_ran(journal: Path) -> None:
+    """A device file whose chart is not in the journal is bad input naming what is there."""
+    code, _, err = cli("coverage", str(journal), str(GANTRY))
+    assert code == 1
+    assert "no device of chart 'Gantry' in the journal; devices journalled: Motor (Motor)" in err
