@@ -179,19 +179,59 @@ def test_generated_tests_fail_against_a_broken_driver(
     assert message in result.stdout, result.stdout[-3000:]
 
 
-def test_a_real_driver_runs_through_the_fixture(tmp_path: Path) -> None:
-    """The same tests pass on the SimMotor driver, given its event data through a fixture."""
+def doc_block(after: str) -> str:
+    """The first fenced Python block of docs/testgen.md after the heading ``after``."""
+    text = (ROOT / "docs" / "testgen.md").read_text(encoding="utf-8")
+    return text.split(after, 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+
+
+def test_the_docs_conftest_runs_the_tests_on_simmotor(tmp_path: Path) -> None:
+    """docs/testgen.md's conftest makes the same tests pass on the SimMotor driver."""
     made = generate(MOTOR, "rows", tmp_path)
-    (tmp_path / "conftest.py").write_text(
-        "import pytest\nfrom statectl.devices import SimMotor\n\n\n"
-        "@pytest.fixture\ndef statectl_driver():\n    return SimMotor()\n\n\n"
-        "@pytest.fixture\ndef statectl_event_data():\n"
-        "    return {'Movement': {'amount': 5.0}}\n",
-        encoding="utf-8",
-    )
+    (tmp_path / "conftest.py").write_text(doc_block("### The same tests"), encoding="utf-8")
     result = run_pytest(tmp_path)
     assert result.returncode == 0, result.stdout[-3000:]
     assert counts(result) == {"passed": made.tests}
+
+
+#: (device file, observer method served with another method's API)
+WRONG_API = [(MOTOR, m) for m in ("Movement", "Initialization", "Error")] + [
+    (GANTRY, m) for m in ("Start", "Pause", "EStop", "Reset")
+]
+
+
+@pytest.mark.parametrize(("file", "method"), WRONG_API, ids=[f"{f.stem}-{m}" for f, m in WRONG_API])
+def test_rows_tests_catch_a_wrong_api_for_every_method(
+    tmp_path: Path, file: Path, method: str
+) -> None:
+    """A driver serving one observer method with another's API fails the rows module."""
+    generate(file, "rows", tmp_path)
+    (tmp_path / "conftest.py").write_text(
+        "import pytest\nfrom statectl.devices import SimTwin\n\n\n"
+        "class Broken(SimTwin):\n"
+        "    def log_call(self, function, *args):\n"
+        f"        super().log_call('Wrong' if function == {method!r} else function, *args)\n"
+        "\n\n@pytest.fixture\ndef statectl_driver(statectl_chart):\n"
+        "    return Broken(statectl_chart)\n",
+        encoding="utf-8",
+    )
+    result = run_pytest(tmp_path)
+    assert result.returncode == 1, result.stdout[-3000:]
+    assert f"{method}(): expected the API call {method}(), the driver called" in result.stdout
+
+
+def test_docs_counts_are_what_testgen_writes(tmp_path: Path) -> None:
+    """The table of test and event counts in docs/testgen.md is what generate() gives."""
+    text = (ROOT / "docs" / "testgen.md").read_text(encoding="utf-8")
+    groups = [[MOTOR], [GANTRY], PICK]
+    for criterion in ("rows", "transitions", "states", "pairs"):
+        line = next(x for x in text.splitlines() if x.startswith(f"| `{criterion}`"))
+        shown = [tuple(map(int, re.findall(r"\d+", cell))) for cell in line.split("|")[3:6]]
+        made = []
+        for files in groups:
+            runs = [generate(f, criterion, tmp_path) for f in files]
+            made.append((sum(r.tests for r in runs), sum(r.steps for r in runs)))
+        assert shown == made, criterion
 
 
 def test_pyproject_registers_the_plugin() -> None:
