@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ast
 import io
+import json
 import os
 import re
 import subprocess
@@ -320,3 +321,51 @@ def test_coverage_of_a_chart_the_journal_never_ran(journal: Path) -> None:
     code, _, err = cli("coverage", str(journal), str(GANTRY))
     assert code == 1
     assert "no device of chart 'Gantry' in the journal; devices journalled: Motor (Motor)" in err
+
+
+# -- Hypothesis and GraphWalker ---------------------------------------------------------------
+
+
+def test_hypothesis_module_passes_on_the_twin(tmp_path: Path) -> None:
+    """The Hypothesis state machine of the Motor and the gantry passes on their twins."""
+    for file in (MOTOR, GANTRY):
+        code, _, err = cli("testgen", str(file), "--hypothesis", "--out", str(tmp_path))
+        assert code == 0, err
+    result = run_pytest(tmp_path)
+    assert result.returncode == 0, result.stdout[-3000:]
+    assert counts(result) == {"passed": 2}
+
+
+def test_hypothesis_module_shrinks_to_the_failing_event(tmp_path: Path) -> None:
+    """Against a driver with a wrong API for Error, Hypothesis fails with Movement, Error."""
+    cli("testgen", str(MOTOR), "--hypothesis", "--out", str(tmp_path))
+    (tmp_path / "conftest.py").write_text(
+        "import pytest\nfrom statectl.devices import SimTwin\n\n\n"
+        "class Broken(SimTwin):\n"
+        "    def log_call(self, function, *args):\n"
+        "        super().log_call('Wrong' if function == 'Error' else function, *args)\n"
+        "\n\n@pytest.fixture\ndef statectl_new_driver():\n    return Broken\n",
+        encoding="utf-8",
+    )
+    result = run_pytest(tmp_path)
+    assert result.returncode == 1, result.stdout[-3000:]
+    assert "after Movement -> Error: Error(): expected the API call Error()" in result.stdout
+
+
+@pytest.mark.parametrize(("file", "vertices", "edges"), [(MOTOR, 3, 6), (GANTRY, 6, 19)])
+def test_graphwalker_model_is_the_state_graph(
+    tmp_path: Path, file: Path, vertices: int, edges: int
+) -> None:
+    """The GraphWalker model has a vertex per configuration and an edge per handled event."""
+    code, out, err = cli("testgen", str(file), "--graphwalker", "--out", str(tmp_path))
+    assert code == 0, err
+    path = Path(out.split("wrote ", 1)[1].strip())
+    model = json.loads(path.read_text(encoding="utf-8"))["models"][0]
+    ids = {v["id"] for v in model["vertices"]}
+    assert len(ids) == vertices
+    start, *rest = model["edges"]
+    assert model["startElementId"] == start["id"] and "sourceVertexId" not in start
+    assert start["name"] == "e__start"  # no event's name reduces to it (leading _ stripped)
+    assert len(rest) == edges
+    assert all(e["sourceVertexId"] in ids and e["targetVertexId"] in ids for e in rest)
+    assert all(e["name"].startswith("e_") and e["properties"]["rows"] for e in rest)

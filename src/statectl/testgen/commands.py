@@ -18,8 +18,14 @@ CRITERIA = ("rows", "transitions", "states", "pairs")  # testgen.cases.CRITERIA,
 
 
 def cmd_testgen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
-    from statectl.testgen.generator import generate
+    from statectl.testgen.generator import export_graphwalker, generate, generate_hypothesis
 
+    if args.graphwalker:
+        out.write(f"wrote {export_graphwalker(args.file, args.out)}\n")
+        return OK
+    if args.hypothesis:
+        out.write(f"wrote {generate_hypothesis(args.file, args.out)}\n")
+        return OK
     made = generate(args.file, args.criterion, args.out)
     out.write(
         f"wrote {made.path}: {made.tests} tests ({len(made.suite.cases)} cases, "
@@ -57,6 +63,17 @@ def register(sub: Any) -> None:
     s.add_argument("file", metavar="FILE", help="device file")
     s.add_argument("--criterion", default="rows", choices=CRITERIA)
     s.add_argument("--out", required=True, metavar="DIR", help="directory to write into")
+    what = s.add_mutually_exclusive_group()
+    what.add_argument(
+        "--hypothesis",
+        action="store_true",
+        help="write a Hypothesis state machine over the chart's events instead",
+    )
+    what.add_argument(
+        "--graphwalker",
+        action="store_true",
+        help="write the state graph as a GraphWalker JSON model instead",
+    )
     s.set_defaults(func=cmd_testgen)
 
     s = sub.add_parser(

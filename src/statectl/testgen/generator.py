@@ -9,10 +9,11 @@ from pathlib import Path
 from statectl.build import load_chart
 from statectl.errors import StatectlError
 from statectl.testgen.cases import CRITERIA, Suite, cases_for, count_steps
+from statectl.testgen.graphwalker import graphwalker_model
 from statectl.testgen.paths import MAX_NODES, explore
-from statectl.testgen.writer import module_text
+from statectl.testgen.writer import hypothesis_text, module_text
 
-__all__ = ["Generated", "generate"]
+__all__ = ["Generated", "export_graphwalker", "generate", "generate_hypothesis", "write_atomic"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -28,24 +29,11 @@ def module_name(device: str, criterion: str) -> str:
     return f"test_{slug}_{criterion}.py"
 
 
-def generate(
-    file: str | Path, criterion: str, out_dir: str | Path, *, max_nodes: int = MAX_NODES
-) -> Generated:
-    """Write the ``criterion`` test module of the device file ``file`` into ``out_dir``.
-
-    Written whole or not at all (a temporary file renamed into place).
-    """
-    if criterion not in CRITERIA:
-        raise StatectlError(f"unknown criterion {criterion!r}; choose one of {', '.join(CRITERIA)}")
-    source = Path(file)
-    chart = load_chart(source)
-    suite = cases_for(explore(chart, max_nodes=max_nodes), criterion)
-    out = Path(out_dir)
-    path = out / module_name(chart.name, criterion)
-    text = module_text(suite, chart.name, source, out, str(file))
+def write_atomic(path: Path, text: str) -> None:
+    """Write ``path`` whole or not at all (a temporary file renamed into place)."""
     tmp = path.with_name(f".{path.name}.tmp")
     try:
-        out.mkdir(parents=True, exist_ok=True)
+        path.parent.mkdir(parents=True, exist_ok=True)
         tmp.write_text(text, encoding="utf-8")
         tmp.replace(path)
     except OSError as exc:
@@ -54,6 +42,42 @@ def generate(
         raise StatectlError(
             f"cannot write {path}: {exc.strerror or exc}; give --out a writable directory"
         ) from None
+
+
+def export_graphwalker(file: str | Path, out_dir: str | Path) -> Path:
+    """Write ``DEVICE.graphwalker.json``: the state graph as a GraphWalker model."""
+    chart = load_chart(Path(file))
+    slug = re.sub(r"[^0-9a-z]+", "_", chart.name.lower()).strip("_") or "device"
+    path = Path(out_dir) / f"{slug}.graphwalker.json"
+    write_atomic(path, graphwalker_model(explore(chart)))
+    return path
+
+
+def generate_hypothesis(file: str | Path, out_dir: str | Path) -> Path:
+    """Write ``test_DEVICE_hypothesis.py``: a RuleBasedStateMachine over the chart's events."""
+    source = Path(file)
+    chart = load_chart(source)
+    out = Path(out_dir)
+    path = out / module_name(chart.name, "hypothesis")
+    write_atomic(path, hypothesis_text(chart, source, out, str(file)))
+    return path
+
+
+def generate(
+    file: str | Path, criterion: str, out_dir: str | Path, *, max_nodes: int = MAX_NODES
+) -> Generated:
+    """Write the ``criterion`` test module of the device file ``file`` into ``out_dir``.
+
+    Written whole or not at all (:func:`write_atomic`).
+    """
+    if criterion not in CRITERIA:
+        raise StatectlError(f"unknown criterion {criterion!r}; choose one of {', '.join(CRITERIA)}")
+    source = Path(file)
+    chart = load_chart(source)
+    suite = cases_for(explore(chart, max_nodes=max_nodes), criterion)
+    out = Path(out_dir)
+    path = out / module_name(chart.name, criterion)
+    write_atomic(path, module_text(suite, chart.name, source, out, str(file)))
     tests = len(suite.cases) + sum(len(t.rows) for t in suite.tables)
     steps = count_steps(suite.cases) + sum((len(t.given) + 1) * len(t.rows) for t in suite.tables)
     return Generated(path, suite, tests, steps)

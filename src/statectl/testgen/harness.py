@@ -22,7 +22,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 from statectl.devices import SimTwin, connect
-from statectl.model import Chart, StateKind
+from statectl.model import Chart, Notify, StateKind
 from statectl.observers import Observer
 from statectl.runtime import (
     ApiLogging,
@@ -34,6 +34,7 @@ from statectl.runtime import (
     SimClock,
     Subject,
 )
+from statectl.semantics import step as kernel_step
 
 __all__ = ["DeviceUnderTest", "Recorder", "api_function"]
 
@@ -124,6 +125,32 @@ class DeviceUnderTest:
             problems = self._check_calls(self._issued())
             if problems:
                 raise AssertionError(f"{self._path()}: " + "; ".join(problems))
+
+    def step(self, event: str, data: Any = None) -> None:
+        """Send ``event`` and check the outcome against the kernel's decision for it.
+
+        What the kernel decides from the device's snapshot before the event is the
+        expectation: the states reached, the invokes issued (with their methods, so
+        the driver's API calls are checked), or the reason nothing happened.
+        """
+        __tracebackhide__ = True
+        before = self.subject.snapshot
+        value = data if data is not None else self.event_data.get(event)
+        if before is None or event not in self.subject.machine.event_names:
+            self.send(event, data)
+            return
+        decided = kernel_step(self.subject.machine, before, event, self.subject.data, value)
+        self.send(event, data)
+        m = self.subject.machine
+        self.expect(
+            states=[
+                s
+                for s in sorted(decided.target.active, key=m.order.__getitem__)
+                if m.kind[s] in (StateKind.ATOMIC, StateKind.FINAL)
+            ],
+            invokes=[(a.invoke, a.method) for a in decided.actions if isinstance(a, Notify)],
+            unhandled=decided.unhandled.value if decided.unhandled is not None else None,
+        )
 
     def advance(self, seconds: float) -> int:
         """Move the simulated clock on (the driver's completions and monitors run)."""

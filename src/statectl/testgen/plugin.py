@@ -5,9 +5,11 @@ these fixtures available to every test suite; generated modules use nothing else
 
 - ``statectl_chart``: the chart of the module's ``STATECTL_TABLES`` (a path
   relative to the module), loaded once per module.
-- ``statectl_driver``: the driver under test; ``None`` (the default) means the
-  simulated twin derived from the tables. Override it in a conftest.py to test a
-  real driver.
+- ``statectl_new_driver``: makes a fresh driver for a chart; its default makes
+  ``None``, which means the simulated twin derived from the tables. Override it in
+  a conftest.py to test a real driver (the Hypothesis module needs one per example).
+- ``statectl_driver``: the driver under test, by default ``statectl_new_driver``'s;
+  override it instead when only example-based modules run.
 - ``statectl_event_data``: event name -> the data sent with it (default: none),
   for drivers that need it (a SimMotor's Movement needs ``{"amount": x}``).
 - ``statectl_api``: observer method -> the API function the driver must call
@@ -15,12 +17,14 @@ these fixtures available to every test suite; generated modules use nothing else
 - ``statectl_device``: a started :class:`~statectl.testgen.harness.DeviceUnderTest`
   (the Subject wired to the driver); the ``statectl_data(name=value, ...)``
   marker gives the datamodel values it starts with.
+- ``statectl_device_factory``: makes a new started device with a fresh driver per
+  call (what a Hypothesis state machine needs for each example).
 - ``statectl_recorder``: that device's record list, in order.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -36,8 +40,10 @@ __all__ = [
     "statectl_api",
     "statectl_chart",
     "statectl_device",
+    "statectl_device_factory",
     "statectl_driver",
     "statectl_event_data",
+    "statectl_new_driver",
     "statectl_recorder",
 ]
 
@@ -67,9 +73,15 @@ def statectl_chart(request: pytest.FixtureRequest) -> Chart:
 
 
 @pytest.fixture
-def statectl_driver() -> Any:
-    """The driver under test; ``None`` means the tables' simulated twin."""
-    return None
+def statectl_new_driver() -> Callable[[Chart], Any]:
+    """Makes a fresh driver for a chart; ``None`` from it means the tables' simulated twin."""
+    return lambda chart: None
+
+
+@pytest.fixture
+def statectl_driver(statectl_new_driver: Callable[[Chart], Any], statectl_chart: Chart) -> Any:
+    """The driver under test (by default ``statectl_new_driver``'s; ``None``: the twin)."""
+    return statectl_new_driver(statectl_chart)
 
 
 @pytest.fixture
@@ -102,6 +114,26 @@ def statectl_device(
         event_data=statectl_event_data,
         api=statectl_api,
     )
+
+
+@pytest.fixture
+def statectl_device_factory(
+    statectl_chart: Chart,
+    statectl_new_driver: Callable[[Chart], Any],
+    statectl_event_data: Mapping[str, Any],
+    statectl_api: Mapping[str, str | None] | None,
+) -> Callable[[], DeviceUnderTest]:
+    """Makes a new started device with a fresh driver each call (a Hypothesis example each)."""
+
+    def make() -> DeviceUnderTest:
+        return DeviceUnderTest(
+            statectl_chart,
+            statectl_new_driver(statectl_chart),
+            event_data=statectl_event_data,
+            api=statectl_api,
+        )
+
+    return make
 
 
 @pytest.fixture
