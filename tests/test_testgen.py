@@ -369,3 +369,77 @@ def test_graphwalker_model_is_the_state_graph(
     assert len(rest) == edges
     assert all(e["sourceVertexId"] in ids and e["targetVertexId"] in ids for e in rest)
     assert all(e["name"].startswith("e_") and e["properties"]["rows"] for e in rest)
+
+
+#: A row from a state nothing enters: the search can never take it.
+UNREACHABLE = """\
+device: Lamp
+states:
+  - {state: Off, control: default, api: Switch(), ignore: [Reset]}
+  - {state: On, control: event trigger required, api: Switch(), ignore: [Switch, Reset]}
+  - {state: Broken, control: event trigger required, api: Switch(), ignore: [Switch]}
+events:
+  - {event: Switch, condition: the operator turns it on, old: Off, new: On, kind: command,
+     api: Switch}
+  - {event: Reset, condition: the lamp was replaced, old: Broken, new: Off, kind: command,
+     api: Switch}
+"""
+
+
+def test_a_row_never_reachable_is_a_skipped_test_saying_so(tmp_path: Path) -> None:
+    """A row the search cannot take becomes a skipped test and a note, not a silent gap."""
+    tables = tmp_path / "lamp.yaml"
+    tables.write_text(UNREACHABLE, encoding="utf-8")
+    code, out, err = cli("testgen", str(tables), "--out", str(tmp_path / "gen"))
+    assert code == 0, err
+    assert "note: row 2 (lamp.yaml:9) is never taken" in out
+    result = run_pytest(tmp_path / "gen", "-rs")
+    assert result.returncode == 0, result.stdout[-3000:]
+    assert counts(result)["skipped"] == 1
+    assert "the search from the default state never takes this row" in result.stdout
+
+
+def test_coverage_reports_steps_the_tables_disagree_with(journal: Path, tmp_path: Path) -> None:
+    """A journal of other tables (Movement now goes to Returning) is listed and exits 1."""
+    changed = tmp_path / "motor.yaml"
+    text = MOTOR.read_text(encoding="utf-8")
+    changed.write_text(
+        text.replace("old: Blocked\n    new: Moving", "old: Blocked\n    new: Returning"),
+        encoding="utf-8",
+    )
+    code, out, _ = cli("coverage", str(journal), str(changed))
+    assert code == 1
+    assert "steps that disagree with the tables: " in out
+    assert "(Motor: Movement): the journal has ['Moving'], the tables give ['Returning']" in out
+
+
+def test_the_docs_hand_written_module_runs(tmp_path: Path) -> None:
+    """docs/testgen.md's hand-written test passes on the twin, strict marker and all."""
+    block = doc_block("### Tests written by hand")
+    rel = os.path.relpath(MOTOR, tmp_path)
+    (tmp_path / "test_by_hand.py").write_text(
+        block.replace('"../examples/motor/motor.yaml"', repr(rel)), encoding="utf-8"
+    )
+    result = run_pytest(tmp_path)
+    assert result.returncode == 0, result.stdout[-3000:]
+    assert counts(result) == {"passed": 1}
+
+
+def test_strict_fails_an_event_the_tables_neither_handle_nor_ignore(tmp_path: Path) -> None:
+    """With strict, a missed state x event pair fails naming both; without, it is ignored."""
+    from statectl.build import load_chart
+    from statectl.testgen import DeviceUnderTest
+
+    tables = tmp_path / "motor.yaml"
+    text = MOTOR.read_text(encoding="utf-8")
+    missed = "ignore: [Movement completion, Initialization completion, Error]\n"
+    tables.write_text(
+        text.replace("ignore: [Movement completion, Initialization completion, Error, "
+                     "Error completion]\n", missed), encoding="utf-8")  # fmt: skip
+    chart = load_chart(tables)
+    lenient = DeviceUnderTest(chart)
+    lenient.send("Error completion")
+    lenient.expect(states=["Blocked"], unhandled="no transition")
+    strict = DeviceUnderTest(chart, strict=True)
+    with pytest.raises(AssertionError, match=r"Error completion in \['Blocked'\] is a pair"):
+        strict.send("Error completion")

@@ -34,6 +34,7 @@ from statectl.runtime import (
     SimClock,
     Subject,
 )
+from statectl.semantics import Unhandled
 from statectl.semantics import step as kernel_step
 
 __all__ = ["DeviceUnderTest", "Recorder", "api_function"]
@@ -76,8 +77,10 @@ class DeviceUnderTest:
         data: Mapping[str, Any] | None = None,
         event_data: Mapping[str, Any] | None = None,
         api: Mapping[str, str | None] | None = None,
+        strict: bool = False,
     ) -> None:
         self.chart = chart
+        self.strict = strict
         self.clock = SimClock()
         self.subject = Subject(chart, clock=self.clock, data=data)
         self.driver: Observer = driver if driver is not None else SimTwin(chart)
@@ -106,10 +109,28 @@ class DeviceUnderTest:
         )
 
     def send(self, event: str, data: Any = None) -> None:
-        """Process ``event`` (with ``data``, else ``event_data[event]``) to completion."""
+        """Process ``event`` (with ``data``, else ``event_data[event]``) to completion.
+
+        With ``strict``, an event that meets a state the tables neither handle it in
+        nor declare it ignored (the kernel's ``no transition``) fails at once.
+        """
+        __tracebackhide__ = True
         self.recorder.mark = len(self.recorder.records)
+        before = self.states
         self.sent.append(event)
         self.subject.dispatch(event, data if data is not None else self.event_data.get(event))
+        if self.strict:
+            missed = [
+                r.event
+                for r in self.recorder.since_mark()
+                if isinstance(r, EventIgnored | EventRejected)
+                and r.reason is Unhandled.NO_TRANSITION
+            ]
+            if missed:
+                raise AssertionError(
+                    f"{self._path()}: {', '.join(missed)} in {list(before)} is a pair the tables "
+                    "neither handle nor ignore (statectl_strict); add a row or an ignore entry"
+                )
 
     def given(self, *events: str) -> None:
         """Send each event in turn; each must be handled (the path to the case's state)."""

@@ -16,7 +16,8 @@ these fixtures available to every test suite; generated modules use nothing else
   (``None``: the driver's own ``methods`` table, else the method's name).
 - ``statectl_device``: a started :class:`~statectl.testgen.harness.DeviceUnderTest`
   (the Subject wired to the driver); the ``statectl_data(name=value, ...)``
-  marker gives the datamodel values it starts with.
+  marker gives the datamodel values it starts with; under the ``statectl_strict``
+  marker an event the tables neither handle nor ignore in the device's state fails.
 - ``statectl_device_factory``: makes a new started device with a fresh driver per
   call (what a Hypothesis state machine needs for each example).
 - ``statectl_recorder``: that device's record list, in order.
@@ -51,6 +52,10 @@ __all__ = [
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line(
         "markers", "statectl_data(**values): datamodel values the statectl_device starts with"
+    )
+    config.addinivalue_line(
+        "markers",
+        "statectl_strict: fail when an event meets a state the tables neither handle nor ignore",
     )
 
 
@@ -113,6 +118,7 @@ def statectl_device(
         data=data,
         event_data=statectl_event_data,
         api=statectl_api,
+        strict=request.node.get_closest_marker("statectl_strict") is not None,
     )
 
 
