@@ -6,7 +6,7 @@ Rules:
    numbers issued with their observer methods, or why nothing happened.
 2. ``rows``: per Event Definition row the shortest path that takes it; per guarded
    row also one where its guard is false (both outcomes). ``transitions``: per
-   distinct edge of the state graph (configuration, event, rows taken).
+   distinct edge of the state graph (configuration, event, configuration, rows).
    ``states``: per reachable configuration. ``pairs``: per transition, each
    transition that can follow it. Every criterion ends with the :class:`Table` of
    each reachable configuration's unhandled events and the kernel's reason.
@@ -218,7 +218,17 @@ def _rows(g: Graph, names: _Names) -> tuple[list[Case], list[str]]:
 
 
 def _edge_key(g: Graph, e: Edge) -> tuple[Any, ...]:
-    return (leaves(g.chart, e.source.snapshot), e.event, tuple(id(t) for t in e.step.transitions))
+    """An edge of the state graph: configuration, event, configuration, and the rows taken.
+
+    The target is part of it: a row into a history state goes where the history says,
+    so Continue from Paused is one edge per configuration it resumes.
+    """
+    return (
+        leaves(g.chart, e.source.snapshot),
+        e.event,
+        leaves(g.chart, e.step.target),
+        tuple(id(t) for t in e.step.transitions),
+    )
 
 
 def _transition_edges(g: Graph) -> list[Edge]:
