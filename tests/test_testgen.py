@@ -540,3 +540,17 @@ def test_generated_set_fails_for_every_seeded_wrong_transition(
     assert len(seeded) - len(distinct) <= 3  # the gantry's Start/Reset into a default child
     survivors = [name for name, mutant in distinct if run_suite(suite, mutant) == 0]
     assert survivors == missed
+
+
+def test_tables_that_no_longer_load_fail_the_module_with_their_diagnostics(
+    tmp_path: Path,
+) -> None:
+    """Generated tests whose tables were broken since fail with the diagnostics, no traceback."""
+    tables = tmp_path / "motor.yaml"
+    tables.write_text(MOTOR.read_text(encoding="utf-8"), encoding="utf-8")
+    generate(tables, "states", tmp_path / "gen")
+    tables.write_text("device: Motor\nstates: 3\n", encoding="utf-8")
+    result = run_pytest(tmp_path / "gen")
+    assert result.returncode == 1, result.stdout[-3000:]
+    assert "does not load:" in result.stdout and "motor.yaml:2: T108" in result.stdout
+    assert "Traceback" not in result.stdout and "During handling" not in result.stdout

@@ -32,6 +32,7 @@ from typing import Any
 import pytest
 
 from statectl.build import load_chart
+from statectl.errors import DiagnosticError, Severity
 from statectl.model import Chart
 from statectl.runtime import Record
 from statectl.testgen.harness import DeviceUnderTest
@@ -69,12 +70,16 @@ def statectl_chart(request: pytest.FixtureRequest) -> Chart:
             "(relative to the module) or override the statectl_chart fixture",
             pytrace=False,
         )
-    path = Path(request.module.__file__).parent / tables
+    path = (Path(request.module.__file__).parent / tables).resolve()
     if not path.exists():
         pytest.fail(
             f"{request.module.__name__}: STATECTL_TABLES {path}: no such file", pytrace=False
         )
-    return load_chart(path)
+    try:
+        return load_chart(path)
+    except DiagnosticError as exc:
+        shown = "\n".join(str(d) for d in exc.diagnostics if d.severity is not Severity.INFO)
+    pytest.fail(f"STATECTL_TABLES {path} does not load:\n{shown}", pytrace=False)
 
 
 @pytest.fixture
