@@ -554,3 +554,27 @@ def test_tables_that_no_longer_load_fail_the_module_with_their_diagnostics(
     assert result.returncode == 1, result.stdout[-3000:]
     assert "does not load:" in result.stdout and "motor.yaml:2: T108" in result.stdout
     assert "Traceback" not in result.stdout and "During handling" not in result.stdout
+
+
+def test_xstate_config_keeps_the_gantry_structure(tmp_path: Path) -> None:
+    """The XState config has the gantry's hierarchy, parallel, final, history and rows."""
+    code, out, err = cli("testgen", str(GANTRY), "--xstate", "--out", str(tmp_path))
+    assert code == 0, err
+    config = json.loads(Path(out.split("wrote ", 1)[1].strip()).read_text(encoding="utf-8"))
+    running = config["states"]["Running"]
+    cycle = running["states"]["Cycle"]
+    cases = [
+        (config["initial"], "Running"),
+        (running["initial"], "Idle"),
+        (cycle["type"], "parallel"),
+        (cycle["states"]["Axis"]["states"]["AtTarget"]["type"], "final"),
+        (running["states"]["Resume"], {"id": "Resume", "type": "history", "history": "deep",
+                                       "target": "#Idle"}),
+        (cycle["onDone"][0]["target"], "#Idle"),
+        (running["states"]["Idle"]["on"]["Start"][0]["target"], "#Cycle"),
+        (running["states"]["Idle"]["on"]["Start"][0]["actions"], ["Start"]),
+        (config["states"]["Paused"]["on"]["Continue"][0]["target"], "#Resume"),
+        ([t["meta"]["row"] for t in running["on"]["EStop"]], ["gantry.yaml:115"]),
+    ]  # fmt: skip
+    for got, expected in cases:
+        assert got == expected

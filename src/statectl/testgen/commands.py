@@ -18,8 +18,16 @@ CRITERIA = ("rows", "transitions", "states", "pairs")  # testgen.cases.CRITERIA,
 
 
 def cmd_testgen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
-    from statectl.testgen.generator import export_graphwalker, generate, generate_hypothesis
+    from statectl.testgen.generator import (
+        export_graphwalker,
+        export_xstate,
+        generate,
+        generate_hypothesis,
+    )
 
+    if args.xstate:
+        out.write(f"wrote {export_xstate(args.file, args.out)}\n")
+        return OK
     if args.graphwalker:
         out.write(f"wrote {export_graphwalker(args.file, args.out)}\n")
         return OK
@@ -73,6 +81,11 @@ def register(sub: Any) -> None:
         "--graphwalker",
         action="store_true",
         help="write the state graph as a GraphWalker JSON model instead",
+    )
+    what.add_argument(
+        "--xstate",
+        action="store_true",
+        help="write the chart as an XState machine config (for @xstate/graph) instead",
     )
     s.set_defaults(func=cmd_testgen)
 

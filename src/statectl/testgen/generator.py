@@ -12,8 +12,16 @@ from statectl.testgen.cases import CRITERIA, Suite, cases_for, count_steps
 from statectl.testgen.graphwalker import graphwalker_model
 from statectl.testgen.paths import MAX_NODES, explore
 from statectl.testgen.writer import hypothesis_text, module_text
+from statectl.testgen.xstate import xstate_config
 
-__all__ = ["Generated", "export_graphwalker", "generate", "generate_hypothesis", "write_atomic"]
+__all__ = [
+    "Generated",
+    "export_graphwalker",
+    "export_xstate",
+    "generate",
+    "generate_hypothesis",
+    "write_atomic",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -50,6 +58,15 @@ def export_graphwalker(file: str | Path, out_dir: str | Path) -> Path:
     slug = re.sub(r"[^0-9a-z]+", "_", chart.name.lower()).strip("_") or "device"
     path = Path(out_dir) / f"{slug}.graphwalker.json"
     write_atomic(path, graphwalker_model(explore(chart)))
+    return path
+
+
+def export_xstate(file: str | Path, out_dir: str | Path) -> Path:
+    """Write ``DEVICE.xstate.json``: the chart as an XState machine config."""
+    chart = load_chart(Path(file))
+    slug = re.sub(r"[^0-9a-z]+", "_", chart.name.lower()).strip("_") or "device"
+    path = Path(out_dir) / f"{slug}.xstate.json"
+    write_atomic(path, xstate_config(chart))
     return path
 
 
