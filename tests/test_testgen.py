@@ -412,7 +412,7 @@ def test_coverage_reports_steps_the_tables_disagree_with(journal: Path, tmp_path
     code, out, _ = cli("coverage", str(journal), str(changed))
     assert code == 1
     assert "steps that disagree with the tables: " in out
-    assert "(Motor: Movement): the journal has ['Moving'], the tables give ['Returning']" in out
+    assert "(Motor): Movement: the run has ['Moving'], the tables give ['Returning']" in out
 
 
 def test_the_docs_hand_written_module_runs(tmp_path: Path) -> None:
@@ -578,3 +578,33 @@ def test_xstate_config_keeps_the_gantry_structure(tmp_path: Path) -> None:
     ]  # fmt: skip
     for got, expected in cases:
         assert got == expected
+
+
+@pytest.mark.parametrize(
+    ("criterion", "summary", "never"),
+    [
+        ("rows", "rows 6 of 6 (100%), states 3 of 3 (100%), transitions 6 of 6 (100%)", 0),
+        ("states", "rows 2 of 6 (33%), states 3 of 3 (100%), transitions 2 of 6 (33%)", 4),
+    ],
+)
+def test_coverage_of_a_test_run(tmp_path: Path, criterion: str, summary: str, never: int) -> None:
+    """pytest --statectl-coverage writes what the tests exercised; coverage reads it."""
+    generate(MOTOR, criterion, tmp_path)
+    result = run_pytest(tmp_path, "--statectl-coverage", str(tmp_path / "cov.json"))
+    assert result.returncode == 0, result.stdout[-3000:]
+    code, out, err = cli("coverage", str(tmp_path / "cov.json"), str(MOTOR))
+    assert code == 0, err
+    assert summary in out
+    assert f"rows never taken: {never or 'none'}\n" in out
+
+
+def test_coverage_file_of_other_tables_is_refused(tmp_path: Path) -> None:
+    """A test run's coverage of another chart is bad input naming what the file has."""
+    (tmp_path / "cov.json").write_text('{"statectl_coverage": 1, "charts": {}}', encoding="utf-8")
+    (tmp_path / "junk.json").write_text("[1, 2]", encoding="utf-8")
+    code, _, err = cli("coverage", str(tmp_path / "cov.json"), str(MOTOR))
+    assert code == 1
+    assert "no chart 'Motor' in this test run's coverage; it has: none" in err
+    code, _, err = cli("coverage", str(tmp_path / "junk.json"), str(MOTOR))
+    assert code == 1
+    assert "not a coverage file written by pytest --statectl-coverage" in err

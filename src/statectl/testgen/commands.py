@@ -46,13 +46,16 @@ def cmd_testgen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
 
 def cmd_coverage(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     from statectl.build import load_chart
-    from statectl.testgen.coverage import coverage_table, journal_coverage, mermaid
+    from statectl.testgen.coverage import coverage_table, journal_coverage, load_tally, mermaid
 
     if not Path(args.journal).exists():
         err.write(f"statectl coverage: {args.journal}: no such file\n")
         return USAGE
     chart = load_chart(args.file)
-    report = journal_coverage(args.journal, chart, args.device)
+    if args.journal.endswith(".json"):  # written by pytest --statectl-coverage
+        report = load_tally(args.journal, chart)
+    else:
+        report = journal_coverage(args.journal, chart, args.device)
     text = mermaid(report) if args.format == "mermaid" else coverage_table(report, args.journal)
     out.write(text)
     return PROBLEMS if report.mismatches else OK
@@ -91,9 +94,13 @@ def register(sub: Any) -> None:
 
     s = sub.add_parser(
         "coverage",
-        help="which rows, states and transitions a journalled run exercised",
+        help="which rows, states and transitions a journalled run or a test run exercised",
     )
-    s.add_argument("journal", metavar="JOURNAL", help="the run's SQLite journal")
+    s.add_argument(
+        "journal",
+        metavar="JOURNAL",
+        help="the run's SQLite journal, or the .json a pytest run wrote with --statectl-coverage",
+    )
     s.add_argument("file", metavar="FILE", help="the device file the run used")
     s.add_argument("--device", help="only this journalled device (default: all of FILE's chart)")
     s.add_argument("--format", default="table", choices=("table", "mermaid"))

@@ -14,7 +14,9 @@ Rules:
 
 from __future__ import annotations
 
+import json
 from collections import Counter
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,7 +28,14 @@ from statectl.semantics import Snapshot, compiled, step
 from statectl.testgen.cases import describe, where
 from statectl.testgen.paths import default_data, explore, leaves
 
-__all__ = ["Coverage", "coverage_table", "journal_coverage", "mermaid"]
+__all__ = [
+    "Coverage",
+    "Tally",
+    "coverage_table",
+    "journal_coverage",
+    "load_tally",
+    "mermaid",
+]
 
 EdgeKey = tuple[tuple[str, ...], str, tuple[str, ...]]
 
@@ -64,15 +73,106 @@ def _reachable(chart: Chart) -> tuple[EdgeKey, ...]:
     return tuple(seen)
 
 
+class Tally:
+    """Counts what the steps of one chart exercised: rows, states entered, graph edges.
+
+    The journal feeds it from its rows; the pytest plugin from each device's steps
+    (``--statectl-coverage``), and writes it as JSON that :func:`load_tally` reads.
+    """
+
+    def __init__(self, chart: Chart) -> None:
+        self.chart = chart
+        self.machine = compiled(chart)
+        self.index = {t: i for i, t in enumerate(chart.transitions)}  # by value: any copy
+        self.rows: Counter[int] = Counter()
+        self.states: Counter[str] = Counter()
+        self.edges: Counter[EdgeKey] = Counter()
+        self.mismatches: list[str] = []
+        self.steps = 0
+
+    def start(self, snapshot: Snapshot) -> None:
+        self.states.update(snapshot.active)
+
+    def event(
+        self,
+        before: Snapshot,
+        event: str,
+        data: Mapping[str, Any],
+        event_data: Any,
+        after: Snapshot,
+        where: str,
+    ) -> None:
+        """A handled event: the kernel re-decides it; a disagreement is noted, not counted."""
+        self.steps += 1
+        decided = step(self.machine, before, event, data, event_data)
+        if not _same(decided.target, after):
+            self.mismatches.append(
+                f"{where}: {event}: the run has {sorted(after.active)}, the tables give "
+                f"{sorted(decided.target.active)}"
+            )
+            return
+        self.rows.update(self.index[t] for t in decided.transitions if t in self.index)
+        self.states.update(decided.entered)
+        chart = self.chart
+        self.edges[(leaves(chart, before), event, leaves(chart, after))] += 1
+
+    def coverage(self, sources: tuple[str, ...]) -> Coverage:
+        chart = self.chart
+        return Coverage(
+            chart,
+            sources,
+            self.steps,
+            tuple(self.rows[i] for i in range(len(chart.transitions))),
+            {st.name: self.states[st.name] for st in chart.states if not st.kind.is_history},
+            dict(self.edges),
+            _reachable(chart),
+            tuple(self.mismatches),
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "chart": self.chart.name,
+            "steps": self.steps,
+            "rows": [self.rows[i] for i in range(len(self.chart.transitions))],
+            "states": dict(self.states),
+            "edges": [[list(s), e, list(d), n] for (s, e, d), n in self.edges.items()],
+            "mismatches": list(self.mismatches),
+        }
+
+
+def load_tally(path: str | Path, chart: Chart) -> Coverage:
+    """Coverage of ``chart`` from a ``--statectl-coverage`` JSON file of a pytest run."""
+    try:
+        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+        entry = doc["charts"].get(chart.name)
+        if entry is None:
+            found = ", ".join(doc["charts"]) or "none"
+            raise StatectlError(
+                f"{path}: no chart {chart.name!r} in this test run's coverage; it has: {found}"
+            )
+        rows = [int(n) for n in entry["rows"]]
+        if len(rows) != len(chart.transitions):
+            raise StatectlError(
+                f"{path}: {chart.name} had {len(rows)} rows in the test run, the tables have "
+                f"{len(chart.transitions)}; run the tests again on these tables"
+            )
+        tally = Tally(chart)
+        tally.steps = int(entry["steps"])
+        tally.rows.update(dict(enumerate(rows)))
+        tally.states.update({str(k): int(v) for k, v in entry["states"].items()})
+        for src, event, dst, n in entry["edges"]:
+            tally.edges[(tuple(src), str(event), tuple(dst))] += int(n)
+        tally.mismatches = [str(m) for m in entry["mismatches"]]
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise StatectlError(
+            f"{path}: not a coverage file written by pytest --statectl-coverage ({exc})"
+        ) from None
+    return tally.coverage(("pytest",))
+
+
 def journal_coverage(journal: str | Path, chart: Chart, device: str | None = None) -> Coverage:
     """Coverage of ``chart`` by the steps ``journal`` holds for it (rules 1-3)."""
-    m = compiled(chart)
-    rows: Counter[int] = Counter()
-    states: Counter[str] = Counter()
-    edges: Counter[EdgeKey] = Counter()
-    mismatches: list[str] = []
-    steps = 0
-    index = {id(t): i for i, t in enumerate(chart.transitions)}
+    tally = Tally(chart)
     with JournalReader(journal) as reader:
         ran = reader.devices()
         names = tuple(
@@ -92,38 +192,17 @@ def journal_coverage(journal: str | Path, chart: Chart, device: str | None = Non
             before: Snapshot | None = None
             for s in reader.steps(name):
                 if s.kind is StepKind.START:
-                    states.update(s.snapshot.active)
+                    tally.start(s.snapshot)
                 elif (
                     s.kind in (StepKind.EVENT, StepKind.RECOVERY)
                     and s.outcome == "handled"
                     and s.event is not None
                     and before is not None
                 ):
-                    steps += 1
-                    decided = step(m, before, s.event, data, s.data)
-                    if not _same(decided.target, s.snapshot):
-                        mismatches.append(
-                            f"step {s.id} ({name}: {s.event}): the journal has "
-                            f"{sorted(s.snapshot.active)}, the tables give "
-                            f"{sorted(decided.target.active)}"
-                        )
-                    else:
-                        rows.update(index[id(t)] for t in decided.transitions if id(t) in index)
-                        states.update(decided.entered)
-                        key = (leaves(chart, before), s.event, leaves(chart, s.snapshot))
-                        edges[key] += 1
+                    tally.event(before, s.event, data, s.data, s.snapshot, f"step {s.id} ({name})")
                 if s.outcome != REDO:
                     before = s.snapshot
-    return Coverage(
-        chart,
-        names,
-        steps,
-        tuple(rows[i] for i in range(len(chart.transitions))),
-        {st.name: states[st.name] for st in chart.states if not st.kind.is_history},
-        dict(edges),
-        _reachable(chart),
-        tuple(mismatches),
-    )
+    return tally.coverage(names)
 
 
 def _pct(part: int, whole: int) -> str:
@@ -137,8 +216,7 @@ def coverage_table(c: Coverage, journal: str) -> str:
     entered = sum(n > 0 for n in c.states.values())
     hit = sum(k in c.edges for k in c.reachable)
     out = [
-        f"{chart.name}: journal {journal}, device(s) {', '.join(c.devices)}, "
-        f"{c.steps} event step(s)",
+        f"{chart.name}: {journal} ({', '.join(c.devices)}), {c.steps} event step(s)",
         f"rows {_pct(taken, len(c.rows))}, states {_pct(entered, len(c.states))}, "
         f"transitions {_pct(hit, len(c.reachable))}",
         "",

@@ -36,6 +36,7 @@ from statectl.runtime import (
 )
 from statectl.semantics import Unhandled
 from statectl.semantics import step as kernel_step
+from statectl.testgen.coverage import Tally
 
 __all__ = ["DeviceUnderTest", "Recorder", "api_function"]
 
@@ -78,6 +79,8 @@ class DeviceUnderTest:
         event_data: Mapping[str, Any] | None = None,
         api: Mapping[str, str | None] | None = None,
         strict: bool = False,
+        tally: Tally | None = None,
+        where: str = "",
     ) -> None:
         self.chart = chart
         self.strict = strict
@@ -95,6 +98,27 @@ class DeviceUnderTest:
             self.subject.attach(self.driver)  # a plain observer: no monitors to poll it
         self.sent: list[str] = []
         self.subject.start()
+        if tally is not None:
+            self._count(tally, where)
+
+    def _count(self, tally: Tally, where: str) -> None:
+        """Tell ``tally`` every step the device takes (the plugin's --statectl-coverage)."""
+        subject = self.subject
+        start = subject.snapshot
+        if start is None:
+            return
+        tally.start(start)
+        last = [start]
+
+        def heard(event: str, data: Any, outcome: str) -> None:
+            after = subject.snapshot
+            if after is None:
+                return
+            if outcome == "handled":
+                tally.event(last[0], event, subject.data, data, after, where)
+            last[0] = after
+
+        subject.on_step(heard)
 
     # -- driving -------------------------------------------------------------------------------
 

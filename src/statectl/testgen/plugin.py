@@ -25,6 +25,7 @@ these fixtures available to every test suite; generated modules use nothing else
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -35,10 +36,14 @@ from statectl.build import load_chart
 from statectl.errors import DiagnosticError, Severity
 from statectl.model import Chart
 from statectl.runtime import Record
+from statectl.testgen.coverage import Tally
+from statectl.testgen.generator import write_atomic
 from statectl.testgen.harness import DeviceUnderTest
 
 __all__ = [
+    "pytest_addoption",
     "pytest_configure",
+    "pytest_sessionfinish",
     "statectl_api",
     "statectl_chart",
     "statectl_device",
@@ -48,6 +53,38 @@ __all__ = [
     "statectl_new_driver",
     "statectl_recorder",
 ]
+
+
+#: chart name -> what this run's devices of that chart exercised (--statectl-coverage)
+_TALLIES = pytest.StashKey[dict[str, Tally]]()
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.getgroup("statectl").addoption(
+        "--statectl-coverage",
+        metavar="PATH",
+        default=None,
+        help="write which rows, states and transitions the statectl devices of this run "
+        "exercised, as JSON for `statectl coverage PATH FILE`",
+    )
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    path = session.config.getoption("statectl_coverage", None)
+    if not path:
+        return
+    tallies = session.config.stash.get(_TALLIES, {})
+    doc = {"statectl_coverage": 1, "charts": {k: t.to_json() for k, t in tallies.items()}}
+    write_atomic(Path(path), json.dumps(doc, indent=1) + "\n")
+
+
+def _tally(config: pytest.Config, chart: Chart) -> Tally | None:
+    """The run's tally for ``chart`` when --statectl-coverage asks for one."""
+    if not config.getoption("statectl_coverage", None):
+        return None
+    tallies = config.stash.setdefault(_TALLIES, {})
+    tally = tallies.setdefault(chart.name, Tally(chart))
+    return tally if tally.chart == chart else None  # another chart of that name: not counted
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -124,6 +161,8 @@ def statectl_device(
         event_data=statectl_event_data,
         api=statectl_api,
         strict=request.node.get_closest_marker("statectl_strict") is not None,
+        tally=_tally(request.config, statectl_chart),
+        where=request.node.nodeid,
     )
 
 
@@ -133,6 +172,7 @@ def statectl_device_factory(
     statectl_new_driver: Callable[[Chart], Any],
     statectl_event_data: Mapping[str, Any],
     statectl_api: Mapping[str, str | None] | None,
+    request: pytest.FixtureRequest,
 ) -> Callable[[], DeviceUnderTest]:
     """Makes a new started device with a fresh driver each call (a Hypothesis example each)."""
 
@@ -142,6 +182,8 @@ def statectl_device_factory(
             statectl_new_driver(statectl_chart),
             event_data=statectl_event_data,
             api=statectl_api,
+            tally=_tally(request.config, statectl_chart),
+            where=request.node.nodeid,
         )
 
     return make
