@@ -608,3 +608,12 @@ def test_coverage_file_of_other_tables_is_refused(tmp_path: Path) -> None:
     code, _, err = cli("coverage", str(tmp_path / "junk.json"), str(MOTOR))
     assert code == 1
     assert "not a coverage file written by pytest --statectl-coverage" in err
+
+
+def test_public_names_resolve() -> None:
+    """Every name in statectl.testgen.__all__ is importable through the lazy package."""
+    import statectl.testgen as tg
+
+    assert [n for n in tg.__all__ if getattr(tg, n, None) is None] == []
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        _ = tg.nope  # type: ignore[attr-defined]

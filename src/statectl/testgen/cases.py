@@ -261,11 +261,8 @@ def _states(g: Graph, names: _Names) -> list[Case]:
         base = f"test_state_{_slug('_'.join(key))}"
         doc = f"The device can be brought to {', '.join(key)}."
         edge = g.parent[node]
-        if edge is None:
-            start = g.start[node.data]
-            expect = Expect(leaves(g.chart, start.snapshot))
-            step0 = g.initial_steps[node.data]
-            expect = Expect(expect.states, tuple((n.invoke, n.method) for n in notifies(step0)))
+        if edge is None:  # the start: what entering the default configuration issued
+            expect = _expect(g.chart, g.initial_steps[node.data])
             out.append(
                 Case(
                     names(base),
