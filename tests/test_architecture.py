@@ -110,6 +110,19 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "cell",
         "explore",
     ),
+    "testgen": (
+        "errors",
+        "model",
+        "expr",
+        "semantics",
+        "observers",
+        "tables",
+        "build",
+        "runtime",
+        "devices",
+        "journal",
+        "rules",
+    ),
 }
 THIRD_PARTY_FREE = (*KERNEL, "observers", "guards")
 

@@ -232,6 +232,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("file", metavar="FILE")
     s.add_argument("--out", help="write to this file instead of standard output")
     s.set_defaults(func=cmd_scxml_export)
+
+    from statectl.testgen.commands import register as register_testgen
+
+    register_testgen(sub)  # testgen, coverage (src/statectl/testgen/commands.py)
     return p
 
 

@@ -1,0 +1,107 @@
+"""The ``statectl testgen`` and ``statectl coverage`` commands, registered on the CLI's parser.
+
+:func:`register` is the CLI's one hook into this package: it adds both
+subcommands to the ``statectl`` parser. Each command is thin: parse, call one
+function, print, exit code (0 ok, 1 bad input or a check failed, 2 usage).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any, TextIO
+
+__all__ = ["cmd_coverage", "cmd_testgen", "register"]
+
+OK, PROBLEMS, USAGE = 0, 1, 2
+CRITERIA = ("rows", "transitions", "states", "pairs")  # testgen.cases.CRITERIA, kept light
+
+
+def cmd_testgen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    from statectl.testgen.generator import (
+        export_graphwalker,
+        export_xstate,
+        generate,
+        generate_hypothesis,
+    )
+
+    if args.xstate:
+        out.write(f"wrote {export_xstate(args.file, args.out)}\n")
+        return OK
+    if args.graphwalker:
+        out.write(f"wrote {export_graphwalker(args.file, args.out)}\n")
+        return OK
+    if args.hypothesis:
+        out.write(f"wrote {generate_hypothesis(args.file, args.out)}\n")
+        return OK
+    made = generate(args.file, args.criterion, args.out)
+    out.write(
+        f"wrote {made.path}: {made.tests} tests ({len(made.suite.cases)} cases, "
+        f"{len(made.suite.tables)} unhandled-event tables), {made.steps} events sent\n"
+    )
+    for note in made.suite.notes:
+        out.write(f"note: {note}\n")
+    return OK
+
+
+def cmd_coverage(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    from statectl.build import load_chart
+    from statectl.testgen.coverage import coverage_table, journal_coverage, load_tally, mermaid
+
+    if not Path(args.journal).exists():
+        err.write(f"statectl coverage: {args.journal}: no such file\n")
+        return USAGE
+    chart = load_chart(args.file)
+    if args.journal.endswith(".json"):  # written by pytest --statectl-coverage
+        report = load_tally(args.journal, chart)
+    else:
+        report = journal_coverage(args.journal, chart, args.device)
+    text = mermaid(report) if args.format == "mermaid" else coverage_table(report, args.journal)
+    out.write(text)
+    return PROBLEMS if report.mismatches else OK
+
+
+def register(sub: Any) -> None:
+    """Add ``testgen`` and ``coverage`` to the CLI's subparsers (``sub``)."""
+    s = sub.add_parser(
+        "testgen",
+        help="write a pytest module that tests a device against its tables",
+        description="Explores the chart from its default state and writes one test per "
+        "row (or transition, state, pair of transitions), plus each state's unhandled "
+        "events, into DIR. The tests run on the simulated twin unless a conftest.py "
+        "overrides the statectl_driver fixture (docs/testgen.md).",
+    )
+    s.add_argument("file", metavar="FILE", help="device file")
+    s.add_argument("--criterion", default="rows", choices=CRITERIA)
+    s.add_argument("--out", required=True, metavar="DIR", help="directory to write into")
+    what = s.add_mutually_exclusive_group()
+    what.add_argument(
+        "--hypothesis",
+        action="store_true",
+        help="write a Hypothesis state machine over the chart's events instead",
+    )
+    what.add_argument(
+        "--graphwalker",
+        action="store_true",
+        help="write the state graph as a GraphWalker JSON model instead",
+    )
+    what.add_argument(
+        "--xstate",
+        action="store_true",
+        help="write the chart as an XState machine config (for @xstate/graph) instead",
+    )
+    s.set_defaults(func=cmd_testgen)
+
+    s = sub.add_parser(
+        "coverage",
+        help="which rows, states and transitions a journalled run or a test run exercised",
+    )
+    s.add_argument(
+        "journal",
+        metavar="JOURNAL",
+        help="the run's SQLite journal, or the .json a pytest run wrote with --statectl-coverage",
+    )
+    s.add_argument("file", metavar="FILE", help="the device file the run used")
+    s.add_argument("--device", help="only this journalled device (default: all of FILE's chart)")
+    s.add_argument("--format", default="table", choices=("table", "mermaid"))
+    s.set_defaults(func=cmd_coverage)

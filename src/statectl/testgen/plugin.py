@@ -1,0 +1,195 @@
+"""The statectl pytest plugin: fixtures for tests of a device against its tables.
+
+Registered under the ``pytest11`` entry point, so ``pip install statectl`` makes
+these fixtures available to every test suite; generated modules use nothing else.
+
+- ``statectl_chart``: the chart of the module's ``STATECTL_TABLES`` (a path
+  relative to the module), loaded once per module.
+- ``statectl_new_driver``: makes a fresh driver for a chart; its default makes
+  ``None``, which means the simulated twin derived from the tables. Override it in
+  a conftest.py to test a real driver (the Hypothesis module needs one per example).
+- ``statectl_driver``: the driver under test, by default ``statectl_new_driver``'s;
+  override it instead when only example-based modules run.
+- ``statectl_event_data``: event name -> the data sent with it (default: none),
+  for drivers that need it (a SimMotor's Movement needs ``{"amount": x}``).
+- ``statectl_api``: observer method -> the API function the driver must call
+  (``None``: the driver's own ``methods`` table, else the method's name).
+- ``statectl_device``: a started :class:`~statectl.testgen.harness.DeviceUnderTest`
+  (the Subject wired to the driver); the ``statectl_data(name=value, ...)``
+  marker gives the datamodel values it starts with; under the ``statectl_strict``
+  marker an event the tables neither handle nor ignore in the device's state fails.
+- ``statectl_device_factory``: makes a new started device with a fresh driver per
+  call (what a Hypothesis state machine needs for each example).
+- ``statectl_recorder``: that device's record list, in order.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from statectl.build import load_chart
+from statectl.errors import DiagnosticError, Severity
+from statectl.model import Chart
+from statectl.runtime import Record
+from statectl.testgen.coverage import Tally
+from statectl.testgen.generator import write_atomic
+from statectl.testgen.harness import DeviceUnderTest
+
+__all__ = [
+    "pytest_addoption",
+    "pytest_configure",
+    "pytest_sessionfinish",
+    "statectl_api",
+    "statectl_chart",
+    "statectl_device",
+    "statectl_device_factory",
+    "statectl_driver",
+    "statectl_event_data",
+    "statectl_new_driver",
+    "statectl_recorder",
+]
+
+
+#: chart name -> what this run's devices of that chart exercised (--statectl-coverage)
+_TALLIES = pytest.StashKey[dict[str, Tally]]()
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.getgroup("statectl").addoption(
+        "--statectl-coverage",
+        metavar="PATH",
+        default=None,
+        help="write which rows, states and transitions the statectl devices of this run "
+        "exercised, as JSON for `statectl coverage PATH FILE`",
+    )
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    path = session.config.getoption("statectl_coverage", None)
+    if not path:
+        return
+    tallies = session.config.stash.get(_TALLIES, {})
+    doc = {"statectl_coverage": 1, "charts": {k: t.to_json() for k, t in tallies.items()}}
+    write_atomic(Path(path), json.dumps(doc, indent=1) + "\n")
+
+
+def _tally(config: pytest.Config, chart: Chart) -> Tally | None:
+    """The run's tally for ``chart`` when --statectl-coverage asks for one."""
+    if not config.getoption("statectl_coverage", None):
+        return None
+    tallies = config.stash.setdefault(_TALLIES, {})
+    tally = tallies.setdefault(chart.name, Tally(chart))
+    return tally if tally.chart == chart else None  # another chart of that name: not counted
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line(
+        "markers", "statectl_data(**values): datamodel values the statectl_device starts with"
+    )
+    config.addinivalue_line(
+        "markers",
+        "statectl_strict: fail when an event meets a state the tables neither handle nor ignore",
+    )
+
+
+@pytest.fixture(scope="module")
+def statectl_chart(request: pytest.FixtureRequest) -> Chart:
+    """The chart of the test module's ``STATECTL_TABLES`` (relative to the module)."""
+    tables = getattr(request.module, "STATECTL_TABLES", None)
+    if not isinstance(tables, str):
+        pytest.fail(
+            f"{request.module.__name__}: set STATECTL_TABLES to the device file "
+            "(relative to the module) or override the statectl_chart fixture",
+            pytrace=False,
+        )
+    path = (Path(request.module.__file__).parent / tables).resolve()
+    if not path.exists():
+        pytest.fail(
+            f"{request.module.__name__}: STATECTL_TABLES {path}: no such file", pytrace=False
+        )
+    try:
+        return load_chart(path)
+    except DiagnosticError as exc:
+        shown = "\n".join(str(d) for d in exc.diagnostics if d.severity is not Severity.INFO)
+    pytest.fail(f"STATECTL_TABLES {path} does not load:\n{shown}", pytrace=False)
+
+
+@pytest.fixture
+def statectl_new_driver() -> Callable[[Chart], Any]:
+    """Makes a fresh driver for a chart; ``None`` from it means the tables' simulated twin."""
+    return lambda chart: None
+
+
+@pytest.fixture
+def statectl_driver(statectl_new_driver: Callable[[Chart], Any], statectl_chart: Chart) -> Any:
+    """The driver under test (by default ``statectl_new_driver``'s; ``None``: the twin)."""
+    return statectl_new_driver(statectl_chart)
+
+
+@pytest.fixture
+def statectl_event_data() -> Mapping[str, Any]:
+    """Event name -> the data sent with it."""
+    return {}
+
+
+@pytest.fixture
+def statectl_api() -> Mapping[str, str | None] | None:
+    """Observer method -> the API function the driver must call (``None``: its own table)."""
+    return None
+
+
+@pytest.fixture
+def statectl_device(
+    request: pytest.FixtureRequest,
+    statectl_chart: Chart,
+    statectl_driver: Any,
+    statectl_event_data: Mapping[str, Any],
+    statectl_api: Mapping[str, str | None] | None,
+) -> DeviceUnderTest:
+    """A started device on a simulated clock, wired to the driver under test."""
+    marker = request.node.get_closest_marker("statectl_data")
+    data = dict(marker.kwargs) if marker is not None else None
+    return DeviceUnderTest(
+        statectl_chart,
+        statectl_driver,
+        data=data,
+        event_data=statectl_event_data,
+        api=statectl_api,
+        strict=request.node.get_closest_marker("statectl_strict") is not None,
+        tally=_tally(request.config, statectl_chart),
+        where=request.node.nodeid,
+    )
+
+
+@pytest.fixture
+def statectl_device_factory(
+    statectl_chart: Chart,
+    statectl_new_driver: Callable[[Chart], Any],
+    statectl_event_data: Mapping[str, Any],
+    statectl_api: Mapping[str, str | None] | None,
+    request: pytest.FixtureRequest,
+) -> Callable[[], DeviceUnderTest]:
+    """Makes a new started device with a fresh driver each call (a Hypothesis example each)."""
+
+    def make() -> DeviceUnderTest:
+        return DeviceUnderTest(
+            statectl_chart,
+            statectl_new_driver(statectl_chart),
+            event_data=statectl_event_data,
+            api=statectl_api,
+            tally=_tally(request.config, statectl_chart),
+            where=request.node.nodeid,
+        )
+
+    return make
+
+
+@pytest.fixture
+def statectl_recorder(statectl_device: DeviceUnderTest) -> list[Record]:
+    """Every record the device emitted, in order (the notifications among them)."""
+    return statectl_device.recorder.records
