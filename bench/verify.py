@@ -22,7 +22,8 @@ import time
 from pathlib import Path
 
 from statectl.cell import load_cell
-from statectl.explore import Composed, ProgressPrinter, explore, export_promela
+from statectl.cli.progress import ProgressPrinter
+from statectl.explore import Composed, explore, export_promela
 
 STATION = """\
 device: Station

@@ -239,7 +239,7 @@ def test_runtime_walk_agrees_with_explorer() -> None:
     """A random walk on the runtime never reaches a state the explorer does not predict."""
     cell = load_cell_or_raise(PICK / "cell-buggy.yaml")
     for seed in range(3):
-        result = run_cell(cell, io.StringIO(), walk=25, seed=seed)
+        result = run_cell(cell, walk=25, seed=seed)
         assert result.divergences == ()
 
 

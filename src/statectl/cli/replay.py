@@ -36,5 +36,5 @@ def run_main(
     except StatectlError as exc:
         err.write(f"statectl run: {exc}\n")
         return USAGE
-    result = run_cell(loaded, out, replay=steps, walk=walk, seed=seed)
+    result = run_cell(loaded, out.write, replay=steps, walk=walk, seed=seed)
     return PROBLEMS if result.divergences else OK

@@ -17,11 +17,12 @@ from typing import TextIO
 
 from statectl.cell import Cell, load_cell
 from statectl.cli.commands import OK, PROBLEMS, USAGE
+from statectl.cli.progress import ProgressPrinter
 from statectl.errors import Severity
 from statectl.explore.compose import Composed
 from statectl.explore.diagrams import to_mermaid, to_plantuml
 from statectl.explore.promela import export_promela
-from statectl.explore.search import ProgressPrinter, explore
+from statectl.explore.search import explore
 from statectl.explore.verify import write_traces
 
 

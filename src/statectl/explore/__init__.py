@@ -17,7 +17,7 @@ from statectl.explore.report import (
     TraceStep,
     Unanticipated,
 )
-from statectl.explore.search import Progress, ProgressPrinter, explore, trace_to
+from statectl.explore.search import Progress, explore, trace_to
 from statectl.explore.verify import verify_cell, write_traces
 
 __all__ = [
@@ -32,7 +32,6 @@ __all__ = [
     "LocalSpace",
     "Outcome",
     "Progress",
-    "ProgressPrinter",
     "Report",
     "Stimulus",
     "Trace",

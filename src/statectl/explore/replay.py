@@ -25,10 +25,10 @@ from __future__ import annotations
 import os
 import random
 from collections import deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 from statectl.cell import Cell, InputKind, Link, Trigger
 from statectl.errors import StatectlError
@@ -39,8 +39,8 @@ from statectl.runtime import (
     SimClock,
     StateEntered,
     Subject,
-    TraceWriter,
     TransitionTaken,
+    format_record,
 )
 from statectl.tables import safeyaml
 
@@ -142,20 +142,20 @@ class CellLinks:
 
 
 class _Runner:
-    def __init__(self, cell: Cell, out: TextIO) -> None:
+    def __init__(self, cell: Cell, write: Callable[[str], object]) -> None:
         self.cell = cell
         self.model = Composed(cell)
         self.clock = SimClock()
         width = max(len(d.name) for d in cell.devices)
-        self.writer = TraceWriter(out, device_width=width)
-        self.out = out
+        self.out = write
+        self.width = width
         self.subjects: dict[str, Subject] = {}
         self.links = CellLinks(cell, self.subjects, self.model)
         self.unhandled: list[str] = []
         self.delivering: tuple[str, str] | None = None
         for d in cell.devices:
             s = Subject(d.chart, clock=self.clock, name=d.name)
-            s.listen(self.writer)
+            s.listen(self._trace)
             s.listen(self.links.watch)
             s.listen(self._watch)
             self.subjects[d.name] = s
@@ -163,6 +163,9 @@ class _Runner:
             s.start()
             s.run_until_idle()
         self.links.fired.clear()
+
+    def _trace(self, r: Record) -> None:
+        self.out(format_record(r, device_width=self.width) + "\n")
 
     def _watch(self, r: Record) -> None:
         if (
@@ -197,21 +200,21 @@ class _Runner:
     def _links(self) -> list[tuple[str, str]]:
         out = []
         for k in self.links.due():
-            self.out.write(f"          link: {k.label}\n")
+            self.out(f"          link: {k.label}\n")
             out.append((k.target, k.event))
         return out
 
 
 def run_cell(
     cell: Cell,
-    out: TextIO,
+    write: Callable[[str], object] = lambda text: None,
     *,
     replay: Sequence[ReplayStep] | None = None,
     walk: int = 20,
     seed: int = 0,
 ) -> CellRun:
-    """Run ``cell`` on the runtime (rules 1-4); the trace goes to ``out``."""
-    r = _Runner(cell, out)
+    """Run ``cell`` on the runtime (rules 1-4); each piece of the trace goes to ``write``."""
+    r = _Runner(cell, write)
     m = r.model
     invariants = [(inv.name, m.predicate(inv.expr)) for inv in cell.invariants]
     rng = random.Random(seed)
@@ -236,10 +239,10 @@ def run_cell(
         else:
             choices = [s for s in m.enabled(g) if m.successors(g, s)]
             if not choices:
-                out.write("--- no stimulus can change the cell: deadlock\n")
+                write("--- no stimulus can change the cell: deadlock\n")
                 break
             stim = rng.choice(choices)
-        out.write(f"--- step {i + 1}: {stim.label(m.names)}\n")
+        write(f"--- step {i + 1}: {stim.label(m.names)}\n")
         expected = {h for h, _, _ in m.successors(g, stim)}
         r.perform(m.names[stim.device], stim.event)
         done += 1
@@ -258,11 +261,11 @@ def run_cell(
         for name, fn in invariants:
             if not fn(h):
                 violations.append(f"step {i + 1}: invariant {name} fails in {m.describe(h)}")
-                out.write(f"--- invariant {name} fails\n")
+                write(f"--- invariant {name} fails\n")
     result = CellRun(done, tuple(divergences), tuple(violations), tuple(r.unhandled))
     for text in result.unhandled:
-        out.write(f"unhandled link event: {text}\n")
+        write(f"unhandled link event: {text}\n")
     for text in result.divergences:
-        out.write(f"diverged: {text}\n")
-    out.write(f"{done} step(s); final: {m.describe(r.state())}\n")
+        write(f"diverged: {text}\n")
+    write(f"{done} step(s); final: {m.describe(r.state())}\n")
     return result

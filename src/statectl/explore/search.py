@@ -19,20 +19,18 @@ Rules:
 from __future__ import annotations
 
 import resource
-import sys
 import time
 from array import array
 from collections.abc import Callable
 from dataclasses import dataclass
 from itertools import pairwise
-from typing import TextIO
 
 from statectl.cell import Cell, InputKind
 from statectl.explore.compose import Branch, Composed, Predicate, Stimulus
 from statectl.explore.report import Finding, Kind, Report, Trace, TraceStep, Unanticipated
 from statectl.semantics import Unhandled
 
-__all__ = ["Progress", "ProgressPrinter", "explore", "trace_to"]
+__all__ = ["Progress", "explore", "trace_to"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -41,28 +39,6 @@ class Progress:
     expanded: int
     depth: int
     seconds: float
-
-
-class ProgressPrinter:
-    """A one-line progress display on a terminal stream (rewritten in place)."""
-
-    def __init__(self, stream: TextIO | None = None) -> None:
-        self.stream: TextIO = stream if stream is not None else sys.stderr
-        self.shown = False
-
-    def __call__(self, p: Progress) -> None:
-        rate = p.states / p.seconds if p.seconds else 0.0
-        text = (
-            f"\rexploring: {p.states:,} states, {p.expanded:,} expanded, depth {p.depth}, "
-            f"{rate:,.0f} states/s "
-        )
-        self.stream.write(text)
-        self.stream.flush()
-        self.shown = True
-
-    def done(self) -> None:
-        if self.shown:
-            self.stream.write("\n")
 
 
 def _peak_bytes() -> int:
