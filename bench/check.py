@@ -108,6 +108,36 @@ def bench_scxml(path: Path) -> tuple[float, float]:
     return t_read, t_start
 
 
+def flat_text(states: int) -> str:
+    """A flat device of ``states`` states in a ring, one event row each (issue 10's chart)."""
+    lines = ["device: Flat", "states:"]
+    lines.append("  - {state: S0, control: default}")
+    lines += [f"  - {{state: S{i}, control: event trigger required}}" for i in range(1, states)]
+    lines.append("events:")
+    lines += [
+        f"  - {{event: E{i}, old: S{i}, new: S{(i + 1) % states}, kind: command, api: Go}}"
+        for i in range(states)
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def bench_flat(path: Path) -> tuple[float, float]:
+    """Load (tables + build) and compile (the kernel's Machine, a started Subject)."""
+    from statectl.build import load_chart
+    from statectl.runtime import SimClock, Subject
+
+    t_load, chart = timed(lambda: load_chart(path))
+    assert not isinstance(chart, BaseException)
+
+    def start() -> object:
+        subject = Subject(chart, clock=SimClock())  # type: ignore[arg-type]  # a Chart
+        subject.start()
+        return subject
+
+    t_compile, _ = timed(start)
+    return t_load, t_compile
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rows", type=int, default=20_000)
@@ -150,6 +180,15 @@ def main() -> int:
         f"ratio read+start {args.states:,} / 1,000 states: {reads[1] / reads[0]:.1f} "
         f"(linear would be {args.states / 1000:.0f})"
     )
+    print(f"{'input':<28} {'load s':>8} {'compile s':>9} {'total s':>8}")
+    for states in (1_000, 10_000):
+        path = where / f"flat{states}.yaml"
+        path.write_text(flat_text(states), encoding="utf-8")
+        t_load, t_compile = bench_flat(path)
+        label = f"flat chart, {states:,} states"
+        total = t_load + t_compile
+        verdict = "" if states < 10_000 else f"  (target < 2 s: {'met' if total < 2 else 'MISSED'})"
+        print(f"{label:<28} {t_load:8.2f} {t_compile:9.2f} {total:8.2f}{verdict}")
     return 0
 
 
