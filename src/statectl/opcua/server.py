@@ -263,13 +263,11 @@ class OpcuaServer:
         device.machines, device.state_nodes, device.transition_nodes = [], {}, {}
         chart_initial = set(initial)
         for spec in lay.machines:
-            holder = node if spec.parent is None else made[spec.parent]
+            holder = node if spec.holder is None else device.state_nodes[spec.holder]
             machine = await holder.add_object(idx, spec.name, objecttype=kind.nodeid)
             made.append(machine)
             if spec.holder is not None:
-                await device.state_nodes[spec.holder].add_reference(
-                    machine.nodeid, ua.ObjectIds.HasSubStateMachine
-                )
+                await holder.add_reference(machine.nodeid, ua.ObjectIds.HasSubStateMachine)
             first = _initial(self.system.subjects[device.name].chart, spec, chart_initial)
             for state in spec.states:
                 stype = ua.ObjectIds.InitialStateType if state == first else ua.ObjectIds.StateType
@@ -349,12 +347,16 @@ class OpcuaServer:
                         await m.last_time.write_value(ua.Variant(now, ua.VariantType.DateTime))
             ev = device.events
             ev.event.Transition = ua.LocalizedText(name)
-            setattr(ev.event, "Transition/Id", tid)
+            node_id = ua.VariantType.NodeId
+            setattr(ev.event, "Transition/Id", ua.Variant(tid, node_id))
             ev.event.FromState = ua.LocalizedText(source)
-            setattr(ev.event, "FromState/Id", device.state_nodes[source].nodeid)
+            setattr(
+                ev.event, "FromState/Id", ua.Variant(device.state_nodes[source].nodeid, node_id)
+            )
             to = target or ""
             ev.event.ToState = ua.LocalizedText(to)
-            setattr(ev.event, "ToState/Id", device.state_nodes[to].nodeid if to else ua.NodeId())
+            to_id = device.state_nodes[to].nodeid if to else ua.NodeId()
+            setattr(ev.event, "ToState/Id", ua.Variant(to_id, node_id))
             await ev.trigger(message=f"{device.name}: {name}")
         for m in device.machines:
             inside = m.states & active

@@ -7,9 +7,10 @@ Rules:
    the ``Number`` of ``CurrentState`` / ``LastTransition``.
 2. A *machine* is one set of sibling states (OPC 10000-16: a finite state machine
    is in exactly one of its states). The device's top-level states form its main
-   machine; a compound state's children form a sub-state machine of the state;
-   each region of a parallel state forms its own sub-state machine, the regions
-   siblings. A chart whose only top-level state is parallel gives the device one
+   machine; a compound state's children form a sub-state machine of the state,
+   named ``SubStateMachine``; each region of a parallel state forms its own
+   sub-state machine named after the region, the regions siblings. A sub-state
+   machine is a component of its state (so names never clash). A chart whose only top-level state is parallel gives the device one
    sibling machine per region instead of a main machine.
 3. A transition belongs to the machine holding its source state; its ``ToState``
    is the target's ancestor in that machine (a transition into a sub-state machine
@@ -73,7 +74,7 @@ def layout(chart: Chart) -> Layout:
         for m in members:
             st = chart.state(m)
             if st.kind is StateKind.COMPOUND:
-                add(m, at, m, kids(m))
+                add("SubStateMachine", at, m, kids(m))
             elif st.kind is StateKind.PARALLEL:
                 for region in kids(m):
                     inner = chart.state(region)
