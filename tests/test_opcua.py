@@ -30,10 +30,10 @@ from support import MOTOR, ROOT
 
 pytest.importorskip("asyncua")
 
-from asyncua import Client, ua  # noqa: E402
-from asyncua.crypto.cert_gen import setup_self_signed_certificate  # noqa: E402
-from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256  # noqa: E402
-from cryptography.x509.oid import ExtendedKeyUsageOID  # noqa: E402
+from asyncua import Client, ua
+from asyncua.crypto.cert_gen import setup_self_signed_certificate
+from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
+from cryptography.x509.oid import ExtendedKeyUsageOID
 
 GANTRY = ROOT / "examples" / "gantry" / "gantry.yaml"
 CELL = ROOT / "examples" / "pick-and-place" / "cell.yaml"
@@ -84,7 +84,7 @@ def serve(tmp: Path, path: Path, security: str) -> Iterator[Served]:
             str(config),
             "--opcua",
             url,
-        ],  # fmt: skip
+        ],
         stdin=subprocess.DEVNULL,
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,

@@ -30,6 +30,7 @@ from __future__ import annotations
 import asyncio
 import hmac
 import threading
+from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -108,6 +109,9 @@ class OpcuaServer:
             name: _Device(name, layout(s.chart), pending=[]) for name, s in system.subjects.items()
         }
         self._offs: list[Callable[[], None]] = []
+        self._server: Any = None
+        self._updates: deque[tuple[_Device, frozenset[str], list[Record]]] = deque()
+        self._kick: Any = None  # an asyncio.Event of the server's loop
 
     # -- hooks on the owner (rule 1) ------------------------------------------------------
 
@@ -189,12 +193,16 @@ class OpcuaServer:
         await self._secure(server)
         idx = await server.register_namespace(NAMESPACE)
         await self._build(server, idx)
+        self._server = server
+        self._kick = asyncio.Event()
+        writer = asyncio.create_task(self._writer())
         self._hook()
         await server.start()
         try:
             self._ready.set()
             await self._stop.wait()
         finally:
+            writer.cancel()
             await server.stop()
 
     async def _secure(self, server: Any) -> None:
@@ -315,7 +323,17 @@ class OpcuaServer:
     # -- updates on the loop (rule 1) ------------------------------------------------------
 
     def _publish(self, device: _Device, active: frozenset[str], records: list[Record]) -> None:
-        asyncio.get_running_loop().create_task(self._write(device, active, records))
+        self._updates.append((device, active, records))
+        self._kick.set()
+
+    async def _writer(self) -> None:
+        """One task writes every update, in the order the steps happened."""
+        updates, kick = self._updates, self._kick
+        while True:
+            await kick.wait()
+            kick.clear()
+            while updates:
+                await self._write(*updates.popleft())
 
     async def _write(self, device: _Device, active: frozenset[str], records: list[Record]) -> None:
         ua = _ua()
@@ -324,11 +342,33 @@ class OpcuaServer:
             return
         lay = device.layout
         now = datetime.now(UTC)
+        server = self._server
+
+        async def put(node: Any, value: Any, kind: Any) -> None:
+            data = ua.DataValue(ua.Variant(value, kind), SourceTimestamp=now, ServerTimestamp=now)
+            await server.write_attribute_value(node.nodeid, data)
+
+        text, node_id, uint = (
+            ua.VariantType.LocalizedText,
+            ua.VariantType.NodeId,
+            ua.VariantType.UInt32,
+        )
+        for m in device.machines:  # first what clients wait for
+            inside = m.states & active
+            shown = next(iter(inside)) if inside else ""
+            if shown == m.shown:
+                continue
+            m.shown = shown
+            await put(m.current, ua.LocalizedText(shown), text)
+            sid = device.state_nodes[shown].nodeid if shown else ua.NodeId()
+            await put(m.current_id, sid, node_id)
+            if m.current_number is not None:
+                await put(m.current_number, lay.state_numbers[shown] if shown else 0, uint)
+        if records:
+            await asyncio.sleep(0)  # let the publisher send the new states before the rest
         for record in records:
             if type(record) is InvokeIssued:
-                await device.last_invoke.write_value(
-                    ua.Variant(record.invoke, ua.VariantType.Int32)
-                )
+                await put(device.last_invoke, record.invoke, ua.VariantType.Int32)
                 continue
             assert type(record) is TransitionTaken
             number = lay.by_record.get((record.source[0], record.targets, record.label))
@@ -339,15 +379,14 @@ class OpcuaServer:
             tid = device.transition_nodes[number].nodeid
             for m in device.machines:
                 if source in m.states:
-                    await m.last.write_value(ua.LocalizedText(name))
-                    await m.last_id.write_value(ua.Variant(tid, ua.VariantType.NodeId))
+                    await put(m.last, ua.LocalizedText(name), text)
+                    await put(m.last_id, tid, node_id)
                     if m.last_number is not None:
-                        await m.last_number.write_value(ua.Variant(number, ua.VariantType.UInt32))
+                        await put(m.last_number, number, uint)
                     if m.last_time is not None:
-                        await m.last_time.write_value(ua.Variant(now, ua.VariantType.DateTime))
+                        await put(m.last_time, now, ua.VariantType.DateTime)
             ev = device.events
             ev.event.Transition = ua.LocalizedText(name)
-            node_id = ua.VariantType.NodeId
             setattr(ev.event, "Transition/Id", ua.Variant(tid, node_id))
             ev.event.FromState = ua.LocalizedText(source)
             setattr(
@@ -358,18 +397,6 @@ class OpcuaServer:
             to_id = device.state_nodes[to].nodeid if to else ua.NodeId()
             setattr(ev.event, "ToState/Id", ua.Variant(to_id, node_id))
             await ev.trigger(message=f"{device.name}: {name}")
-        for m in device.machines:
-            inside = m.states & active
-            shown = next(iter(inside)) if inside else ""
-            if shown == m.shown:
-                continue
-            m.shown = shown
-            await m.current.write_value(ua.LocalizedText(shown))
-            sid = device.state_nodes[shown].nodeid if shown else ua.NodeId()
-            await m.current_id.write_value(ua.Variant(sid, ua.VariantType.NodeId))
-            if m.current_number is not None:
-                number = lay.state_numbers[shown] if shown else 0
-                await m.current_number.write_value(ua.Variant(number, ua.VariantType.UInt32))
 
     # -- methods (rule 3) -------------------------------------------------------------------
 
@@ -381,7 +408,10 @@ class OpcuaServer:
         async def call(_parent: Any, *_args: Any) -> list[Any]:
             try:
                 if system.journal is None:
-                    outcome = await system.send(device, event)
+                    sent = asyncio.ensure_future(system.send(device, event))
+                    await asyncio.sleep(0)  # send() has posted the event
+                    _drain_if_free(system)
+                    outcome = await sent
                 else:
                     outcome = await self._journalled(device, event)
             except StatectlError as exc:
@@ -413,6 +443,18 @@ class OpcuaServer:
             off()
             raise
         return await done
+
+
+def _drain_if_free(system: System) -> None:
+    """Be the owner for a moment if nobody is (as the journal's writer does): one thread hop less.
+
+    Never waits for the owner lock: when another thread owns the devices it runs the event.
+    """
+    if system.owner.acquire(blocking=False):
+        try:
+            system.drain()
+        finally:
+            system.owner.release()
 
 
 def _settle(future: asyncio.Future[str], outcome: str) -> None:

@@ -10,8 +10,9 @@ Rules:
    machine; a compound state's children form a sub-state machine of the state,
    named ``SubStateMachine``; each region of a parallel state forms its own
    sub-state machine named after the region, the regions siblings. A sub-state
-   machine is a component of its state (so names never clash). A chart whose only top-level state is parallel gives the device one
-   sibling machine per region instead of a main machine.
+   machine is a component of its state (so names never clash). A chart whose
+   only top-level state is parallel gives the device one sibling machine per
+   region instead of a main machine.
 3. A transition belongs to the machine holding its source state; its ``ToState``
    is the target's ancestor in that machine (a transition into a sub-state machine
    points at the state that holds it); a target outside the machine has none.
