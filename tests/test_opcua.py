@@ -414,3 +414,42 @@ def test_a_good_opcua_section_reads_and_never_shows_the_password(tmp_path: Path)
         "opc.tcp://127.0.0.1:4841", "op", PASSWORD, ("Basic256Sha256", "None"),
     )  # fmt: skip
     assert PASSWORD not in repr(section)
+
+
+def test_a_journalled_run_answers_a_call_once_the_step_ran(tmp_path: Path) -> None:
+    """With a journal the call goes through it and returns the step's outcome."""
+    from statectl.journal import Journal
+    from statectl.opcua.server import OpcuaServer, OpcuaSettings
+    from statectl.runtime import SimClock
+    from statectl.system import DeviceSetup, System
+
+    chart = load_device(str(MOTOR)).chart
+    system = System((DeviceSetup(chart.name, chart),), SimClock(), Journal(tmp_path / "j.db"))
+    url = f"opc.tcp://127.0.0.1:{free_port()}"
+    settings = OpcuaSettings(endpoint=url, user=USER, password=PASSWORD, security=("None",))
+    server = OpcuaServer(system, settings)
+    server.start()
+    halt = None
+    try:
+        system.start()
+        server.refresh()
+        halt = system.start_owner()
+
+        async def go() -> list[Any]:
+            client = Client(url, timeout=10)
+            client.set_user(USER)
+            client.set_password(PASSWORD)
+            async with client:
+                device = await client.nodes.objects.get_child([f"2:{chart.name}"])
+                return [
+                    await device.call_method("2:Movement"),
+                    await device.call_method("2:Movement"),  # Moving: no driver completes it
+                ]
+
+        answers = run(go())
+    finally:
+        if halt is not None:
+            halt()
+        server.stop()
+        system.close()
+    assert answers == [[True, ""], [False, "declared ignored"]]

@@ -42,7 +42,7 @@ from statectl.errors import StatectlError
 from statectl.opcua.certs import APP_URI, default_directory, ensure_certificate
 from statectl.opcua.space import Layout, layout
 from statectl.runtime import InvokeIssued, Record, Started, TransitionTaken
-from statectl.system import System
+from statectl.system import QueueFull, System
 
 __all__ = ["NAMESPACE", "OpcuaServer", "OpcuaSettings"]
 
@@ -112,6 +112,7 @@ class OpcuaServer:
         self._server: Any = None
         self._updates: deque[tuple[_Device, frozenset[str], list[Record]]] = deque()
         self._kick: Any = None  # an asyncio.Event of the server's loop
+        self._loop_thread: int | None = None
 
     # -- hooks on the owner (rule 1) ------------------------------------------------------
 
@@ -134,7 +135,9 @@ class OpcuaServer:
                 assert records is not None
                 device.pending = []
                 loop = self._loop
-                if loop is not None and not loop.is_closed():
+                if threading.get_ident() == self._loop_thread:
+                    self._publish(device, s.configuration, records)
+                elif loop is not None and not loop.is_closed():
                     loop.call_soon_threadsafe(self._publish, device, s.configuration, records)
 
             self._offs.append(subject.listen(keep))
@@ -195,6 +198,7 @@ class OpcuaServer:
         await self._build(server, idx)
         self._server = server
         self._kick = asyncio.Event()
+        self._loop_thread = threading.get_ident()
         writer = asyncio.create_task(self._writer())
         self._hook()
         await server.start()
@@ -408,10 +412,7 @@ class OpcuaServer:
         async def call(_parent: Any, *_args: Any) -> list[Any]:
             try:
                 if system.journal is None:
-                    sent = asyncio.ensure_future(system.send(device, event))
-                    await asyncio.sleep(0)  # send() has posted the event
-                    _drain_if_free(system)
-                    outcome = await sent
+                    outcome = await _send(system, device, event)
                 else:
                     outcome = await self._journalled(device, event)
             except StatectlError as exc:
@@ -445,16 +446,36 @@ class OpcuaServer:
         return await done
 
 
-def _drain_if_free(system: System) -> None:
-    """Be the owner for a moment if nobody is (as the journal's writer does): one thread hop less.
+async def _send(system: System, device: str, event: str) -> str:
+    """:meth:`System.send`, but the loop's thread is the owner for a moment if nobody is.
 
-    Never waits for the owner lock: when another thread owns the devices it runs the event.
+    As the journal's writer does (system.py rule 2): the step runs here, with no hop to
+    the owner's thread and back. It never waits for the owner lock: when another thread
+    owns the devices, that thread is woken and runs the event.
     """
-    if system.owner.acquire(blocking=False):
+    subject = system.subjects[system.device(device)]
+    limit = system.max_queue
+    if limit is not None and subject.queued >= limit:
+        raise QueueFull(f"{device}: {limit} events are queued already (max_queue)")
+    loop = asyncio.get_running_loop()
+    done: asyncio.Future[str] = loop.create_future()
+    here = threading.get_ident()
+
+    def then(outcome: str) -> None:
+        if threading.get_ident() == here:
+            _settle(done, outcome)
+        else:
+            loop.call_soon_threadsafe(_settle, done, outcome)
+
+    subject.post(event, None, then=then)
+    if subject.started and system.owner.acquire(blocking=False):
         try:
             system.drain()
         finally:
             system.owner.release()
+    else:
+        system.wake.set()
+    return await done
 
 
 def _settle(future: asyncio.Future[str], outcome: str) -> None:
