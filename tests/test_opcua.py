@@ -453,3 +453,45 @@ def test_a_journalled_run_answers_a_call_once_the_step_ran(tmp_path: Path) -> No
         server.stop()
         system.close()
     assert answers == [[True, ""], [False, "declared ignored"]]
+
+
+@pytest.mark.parametrize(
+    ("endpoint", "env", "message"),
+    [
+        ("http://127.0.0.1:4840", {}, "is not an opc.tcp://HOST:PORT URL"),
+        (None, {"STATECTL_OPCUA_USER": "op", "STATECTL_OPCUA_PASSWORD": "tiny"}, "shorter than"),
+        (None, {"STATECTL_OPCUA_USER": "op"}, "set both STATECTL_OPCUA_USER"),
+        ("busy", {}, "opcua: cannot serve"),
+    ],
+)
+def test_a_bad_opcua_setting_fails_the_run_with_a_message(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, endpoint: str | None,
+    env: dict[str, str], message: str,
+) -> None:  # fmt: skip
+    """A bad endpoint, environment user or a taken port: exit 1, one line, no secret shown."""
+    import io
+
+    from statectl.cli.run import run as run_cli
+
+    for name in ("STATECTL_OPCUA_USER", "STATECTL_OPCUA_PASSWORD"):
+        monkeypatch.delenv(name, raising=False)
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
+    config = tmp_path / "run.yaml"
+    config.write_text(f"opcua: {{security: [None], certificates: {tmp_path}}}\n", "utf-8")
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        if endpoint is None:
+            endpoint = f"opc.tcp://127.0.0.1:{free_port()}"
+        elif endpoint == "busy":
+            endpoint = f"opc.tcp://127.0.0.1:{taken.getsockname()[1]}"
+        out, err = io.StringIO(), io.StringIO()
+        code = run_cli(
+            str(MOTOR), config=str(config), opcua=endpoint, events=io.StringIO(""), out=out,
+            err=err, stop=threading.Event(),
+        )  # fmt: skip
+    assert code == 1
+    assert message in err.getvalue()
+    assert "Traceback" not in err.getvalue()
+    assert "tiny" not in err.getvalue() + out.getvalue()

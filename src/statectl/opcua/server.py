@@ -153,6 +153,9 @@ class OpcuaServer:
             raise StatectlError("opcua: the server did not start within 30 s")
         if self._failure is not None:
             self._thread.join()
+            for off in self._offs:  # hooked before the listen failed
+                off()
+            self._offs.clear()
             failure = self._failure
             if isinstance(failure, StatectlError):
                 raise failure
