@@ -28,6 +28,7 @@ Rules:
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import hmac
 import threading
 from collections import deque
@@ -137,8 +138,9 @@ class OpcuaServer:
                 loop = self._loop
                 if threading.get_ident() == self._loop_thread:
                     self._publish(device, s.configuration, records)
-                elif loop is not None and not loop.is_closed():
-                    loop.call_soon_threadsafe(self._publish, device, s.configuration, records)
+                elif loop is not None:
+                    with contextlib.suppress(RuntimeError):  # the loop closed: stopping
+                        loop.call_soon_threadsafe(self._publish, device, s.configuration, records)
 
             self._offs.append(subject.listen(keep))
             self._offs.append(subject.on_step(stepped))
@@ -153,13 +155,11 @@ class OpcuaServer:
             raise StatectlError("opcua: the server did not start within 30 s")
         if self._failure is not None:
             self._thread.join()
-            for off in self._offs:  # hooked before the listen failed
-                off()
-            self._offs.clear()
             failure = self._failure
             if isinstance(failure, StatectlError):
                 raise failure
             raise StatectlError(f"opcua: cannot serve {self.url}: {failure}") from None
+        self._hook()  # on the caller's thread, before the System starts (refresh() after)
         return self.url
 
     def refresh(self) -> None:
@@ -203,7 +203,6 @@ class OpcuaServer:
         self._kick = asyncio.Event()
         self._loop_thread = threading.get_ident()
         writer = asyncio.create_task(self._writer())
-        self._hook()
         await server.start()
         try:
             self._ready.set()
@@ -438,7 +437,8 @@ class OpcuaServer:
         def heard(name: str, _data: Any, outcome: str) -> None:
             if name == event and off is not None:
                 off()
-                loop.call_soon_threadsafe(_settle, done, outcome)
+                with contextlib.suppress(RuntimeError):  # the loop closed: stopping
+                    loop.call_soon_threadsafe(_settle, done, outcome)
 
         off = subject.on_step(heard)
         try:
@@ -468,7 +468,8 @@ async def _send(system: System, device: str, event: str) -> str:
         if threading.get_ident() == here:
             _settle(done, outcome)
         else:
-            loop.call_soon_threadsafe(_settle, done, outcome)
+            with contextlib.suppress(RuntimeError):  # the loop closed: stopping
+                loop.call_soon_threadsafe(_settle, done, outcome)
 
     subject.post(event, None, then=then)
     if subject.started and system.owner.acquire(blocking=False):
