@@ -9,7 +9,8 @@ Two servers in this process, each on its own thread and loop, on 127.0.0.1 with
 - **bare asyncua**: an asyncua server with one String variable and the methods
   ``Go`` and ``Back``, which write ``B`` or ``A`` to it and return.
 
-The client (one client process: this process's main loop) subscribes to the state
+The client is a separate process (this file with ``--client``, one per round and
+contender, stopped by its PID if it overruns): it subscribes to the state
 (``CurrentState`` / the variable) with a 0 ms publishing interval and, per sample,
 calls ``Go`` or ``Back`` and waits for the notification of the new value. Rounds are
 interleaved (each round runs both, the order alternating), the first is warm-up;
@@ -24,8 +25,10 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import json
 import socket
 import statistics
+import subprocess
 import sys
 import threading
 import time
@@ -172,14 +175,35 @@ async def measure(url: str, path: list[str], calls: int, user: bool) -> list[flo
     return samples
 
 
+def client_process(url: str, path: list[str], calls: int, user: bool) -> list[float]:
+    """One round's samples, measured by a client in its own process."""
+    command = [sys.executable, __file__, "--client", json.dumps([url, path, calls, user])]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, text=True)
+    try:
+        out, _ = process.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.wait()
+        raise
+    if process.returncode != 0:
+        raise RuntimeError(f"the client failed (exit {process.returncode})")
+    samples: list[float] = json.loads(out)
+    return samples
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--calls", type=int, default=200)
+    parser.add_argument("--client", help=argparse.SUPPRESS)
     args = parser.parse_args()
     import logging
 
     logging.disable(logging.WARNING)
+    if args.client is not None:
+        url, path, calls, user = json.loads(args.client)
+        print(json.dumps(asyncio.run(measure(url, path, calls, user))))
+        return 0
     ours_url, ours_stop = start_statectl()
     bare_url, bare_stop = start_bare()
     contenders = {
@@ -192,7 +216,7 @@ def main() -> int:
             order = list(contenders) if r % 2 == 0 else list(reversed(contenders))
             for name in order:
                 url, path, user = contenders[name]
-                samples = asyncio.run(measure(url, path, args.calls, user))
+                samples = client_process(url, path, args.calls, user)
                 if r > 0:
                     kept[name].extend(samples)
     finally:
