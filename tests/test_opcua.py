@@ -495,3 +495,21 @@ def test_a_bad_opcua_setting_fails_the_run_with_a_message(
     assert message in err.getvalue()
     assert "Traceback" not in err.getvalue()
     assert "tiny" not in err.getvalue() + out.getvalue()
+
+
+def test_the_stored_certificate_is_reused_by_the_next_run(motor: Served) -> None:
+    """A second server on the same directory keeps the first run's certificate and key."""
+    from statectl.opcua.server import OpcuaServer, OpcuaSettings
+    from statectl.runtime import SimClock
+    from statectl.system import DeviceSetup, System
+
+    files = [motor.certs / "server-cert.der", motor.certs / "server-key.pem"]
+    before = [f.read_bytes() for f in files]
+    chart = load_device(str(MOTOR)).chart
+    system = System((DeviceSetup(chart.name, chart),), SimClock())
+    url = f"opc.tcp://127.0.0.1:{free_port()}"
+    server = OpcuaServer(system, OpcuaSettings(endpoint=url, certificates=motor.certs))
+    server.start()
+    server.stop()
+    system.close()
+    assert [f.read_bytes() for f in files] == before
