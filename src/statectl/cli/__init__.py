@@ -183,6 +183,13 @@ def build_parser() -> argparse.ArgumentParser:
         "acknowledged once durable; durable-first = only after its commit",
     )
     s.add_argument("--realtime", action="store_true", help="run on the wall clock")
+    s.add_argument(
+        "--opcua",
+        nargs="?",
+        const="",
+        metavar="URL",
+        help="serve the devices over OPC UA (default opc.tcp://127.0.0.1:4840; docs/opcua.md)",
+    )
     s.add_argument("--replay", metavar="TRACE", help="cells: a .trace.json from verify --traces")
     s.add_argument("--walk", type=int, metavar="N", help="cells: a seeded random walk of N steps")
     s.add_argument("--seed", type=int, default=0, help="cells: random-walk seed")

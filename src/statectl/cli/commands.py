@@ -270,6 +270,7 @@ def cmd_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         sync=args.sync,
         guarantee=args.guarantee,
         realtime=args.realtime,
+        opcua=args.opcua,
         out=out,
         err=err,
     )

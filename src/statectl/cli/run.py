@@ -49,6 +49,7 @@ from statectl.devices import (
     MIN_TOKEN,
     DashboardConfig,
     DeviceDriver,
+    OpcuaConfig,
     RunConfig,
     SimTwin,
     TwinNote,
@@ -185,6 +186,7 @@ def run(
     sync: str = "normal",
     guarantee: str = "prompt",
     realtime: bool = False,
+    opcua: str | None = None,
     events: TextIO | None = None,
     out: TextIO = sys.stdout,
     err: TextIO = sys.stderr,
@@ -201,6 +203,8 @@ def run(
     journalled event reaches its device (docs/journal.md). ``fresh`` (``--fresh``)
     sets an existing journal aside and starts a new one; with ``resume`` only a
     journal that cannot be trusted is set aside (docs/journal.md, "Faults").
+    ``opcua`` (``--opcua [URL]``; ``""``: the config's endpoint or the default)
+    serves the devices over OPC UA, as does an ``opcua:`` section (docs/opcua.md).
     """
     if (resume or fresh) and journal is None:
         err.write(f"statectl run: {'--resume' if resume else '--fresh'} needs --journal DB\n")
@@ -230,14 +234,17 @@ def run(
         for d in exc.diagnostics:
             err.write(f"{d}\n")
         return PROBLEMS
-    live = dashboard or realtime
+    live = dashboard or realtime or opcua is not None
     failed = ""  # what the run reported as its failure, if anything
     system: System | None = None
     server: Any = None
+    plant: Any = None  # the OPC UA server (cli/opcua.py)
     try:
         table = RunConfig(None, DashboardConfig())
         if config is not None:
             table = load_run_config(config)
+        if opcua is None and table.opcua != OpcuaConfig():
+            opcua, live = "", True  # an opcua: section serves it too
         drivers = _drivers(devices, driver, config, table)
         host, port, token, token_from = _dashboard_settings(
             host, port, token, config, table.dashboard
@@ -267,7 +274,13 @@ def run(
                 system.subjects.values(), post=system.post, token=token, limits=limits
             )
             url = server.start(host, port)
+        if opcua is not None:
+            from statectl.cli.opcua import serve_opcua
+
+            plant = serve_opcua(system, opcua, table.opcua, config, out)
         resumed = system.start(resume=resume)
+        if plant is not None:
+            plant.refresh()
         for name, bound in system.bound.items():
             if resumed.get(name):
                 taken = ", ".join(bound.recovered) or "none"
@@ -299,7 +312,7 @@ def run(
         if events is not None:
             feeder = threading.Thread(
                 target=_feed_then_stop,
-                args=(system, events, err, halt, server is None),
+                args=(system, events, err, halt, server is None and plant is None),
                 daemon=True,
             )
             feeder.start()
@@ -317,6 +330,8 @@ def run(
     finally:
         if server is not None:
             server.stop()
+        if plant is not None:
+            plant.stop()
         if system is not None:
             _close(system, err, failed)
 

@@ -25,6 +25,8 @@ Rules:
 
    :func:`load_run_config` reads both sections; a file with only ``dashboard``
    leaves the drivers to ``--driver`` or the twins. Problems there are D510.
+6. An ``opcua:`` section configures ``statectl run --opcua`` (parsed by
+   :mod:`statectl.devices.opcua_config`; problems there are D520).
 """
 
 from __future__ import annotations
@@ -32,13 +34,14 @@ from __future__ import annotations
 import importlib
 import inspect
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import yaml
 
 from statectl.devices.motor import SimMotor
+from statectl.devices.opcua_config import OpcuaConfig, parse_opcua
 from statectl.devices.protocol import DeviceDriver
 from statectl.devices.stepper import SimStepper
 from statectl.devices.twin import SimTwin, twin_option_problems
@@ -52,6 +55,7 @@ __all__ = [
     "OPTION_CHECKS",
     "DashboardConfig",
     "DriverConfig",
+    "OpcuaConfig",
     "RunConfig",
     "load_driver_config",
     "load_run_config",
@@ -102,6 +106,8 @@ class RunConfig:
 
     drivers: DriverConfig | None
     dashboard: DashboardConfig
+    #: the ``opcua:`` section (devices/opcua_config.py)
+    opcua: OpcuaConfig = field(default_factory=OpcuaConfig)
 
 
 def _available() -> str:
@@ -227,6 +233,7 @@ def load_run_config(path: str | Path) -> RunConfig:
     result: DriverConfig = {}
     devices_node: yaml.Node | None = None
     dashboard_node: yaml.Node | None = None
+    opcua_node: yaml.Node | None = None
     if not isinstance(root, yaml.MappingNode):
         error(
             "D503",
@@ -240,14 +247,16 @@ def load_run_config(path: str | Path) -> RunConfig:
                 devices_node = val
             elif value(key) == "dashboard":
                 dashboard_node = val
+            elif value(key) == "opcua":
+                opcua_node = val
             else:
                 error(
                     "D507",
                     line_of(key),
                     f"unknown key {value(key)!r}",
-                    "a run config has 'devices' and 'dashboard'",
+                    "a run config has 'devices', 'dashboard' and 'opcua'",
                 )
-        if devices_node is None and dashboard_node is None:
+        if devices_node is None and dashboard_node is None and opcua_node is None:
             error(
                 "D503",
                 line_of(root),
@@ -325,9 +334,10 @@ def load_run_config(path: str | Path) -> RunConfig:
     dashboard = DashboardConfig()
     if dashboard_node is not None:
         dashboard = _dashboard(dashboard_node, value, line_of, error)
+    opcua = OpcuaConfig() if opcua_node is None else parse_opcua(opcua_node, value, line_of, error)
     if diags:
         raise DiagnosticError(diags)
-    return RunConfig(result if devices_node is not None else None, dashboard)
+    return RunConfig(result if devices_node is not None else None, dashboard, opcua)
 
 
 def _dashboard(

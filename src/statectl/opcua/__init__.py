@@ -1,0 +1,10 @@
+"""``statectl run --opcua``: the running devices as an OPC UA address space (asyncua).
+
+:mod:`statectl.opcua.space` works out the machines and numbers from a chart;
+:mod:`statectl.opcua.server` serves them on their own loop thread. asyncua is the
+``opcua`` extra: ``pip install 'statectl[opcua]'``.
+"""
+
+from statectl.opcua.space import Layout, MachineSpec, layout
+
+__all__ = ["Layout", "MachineSpec", "layout"]
