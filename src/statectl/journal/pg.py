@@ -162,10 +162,31 @@ def pg_problem(exc: BaseException) -> str:
 
 
 def ensure_schema(conn: psycopg.Connection[Any]) -> None:
-    """Create the shared schema if missing; concurrent shippers take turns (advisory lock)."""
+    """Create the shared schema if missing; concurrent shippers take turns (advisory lock).
+
+    An existing schema is left alone without DDL: ``CREATE INDEX IF NOT EXISTS``
+    still locks its table, which would deadlock with other sources' inserts. The
+    check after the lock runs in a transaction of its own, begun after the lock
+    was granted, so it sees a schema another shipper has just committed.
+    """
+    if _has_schema(conn):
+        return
+    key = "hashtext('statectl-schema')"
     with conn.transaction():
-        conn.execute("SELECT pg_advisory_xact_lock(hashtext('statectl-schema'))")
-        conn.execute(SCHEMA.encode())
+        conn.execute(f"SELECT pg_advisory_lock({key})")
+    try:
+        with conn.transaction():
+            if not _has_schema(conn):
+                conn.execute(SCHEMA.encode())
+    finally:
+        with conn.transaction():
+            conn.execute(f"SELECT pg_advisory_unlock({key})")
+
+
+def _has_schema(conn: psycopg.Connection[Any]) -> bool:
+    with conn.transaction():
+        row = conn.execute("SELECT to_regclass('statectl_inbox_device_at') IS NOT NULL").fetchone()
+    return bool(row is not None and row[0])
 
 
 class PgJournalReader:

@@ -246,6 +246,7 @@ class ShipThread:
         self.failure: str | None = None  # the problem reported, while it lasts
         self._wake = threading.Event()
         self._stop = threading.Event()
+        self._drain_until = 0.0
         self._thread = threading.Thread(target=self._run, name="statectl-ship", daemon=True)
 
     def start(self) -> None:
@@ -259,8 +260,14 @@ class ShipThread:
         while not self._stop.is_set():
             self._wake.wait(self.interval)
             self._wake.clear()
+            if self._stop.is_set():
+                break
             if not self._round(self._stop.is_set):
+                self.shipper.close()
                 return
+        if self.failure is None and self._drain_until > time.monotonic():
+            self._round(lambda: time.monotonic() > self._drain_until)
+        self.shipper.close()
 
     def _round(self, stop: Callable[[], bool]) -> bool:
         """One catch-up; False when shipping must stop (a refusal)."""
@@ -282,19 +289,13 @@ class ShipThread:
         return True
 
     def stop(self, drain: float = 5.0) -> None:
-        """Stop; first ship what is committed, for at most ``drain`` seconds."""
-        deadline = time.monotonic() + drain
+        """Stop; first ship what is committed, for about ``drain`` seconds at most.
+
+        The shipper's own thread does it (its SQLite connection is its own); a
+        thread stuck on the network is left behind (a daemon) rather than waited for.
+        """
+        self._drain_until = time.monotonic() + drain
         self._stop.set()
         self._wake.set()
-        self._thread.join(max(0.0, deadline - time.monotonic()))
         if self._thread.is_alive():
-            return  # stuck on the network: the daemon thread ends with the process
-        if self.failure is None and drain > 0:
-            late = threading.Thread(
-                target=self._round, args=(lambda: time.monotonic() > deadline,), daemon=True
-            )
-            late.start()
-            late.join(max(0.0, deadline - time.monotonic()))
-            if late.is_alive():
-                return
-        self.shipper.close()
+            self._thread.join(drain + 1.0)
