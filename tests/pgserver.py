@@ -63,8 +63,12 @@ def why_not() -> str | None:
     return None
 
 
-def start() -> PgServer | None:
-    """A running server with database ``postgres`` and user ``postgres`` (trust on loopback)."""
+def start(*, durable: bool = False) -> PgServer | None:
+    """A running server with database ``postgres`` and user ``postgres`` (trust on loopback).
+
+    ``durable``: PostgreSQL's default fsync and synchronous commit (benchmarks);
+    tests turn both off, which changes no result, only the time.
+    """
     if why_not() is not None:
         return None
     initdb, postgres = _binary("initdb"), _binary("postgres")
@@ -83,9 +87,10 @@ def start() -> PgServer | None:
         stderr=subprocess.DEVNULL,
     )
     port = _free_port()
+    fast = [] if durable else ["-c", "fsync=off", "-c", "synchronous_commit=off"]
     proc = subprocess.Popen(
         [*as_user, postgres, "-D", str(data), "-p", str(port), "-h", "127.0.0.1",
-         "-k", str(root), "-c", "fsync=off", "-c", "synchronous_commit=off"],
+         "-k", str(root), *fast],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )  # fmt: skip
