@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import pwd
 import shutil
 import signal
 import socket
@@ -60,6 +61,11 @@ def why_not() -> str | None:
         return "PostgreSQL's initdb/postgres are not installed"
     if os.geteuid() == 0 and shutil.which("runuser") is None:
         return "running as root without runuser"
+    if os.geteuid() == 0:
+        try:
+            pwd.getpwnam("postgres")
+        except KeyError:
+            return "running as root and there is no postgres user to run the server as"
     return None
 
 
