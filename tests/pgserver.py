@@ -19,6 +19,7 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 BIN_DIRS = sorted(Path("/usr/lib/postgresql").glob("*/bin"), reverse=True)
 
@@ -36,16 +37,62 @@ class PgServer:
     port: int
     data: Path
     proc: subprocess.Popen[bytes]
+    argv: list[str]
+
+    def crash(self) -> None:
+        """Immediate shutdown (SIGQUIT): no checkpoint; the next start runs crash recovery."""
+        self.signal(signal.SIGQUIT)
+        if not self.wait_gone(20):
+            raise RuntimeError("PostgreSQL did not stop on SIGQUIT")
+
+    def restart(self) -> None:
+        """Start the server again on its data directory and port."""
+        self.proc = subprocess.Popen(
+            self.argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+        )
+        if not _listening(self.port, self.proc, 60):
+            raise RuntimeError(f"PostgreSQL did not start again on port {self.port}")
+
+    def pid(self) -> int | None:
+        """The postmaster's PID (runuser's child), from its pid file."""
+        try:
+            return int((self.data / "postmaster.pid").read_text().split()[0])
+        except (OSError, ValueError, IndexError):
+            return None
+
+    def signal(self, sig: int) -> None:
+        """Signal the postmaster itself: runuser does not pass every signal on."""
+        pid = self.pid()
+        if pid is not None:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, sig)
+
+    def wait_gone(self, timeout: float) -> bool:
+        """Wait for the postmaster and runuser to end; False if they did not in time."""
+        pid = self.pid()
+        deadline = time.monotonic() + timeout
+        while pid is not None and time.monotonic() < deadline:
+            try:
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                break
+            time.sleep(0.05)
+        else:
+            if pid is not None:
+                return False
+        try:
+            self.proc.wait(max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            return False
+        return True
 
     def stop(self) -> None:
         """Stop the server by its PID (fast shutdown), then remove its directory."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(20)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(10)
+        self.signal(signal.SIGINT)
+        if not self.wait_gone(20):
+            self.signal(signal.SIGKILL)
+            self.proc.kill()
+            self.wait_gone(10)
         shutil.rmtree(self.data.parent, ignore_errors=True)
 
 
@@ -94,21 +141,30 @@ def start(*, durable: bool = False) -> PgServer | None:
     )
     port = _free_port()
     fast = [] if durable else ["-c", "fsync=off", "-c", "synchronous_commit=off"]
-    proc = subprocess.Popen(
-        [*as_user, postgres, "-D", str(data), "-p", str(port), "-h", "127.0.0.1",
-         "-k", str(root), *fast],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )  # fmt: skip
+    argv = [*as_user, postgres, "-D", str(data), "-p", str(port), "-h", "127.0.0.1",
+            "-k", str(root), *fast]  # fmt: skip
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     url = f"postgresql://postgres@127.0.0.1:{port}/postgres"
-    server = PgServer(url, port, data, proc)
-    deadline = time.monotonic() + 30
-    while time.monotonic() < deadline:
-        with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), 0.2):
-            time.sleep(0.2)  # accepting connections: give it a moment to finish start-up
-            return server
-        if proc.poll() is not None:
-            break
-        time.sleep(0.1)
+    server = PgServer(url, port, data, proc, argv)
+    if _listening(port, proc, 30):
+        return server
     server.stop()
     raise RuntimeError(f"PostgreSQL did not start on port {port}")
+
+
+def _listening(port: int, proc: subprocess.Popen[bytes], timeout: float) -> bool:
+    """Wait until the server accepts connections on ``port`` (False: it ended or timed out)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and proc.poll() is None:
+        try:
+            with psycopg_connect(port):
+                return True
+        except Exception:  # starting up, or in crash recovery: not yet
+            time.sleep(0.1)
+    return False
+
+
+def psycopg_connect(port: int) -> Any:
+    import psycopg
+
+    return psycopg.connect(f"postgresql://postgres@127.0.0.1:{port}/postgres", connect_timeout=2)

@@ -134,6 +134,12 @@ def test_kill_mid_batch_and_restart_loses_and_doubles_nothing(tmp_path: Path, ur
         assert proc.returncode in (0, -signal.SIGKILL), proc.stderr.read() if proc.stderr else ""
         if proc.stderr:
             proc.stderr.close()
+        marks = query(url, "SELECT inbox_upto, steps_upto FROM statectl_sources")
+        counts = query(
+            url,
+            "SELECT (SELECT count(*) FROM statectl_inbox), (SELECT count(*) FROM statectl_steps)",
+        )
+        assert marks == counts, "a killed batch left rows beyond the marks, or marks beyond rows"
     assert kills >= 1, "the shipper finished before it could be killed"
     assert 0 < _shipped(url) < 60_001
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
@@ -322,3 +328,47 @@ def test_reader_without_a_shipped_journal_says_so(url: str) -> None:
     """An empty database is a clear JournalError, not a missing-table traceback."""
     with pytest.raises(JournalError, match="holds no shipped journal"):
         PgJournalReader(url)
+
+
+def test_a_server_crash_mid_run_loses_and_doubles_nothing(tmp_path: Path) -> None:
+    """PostgreSQL killed (SIGQUIT) while a node writes and ships, then restarted: all, once."""
+    why = pgserver.why_not()
+    if why is not None:
+        pytest.skip(why)
+    srv = pgserver.start(durable=True)
+    assert srv is not None
+    try:
+        db = tmp_path / "live.db"
+        j = Journal(db)
+        said: list[str] = []
+        ship = ShipThread(Shipper(db, srv.url, batch=100), interval=0.01, retry=0.1,
+                          report=said.append)  # fmt: skip
+        j.after_commit(ship.wake)
+        ship.start()
+        j.register("Arm", "Arm", "arm.yaml", None)
+        j.record("Arm", StepKind.START, IDLE, time_=0.0)
+
+        def burst(first: int) -> None:
+            for i in range(first, first + 3000):
+                t = j.accept("Arm", "Go", {"n": i})
+                j.record("Arm", StepKind.EVENT, IDLE, time_=float(i), event="Go",
+                         inbox=t.seq, outcome="handled")  # fmt: skip
+                if i % 100 == 0:
+                    time.sleep(0.002)
+
+        burst(0)
+        srv.crash()
+        burst(3000)  # the server is down: the journal goes on
+        j.flush()
+        srv.restart()
+        burst(6000)
+        j.flush()
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and _shipped(srv.url) < 2 * 9000 + 1:
+            time.sleep(0.05)
+        ship.stop()
+        j.close()
+        assert any("retrying" in s for s in said) and any("resumed" in s for s in said), said
+        same_rows(db, srv.url)
+    finally:
+        srv.stop()
