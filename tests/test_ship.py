@@ -10,6 +10,7 @@ from __future__ import annotations
 import io
 import os
 import signal
+import sqlite3
 import subprocess
 import sys
 import threading
@@ -251,6 +252,19 @@ def test_bad_url_or_server_down_is_a_message_and_exit_1(
         assert "s3cret" not in r.stderr
 
 
+def test_a_file_that_is_no_journal_is_refused_before_shipping(tmp_path: Path, url: str) -> None:
+    """Shipping a text file or a foreign database: exit 1 with what is wrong, nothing shipped."""
+    text = tmp_path / "notes.db"
+    text.write_text("not a database\n" * 100)
+    other = tmp_path / "other.db"
+    sqlite3.connect(other).execute("CREATE TABLE x (a)").connection.commit()
+    for path in (text, other):
+        err = io.StringIO()
+        assert journal_ship(str(path), url, out=io.StringIO(), err=err) == 1
+        assert str(path) in err.getvalue() and "Traceback" not in err.getvalue()
+    assert _shipped(url) == 0
+
+
 def test_url_helpers_take_off_the_source_and_hide_the_password() -> None:
     """``?source=`` is statectl's, not libpq's; a password never reaches a message."""
     assert split_url("postgresql://h/db?source=a&sslmode=disable") == (
@@ -282,6 +296,22 @@ def test_a_running_device_is_never_blocked_while_the_server_is_down(tmp_path: Pa
     j.close()
     assert took < 10, f"2000 committed events took {took:.1f} s with the server down"
     assert len(said) == 1 and "retrying" in said[0] and "pw@" not in said[0]
+
+
+def test_a_run_with_ship_and_the_server_down_runs_and_says_so(tmp_path: Path) -> None:
+    """``ship:`` to a server that is down: the run completes (exit 0) and reports it once."""
+    config = tmp_path / "run.yaml"
+    config.write_text("ship: {to: 'postgresql://u:pw@127.0.0.1:1/x', retry: 0.05}\n")
+    out, err = io.StringIO(), io.StringIO()
+    events = io.StringIO("Movement\n+5\nMovement\n+5\n")
+    code = run(str(MOTOR), journal=str(tmp_path / "r.db"), config=str(config), events=events,
+               out=out, err=err)  # fmt: skip
+    assert code == 0, err.getvalue()
+    assert "final state" in out.getvalue()
+    assert err.getvalue().count("retrying") == 1 and "pw@" not in err.getvalue()
+    err = io.StringIO()
+    assert run(str(MOTOR), config=str(config), events=io.StringIO(""), out=out, err=err) == 1
+    assert "run with --journal DB" in err.getvalue()
 
 
 def test_run_config_ship_section_ships_while_the_run_goes_on(tmp_path: Path, url: str) -> None:

@@ -53,6 +53,7 @@ def journal_ship(
     err: TextIO = sys.stderr,
 ) -> int:
     """The whole command; 0 shipped, 1 could not (server, journal, refusal), 2 usage."""
+    from statectl.journal.check import check_journal
     from statectl.journal.format import JournalError
     from statectl.journal.pg import is_pg_url
     from statectl.journal.ship import Shipper, ShipRefused
@@ -66,6 +67,11 @@ def journal_ship(
     if not Path(path).is_file():
         err.write(f"statectl journal ship: no journal at {path}\n")
         return USAGE
+    try:  # a file that is no journal, or a damaged one, is refused before anything is shipped
+        check_journal(path, reader=False)
+    except JournalError as exc:
+        err.write(f"statectl journal ship: {exc}\n")
+        return PROBLEMS
     shipper = Shipper(path, url, source=source, batch=batch)
     halt = stop or threading.Event()
     total_inbox = total_steps = 0
