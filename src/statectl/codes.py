@@ -213,6 +213,7 @@ ALL: tuple[Code, ...] = (
     _c("D509", _E, "an option value the driver refuses", _DRIVERS),
     _c("D510", _E, "a bad 'dashboard:' section", _DRIVERS),
     _c("D520", _E, "a bad 'opcua:' section", ("docs/opcua.md", "configuration")),
+    _c("D530", _E, "a bad 'ship:' section", ("docs/journal.md", "shipping-to-postgresql")),
     # -- S6xx: reading SCXML (statectl.scxml.reader) --------------------------------------
     _c("S601", _E, "the document is not well-formed XML", _SCXML),
     _c("S602", _E, "the root is not <scxml> in the SCXML namespace", _SCXML),

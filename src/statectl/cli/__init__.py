@@ -216,6 +216,9 @@ def build_parser() -> argparse.ArgumentParser:
                 help="write to FILE (whole or not at all) instead of standard output",
             )
         s.set_defaults(func=cmd_journal)
+    from statectl.cli.ship import register as register_ship
+
+    register_ship(jsub)  # journal ship (src/statectl/cli/ship.py)
 
     scxml = sub.add_parser("scxml", help="SCXML documents")
     ssub = scxml.add_subparsers(dest="scxml_command", required=True, parser_class=_Parser)

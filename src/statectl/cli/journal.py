@@ -25,6 +25,8 @@ from statectl.journal import (
     replay,
 )
 from statectl.journal.check import sqlite_problem
+from statectl.journal.pg import display_url
+from statectl.journal.read import JournalSource
 from statectl.model import Chart
 from statectl.runner.events import (
     parse_time,
@@ -33,12 +35,21 @@ from statectl.runtime import format_data
 from statectl.runtime.trace import format_record
 
 
-def _reader(command: str, path: str, err: TextIO) -> JournalReader | int:
+def _reader(command: str, path: str, err: TextIO) -> JournalSource | int:
     """The checked journal, or the exit code: 2 if there is none, 1 if it cannot be trusted.
 
     The whole journal is checked before anything is written (journal/check.py), so
-    a damaged journal gives a message and no partial output.
+    a damaged journal gives a message and no partial output. A ``postgresql://``
+    URL reads a shipped journal instead (journal/pg.py); 1 if it cannot be read.
     """
+    if path.startswith(("postgresql://", "postgres://")):
+        from statectl.journal.pg import PgJournalReader
+
+        try:
+            return PgJournalReader(path)
+        except JournalError as exc:
+            err.write(f"statectl journal {command}: {exc}\n")
+            return PROBLEMS
     if not Path(path).exists():
         err.write(f"statectl journal {command}: no journal at {path}\n")
         return USAGE
@@ -51,7 +62,7 @@ def _reader(command: str, path: str, err: TextIO) -> JournalReader | int:
 
 def _reader_in_window(
     command: str, path: str, since: str | None, until: str | None, err: TextIO
-) -> tuple[JournalReader, float | None, float | None] | int:
+) -> tuple[JournalSource, float | None, float | None] | int:
     """The journal and the time window a ``journal show|export`` asks for, or the exit code."""
     try:
         lo = parse_time(since) if since is not None else None
@@ -74,7 +85,7 @@ def _reading(command: str, path: str, err: TextIO) -> Iterator[list[int]]:
         yield code
     except (JournalError, sqlite3.Error) as exc:
         text = exc if isinstance(exc, JournalError) else sqlite_problem(exc)
-        err.write(f"statectl journal {command}: journal {path}: {text}\n")
+        err.write(f"statectl journal {command}: journal {display_url(path)}: {text}\n")
         code[0] = PROBLEMS
 
 

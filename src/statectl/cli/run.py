@@ -29,6 +29,10 @@ Rules:
    ``dashboard:`` section, else loopback, any free port and a new token, which
    is printed; a token from elsewhere is not echoed. A token shorter than 16
    characters is refused.
+8. The config file's ``ship:`` section ships the journal to PostgreSQL while
+   the run goes on (journal/ship.py): a thread of its own, woken by each
+   commit; a server that is down is reported and retried, never waited for.
+   At the end what was committed is shipped for a few seconds at most.
 """
 
 from __future__ import annotations
@@ -56,6 +60,7 @@ from statectl.devices import (
     load_run_config,
     make_driver,
 )
+from statectl.devices.config import ShipConfig
 from statectl.errors import DiagnosticError, Severity, StatectlError
 from statectl.journal import (
     Guarantee,
@@ -239,6 +244,7 @@ def run(
     system: System | None = None
     server: Any = None
     plant: Any = None  # the OPC UA server (cli/opcua.py)
+    shipping: Any = None  # a ShipThread (journal/ship.py) when the config has 'ship:'
     try:
         table = RunConfig(None, DashboardConfig())
         if config is not None:
@@ -254,6 +260,8 @@ def run(
         store = None
         if journal is not None:
             store = _open_journal(journal, mode, promise, resume=resume, fresh=fresh, out=out)
+        if table.ship is not None:
+            shipping = _start_shipping(table.ship, store, config, err)
         system = System(setups, clock, store, cell)
         width = max(len(n) for n in system.subjects)
         if driver is None and config is None:
@@ -334,6 +342,8 @@ def run(
             plant.stop()
         if system is not None:
             _close(system, err, failed)
+        if shipping is not None:
+            shipping.stop()  # what the journal committed goes too, for a few seconds at most
 
 
 def _feed_then_stop(
@@ -378,6 +388,26 @@ def _open_journal(
         aside = set_aside(p)
         out.write(f"{exc}\njournal {p} set aside as {aside}; starting a new journal\n")
         return Journal(p, sync=sync, guarantee=guarantee)
+
+
+def _start_shipping(
+    ship: ShipConfig, store: Journal | None, config: str | None, err: TextIO
+) -> Any:
+    """The ``ship:`` section's shipper, woken by each journal commit (journal/ship.py rule 4)."""
+    from statectl.journal.ship import Shipper, ShipThread
+
+    if store is None:
+        raise StatectlError(f"{config}: 'ship:' ships the journal: run with --journal DB")
+    shipper = Shipper(store.path, ship.to, source=ship.source, batch=ship.batch)
+    thread = ShipThread(
+        shipper,
+        interval=ship.interval,
+        retry=ship.retry,
+        report=lambda text: err.write(f"statectl run: {text}\n"),
+    )
+    store.after_commit(thread.wake)
+    thread.start()
+    return thread
 
 
 def _close(system: System, err: TextIO, failed: str) -> None:

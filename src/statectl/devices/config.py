@@ -27,6 +27,15 @@ Rules:
    leaves the drivers to ``--driver`` or the twins. Problems there are D510.
 6. An ``opcua:`` section configures ``statectl run --opcua`` (parsed by
    :mod:`statectl.devices.opcua_config`; problems there are D520).
+7. A ``ship:`` section ships the run's journal to PostgreSQL as it is
+   committed (docs/journal.md, "Shipping to PostgreSQL")::
+
+       ship: {to: postgresql://statectl@db.plant/cell, source: cell-a, interval: 0.5}
+
+   ``to`` is required; ``source`` (default ``host:path``), ``interval`` (seconds
+   between looks when nothing wakes the shipper), ``retry`` (seconds between
+   attempts while the server is down) and ``batch`` (rows per transaction) are
+   optional. Problems there are D530; a password in ``to`` is never echoed.
 """
 
 from __future__ import annotations
@@ -57,6 +66,7 @@ __all__ = [
     "DriverConfig",
     "OpcuaConfig",
     "RunConfig",
+    "ShipConfig",
     "load_driver_config",
     "load_run_config",
     "make_driver",
@@ -101,6 +111,17 @@ class DashboardConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class ShipConfig:
+    """The ``ship:`` section (rule 6): where the journal goes, and how often."""
+
+    to: str
+    source: str | None = None
+    interval: float = 0.5
+    retry: float = 5.0
+    batch: int = 5000
+
+
+@dataclass(frozen=True, slots=True)
 class RunConfig:
     """A run's configuration file: drivers per device (None: no ``devices`` section)."""
 
@@ -108,6 +129,8 @@ class RunConfig:
     dashboard: DashboardConfig
     #: the ``opcua:`` section (devices/opcua_config.py)
     opcua: OpcuaConfig = field(default_factory=OpcuaConfig)
+    #: the ``ship:`` section: the run's journal shipped to PostgreSQL
+    ship: ShipConfig | None = None
 
 
 def _available() -> str:
@@ -234,6 +257,7 @@ def load_run_config(path: str | Path) -> RunConfig:
     devices_node: yaml.Node | None = None
     dashboard_node: yaml.Node | None = None
     opcua_node: yaml.Node | None = None
+    ship_node: yaml.Node | None = None
     if not isinstance(root, yaml.MappingNode):
         error(
             "D503",
@@ -249,14 +273,21 @@ def load_run_config(path: str | Path) -> RunConfig:
                 dashboard_node = val
             elif value(key) == "opcua":
                 opcua_node = val
+            elif value(key) == "ship":
+                ship_node = val
             else:
                 error(
                     "D507",
                     line_of(key),
                     f"unknown key {value(key)!r}",
-                    "a run config has 'devices', 'dashboard' and 'opcua'",
+                    "a run config has 'devices', 'dashboard', 'opcua' and 'ship'",
                 )
-        if devices_node is None and dashboard_node is None and opcua_node is None:
+        if (
+            devices_node is None
+            and dashboard_node is None
+            and opcua_node is None
+            and ship_node is None
+        ):
             error(
                 "D503",
                 line_of(root),
@@ -335,9 +366,10 @@ def load_run_config(path: str | Path) -> RunConfig:
     if dashboard_node is not None:
         dashboard = _dashboard(dashboard_node, value, line_of, error)
     opcua = OpcuaConfig() if opcua_node is None else parse_opcua(opcua_node, value, line_of, error)
+    ship = None if ship_node is None else _ship(ship_node, value, line_of, error)
     if diags:
         raise DiagnosticError(diags)
-    return RunConfig(result if devices_node is not None else None, dashboard, opcua)
+    return RunConfig(result if devices_node is not None else None, dashboard, opcua, ship)
 
 
 def _dashboard(
@@ -382,3 +414,51 @@ def _dashboard(
         else:
             fields[name] = val
     return DashboardConfig(**fields)
+
+
+_SHIP_KEYS = ("to", "source", "interval", "retry", "batch")
+
+
+def _ship(
+    node: yaml.Node,
+    value: Callable[[yaml.Node], Any],
+    line_of: Callable[[yaml.Node], int],
+    error: Callable[[str, int | None, str, str], None],
+) -> ShipConfig | None:
+    """The ``ship:`` section (rule 7); every problem is a D530 error."""
+    example = "write 'ship: {to: postgresql://user@host/db}'"
+    if not isinstance(node, yaml.MappingNode):
+        error("D530", line_of(node), "'ship' must be a mapping", example)
+        return None
+    fields: dict[str, Any] = {}
+    bad = False
+    for k, v in node.value:
+        name, val, line = value(k), value(v), line_of(v)
+        number = isinstance(val, int | float) and not isinstance(val, bool)
+        problem = ""
+        if name not in _SHIP_KEYS:
+            error("D530", line_of(k), f"ship: unknown key {name!r}",
+                  f"the ship section has {', '.join(_SHIP_KEYS)}")  # fmt: skip
+            bad = True
+            continue
+        if name == "to" and not (
+            isinstance(val, str) and val.startswith(("postgresql://", "postgres://"))
+        ):
+            shown = "a text that is not one" if isinstance(val, str) else repr(val)
+            problem = f"ship: to must be a postgresql:// URL (got {shown})"  # may hold a password
+        elif name == "source" and not (isinstance(val, str) and val):
+            problem = f"ship: source must be a name (got {val!r})"
+        elif name in ("interval", "retry") and not (number and 0.01 <= val <= 3600):
+            problem = f"ship: {name} must be seconds from 0.01 to 3600 (got {val!r})"
+        elif name == "batch" and not (number and isinstance(val, int) and 1 <= val <= 1_000_000):
+            problem = f"ship: batch must be a number of rows 1-1000000 (got {val!r})"
+        if problem:
+            error("D530", line, problem, example)
+            bad = True
+        else:
+            fields[name] = val
+    if "to" not in fields:
+        if not bad:
+            error("D530", line_of(node), "ship: no 'to'", example)
+        return None
+    return None if bad else ShipConfig(**fields)

@@ -31,7 +31,7 @@ import sqlite3
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, Protocol, TextIO
 
 from statectl.journal.check import check_journal, connect_ro, sqlite_problem
 from statectl.journal.format import JournalError, StepKind, decode_snapshot
@@ -46,6 +46,7 @@ __all__ = [
     "DeviceRow",
     "InboxRow",
     "JournalReader",
+    "JournalSource",
     "Mismatch",
     "ReplayResult",
     "StepRow",
@@ -146,6 +147,31 @@ def _window(
         where.append(f"{key} > ?")
         args.append(after)
     return (" WHERE " + " AND ".join(where)) if where else "", args
+
+
+class JournalSource(Protocol):
+    """What show, export and replay read: a journal file or a shipped one (journal/pg.py)."""
+
+    def devices(self) -> tuple[DeviceRow, ...]: ...
+
+    def steps(
+        self,
+        device: str | None = None,
+        since: float | None = None,
+        until: float | None = None,
+        after: int | None = None,
+        upto: int | None = None,
+    ) -> Iterator[StepRow]: ...
+
+    def inbox(
+        self, device: str | None = None, since: float | None = None, until: float | None = None
+    ) -> Iterator[InboxRow]: ...
+
+    def close(self) -> None: ...
+
+    def __enter__(self) -> JournalSource: ...
+
+    def __exit__(self, *_: object) -> None: ...
 
 
 class JournalReader:
@@ -276,7 +302,7 @@ class JournalReader:
 
 
 def export_jsonl(
-    reader: JournalReader,
+    reader: JournalSource,
     out: TextIO,
     *,
     device: str | None = None,
@@ -324,7 +350,7 @@ class ReplayResult:
 
 
 def replay(
-    reader: JournalReader,
+    reader: JournalSource,
     charts: Mapping[str, Chart],
     *,
     device: str | None = None,
