@@ -1,6 +1,6 @@
 """Test a device against its tables: generated pytest modules, a pytest plugin, coverage.
 
-See docs/testgen.md. :func:`generate` writes a module per criterion (rows,
+See docs/testing.md. :func:`generate` writes a module per criterion (rows,
 transitions, states, pairs) whose tests use the plugin's fixtures
 (:mod:`statectl.testgen.plugin`); :class:`DeviceUnderTest` is what they drive;
 :func:`journal_coverage` says what a journalled run exercised. The names are

@@ -46,7 +46,13 @@ def cmd_testgen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
 
 def cmd_coverage(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     from statectl.build import load_chart
-    from statectl.testgen.coverage import coverage_table, journal_coverage, load_tally, mermaid
+    from statectl.testgen.coverage import (
+        coverage_table,
+        journal_coverage,
+        load_tally,
+        mermaid,
+        svg,
+    )
 
     if not Path(args.journal).exists():
         err.write(f"statectl coverage: {args.journal}: no such file\n")
@@ -56,7 +62,12 @@ def cmd_coverage(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         report = load_tally(args.journal, chart)
     else:
         report = journal_coverage(args.journal, chart, args.device)
-    text = mermaid(report) if args.format == "mermaid" else coverage_table(report, args.journal)
+    if args.format == "svg":
+        text = svg(report)  # a missing Graphviz is a StatectlError: the CLI prints the hint
+    elif args.format == "mermaid":
+        text = mermaid(report)
+    else:
+        text = coverage_table(report, args.journal)
     out.write(text)
     return PROBLEMS if report.mismatches else OK
 
@@ -69,7 +80,7 @@ def register(sub: Any) -> None:
         description="Explores the chart from its default state and writes one test per "
         "row (or transition, state, pair of transitions), plus each state's unhandled "
         "events, into DIR. The tests run on the simulated twin unless a conftest.py "
-        "overrides the statectl_driver fixture (docs/testgen.md).",
+        "overrides the statectl_driver fixture (docs/testing.md).",
     )
     s.add_argument("file", metavar="FILE", help="device file")
     s.add_argument("--criterion", default="rows", choices=CRITERIA)
@@ -103,5 +114,5 @@ def register(sub: Any) -> None:
     )
     s.add_argument("file", metavar="FILE", help="the device file the run used")
     s.add_argument("--device", help="only this journalled device (default: all of FILE's chart)")
-    s.add_argument("--format", default="table", choices=("table", "mermaid"))
+    s.add_argument("--format", default="table", choices=("table", "mermaid", "svg"))
     s.set_defaults(func=cmd_coverage)

@@ -203,6 +203,25 @@ class DeviceUnderTest:
 
     # -- checking ------------------------------------------------------------------------------
 
+    def assert_state(self, *states: str) -> None:
+        """The device is in exactly ``states`` (its active atomic states, document order)."""
+        __tracebackhide__ = True
+        if tuple(states) != self.states:
+            raise AssertionError(
+                f"{self._path()}: expected the state {list(states)}, "
+                f"device is in {list(self.states)}"
+            )
+
+    def assert_called(self, name: str) -> None:
+        """The last event made the driver call ``name``: an API function or observer method."""
+        __tracebackhide__ = True
+        called = self._called()
+        if not any(name in (m, api_function(api)) for m, api in called):
+            shown = [api for _, api in called] or "nothing"
+            raise AssertionError(
+                f"{self._path()}: expected the driver to call {name}(), it called {shown}"
+            )
+
     def _path(self) -> str:
         return "after " + (" -> ".join(self.sent) if self.sent else "the start")
 

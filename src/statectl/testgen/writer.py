@@ -28,7 +28,7 @@ Regenerate: statectl testgen {source} --criterion {criterion} --out {out}
 {counts}
 The tests run on the simulated twin derived from the tables. To run them against
 another driver (a real device, a vendor's simulator), override the ``statectl_driver``
-fixture in a conftest.py; see docs/testgen.md.{notes}
+fixture in a conftest.py; see docs/testing.md.{notes}
 """
 
 from __future__ import annotations
@@ -144,7 +144,7 @@ Hypothesis sends the chart's events in any order; after every event the device m
 be where the kernel puts it, with the invokes the kernel issues and the driver's API
 call for each, or unhandled for the kernel's reason. A failure shrinks to a short
 sequence. The driver is the simulated twin unless a conftest.py overrides
-``statectl_new_driver`` (a fresh driver per example); see docs/testgen.md.
+``statectl_new_driver`` (a fresh driver per example); see docs/testing.md.
 """
 
 from __future__ import annotations
