@@ -25,6 +25,8 @@ def cmd_testgen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         generate_hypothesis,
     )
 
+    if _is_cell(args.file):
+        return _cell_testgen(args, out, err)
     if args.xstate:
         out.write(f"wrote {export_xstate(args.file, args.out)}\n")
         return OK
@@ -40,6 +42,40 @@ def cmd_testgen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         f"{len(made.suite.tables)} unhandled-event tables), {made.steps} events sent\n"
     )
     for note in made.suite.notes:
+        out.write(f"note: {note}\n")
+    return OK
+
+
+def _is_cell(path: str) -> bool:
+    """A YAML file with a ``devices`` section and no ``states`` table is a cell file."""
+    from statectl.tables import safeyaml
+
+    if Path(path).suffix.lower() not in (".yaml", ".yml"):
+        return False
+    try:
+        data = safeyaml.load_value(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, safeyaml.YamlRefused):
+        return False  # loaded as a device file, whose loader says what is wrong
+    return isinstance(data, dict) and "devices" in data and "states" not in data
+
+
+def _cell_testgen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    from statectl.testgen.cellgen import generate_cell, generate_cell_hypothesis
+
+    if args.xstate or args.graphwalker:
+        err.write(
+            f"statectl testgen: {args.file} is a cell; --xstate and --graphwalker export one "
+            "device: give one of its device files\n"
+        )
+        return USAGE
+    if args.hypothesis:
+        out.write(f"wrote {generate_cell_hypothesis(args.file, args.out)}\n")
+        return OK
+    made = generate_cell(args.file, args.criterion, args.out)
+    for d in made.devices:
+        out.write(f"wrote {d.path}: {d.tests} tests, {d.steps} events sent\n")
+    out.write(f"wrote {made.links}: {len(made.cases)} link tests\n")
+    for note in made.notes:
         out.write(f"note: {note}\n")
     return OK
 
@@ -82,7 +118,11 @@ def register(sub: Any) -> None:
         "events, into DIR. The tests run on the simulated twin unless a conftest.py "
         "overrides the statectl_driver fixture (docs/testing.md).",
     )
-    s.add_argument("file", metavar="FILE", help="device file")
+    s.add_argument(
+        "file",
+        metavar="FILE_OR_CELL",
+        help="device file, or cell file (each device's module plus the links' module)",
+    )
     s.add_argument("--criterion", default="rows", choices=CRITERIA)
     s.add_argument("--out", required=True, metavar="DIR", help="directory to write into")
     what = s.add_mutually_exclusive_group()

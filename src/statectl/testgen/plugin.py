@@ -21,6 +21,12 @@ these fixtures available to every test suite; generated modules use nothing else
 - ``statectl_device_factory``: makes a new started device with a fresh driver per
   call (what a Hypothesis state machine needs for each example).
 - ``statectl_recorder``: that device's record list, in order.
+- ``statectl_cell``: a started :class:`~statectl.testgen.cellharness.CellUnderTest`,
+  the devices of the module's ``STATECTL_CELL`` on one System with the cell's links
+  (``send(device, event)``, ``given``, ``expect``, ``advance``, ``assert_state``,
+  ``assert_called``, ``assert_invariants``); ``statectl_cell_new_drivers`` makes
+  the drivers (default: each device's twin), ``statectl_cell_factory`` a fresh
+  cell per call (a Hypothesis example each).
 """
 
 from __future__ import annotations
@@ -33,9 +39,11 @@ from typing import Any
 import pytest
 
 from statectl.build import load_chart
+from statectl.cell import Cell, load_cell
 from statectl.errors import DiagnosticError, Severity
 from statectl.model import Chart
 from statectl.runtime import Record
+from statectl.testgen.cellharness import CellUnderTest
 from statectl.testgen.coverage import Tally
 from statectl.testgen.generator import write_atomic
 from statectl.testgen.harness import DeviceUnderTest
@@ -45,6 +53,11 @@ __all__ = [
     "pytest_configure",
     "pytest_sessionfinish",
     "statectl_api",
+    "statectl_cell",
+    "statectl_cell_event_data",
+    "statectl_cell_factory",
+    "statectl_cell_model",
+    "statectl_cell_new_drivers",
     "statectl_chart",
     "statectl_device",
     "statectl_device_factory",
@@ -193,3 +206,65 @@ def statectl_device_factory(
 def statectl_recorder(statectl_device: DeviceUnderTest) -> list[Record]:
     """Every record the device emitted, in order (the notifications among them)."""
     return statectl_device.recorder.records
+
+
+# -- cells ---------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def statectl_cell_model(request: pytest.FixtureRequest) -> Cell:
+    """The cell of the test module's ``STATECTL_CELL`` (relative to the module)."""
+    given = getattr(request.module, "STATECTL_CELL", None)
+    if not isinstance(given, str):
+        pytest.fail(
+            f"{request.module.__name__}: set STATECTL_CELL to the cell file "
+            "(relative to the module) or override the statectl_cell_model fixture",
+            pytrace=False,
+        )
+    path = (Path(request.module.__file__).parent / given).resolve()
+    if not path.exists():
+        pytest.fail(f"{request.module.__name__}: STATECTL_CELL {path}: no such file", pytrace=False)
+    cell, diags = load_cell(path)
+    if cell is None:
+        shown = "\n".join(str(d) for d in diags if d.severity is not Severity.INFO)
+        pytest.fail(f"STATECTL_CELL {path} does not load:\n{shown}", pytrace=False)
+    return cell
+
+
+@pytest.fixture
+def statectl_cell_new_drivers() -> Callable[[Cell], Mapping[str, Any]]:
+    """Makes fresh drivers for a cell: device name -> driver; a device left out gets its twin."""
+    return lambda cell: {}
+
+
+@pytest.fixture
+def statectl_cell_event_data() -> Mapping[str, Mapping[str, Any]]:
+    """Device name -> event name -> the data sent with it."""
+    return {}
+
+
+@pytest.fixture
+def statectl_cell_factory(
+    request: pytest.FixtureRequest,
+    statectl_cell_model: Cell,
+    statectl_cell_new_drivers: Callable[[Cell], Mapping[str, Any]],
+    statectl_cell_event_data: Mapping[str, Mapping[str, Any]],
+) -> Callable[[], CellUnderTest]:
+    """Makes a new started cell with fresh drivers each call."""
+    strict = request.node.get_closest_marker("statectl_strict") is not None
+
+    def make() -> CellUnderTest:
+        return CellUnderTest(
+            statectl_cell_model,
+            statectl_cell_new_drivers(statectl_cell_model),
+            event_data=statectl_cell_event_data,
+            strict=strict,
+        )
+
+    return make
+
+
+@pytest.fixture
+def statectl_cell(statectl_cell_factory: Callable[[], CellUnderTest]) -> CellUnderTest:
+    """The cell's devices started on one System with its links, on a simulated clock."""
+    return statectl_cell_factory()
