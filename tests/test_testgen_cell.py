@@ -5,14 +5,27 @@ docs/testing.md; the device-level parts are in tests/test_testgen.py.
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
+from statectl.build import load_chart
+from statectl.cell import load_cell_or_raise
+from statectl.testgen.cellharness import CellUnderTest, holds
+from statectl.testgen.harness import DeviceUnderTest
 from support import MOTOR
-from test_testgen import cli, journal  # noqa: F401  # journal: a fixture used below
+from test_testgen import (  # noqa: F401  # journal: a fixture used below
+    cli,
+    counts,
+    doc_block,
+    functions,
+    journal,
+    run_pytest,
+)
 
 HAS_DOT = shutil.which("dot") is not None
 
@@ -41,3 +54,146 @@ def test_coverage_svg_without_dot_says_how_to_install(
     code, out, err = cli("coverage", str(journal), str(MOTOR), "--format", "svg")
     assert (code, out) == (1, "")
     assert "apt-get install graphviz" in err and "Traceback" not in err
+
+
+# -- cells -------------------------------------------------------------------------------------
+
+CELL_DIR = MOTOR.parents[1] / "pick-and-place"
+CELL = CELL_DIR / "cell.yaml"
+
+
+def copy_cell(into: Path, text: str | None = None) -> Path:
+    """The pick-and-place devices copied into ``into``, with ``text`` as the cell file."""
+    into.mkdir(parents=True, exist_ok=True)
+    for f in CELL_DIR.glob("*.yaml"):
+        shutil.copy(f, into / f.name)
+    if text is not None:
+        (into / "cell.yaml").write_text(text, encoding="utf-8")
+    return into / "cell.yaml"
+
+
+def test_cell_testgen_writes_each_device_and_the_links(tmp_path: Path) -> None:
+    """Given a cell, testgen writes each device's module and a links module; all pass on twins."""
+    code, out, err = cli("testgen", str(CELL), "--out", str(tmp_path))
+    assert code == 0, err
+    written = sorted(p.name for p in tmp_path.glob("test_*.py"))
+    assert written == [
+        "test_armmotor_rows.py",
+        "test_conveyor_rows.py",
+        "test_gripper_rows.py",
+        "test_partsensor_rows.py",
+        "test_pickandplace_links.py",
+    ]
+    links = functions(tmp_path / "test_pickandplace_links.py")
+    assert len(links) == 8 and "wrote" in out and "8 link tests" in out
+    guarded = links["test_link_06_arm_initialization_completion_row_04_guard_false"]
+    assert "Its guard is false here" in guarded
+    result = run_pytest(tmp_path)
+    assert result.returncode == 0, result.stdout[-3000:]
+    said = sum(int(n) for n in re.findall(r": (\d+) (?:link )?tests", out))
+    assert counts(result) == {"passed": said}
+
+
+def test_links_module_fails_for_every_deleted_link(tmp_path: Path) -> None:
+    """The links tests generated from the right cell fail on a cell missing any one link."""
+    gen = tmp_path / "gen"
+    cell = copy_cell(tmp_path / "cell")
+    code, _, err = cli("testgen", str(cell), "--out", str(gen))
+    assert code == 0, err
+    for f in gen.glob("test_*.py"):
+        if not f.name.endswith("_links.py"):
+            f.unlink()
+    text = CELL.read_text(encoding="utf-8")
+    lines = [ln for ln in text.splitlines() if ln.startswith("  - {from:")]
+    assert len(lines) == 7
+    survived = []
+    for line in lines:
+        cell.write_text(text.replace(line + "\n", ""), encoding="utf-8")
+        result = run_pytest(gen)
+        if result.returncode == 0 or "failed" not in counts(result):
+            survived.append(line)
+    assert survived == []
+
+
+def test_cell_hypothesis_passes_on_the_cell_and_finds_the_interlock_bug(tmp_path: Path) -> None:
+    """The cell's Hypothesis machine passes on cell.yaml; on cell-buggy.yaml an invariant breaks."""
+    for name, ok in (("cell.yaml", True), ("cell-buggy.yaml", False)):
+        out = tmp_path / name.split(".")[0]
+        code, said, err = cli("testgen", str(CELL_DIR / name), "--hypothesis", "--out", str(out))
+        assert code == 0 and "_hypothesis.py" in said, err
+        result = run_pytest(out)
+        if ok:
+            assert counts(result) == {"passed": 1}, result.stdout[-3000:]
+        else:
+            assert counts(result) == {"failed": 1}, result.stdout[-3000:]
+            assert "invariant belt-still-while-arm-reaches broken" in result.stdout
+
+
+def test_the_docs_cell_example_runs(tmp_path: Path) -> None:
+    """docs/testing.md's hand-written statectl_cell test passes on the twins."""
+    block = doc_block("The `statectl_cell` fixture serves hand-written tests too")
+    rel = os.path.relpath(CELL, tmp_path)
+    (tmp_path / "test_cell_by_hand.py").write_text(
+        block.replace('"../examples/pick-and-place/cell.yaml"', repr(rel)), encoding="utf-8"
+    )
+    result = run_pytest(tmp_path)
+    assert result.returncode == 0, result.stdout[-3000:]
+    assert counts(result) == {"passed": 1}
+
+
+@pytest.mark.parametrize("flag", ["--xstate", "--graphwalker"])
+def test_one_device_exports_refuse_a_cell(tmp_path: Path, flag: str) -> None:
+    """--xstate and --graphwalker given a cell are a usage error naming what to give."""
+    code, out, err = cli("testgen", str(CELL), flag, "--out", str(tmp_path))
+    assert (code, out) == (2, "")
+    assert "is a cell" in err and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("expr", "expected"),
+    [
+        ("In('arm.Moving')", True),
+        ("In('arm.Blocked')", False),
+        ("not In('arm.Blocked')", True),
+        ("In('arm.Moving') and In('conveyor.Running')", False),
+        ("In('arm.Moving') or In('conveyor.Running')", True),
+        ("True and not False", True),
+        ("In('nobody.Moving')", False),
+    ],
+)
+def test_global_expressions_read_the_devices_states(expr: str, expected: bool) -> None:
+    """A cell's global expression is evaluated over each device's active states."""
+    active = {"arm": frozenset({"Moving"}), "conveyor": frozenset({"Stopped"})}
+    assert holds(expr, active) is expected
+
+
+def test_cell_step_fails_when_a_device_leaves_the_kernels_path() -> None:
+    """CellUnderTest.step fails, naming the device, when a device is not where the kernel says."""
+    c = CellUnderTest(load_cell_or_raise(CELL))
+    c.step("conveyor", "Start")
+    c.system.subjects["gripper"].post("Grip")  # behind the test's back: the gripper moves
+    with pytest.raises(AssertionError, match=r"gripper: expected \['Open'\], it is in"):
+        c.step("conveyor", "Stop")
+
+
+# -- helpers of the device fixture ---------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("check", "fails"),
+    [
+        (lambda d: d.assert_state("Moving"), None),
+        (lambda d: d.assert_state("Blocked"), r"expected the state \['Blocked'\]"),
+        (lambda d: d.assert_called("Movement"), None),
+        (lambda d: d.assert_called("Initialization"), r"call Initialization\(\)"),
+    ],
+)
+def test_device_assert_helpers(check: Callable[[DeviceUnderTest], None], fails: str | None) -> None:
+    """assert_state and assert_called pass on what the Motor did after Movement, fail otherwise."""
+    d = DeviceUnderTest(load_chart(MOTOR))
+    d.send("Movement")
+    if fails is None:
+        check(d)
+    else:
+        with pytest.raises(AssertionError, match=fails):
+            check(d)

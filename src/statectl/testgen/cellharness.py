@@ -23,6 +23,7 @@ from typing import Any
 from statectl.cell import Cell, GlobalExpr
 from statectl.devices import SimTwin
 from statectl.errors import StatectlError
+from statectl.explore import Composed
 from statectl.explore.replay import CellLinks
 from statectl.model import ControlKind, EventKind, StateKind
 from statectl.runtime import (
@@ -81,6 +82,19 @@ def holds(expr: GlobalExpr | str, active: Mapping[str, frozenset[str]]) -> bool:
     return ev(ast.parse(source, mode="eval").body)
 
 
+_MODELS: dict[int, tuple[Cell, Composed]] = {}
+
+
+def _composed(cell: Cell) -> Composed:
+    """The explorer's model of ``cell`` (what link guards are read over), built once."""
+    hit = _MODELS.get(id(cell))
+    if hit is None or hit[0] is not cell:
+        if len(_MODELS) > 16:
+            _MODELS.clear()
+        hit = _MODELS[id(cell)] = (cell, Composed(cell))
+    return hit[1]
+
+
 def _settle(subjects: Mapping[str, Subject], links: CellLinks, ready: deque[Subject]) -> None:
     """Run the devices with work until none has; deliver the links each step fires."""
 
@@ -112,7 +126,7 @@ def reference_step(
         s = Subject(d.chart, clock=clock, name=d.name, data=values)
         s.on_queued(ready.append)
         subjects[d.name] = s
-    links = CellLinks(cell, subjects)
+    links = CellLinks(cell, subjects, _composed(cell))
     records: list[Record] = []
     for s in subjects.values():
         s.listen(links.watch)
