@@ -15,6 +15,7 @@ import pytest
 
 from statectl.build import load_chart
 from statectl.cell import load_cell_or_raise
+from statectl.testgen import generate
 from statectl.testgen.cellharness import CellUnderTest, holds
 from statectl.testgen.harness import DeviceUnderTest
 from support import MOTOR
@@ -197,3 +198,39 @@ def test_device_assert_helpers(check: Callable[[DeviceUnderTest], None], fails: 
     else:
         with pytest.raises(AssertionError, match=fails):
             check(d)
+
+
+# -- guards over the event's own data -----------------------------------------------------------
+
+#: A device whose guard reads the event's data (the kernel's spelling: ``_event['data']``).
+JOG = """\
+device: Jog
+states:
+  - {state: Idle, control: default, ignore: [Done]}
+  - {state: Jogging, control: event trigger required, api: Jog(), ignore: [Jog]}
+events:
+  - {event: Jog, condition: the step is small enough, guard: "_event['data']['step'] <= 5",
+     old: Idle, new: Jogging, kind: command, api: Jog}
+  - {event: Done, condition: the step is done, old: Jogging, new: Idle, kind: completion,
+     api: Jog}
+"""
+
+
+def test_guard_over_event_data_gets_data_for_both_outcomes(tmp_path: Path) -> None:
+    """A guard on _event['data'] is taken with data that makes it true, and tested false."""
+    tables = tmp_path / "jog.yaml"
+    tables.write_text(JOG, encoding="utf-8")
+    made = generate(tables, "rows", tmp_path / "gen")
+    text = made.path.read_text(encoding="utf-8")
+    true_case = next(c for c in made.suite.cases if c.name == "test_row_01_jog_idle_to_jogging")
+    false_case = next(c for c in made.suite.cases if c.name.endswith("_guard_false"))
+    assert (true_case.event_data, true_case.expect.unhandled) == ({"step": 5}, None)
+    assert (false_case.event_data, false_case.expect.unhandled) == ({"step": 6}, "guard false")
+    assert 'd.given(["Jog", {"step": 5}])' in text
+    result = run_pytest(made.path.parent)
+    assert result.returncode == 0, result.stdout[-3000:]
+    # the same tests against tables whose guard is off by one: the row's true case fails
+    tables.write_text(JOG.replace("<= 5", "< 5"), encoding="utf-8")
+    result = run_pytest(made.path.parent)
+    assert counts(result).get("failed", 0) >= 1, result.stdout[-3000:]
+    assert "FAILED test_jog_rows.py::test_row_01_jog_idle_to_jogging " in result.stdout

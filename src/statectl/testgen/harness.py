@@ -156,11 +156,15 @@ class DeviceUnderTest:
                     "neither handle nor ignore (statectl_strict); add a row or an ignore entry"
                 )
 
-    def given(self, *events: str) -> None:
-        """Send each event in turn; each must be handled (the path to the case's state)."""
+    def given(self, *events: str | Sequence[Any]) -> None:
+        """Send each event (or ``[event, data]``) in turn; each must be handled."""
         __tracebackhide__ = True
-        for e in events:
-            self.send(e)
+        for item in events:
+            if isinstance(item, str):
+                e, data = item, None
+            else:
+                e, data = item[0], item[1]
+            self.send(e, data)
             reason = self._unhandled()
             if reason is not None:
                 raise AssertionError(

@@ -62,6 +62,8 @@ def _lit(value: Any) -> str:
             if isinstance(value, list)
             else f"({inner}{',' if len(value) == 1 else ''})"
         )
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{_lit(k)}: {_lit(v)}" for k, v in value.items()) + "}"
     return repr(value)
 
 
@@ -72,10 +74,18 @@ def _marker(data: tuple[tuple[str, Any], ...]) -> str:
     return f"@pytest.mark.statectl_data({args})\n"
 
 
-def _given(given: tuple[str, ...]) -> str:
+def _given(given: tuple[str, ...], data: tuple[Any, ...] = ()) -> str:
+    """``d.given(...)``: each event, or ``[event, data]`` when it is sent with data."""
     if not given:
         return ""
-    return f"    d.given({', '.join(_lit(e) for e in given)})\n"
+    sent = [
+        _lit(e) if i >= len(data) or data[i] is None else _lit([e, data[i]])
+        for i, e in enumerate(given)
+    ]
+    line = f"    d.given({', '.join(sent)})\n"
+    if len(line) <= 101:
+        return line
+    return "    d.given(\n" + "".join(f"        {a},\n" for a in sent) + "    )\n"
 
 
 def _expect(e: Expect) -> str:
@@ -99,8 +109,10 @@ def _case(c: Case) -> str:
     out += f"def {c.name}(statectl_device):\n" + _doc(c.doc)
     if c.skip:
         return out + "\n\n"
-    out += "    d = statectl_device\n" + _given(c.given)
-    if c.event is not None:
+    out += "    d = statectl_device\n" + _given(c.given, c.given_data)
+    if c.event is not None and c.event_data is not None:
+        out += f"    d.send({_lit(c.event)}, {_lit(c.event_data)})\n"
+    elif c.event is not None:
         out += f"    d.send({_lit(c.event)})\n"
     return out + _expect(c.expect) + "\n\n"
 
@@ -110,7 +122,7 @@ def _table(t: Table) -> str:
     out = f'@pytest.mark.parametrize(\n    ("event", "reason"),\n    [\n{rows}    ],\n)\n'
     out += _marker(t.data)
     out += f"def {t.name}(statectl_device, event, reason):\n" + _doc(t.doc)
-    out += "    d = statectl_device\n" + _given(t.given)
+    out += "    d = statectl_device\n" + _given(t.given, t.given_data)
     out += "    d.send(event)\n"
     out += f"    d.expect(states={_lit(list(t.states))}, unhandled=reason)\n\n\n"
     return out
