@@ -5,7 +5,8 @@ Rules:
    then one event whose outcome the kernel decided: the states reached, the invoke
    numbers issued with their observer methods, or why nothing happened.
 2. ``rows``: per Event Definition row the shortest path that takes it; per guarded
-   row also one where its guard is false (both outcomes). ``transitions``: per
+   row also one where its guard is false (both outcomes); per row into a history
+   state also one per other configuration the history resumes. ``transitions``: per
    distinct edge of the state graph (configuration, event, configuration, rows).
    ``states``: per reachable configuration. ``pairs``: per transition, each
    transition that can follow it. Every criterion ends with the :class:`Table` of
@@ -195,9 +196,18 @@ def _rows(g: Graph, names: _Names) -> tuple[list[Case], list[str]]:
     false: dict[int, Edge] = {}
     no_data: dict[int, Edge] = {}
     guarded = [t for t in g.chart.transitions if t.guard]
+    #: rows into a history state: each configuration the history resumes, first edge
+    resumes: dict[int, dict[tuple[str, ...], Edge]] = {}
+    into_history = {
+        id(t)
+        for t in g.chart.transitions
+        if any(g.chart.has_state(x) and g.chart.state(x).kind.is_history for x in t.targets)
+    }
     for e in g.edges:
         for t in e.step.transitions:
             first.setdefault(id(t), e)
+            if id(t) in into_history:
+                resumes.setdefault(id(t), {}).setdefault(leaves(g.chart, e.step.target), e)
         for t in guarded:
             if (
                 id(t) not in false
@@ -226,6 +236,12 @@ def _rows(g: Graph, names: _Names) -> tuple[list[Case], list[str]]:
         if edge.event not in t.events:
             doc += f" Taken inside the step of {edge.event!r} (the chart raises {t.label!r})."
         cases.append(_case(g, names, base, doc, edge))
+        for key, other in resumes.get(id(t), {}).items():
+            if other is edge:
+                continue
+            shown = ", ".join(key)
+            more = f"{doc} Its history resumes {shown} here (each configuration it resumes)."
+            cases.append(_case(g, names, f"{base}_resumes_{_slug('_'.join(key))}", more, other))
         if t.guard:
             fe = false.get(id(t))
             if fe is None:
