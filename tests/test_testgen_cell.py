@@ -234,3 +234,29 @@ def test_guard_over_event_data_gets_data_for_both_outcomes(tmp_path: Path) -> No
     result = run_pytest(made.path.parent)
     assert counts(result).get("failed", 0) >= 1, result.stdout[-3000:]
     assert "FAILED test_jog_rows.py::test_row_01_jog_idle_to_jogging " in result.stdout
+
+
+# -- statectl_device("file", driver=...) and statectl_cell("file") --------------------------------
+
+
+def test_the_docs_callable_fixtures_run(tmp_path: Path) -> None:
+    """Without STATECTL_TABLES/CELL the fixtures are callables: the docs' example passes."""
+    block = doc_block("### A device of any file, on any driver")
+    module = block.replace('"../examples/motor/motor.yaml"', repr(os.path.relpath(MOTOR, tmp_path)))
+    module = module.replace(
+        '"../examples/pick-and-place/cell.yaml"', repr(os.path.relpath(CELL, tmp_path))
+    )
+    (tmp_path / "test_callables.py").write_text(module, encoding="utf-8")
+    result = run_pytest(tmp_path)
+    assert result.returncode == 0, result.stdout[-3000:]
+    assert counts(result) == {"passed": 2}
+
+
+def test_a_device_used_without_tables_says_what_to_do(tmp_path: Path) -> None:
+    """statectl_device.send in a module naming no tables fails saying how to name them."""
+    (tmp_path / "test_no_tables.py").write_text(
+        "def test_it(statectl_device):\n    statectl_device.send('Movement')\n", encoding="utf-8"
+    )
+    result = run_pytest(tmp_path)
+    assert counts(result) == {"failed": 1}
+    assert "names no STATECTL_TABLES" in result.stdout and "Traceback" not in result.stdout
