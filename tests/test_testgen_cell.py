@@ -260,3 +260,13 @@ def test_a_device_used_without_tables_says_what_to_do(tmp_path: Path) -> None:
     result = run_pytest(tmp_path)
     assert counts(result) == {"failed": 1}
     assert "names no STATECTL_TABLES" in result.stdout and "Traceback" not in result.stdout
+
+
+def test_a_cell_that_does_not_load_is_exit_1_with_its_diagnostics(tmp_path: Path) -> None:
+    """A cell naming a missing device file: exit 1, the cell file's line, nothing written."""
+    cell = copy_cell(tmp_path / "cell", CELL.read_text(encoding="utf-8"))
+    (cell.parent / "arm.yaml").unlink()
+    code, out, err = cli("testgen", str(cell), "--out", str(tmp_path / "gen"))
+    assert (code, out) == (1, "")
+    assert "cell.yaml:" in err and "arm.yaml" in err and "Traceback" not in err
+    assert not (tmp_path / "gen").exists()
