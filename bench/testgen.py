@@ -10,6 +10,8 @@ Usage: python bench/testgen.py [--states 50] [--no-run]
 - The shipped examples (Motor, gantry, pick-and-place's four devices): tests and
   events per criterion, time to generate, and (unless ``--no-run``) time to run the
   four modules of each with pytest on the simulated twin, in one subprocess per example.
+- The pick-and-place cell: time to generate its links module (the search over the
+  kernel's cell) and, unless ``--no-run``, to run it and the cell's Hypothesis module.
 """
 
 from __future__ import annotations
@@ -26,6 +28,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from statectl.testgen import CRITERIA, generate  # noqa: E402  # src/ first on the path
+from statectl.testgen.cellgen import (  # noqa: E402
+    generate_cell,
+    generate_cell_hypothesis,
+)
+
+CELL = ROOT / "examples/pick-and-place/cell.yaml"
 
 EXAMPLES = {
     "Motor": [ROOT / "examples/motor/motor.yaml"],
@@ -105,6 +113,27 @@ def main() -> None:
                 )
                 last = result.stdout.strip().splitlines()[-1]
                 runs.append((name, time.perf_counter() - start, last))
+        start = time.perf_counter()
+        cell_out = base / "cell"
+        made = generate_cell(CELL, "rows", cell_out)
+        t_cell = time.perf_counter() - start
+        for f in made.devices:
+            f.path.unlink()
+        generate_cell_hypothesis(CELL, cell_out)
+        print()
+        print(f"pick-and-place cell: {len(made.cases)} link tests, generated in {t_cell:.2f} s")
+        if not args.no_run:
+            start = time.perf_counter()
+            result = subprocess.run(
+                [sys.executable, "-m", "pytest", "-q", *PLUGIN, str(cell_out)],
+                cwd=cell_out,
+                env=env,
+                capture_output=True,
+                text=True,
+            )
+            last = result.stdout.strip().splitlines()[-1]
+            took = time.perf_counter() - start
+            runs.append(("pick-and-place cell (links + Hypothesis)", took, last))
         if runs:
             print()
             print("| example | pytest on the twin, all four criteria (s, with start-up) | result |")

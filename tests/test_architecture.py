@@ -138,6 +138,10 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "devices",
         "journal",
         "rules",
+        "render",
+        "cell",
+        "system",
+        "explore",
     ),
 }
 THIRD_PARTY_FREE = (*KERNEL, "observers", "guards")

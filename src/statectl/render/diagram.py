@@ -82,6 +82,8 @@ class Edge:
     event: str = ""
     condition: str = ""
     internal: bool = False
+    color: str = ""  # a writer's stroke colour for it (coverage: taken or never taken)
+    dashed: bool = False
 
 
 @dataclass(frozen=True, slots=True)

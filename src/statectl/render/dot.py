@@ -100,8 +100,10 @@ def write(d: Diagram) -> str:
             attrs["ltail"] = quote("cluster_" + e.source)
         if target.kind.is_container and e.target not in d.ancestors(e.source):
             attrs["lhead"] = quote("cluster_" + e.target)
-        if e.internal:
+        if e.internal or e.dashed:
             attrs["style"] = "dashed"
+        if e.color:
+            attrs["color"] = attrs["fontcolor"] = quote(e.color)
         line = f"{_end(d, e.source)} -> {_end(d, e.target)}"
         out.append(f"  {line} {_attrs(attrs)};")
     for note in d.notes:

@@ -1,6 +1,6 @@
 """Test a device against its tables: generated pytest modules, a pytest plugin, coverage.
 
-See docs/testgen.md. :func:`generate` writes a module per criterion (rows,
+See docs/testing.md. :func:`generate` writes a module per criterion (rows,
 transitions, states, pairs) whose tests use the plugin's fixtures
 (:mod:`statectl.testgen.plugin`); :class:`DeviceUnderTest` is what they drive;
 :func:`journal_coverage` says what a journalled run exercised. The names are
@@ -14,6 +14,8 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from statectl.testgen.cases import CRITERIA, Case, Expect, Suite, Table, cases_for
+    from statectl.testgen.cellgen import generate_cell
+    from statectl.testgen.cellharness import CellUnderTest
     from statectl.testgen.coverage import Coverage, journal_coverage
     from statectl.testgen.generator import Generated, generate
     from statectl.testgen.harness import DeviceUnderTest, Recorder
@@ -22,6 +24,7 @@ if TYPE_CHECKING:
 __all__ = [
     "CRITERIA",
     "Case",
+    "CellUnderTest",
     "Coverage",
     "DeviceUnderTest",
     "Expect",
@@ -33,6 +36,7 @@ __all__ = [
     "cases_for",
     "explore",
     "generate",
+    "generate_cell",
     "journal_coverage",
 ]
 
@@ -43,6 +47,8 @@ _WHERE = {
     "Suite": "cases",
     "Table": "cases",
     "cases_for": "cases",
+    "CellUnderTest": "cellharness",
+    "generate_cell": "cellgen",
     "Coverage": "coverage",
     "journal_coverage": "coverage",
     "Generated": "generator",

@@ -5,7 +5,8 @@ Rules:
    then one event whose outcome the kernel decided: the states reached, the invoke
    numbers issued with their observer methods, or why nothing happened.
 2. ``rows``: per Event Definition row the shortest path that takes it; per guarded
-   row also one where its guard is false (both outcomes). ``transitions``: per
+   row also one where its guard is false (both outcomes); per row into a history
+   state also one per other configuration the history resumes. ``transitions``: per
    distinct edge of the state graph (configuration, event, configuration, rows).
    ``states``: per reachable configuration. ``pairs``: per transition, each
    transition that can follow it. Every criterion ends with the :class:`Table` of
@@ -50,6 +51,8 @@ class Case:
     event: str | None  # None: only the start is checked
     expect: Expect
     skip: str = ""  # why the case cannot run (a row the search never reached)
+    given_data: tuple[Any, ...] = ()  # per given event, its data (empty: none at all)
+    event_data: Any = None  # the data sent with ``event``
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,6 +65,7 @@ class Table:
     given: tuple[str, ...]
     states: tuple[str, ...]
     rows: tuple[tuple[str, str], ...]  # (event, reason)
+    given_data: tuple[Any, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -115,16 +119,27 @@ class _Names:
         return name
 
 
+def _sent(path: Iterable[Edge]) -> tuple[tuple[str, ...], tuple[Any, ...]]:
+    """The events of a path, and their data (empty when none carries any)."""
+    edges = tuple(path)
+    data = tuple(e.data for e in edges)
+    return tuple(e.event for e in edges), data if any(d is not None for d in data) else ()
+
+
 def _case(g: Graph, names: _Names, base: str, doc: str, edge: Edge, skip: str = "") -> Case:
-    path = g.path(edge.source)
+    given, given_data = _sent(g.path(edge.source))
+    if edge.data is not None:
+        doc += f" Sent with the data {edge.data!r}."
     return Case(
         names(base),
         doc,
         tuple(g.overrides(edge.source).items()),
-        tuple(e.event for e in path),
+        given,
         edge.event,
         _expect(g.chart, edge.step),
         skip,
+        given_data,
+        edge.data,
     )
 
 
@@ -153,20 +168,22 @@ def _tables(g: Graph, names: _Names) -> list[Table]:
         pairs = tuple(
             (e.step.event or "", e.step.unhandled.value)
             for e in by_source.get(node, ())
-            if e.step.unhandled is not None
+            if e.step.unhandled is not None and e.data is None
         )
         if not pairs:
             continue
         shown = ", ".join(key)
+        given, given_data = _sent(g.path(node))
         out.append(
             Table(
                 names(f"test_unhandled_in_{_slug('_'.join(key))}"),
                 f"In {shown}, each event the tables do not take there changes nothing, "
                 "for the reason given.",
                 tuple(g.overrides(node).items()),
-                tuple(e.event for e in g.path(node)),
+                given,
                 key,
                 pairs,
+                given_data,
             )
         )
     return out
@@ -177,19 +194,34 @@ def _rows(g: Graph, names: _Names) -> tuple[list[Case], list[str]]:
     notes: list[str] = []
     first: dict[int, Edge] = {}
     false: dict[int, Edge] = {}
+    no_data: dict[int, Edge] = {}
     guarded = [t for t in g.chart.transitions if t.guard]
+    #: rows into a history state: each configuration the history resumes, first edge
+    resumes: dict[int, dict[tuple[str, ...], Edge]] = {}
+    into_history = {
+        id(t)
+        for t in g.chart.transitions
+        if any(g.chart.has_state(x) and g.chart.state(x).kind.is_history for x in t.targets)
+    }
     for e in g.edges:
         for t in e.step.transitions:
             first.setdefault(id(t), e)
+            if id(t) in into_history:
+                resumes.setdefault(id(t), {}).setdefault(leaves(g.chart, e.step.target), e)
         for t in guarded:
             if (
                 id(t) not in false
                 and e.event in t.events
                 and t.source in e.source.snapshot.active
                 and t not in e.step.transitions
-                and not g.guard_holds(e.source, t)
+                and not g.guard_holds(e.source, t, e.data)
             ):
-                false[id(t)] = e
+                if e.data is None and "_event" in (t.guard or ""):
+                    no_data.setdefault(id(t), e)  # false for want of data: a last resort
+                else:
+                    false[id(t)] = e
+    for k, e in no_data.items():
+        false.setdefault(k, e)
     for i, t in enumerate(g.chart.transitions, 1):
         words = describe(t)
         base = f"test_row_{i:02d}_{_slug(' '.join(t.events) or 'eventless')}_{_slug(t.source)}"
@@ -204,6 +236,12 @@ def _rows(g: Graph, names: _Names) -> tuple[list[Case], list[str]]:
         if edge.event not in t.events:
             doc += f" Taken inside the step of {edge.event!r} (the chart raises {t.label!r})."
         cases.append(_case(g, names, base, doc, edge))
+        for key, other in resumes.get(id(t), {}).items():
+            if other is edge:
+                continue
+            shown = ", ".join(key)
+            more = f"{doc} Its history resumes {shown} here (each configuration it resumes)."
+            cases.append(_case(g, names, f"{base}_resumes_{_slug('_'.join(key))}", more, other))
         if t.guard:
             fe = false.get(id(t))
             if fe is None:
@@ -288,7 +326,7 @@ def _pairs(g: Graph, names: _Names) -> list[Case]:
             if not e2.step.handled or key in seen:
                 continue
             seen.add(key)
-            path = (*g.path(e1.source), e1)
+            given, given_data = _sent((*g.path(e1.source), e1))
             src = "_".join(leaves(g.chart, e1.source.snapshot))
             base = f"test_pair_{_slug(e1.event)}_from_{_slug(src)}_then_{_slug(e2.event)}"
             doc = f"Transition {_edge_words(g, e1)}, then {_edge_words(g, e2)}."
@@ -297,9 +335,11 @@ def _pairs(g: Graph, names: _Names) -> list[Case]:
                     names(base),
                     doc,
                     tuple(g.overrides(e1.source).items()),
-                    tuple(e.event for e in path),
+                    given,
                     e2.event,
                     _expect(g.chart, e2.step),
+                    given_data=given_data,
+                    event_data=e2.data,
                 )
             )
     return out

@@ -25,6 +25,8 @@ def cmd_testgen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         generate_hypothesis,
     )
 
+    if _is_cell(args.file):
+        return _cell_testgen(args, out, err)
     if args.xstate:
         out.write(f"wrote {export_xstate(args.file, args.out)}\n")
         return OK
@@ -44,9 +46,49 @@ def cmd_testgen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     return OK
 
 
+def _is_cell(path: str) -> bool:
+    """A YAML file with a ``devices`` section and no ``states`` table is a cell file."""
+    from statectl.tables import safeyaml
+
+    if Path(path).suffix.lower() not in (".yaml", ".yml"):
+        return False
+    try:
+        data = safeyaml.load_value(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, safeyaml.YamlRefused):
+        return False  # loaded as a device file, whose loader says what is wrong
+    return isinstance(data, dict) and "devices" in data and "states" not in data
+
+
+def _cell_testgen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    from statectl.testgen.cellgen import generate_cell, generate_cell_hypothesis
+
+    if args.xstate or args.graphwalker:
+        err.write(
+            f"statectl testgen: {args.file} is a cell; --xstate and --graphwalker export one "
+            "device: give one of its device files\n"
+        )
+        return USAGE
+    if args.hypothesis:
+        out.write(f"wrote {generate_cell_hypothesis(args.file, args.out)}\n")
+        return OK
+    made = generate_cell(args.file, args.criterion, args.out)
+    for d in made.devices:
+        out.write(f"wrote {d.path}: {d.tests} tests, {d.steps} events sent\n")
+    out.write(f"wrote {made.links}: {len(made.cases)} link tests\n")
+    for note in made.notes:
+        out.write(f"note: {note}\n")
+    return OK
+
+
 def cmd_coverage(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     from statectl.build import load_chart
-    from statectl.testgen.coverage import coverage_table, journal_coverage, load_tally, mermaid
+    from statectl.testgen.coverage import (
+        coverage_table,
+        journal_coverage,
+        load_tally,
+        mermaid,
+        svg,
+    )
 
     if not Path(args.journal).exists():
         err.write(f"statectl coverage: {args.journal}: no such file\n")
@@ -56,7 +98,12 @@ def cmd_coverage(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         report = load_tally(args.journal, chart)
     else:
         report = journal_coverage(args.journal, chart, args.device)
-    text = mermaid(report) if args.format == "mermaid" else coverage_table(report, args.journal)
+    if args.format == "svg":
+        text = svg(report)  # a missing Graphviz is a StatectlError: the CLI prints the hint
+    elif args.format == "mermaid":
+        text = mermaid(report)
+    else:
+        text = coverage_table(report, args.journal)
     out.write(text)
     return PROBLEMS if report.mismatches else OK
 
@@ -69,9 +116,13 @@ def register(sub: Any) -> None:
         description="Explores the chart from its default state and writes one test per "
         "row (or transition, state, pair of transitions), plus each state's unhandled "
         "events, into DIR. The tests run on the simulated twin unless a conftest.py "
-        "overrides the statectl_driver fixture (docs/testgen.md).",
+        "overrides the statectl_driver fixture (docs/testing.md).",
     )
-    s.add_argument("file", metavar="FILE", help="device file")
+    s.add_argument(
+        "file",
+        metavar="FILE_OR_CELL",
+        help="device file, or cell file (each device's module plus the links' module)",
+    )
     s.add_argument("--criterion", default="rows", choices=CRITERIA)
     s.add_argument("--out", required=True, metavar="DIR", help="directory to write into")
     what = s.add_mutually_exclusive_group()
@@ -103,5 +154,5 @@ def register(sub: Any) -> None:
     )
     s.add_argument("file", metavar="FILE", help="the device file the run used")
     s.add_argument("--device", help="only this journalled device (default: all of FILE's chart)")
-    s.add_argument("--format", default="table", choices=("table", "mermaid"))
+    s.add_argument("--format", default="table", choices=("table", "mermaid", "svg"))
     s.set_defaults(func=cmd_coverage)

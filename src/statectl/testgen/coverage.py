@@ -17,13 +17,16 @@ from __future__ import annotations
 import json
 from collections import Counter
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from statectl.errors import StatectlError
 from statectl.journal import REDO, JournalReader, StepKind
 from statectl.model import Chart, StateKind, Transition
+from statectl.render import dot
+from statectl.render.diagram import from_chart
+from statectl.render.svg import dot_to_svg
 from statectl.semantics import Snapshot, compiled, step
 from statectl.testgen.cases import describe, where
 from statectl.testgen.paths import default_data, explore, leaves
@@ -35,6 +38,7 @@ __all__ = [
     "journal_coverage",
     "load_tally",
     "mermaid",
+    "svg",
 ]
 
 EdgeKey = tuple[tuple[str, ...], str, tuple[str, ...]]
@@ -270,3 +274,33 @@ def mermaid(c: Coverage) -> str:
         cls = "covered" if c.states.get(s.name, 0) else "uncovered"
         out.append(f"  class {_node(s.name)} {cls}")
     return "\n".join(out) + "\n"
+
+
+TAKEN, NEVER = "#22aa22", "#cc3333"  # six digits: Graphviz reads no shorthand
+
+
+def svg(c: Coverage) -> str:
+    """The chart's diagram (as ``statectl render``) with the coverage drawn on it, via Graphviz.
+
+    States entered are highlighted; each row's edge is labelled with how often it
+    was taken, green when it was, red and dashed when never. Needs Graphviz ``dot``
+    (a missing one is a StatectlError saying what to install).
+    """
+    chart = c.chart
+    entered = frozenset(s for s, n in c.states.items() if n and chart.has_state(s))
+    d = from_chart(chart, entered)
+    per_edge: list[int] = []  # from_chart's edges: per row, one per target, in table order
+    for t, times in zip(chart.transitions, c.rows, strict=True):
+        per_edge += [times] * len(t.targets or (t.source,))
+    if len(per_edge) != len(d.edges):  # a row from or to an unknown state: labels only
+        per_edge = [0] * len(d.edges)
+    edges = tuple(
+        replace(
+            e,
+            label=f"{e.label} x{n}" if n else f"{e.label} (never)",
+            color=TAKEN if n else NEVER,
+            dashed=not n,
+        )
+        for e, n in zip(d.edges, per_edge, strict=True)
+    )
+    return dot_to_svg(dot.write(replace(d, edges=edges)))

@@ -156,11 +156,15 @@ class DeviceUnderTest:
                     "neither handle nor ignore (statectl_strict); add a row or an ignore entry"
                 )
 
-    def given(self, *events: str) -> None:
-        """Send each event in turn; each must be handled (the path to the case's state)."""
+    def given(self, *events: str | Sequence[Any]) -> None:
+        """Send each event (or ``[event, data]``) in turn; each must be handled."""
         __tracebackhide__ = True
-        for e in events:
-            self.send(e)
+        for item in events:
+            if isinstance(item, str):
+                e, data = item, None
+            else:
+                e, data = item[0], item[1]
+            self.send(e, data)
             reason = self._unhandled()
             if reason is not None:
                 raise AssertionError(
@@ -202,6 +206,25 @@ class DeviceUnderTest:
         return self.subject.advance(seconds)
 
     # -- checking ------------------------------------------------------------------------------
+
+    def assert_state(self, *states: str) -> None:
+        """The device is in exactly ``states`` (its active atomic states, document order)."""
+        __tracebackhide__ = True
+        if tuple(states) != self.states:
+            raise AssertionError(
+                f"{self._path()}: expected the state {list(states)}, "
+                f"device is in {list(self.states)}"
+            )
+
+    def assert_called(self, name: str) -> None:
+        """The last event made the driver call ``name``: an API function or observer method."""
+        __tracebackhide__ = True
+        called = self._called()
+        if not any(name in (m, api_function(api)) for m, api in called):
+            shown = [api for _, api in called] or "nothing"
+            raise AssertionError(
+                f"{self._path()}: expected the driver to call {name}(), it called {shown}"
+            )
 
     def _path(self) -> str:
         return "after " + (" -> ".join(self.sent) if self.sent else "the start")

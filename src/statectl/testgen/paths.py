@@ -22,7 +22,7 @@ import ast
 import itertools
 from collections import deque
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from statectl.errors import StatectlError
@@ -65,6 +65,7 @@ class Edge:
     event: str
     step: Step
     target: Node
+    data: Any = None  # the event's own data (``_event['data']``), when a guard reads it
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,6 +81,8 @@ class Graph:
     parent: Mapping[Node, Edge | None]  # the edge that first reached a node
     edges: tuple[Edge, ...]  # every edge, in breadth-first order
     complete: bool  # False when max_nodes stopped the search
+    #: per event whose guards read its data, the data tried (``None``: none sent)
+    event_datas: Mapping[str, tuple[Any, ...]] = field(default_factory=dict)
 
     def path(self, node: Node) -> tuple[Edge, ...]:
         """The shortest sequence of edges from the start to ``node``."""
@@ -95,7 +98,7 @@ class Graph:
         defaults = dict(self.defaults)
         return {k: v for k, v in self.datas[node.data] if defaults.get(k, _UNSET) != v}
 
-    def guard_holds(self, node: Node, t: Transition) -> bool:
+    def guard_holds(self, node: Node, t: Transition, event_data: Any = None) -> bool:
         """The kernel's answer: does ``t``'s guard hold in ``node`` for an external event?"""
         run = Run(
             set(node.snapshot.active),
@@ -104,7 +107,7 @@ class Graph:
             dict(self.datas[node.data]),
         )
         run.event = t.events[0] if t.events else None
-        return condition_match(compiled(self.chart), run, t, None)
+        return condition_match(compiled(self.chart), run, t, event_data)
 
 
 _UNSET = object()
@@ -181,11 +184,74 @@ def candidate_data(chart: Chart, m: Machine) -> tuple[Data, ...]:
     return tuple(out)
 
 
+def _event_data_reads(source: str) -> tuple[set[str], bool]:
+    """The keys a guard reads of ``_event['data']``, and whether it reads it whole."""
+    keys: set[str] = set()
+    whole = False
+    parents: dict[int, ast.AST] = {}
+    tree = ast.parse(source, mode="eval")
+    for node in ast.walk(tree):
+        for child in ast.iter_child_nodes(node):
+            parents[id(child)] = node
+    for node in ast.walk(tree):
+        if not (
+            isinstance(node, ast.Subscript)
+            and isinstance(node.value, ast.Name)
+            and node.value.id == "_event"
+            and isinstance(node.slice, ast.Constant)
+            and node.slice.value == "data"
+        ):
+            continue
+        up = parents.get(id(node))
+        if (
+            isinstance(up, ast.Subscript)
+            and up.value is node
+            and isinstance(up.slice, ast.Constant)
+            and isinstance(up.slice.value, str)
+        ):
+            keys.add(up.slice.value)
+        else:
+            whole = True
+    return keys, whole
+
+
+def candidate_event_data(chart: Chart) -> dict[str, tuple[Any, ...]]:
+    """Per event, the data a test sends with it: none first, then data for its guards.
+
+    A guard reading ``_event['data']['x']`` (the kernel's spelling: ``_event`` is
+    ``{"name": ..., "data": ...}``) gets ``{"x": v}`` for each literal it compares
+    against and its neighbours (as for the datamodel, rule 2); one reading
+    ``_event['data']`` whole gets the values themselves.
+    """
+    out: dict[str, tuple[Any, ...]] = {}
+    for t in chart.transitions:
+        if not t.guard or "_event" not in t.guard:
+            continue
+        keys, whole = _event_data_reads(t.guard)
+        lits = _literals(t.guard)
+        for event in t.events:
+            found = list(out.get(event, (None,)))
+            values: list[Any] = []
+            if keys:
+                for combo in itertools.product(lits, repeat=len(keys)):
+                    values.append(dict(zip(sorted(keys), combo, strict=True)))
+                    if len(values) >= MAX_DATA:
+                        break
+            if whole:
+                values += lits
+            for v in values:
+                if not any(type(v) is type(w) and v == w for w in found):
+                    found.append(v)
+            out[event] = tuple(found[:MAX_DATA])
+    return out
+
+
 def explore(chart: Chart, *, max_nodes: int = MAX_NODES) -> Graph:
     """Breadth-first over every sendable event from the default state (rules 1-3)."""
     m = compiled(chart)
     datas = candidate_data(chart, m)
     sendable = sendable_events(chart)
+    event_datas = candidate_event_data(chart)
     parent: dict[Node, Edge | None] = {}
     starts: list[Node] = []
     firsts: list[Step] = []
@@ -205,18 +271,19 @@ def explore(chart: Chart, *, max_nodes: int = MAX_NODES) -> Graph:
         node = queue.popleft()
         values = dict(datas[node.data])
         for event in sendable:
-            decided = step(m, node.snapshot, event, values)
-            target = Node(node.data, decided.target)
-            edge = Edge(node, event, decided, target)
-            edges.append(edge)
-            if target in parent:
-                continue
-            if len(parent) >= max_nodes:
-                complete = False
-                continue
-            parent[target] = edge
-            if not decided.final:
-                queue.append(target)
+            for sent in event_datas.get(event, (None,)):
+                decided = step(m, node.snapshot, event, values, sent)
+                target = Node(node.data, decided.target)
+                edge = Edge(node, event, decided, target, sent)
+                edges.append(edge)
+                if target in parent:
+                    continue
+                if len(parent) >= max_nodes:
+                    complete = False
+                    continue
+                parent[target] = edge
+                if not decided.final:
+                    queue.append(target)
     return Graph(
         chart,
         datas,
@@ -227,6 +294,7 @@ def explore(chart: Chart, *, max_nodes: int = MAX_NODES) -> Graph:
         parent,
         tuple(edges),
         complete,
+        event_datas,
     )
 
 

@@ -28,7 +28,7 @@ Regenerate: statectl testgen {source} --criterion {criterion} --out {out}
 {counts}
 The tests run on the simulated twin derived from the tables. To run them against
 another driver (a real device, a vendor's simulator), override the ``statectl_driver``
-fixture in a conftest.py; see docs/testgen.md.{notes}
+fixture in a conftest.py; see docs/testing.md.{notes}
 """
 
 from __future__ import annotations
@@ -62,6 +62,8 @@ def _lit(value: Any) -> str:
             if isinstance(value, list)
             else f"({inner}{',' if len(value) == 1 else ''})"
         )
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{_lit(k)}: {_lit(v)}" for k, v in value.items()) + "}"
     return repr(value)
 
 
@@ -72,10 +74,18 @@ def _marker(data: tuple[tuple[str, Any], ...]) -> str:
     return f"@pytest.mark.statectl_data({args})\n"
 
 
-def _given(given: tuple[str, ...]) -> str:
+def _given(given: tuple[str, ...], data: tuple[Any, ...] = ()) -> str:
+    """``d.given(...)``: each event, or ``[event, data]`` when it is sent with data."""
     if not given:
         return ""
-    return f"    d.given({', '.join(_lit(e) for e in given)})\n"
+    sent = [
+        _lit(e) if i >= len(data) or data[i] is None else _lit([e, data[i]])
+        for i, e in enumerate(given)
+    ]
+    line = f"    d.given({', '.join(sent)})\n"
+    if len(line) <= 101:
+        return line
+    return "    d.given(\n" + "".join(f"        {a},\n" for a in sent) + "    )\n"
 
 
 def _expect(e: Expect) -> str:
@@ -99,8 +109,10 @@ def _case(c: Case) -> str:
     out += f"def {c.name}(statectl_device):\n" + _doc(c.doc)
     if c.skip:
         return out + "\n\n"
-    out += "    d = statectl_device\n" + _given(c.given)
-    if c.event is not None:
+    out += "    d = statectl_device\n" + _given(c.given, c.given_data)
+    if c.event is not None and c.event_data is not None:
+        out += f"    d.send({_lit(c.event)}, {_lit(c.event_data)})\n"
+    elif c.event is not None:
         out += f"    d.send({_lit(c.event)})\n"
     return out + _expect(c.expect) + "\n\n"
 
@@ -110,7 +122,7 @@ def _table(t: Table) -> str:
     out = f'@pytest.mark.parametrize(\n    ("event", "reason"),\n    [\n{rows}    ],\n)\n'
     out += _marker(t.data)
     out += f"def {t.name}(statectl_device, event, reason):\n" + _doc(t.doc)
-    out += "    d = statectl_device\n" + _given(t.given)
+    out += "    d = statectl_device\n" + _given(t.given, t.given_data)
     out += "    d.send(event)\n"
     out += f"    d.expect(states={_lit(list(t.states))}, unhandled=reason)\n\n\n"
     return out
@@ -144,7 +156,7 @@ Hypothesis sends the chart's events in any order; after every event the device m
 be where the kernel puts it, with the invokes the kernel issues and the driver's API
 call for each, or unhandled for the kernel's reason. A failure shrinks to a short
 sequence. The driver is the simulated twin unless a conftest.py overrides
-``statectl_new_driver`` (a fresh driver per example); see docs/testgen.md.
+``statectl_new_driver`` (a fresh driver per example); see docs/testing.md.
 """
 
 from __future__ import annotations
