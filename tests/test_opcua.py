@@ -252,7 +252,13 @@ def test_a_user_calls_movement_and_subscribers_see_moving_then_blocked(motor: Se
             await heard.until(lambda: heard.values == ["Blocked"])
             refused = await device.call_method("2:Initialization")  # guard: previous Moving
             first = await device.call_method("2:Movement")
-            await heard.until(lambda: heard.values[-1:] == ["Blocked"] and len(heard.values) > 2)
+            await heard.until(  # data changes and events come on their own: wait for both
+                lambda: (
+                    heard.values[-1:] == ["Blocked"]
+                    and len(heard.values) > 2
+                    and len(heard.events) >= 2
+                )
+            )
             number = await (await current.get_child("0:Number")).read_value()
             await sub.delete()
             return first, refused, heard, number
