@@ -307,3 +307,18 @@ def test_bad_cia402_options_are_d511_all_at_once(tmp_path: Path) -> None:
         "eds",
         "scale",
     }
+
+
+def test_demo_runs_the_motor_scenario_on_the_simulated_drive() -> None:
+    """`statectl demo --driver cia402-sim` ends Blocked, its fault an EMCY from the drive."""
+    import io
+    import re
+
+    from statectl.demo import run_demo
+
+    out = io.StringIO()
+    subject = run_demo(out, driver="cia402-sim")
+    text = out.getvalue()
+    assert subject.configuration == {"Blocked"}
+    assert "EMCY 0x7300" in text and "Error completion" in text
+    assert len(re.findall(r"event\s+Movement completion", text)) == 1  # the faulted one never
