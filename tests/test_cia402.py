@@ -322,3 +322,12 @@ def test_demo_runs_the_motor_scenario_on_the_simulated_drive() -> None:
     assert subject.configuration == {"Blocked"}
     assert "EMCY 0x7300" in text and "Error completion" in text
     assert len(re.findall(r"event\s+Movement completion", text)) == 1  # the faulted one never
+
+
+def test_the_socketcan_example_config_loads() -> None:
+    """examples/motor/cia402-socketcan.yaml is a valid run config for the cia402 driver."""
+    root = Path(__file__).parent.parent
+    name, options = load_driver_config(root / "examples" / "motor" / "cia402-socketcan.yaml")[
+        "Motor"
+    ]
+    assert (name, options["interface"], options["channel"]) == ("cia402", "socketcan", "can0")

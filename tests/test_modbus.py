@@ -27,6 +27,7 @@ from statectl.errors import DiagnosticError
 from statectl.observers import Notification
 from statectl.runtime import WallClock
 
+ROOT = Path(__file__).parent.parent
 COILS = {"close_valve": 0, "open_valve": 1}
 INPUTS = {f"in{i}": i for i in range(64)} | {"closed": 0, "opened": 1}
 ACTIONS = {
@@ -210,3 +211,48 @@ def test_modbus_options_are_checked_when_the_config_loads(tmp_path: Path) -> Non
     assert [d.code for d in info.value.diagnostics] == ["D511", "D511"]
     assert "coils.close_valve: address" in messages[0]
     assert "'nozzle' is not one of the coils" in messages[1]
+
+
+def test_the_example_gripper_runs_on_modbus_and_a_reset_link_is_its_slip(
+    server: Server, tmp_path: Path
+) -> None:
+    """The pick-and-place Gripper, configured by its example run config (port changed),
+    closes on Grip by the sensor, and a connection reset while Closed (monitored) is its
+    declared fault event Slip."""
+    from statectl.build import load_chart
+    from statectl.devices import connect, make_driver
+    from statectl.runtime import EventReceived, Subject
+
+    example = ROOT / "examples" / "pick-and-place"
+    text = (example / "gripper-modbus.yaml").read_text().replace("5020", str(server.port))
+    (tmp_path / "run.yaml").write_text(text)
+    name, options = load_driver_config(tmp_path / "run.yaml")["Gripper"]
+    chart = load_chart(example / "gripper.yaml")
+    driver = make_driver(name, options, chart=chart)
+    clock = WallClock()
+    subject = Subject(chart, clock=clock)
+    events: list[str] = []
+    subject.listen(lambda r: events.append(r.event) if isinstance(r, EventReceived) else None)
+    connect(subject, driver, period=0.01)
+    subject.start()
+
+    def until(state: str) -> None:
+        deadline = time.monotonic() + 5
+        subject.run_until_idle()
+        while subject.configuration != {state}:
+            assert time.monotonic() < deadline, (state, events)
+            time.sleep(0.005)
+            subject.run_until_idle()
+
+    try:
+        subject.post("Grip")
+        until("Closing")
+        server.set_input(0, True)  # the jaws close
+        until("Closed")
+        server.stop()
+        until("Open")
+        assert events == ["Grip", "Grip completion", "Slip"]
+    finally:
+        subject.close()
+        getattr(driver, "close")()  # noqa: B009 - not on the DeviceDriver protocol
+        clock.stop()
