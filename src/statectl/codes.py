@@ -58,6 +58,7 @@ _SCXML = ("docs/scxml.md", "diagnostics")
 _CODEGEN = ("docs/codegen.md", "diagnostics")
 _CELLS = ("docs/cells.md", "diagnostics")
 _DRIVERS = ("docs/runtime.md", "drivers-and-their-configuration")
+_BUS = ("docs/drivers.md", "configuration-diagnostics")
 _BUILDER = ("docs/check.md", "builder-codes-reported-through-check")
 
 
@@ -212,6 +213,8 @@ ALL: tuple[Code, ...] = (
     _c("D508", _E, "an option the driver does not take", _DRIVERS),
     _c("D509", _E, "an option value the driver refuses", _DRIVERS),
     _c("D510", _E, "a bad 'dashboard:' section", _DRIVERS),
+    _c("D511", _E, "a bus driver option value it refuses (address, port, node id, EDS)", _BUS),
+    _c("D512", _E, "a bus driver whose library is not installed", _BUS),
     _c("D520", _E, "a bad 'opcua:' section", ("docs/opcua.md", "configuration")),
     _c("D530", _E, "a bad 'ship:' section", ("docs/journal.md", "shipping-to-postgresql")),
     # -- S6xx: reading SCXML (statectl.scxml.reader) --------------------------------------

@@ -5,7 +5,10 @@ Rules:
    (``statectl/data/motor.yaml``), so the demo runs from a wheel too.
 2. The driver comes from a driver name or a driver config file; the model is
    the same whichever runs it.
-3. The scenario: a Movement of 10 until its completion; an Initialization back
+3. A driver on a real bus (``cia402-sim``: a simulated CiA 402 drive speaking
+   CANopen on python-can's virtual bus) runs on a WallClock, since the bus runs
+   in real time; the demo closes its bus at the end.
+4. The scenario: a Movement of 10 until its completion; an Initialization back
    (its guard ``previous == 'Moving'`` holds); a second Movement during which the
    motor faults, the Moving monitor raises Error, the motor returns to where the
    movement began, and the run ends Blocked.
@@ -13,6 +16,7 @@ Rules:
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterable
 from importlib.resources import as_file, files
 from typing import TextIO
@@ -21,7 +25,7 @@ from statectl.build import load_chart
 from statectl.devices import Driver, connect, load_driver_config, make_driver
 from statectl.errors import StatectlError
 from statectl.model import Chart
-from statectl.runtime import Listener, SimClock, Subject, TraceWriter
+from statectl.runtime import Clock, Listener, SimClock, Subject, TraceWriter, WallClock
 
 __all__ = ["FAULT", "motor_chart", "run_demo"]
 
@@ -40,15 +44,18 @@ def motor_chart() -> Chart:
 def _until(subject: Subject, state: str) -> None:
     """Advance simulated time until the device rests in ``state`` with nothing queued."""
     clock = subject.clock
-    assert isinstance(clock, SimClock)
     deadline = clock.now() + _LIMIT
     subject.run_until_idle()
     while subject.configuration != {state} or subject.queued:
         if clock.now() >= deadline:
             active = ", ".join(sorted(subject.configuration))
             raise StatectlError(f"demo: not back in {state} after {_LIMIT} s (in {active})")
-        due = clock.next_deadline()
-        subject.advance(_TICK if due is None else max(0.0, min(_TICK, due - clock.now())))
+        if isinstance(clock, SimClock):
+            due = clock.next_deadline()
+            subject.advance(_TICK if due is None else max(0.0, min(_TICK, due - clock.now())))
+        else:  # a bus in real time: let its frames arrive
+            time.sleep(0.002)
+            subject.run_until_idle()
 
 
 def run_demo(
@@ -72,24 +79,32 @@ def run_demo(
     device = make_driver(driver, options, chart=chart)
     if not isinstance(device, Driver):
         raise StatectlError(f"driver {driver!r} cannot inject faults; the demo needs a twin")
-    subject = Subject(chart, clock=SimClock())
+    realtime = bool(getattr(device, "realtime", False))
+    clock: Clock = WallClock() if realtime else SimClock()
+    subject = Subject(chart, clock=clock)
     invokes = ", ".join(f"#{i.number} {i.name} -> {i.method}()" for i in chart.invokes)
     out.write(f"statectl demo: {chart.name} on {type(device).__name__} (driver {driver})\n")
     out.write(f"invokes: {invokes}\n\n")
     subject.listen(TraceWriter(out, device_width=len(subject.name)))
     for listener in listeners:
         subject.listen(listener)
-    connect(subject, device)
-    subject.start()
-
-    subject.post("Movement", {"amount": 10})
-    _until(subject, "Blocked")
-    subject.post("Initialization")
-    _until(subject, "Blocked")
-    subject.post("Movement", {"amount": 10})
-    device.inject_fault(FAULT, after=0.45)
-    _until(subject, "Blocked")
-    subject.close()
+    try:
+        connect(subject, device)
+        subject.start()
+        subject.post("Movement", {"amount": 10})
+        _until(subject, "Blocked")
+        subject.post("Initialization")
+        _until(subject, "Blocked")
+        subject.post("Movement", {"amount": 10})
+        device.inject_fault(FAULT, after=0.45)
+        _until(subject, "Blocked")
+    finally:
+        subject.close()
+        close = getattr(device, "close", None)
+        if callable(close):
+            close()
+        if isinstance(clock, WallClock):
+            clock.stop()
 
     final = ", ".join(sorted(subject.configuration))
     out.write(

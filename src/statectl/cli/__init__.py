@@ -71,7 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument(
         "--driver",
         default="sim-motor",
-        help="driver for the Motor (sim-motor, sim-stepper, or package.module:Class)",
+        help="driver for the Motor (sim-motor, sim-stepper, cia402-sim, or package.module:Class)",
     )
     s.add_argument("--config", help="driver configuration YAML (overrides --driver)")
     s.set_defaults(func=cmd_demo)

@@ -2,7 +2,8 @@
 
 Rules:
 1. A driver is named by a registry name (:data:`DRIVERS`: ``sim-motor``,
-   ``sim-stepper``, ``sim-twin``) or by an entry string ``package.module:Class``.
+   ``sim-stepper``, ``sim-twin``; the bus drivers ``cia402``, ``cia402-sim``,
+   ``modbus``, docs/drivers.md) or by an entry string ``package.module:Class``.
 2. A driver config file is YAML::
 
        devices:
@@ -14,7 +15,8 @@ Rules:
 3. Options are checked against the driver's constructor when the file loads,
    so a misspelt option is a diagnostic, not a ``TypeError`` at start-up; a
    driver with a ``check_options(options) -> problems`` attribute (``sim-twin``)
-   has its option values checked too (D509).
+   has its option values checked too (D509); a bus driver's option values are
+   D511, and a bus driver whose library is not installed is D512.
 4. A driver whose constructor takes ``chart`` is given the device's chart by
    :func:`make_driver` (a twin derives itself from the tables); ``chart`` is
    never an option a config file sets.
@@ -41,6 +43,7 @@ Rules:
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import inspect
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -49,6 +52,9 @@ from typing import Any
 
 import yaml
 
+from statectl.devices.cia402 import Cia402Driver, Cia402SimDriver
+from statectl.devices.cia402.options import cia402_option_problems
+from statectl.devices.modbus import ModbusIO, modbus_option_problems
 from statectl.devices.motor import SimMotor
 from statectl.devices.opcua_config import OpcuaConfig, parse_opcua
 from statectl.devices.protocol import DeviceDriver
@@ -78,6 +84,23 @@ DRIVERS: Mapping[str, Callable[..., DeviceDriver]] = {
     "sim-motor": SimMotor,
     "sim-stepper": SimStepper,
     "sim-twin": SimTwin,
+    "cia402": Cia402Driver,
+    "cia402-sim": Cia402SimDriver,
+    "modbus": ModbusIO,
+}
+
+#: Checks of a bus driver's option values (D511), by driver name.
+BUS_OPTION_CHECKS: Mapping[str, Callable[[Mapping[str, Any]], Sequence[str]]] = {
+    "cia402": cia402_option_problems,
+    "cia402-sim": cia402_option_problems,
+    "modbus": modbus_option_problems,
+}
+
+#: The library each bus driver needs, by driver name: (module, extra) for D512.
+BUS_LIBRARIES: Mapping[str, tuple[str, str]] = {
+    "cia402": ("canopen", "canopen"),
+    "cia402-sim": ("canopen", "canopen"),
+    "modbus": ("pymodbus", "modbus"),
 }
 
 #: Checks of option values, by driver name: each returns the problems it finds.
@@ -189,8 +212,16 @@ def _takes_chart(factory: Callable[..., Any]) -> bool:
 
 
 def _value_problems(name: str, options: Mapping[str, Any]) -> Sequence[str]:
-    check = OPTION_CHECKS.get(name)
+    check = OPTION_CHECKS.get(name) or BUS_OPTION_CHECKS.get(name)
     return check(options) if check is not None else ()
+
+
+def _missing_library(name: str) -> str | None:
+    """The ``pip install`` a bus driver still needs, or None (D512)."""
+    need = BUS_LIBRARIES.get(name)
+    if need is None or importlib.util.find_spec(need[0]) is not None:
+        return None
+    return f"pip install 'statectl[{need[1]}]'"
 
 
 def _option_problem(factory: Callable[..., Any], options: Mapping[str, Any]) -> str | None:
@@ -351,6 +382,26 @@ def load_run_config(path: str | Path) -> RunConfig:
         if problem:
             error("D508", line_of(fields["options"][1]), f"device {device!r}: {problem}")
             continue
+        missing = _missing_library(driver)
+        if missing is not None:
+            error(
+                "D512",
+                line_of(dnode),
+                f"device {device!r}: driver {driver!r} needs a library that is not installed",
+                missing,
+            )
+            continue
+        if driver in BUS_OPTION_CHECKS:
+            bad = _value_problems(driver, options)
+            for text in bad:
+                error(
+                    "D511",
+                    line_of(fields["options"][1]),
+                    f"device {device!r}: {text}",
+                    "see docs/drivers.md for the driver's options",
+                )
+            if bad:
+                continue
         bad = _value_problems(driver, options)
         for text in bad:
             error(
