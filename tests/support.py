@@ -30,3 +30,29 @@ def record_keys(records: Any) -> list[tuple[Any, ...]]:
         (type(r).__name__, *(getattr(r, f) for f in r._fields if f not in ("device", "time")))
         for r in records
     ]
+
+
+#: A press whose Work is parallel: the ram presses while the clamp holds. Work is
+#: entered with a device call (Start -> Go()); only the ram's completion ends it.
+PARALLEL_PRESS = """\
+device: Press
+states:
+  - state: Idle
+    control: default
+  - state: Work
+    type: parallel
+  - state: Ram
+    parent: Work
+  - state: Pressing
+    parent: Ram
+    control: event trigger required
+  - state: Clamp
+    parent: Work
+  - state: Holding
+    parent: Clamp
+    control: event trigger required
+events:
+  - {event: Start, old: Idle, new: Work, kind: command, api: Go}
+  - {event: Done, old: Pressing, new: Idle, kind: completion, api: Go}
+  - {event: Release, old: Holding, new: Idle, kind: command}
+"""

@@ -24,6 +24,7 @@ from statectl.runtime import SimClock, Subject
 from statectl.runtime.records import EventReceived, InvokeIssued, ObserverCalled, Record
 from statectl.semantics import step
 from statectl.tables import load
+from support import PARALLEL_PRESS
 
 ROOT = Path(__file__).resolve().parent.parent
 MOTOR = ROOT / "examples" / "motor" / "motor.yaml"
@@ -375,32 +376,8 @@ def test_a_substate_left_through_its_superstate_by_a_command_does_not_wait() -> 
     assert "J608" not in {d.code for d in check_recovery(dev.chart, dev.rules)}
 
 
-#: A cell press whose Work is parallel: the ram presses while the clamp holds. Work is
-#: entered with a device call (Start -> Go()); only the ram's completion ends it.
-PARALLEL = """\
-device: Press
-states:
-  - state: Idle
-    control: default
-  - state: Work
-    type: parallel
-  - state: Ram
-    parent: Work
-  - state: Pressing
-    parent: Ram
-    control: event trigger required
-  - state: Clamp
-    parent: Work
-  - state: Holding
-    parent: Clamp
-    control: event trigger required
-events:
-  - {event: Start, old: Idle, new: Work, kind: command, api: Go}
-  - {event: Done, old: Pressing, new: Idle, kind: completion, api: Go}
-  - {event: Release, old: Holding, new: Idle, kind: command}
-recovery:
-  - {state: Pressing, redo: yes}
-"""
+#: The press of tests/support.py, its ram's Pressing resumed by a redo.
+PARALLEL = PARALLEL_PRESS + "recovery:\n  - {state: Pressing, redo: yes}\n"
 
 
 def test_a_redo_in_a_region_of_a_parallel_state_is_not_a_j607(tmp_path: Path) -> None:

@@ -19,6 +19,7 @@ from statectl.model import Chart
 from statectl.observers import Notification
 from statectl.runtime import Record, SimClock, Subject
 from statectl.runtime.records import TransitionTaken
+from support import PARALLEL_PRESS
 
 ROOT = Path(__file__).parent.parent
 MOTOR = ROOT / "examples" / "motor" / "motor.yaml"
@@ -386,30 +387,6 @@ def test_eight_threads_notifying_a_twin_on_a_wall_clock_lose_no_completion() -> 
         clock.stop()
     assert errors == []
     assert len(reported) == rounds * len(twins)
-
-
-PARALLEL_PRESS = """\
-device: Press
-states:
-  - state: Idle
-    control: default
-  - state: Work
-    type: parallel
-  - state: Ram
-    parent: Work
-  - state: Pressing
-    parent: Ram
-    control: event trigger required
-  - state: Clamp
-    parent: Work
-  - state: Holding
-    parent: Clamp
-    control: event trigger required
-events:
-  - {event: Start, old: Idle, new: Work, kind: command, api: Go}
-  - {event: Done, old: Pressing, new: Idle, kind: completion, api: Go}
-  - {event: Release, old: Holding, new: Idle, kind: command}
-"""
 
 
 def test_a_twin_completes_work_entered_in_a_region_of_a_parallel_state(tmp_path: Path) -> None:
