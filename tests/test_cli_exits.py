@@ -54,6 +54,8 @@ CASES = [
     (["verify", str(BUGGY), "--traces", "{file}"], "", 1, "T110"),
     (["verify", str(CELL), "--export", "promela", "-o", "{file}/x.pml"], "", 1, "T110"),
     (["run", str(MOTOR), "--dashboard", "--port", "99999"], "", 2, "--port"),
+    (["journal", "export", "{tmp}/j.db", "-o", "{file}/x.jsonl"], "", 1, "is not a directory"),
+    (["testgen", str(MOTOR), "--out", "{file}/x"], "", 1, "cannot write"),
     (["run", str(MOTOR)], "Movement {amount: \n", 1, "line 1:"),
     (["run", str(MOTOR)], "Movement {amount: 5}\nNoSuch: Movement\n", 1, "line 2:"),
     (["run", str(MOTOR)], "Bogus\n", 1, "unknown"),
@@ -66,6 +68,14 @@ def test_mistake_ends_cleanly(
     argv: list[str], stdin: str, code: int, says: str, tmp_path: Path
 ) -> None:
     """A mistake gives its message and exit code, no traceback, no file left half-written."""
+    if "{tmp}/j.db" in argv:
+        journal = tmp_path / "j.db"
+        statectl(["run", str(MOTOR), "--journal", str(journal)], tmp_path, "Movement\n")
+        # the journal is an input of the case, not something it wrote: move it aside
+        journal.rename(tmp_path.parent / f"{tmp_path.name}-j.db")
+        argv = [
+            a.replace("{tmp}/j.db", str(tmp_path.parent / f"{tmp_path.name}-j.db")) for a in argv
+        ]
     done = statectl(argv, tmp_path, stdin)
     assert "Traceback" not in done.stderr, done.stderr
     assert done.returncode == code, done.stderr
