@@ -166,7 +166,8 @@ def journal_export(
                 n = export_jsonl(reader, f, device=device, since=lo, until=hi)
             tmp.replace(target)
         except OSError as exc:
-            why = exc.strerror or sqlite_problem(exc)
+            known = exc.errno in (errno.EISDIR, errno.ENOTDIR)  # said in words above
+            why = exc.strerror if known and exc.strerror else sqlite_problem(exc)
             err.write(f"statectl journal export: cannot write {to}: {why}\n")
             code[0] = PROBLEMS
         finally:
