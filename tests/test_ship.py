@@ -217,7 +217,7 @@ def test_show_export_and_replay_read_a_shipped_journal_as_the_file(
 ) -> None:
     """show, export and replay print the same from the URL as from the SQLite file."""
     db = tmp_path / "run.db"
-    events = io.StringIO("Movement\n+5\nStop\n")
+    events = io.StringIO("Movement\n+5\nInitialization\n")
     assert run(str(MOTOR), journal=str(db), events=events, out=io.StringIO()) == 0
     assert journal_ship(str(db), url, source="m", out=io.StringIO()) == 0
     for command in (journal_show, journal_export, journal_replay):

@@ -315,6 +315,10 @@ def main(
             err.write(f"statectl: {exc}\n")
             return PROBLEMS
         return _broken_pipe(out)
+    except OSError as exc:  # last resort: a file a command could not read or write
+        where = f"{exc.filename}: " if exc.filename else ""
+        err.write(f"statectl {_command(args)}: {where}{exc.strerror or exc}\n")
+        return PROBLEMS
     return code
 
 

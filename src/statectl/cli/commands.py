@@ -313,15 +313,15 @@ def cmd_scxml_export(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
 
 
 def _emit(text: str, path: str | None, out: TextIO) -> None:
-    """Write a command's text to ``path`` atomically, or to standard output."""
+    """Write a command's text to ``path`` atomically, or to standard output.
+
+    A file that cannot be written raises DiagnosticError (T110), which main() prints
+    with exit 1; nothing is left half-written (:func:`statectl.tables.write_files`).
+    """
     if path:
-        _write_atomic(Path(path), text)
+        from statectl.tables import write_files
+
+        write_files({Path(path): text})
         out.write(f"wrote {path}\n")
     else:
         out.write(text if text.endswith("\n") else text + "\n")
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)

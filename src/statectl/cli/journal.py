@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
+import errno
 import heapq
 import os
 import sqlite3
@@ -157,14 +158,21 @@ def journal_export(
         target = Path(to)
         tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
         try:
+            if target.is_dir():
+                raise IsADirectoryError(errno.EISDIR, "it is a directory; name a file in it")
+            if not target.parent.is_dir():
+                raise NotADirectoryError(errno.ENOTDIR, f"{target.parent} is not a directory")
             with tmp.open("w", encoding="utf-8") as f:
                 n = export_jsonl(reader, f, device=device, since=lo, until=hi)
             tmp.replace(target)
         except OSError as exc:
-            err.write(f"statectl journal export: cannot write {to}: {sqlite_problem(exc)}\n")
+            known = exc.errno in (errno.EISDIR, errno.ENOTDIR)  # said in words above
+            why = exc.strerror if known and exc.strerror else sqlite_problem(exc)
+            err.write(f"statectl journal export: cannot write {to}: {why}\n")
             code[0] = PROBLEMS
         finally:
-            tmp.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):
+                tmp.unlink(missing_ok=True)
         if code[0] == OK:
             out.write(f"wrote {n} line(s) to {to}\n")
     return code[0]

@@ -33,6 +33,11 @@ Rules:
    the run goes on (journal/ship.py): a thread of its own, woken by each
    commit; a server that is down is reported and retried, never waited for.
    At the end what was committed is shipped for a few seconds at most.
+9. A run goes on past a bad event line (reported with its number and skipped),
+   an event its device does not know, or one rejected under the ``error``
+   policy, but then exits 1 with a line saying how many, so a batch run can be
+   trusted in CI. A driver that lacks an observer method its chart calls is
+   refused before anything runs (devices/base.py rule 6).
 """
 
 from __future__ import annotations
@@ -74,6 +79,8 @@ from statectl.journal import (
 from statectl.runner.cells import is_cell, load_setups, relevant_warnings
 from statectl.runner.events import parse_event_line
 from statectl.runtime import Clock, SimClock, TraceWriter, WallClock
+from statectl.runtime.records import EventIgnored, EventRejected
+from statectl.semantics import Unhandled
 from statectl.system import DeviceSetup, System
 
 
@@ -90,6 +97,9 @@ def _drivers(
         return {d.name: make_driver(*drivers[d.name], chart=d.chart) for d in devices}
     return {d.name: make_driver(driver or "sim-twin", chart=d.chart) for d in devices}
 
+
+#: The highest TCP port number (``--port``).
+MAX_PORT = 65535
 
 #: The environment variable that may hold the dashboard's token (rule 7).
 TOKEN_VARIABLE = "STATECTL_DASHBOARD_TOKEN"
@@ -132,8 +142,46 @@ def _show_notes(drivers: Mapping[str, DeviceDriver], out: TextIO, width: int) ->
             d.on_note = writer(name)
 
 
-def _feed(system: System, lines: Iterable[str], err: TextIO, *, batch: bool) -> None:
-    """Post each event line; a batch run settles after each (rule 3)."""
+class _Problems:
+    """Rule 9: what went wrong during a run that went on (bad lines, unknown events)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()  # the feeder thread and the owner both count
+        self.lines = 0  # event lines reported and skipped
+        self.unknown = 0  # events no chart knows, or rejected under the 'error' policy
+
+    def record(self, record: object) -> None:
+        """A listener: count the events a device refused or did not know."""
+        refused = isinstance(record, EventRejected) or (
+            isinstance(record, EventIgnored) and record.reason is Unhandled.UNKNOWN_EVENT
+        )
+        if refused:
+            with self._lock:
+                self.unknown += 1
+
+    def bad_line(self) -> None:
+        with self._lock:
+            self.lines += 1
+
+    def summary(self) -> str | None:
+        """One line for the end of the run, or None when nothing went wrong."""
+        parts = []
+        if self.lines:
+            parts.append(f"{self.lines} event line(s) reported above and skipped")
+        if self.unknown:
+            parts.append(f"{self.unknown} event(s) unknown to the device or rejected")
+        return "; ".join(parts) or None
+
+
+def _feed(
+    system: System,
+    lines: Iterable[str],
+    err: TextIO,
+    *,
+    batch: bool,
+    problems: _Problems | None = None,
+) -> None:
+    """Post each event line; a batch run settles after each (rule 3); count bad lines (rule 9)."""
     for number, line in enumerate(lines, 1):
         try:
             parsed = parse_event_line(line)
@@ -156,6 +204,8 @@ def _feed(system: System, lines: Iterable[str], err: TextIO, *, batch: bool) -> 
             raise JournalError(f"line {number}: {exc}") from None
         except StatectlError as exc:
             err.write(f"line {number}: {exc}\n")
+            if problems is not None:
+                problems.bad_line()
 
 
 def _load_cell(path: str, err: TextIO, journalled: bool) -> tuple[Cell, tuple[DeviceSetup, ...]]:
@@ -217,6 +267,9 @@ def run(
     if not Path(path).exists():
         err.write(f"statectl run: {path}: no such file\n")
         return USAGE
+    if port is not None and not 0 <= port <= MAX_PORT:
+        err.write(f"statectl run: --port must be 0 (any free port) to {MAX_PORT} (got {port})\n")
+        return USAGE
     try:
         mode = Sync(sync.lower())
     except ValueError:
@@ -240,6 +293,7 @@ def run(
             err.write(f"{d}\n")
         return PROBLEMS
     live = dashboard or realtime or opcua is not None
+    problems = _Problems()
     failed = ""  # what the run reported as its failure, if anything
     system: System | None = None
     server: Any = None
@@ -267,6 +321,7 @@ def run(
         if driver is None and config is None:
             out.write(f"no driver configured: simulated twins for {', '.join(drivers)}\n")
         system.listen(TraceWriter(out, device_width=width))
+        system.listen(problems.record)
         _show_notes(drivers, out, width)
         url = None
         if dashboard:
@@ -308,19 +363,20 @@ def run(
                     "reading event lines '[DEVICE:] EVENT [DATA]' or '+SECONDS' from the "
                     "terminal; end with Ctrl-D\n"
                 )
-            _feed(system, events if events is not None else sys.stdin, err, batch=True)
+            lines = events if events is not None else sys.stdin
+            _feed(system, lines, err, batch=True, problems=problems)
             system.quiesce()
             for name, subject in system.subjects.items():
                 final = ", ".join(sorted(subject.configuration))
                 out.write(f"final state {final}\n" if cell is None else f"final {name}: {final}\n")
-            return OK
+            return _verdict(problems, err)
         halt = stop or threading.Event()
         if events is None and server is None:
             events = sys.stdin  # rule 5: without a dashboard, stdin is the operator
         if events is not None:
             feeder = threading.Thread(
                 target=_feed_then_stop,
-                args=(system, events, err, halt, server is None and plant is None),
+                args=(system, events, err, halt, server is None and plant is None, problems),
                 daemon=True,
             )
             feeder.start()
@@ -328,7 +384,7 @@ def run(
             system.serve(halt)
         if system.journal is not None:
             system.journal.flush()  # a write that failed meanwhile fails the run
-        return OK
+        return _verdict(problems, err)
     except BrokenPipeError:
         raise  # the reader of the trace went away: the command line ends quietly
     except (StatectlError, OSError) as exc:
@@ -346,11 +402,25 @@ def run(
             shipping.stop()  # what the journal committed goes too, for a few seconds at most
 
 
+def _verdict(problems: _Problems, err: TextIO) -> int:
+    """Rule 9: exit 1 when anything went wrong on the way, with one line saying what."""
+    summary = problems.summary()
+    if summary is None:
+        return OK
+    err.write(f"statectl run: {summary}: exit 1\n")
+    return PROBLEMS
+
+
 def _feed_then_stop(
-    system: System, lines: TextIO, err: TextIO, halt: threading.Event, stop_at_end: bool
+    system: System,
+    lines: TextIO,
+    err: TextIO,
+    halt: threading.Event,
+    stop_at_end: bool,
+    problems: _Problems,
 ) -> None:
     try:
-        _feed(system, lines, err, batch=False)
+        _feed(system, lines, err, batch=False, problems=problems)
     except JournalError:
         halt.set()  # the owner's loop ends; run() reports the failure from flush()
         return

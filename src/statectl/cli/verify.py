@@ -24,6 +24,7 @@ from statectl.explore.diagrams import to_mermaid, to_plantuml
 from statectl.explore.promela import export_promela
 from statectl.explore.search import explore
 from statectl.explore.verify import write_traces
+from statectl.tables import write_files
 
 
 def verify_main(
@@ -87,7 +88,7 @@ def verify_main(
 def _export(cell: Cell, output: str | None, out: TextIO) -> int:
     text = export_promela(Composed(cell))
     if output:
-        Path(output).write_text(text, encoding="utf-8")
+        write_files({Path(output): text})  # T110 (exit 1 in main()) if it cannot be written
     else:
         out.write(text)
     return OK

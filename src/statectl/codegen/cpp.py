@@ -35,8 +35,10 @@ from statectl.codegen.flatten import (
     flatten,
     identifiers,
 )
-from statectl.errors import Diagnostic, has_errors
+from statectl.errors import Diagnostic, DiagnosticError, Location, has_errors
 from statectl.model import Chart
+from statectl.tables import write_files
+from statectl.tables.schema import diag
 
 __all__ = ["RUNTIME_HEADERS", "generate", "render"]
 
@@ -151,11 +153,17 @@ def generate(chart: Chart, out_dir: str | os.PathLike[str]) -> tuple[list[Path],
         return [], diags
     texts = {**render(flat), **runtime_files()}
     out = Path(out_dir)
-    written: list[Path] = []
-    for rel, text in sorted(texts.items()):
-        path = out / rel
-        path.parent.mkdir(parents=True, exist_ok=True)
-        if not path.exists() or path.read_text(encoding="utf-8") != text:
-            path.write_text(text, encoding="utf-8")
-        written.append(path)
+    if out.exists() and not out.is_dir():
+        where = Location(str(out))
+        return [], [*diags, diag("T110", where, "it is a file; --out names a directory")]
+    written = [out / rel for rel in sorted(texts)]
+    changed: dict[Path, str | bytes] = {
+        path: texts[rel]
+        for rel, path in zip(sorted(texts), written, strict=True)
+        if not path.is_file() or path.read_text(encoding="utf-8") != texts[rel]
+    }
+    try:
+        write_files(changed, make_dirs=True)  # all or nothing, unchanged files kept as they are
+    except DiagnosticError as exc:
+        return [], [*diags, *exc.diagnostics]
     return written, diags

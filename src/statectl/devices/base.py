@@ -14,6 +14,12 @@ Rules:
    :meth:`Driver.poll_fault` returns once, from ``after`` seconds on.
 5. Timer callbacks and ``update`` may run on different threads (WallClock), so
    both hold the driver's lock while they touch its state.
+6. :func:`connect` checks the driver against the chart before anything runs:
+   every observer method of the invokes it is attached for must be one the
+   driver :meth:`~Driver.serves`, else a :class:`StatectlError` names the
+   missing and the available methods. Otherwise the first such transition would
+   be committed and only then fail, leaving the device in the new state.
+   A driver without ``serves()`` (a bare protocol implementation) is trusted.
 """
 
 from __future__ import annotations
@@ -30,7 +36,7 @@ from statectl.runtime.monitors import DEFAULT_PERIOD, Monitor, attach_monitors
 from statectl.runtime.records import ApiCall
 from statectl.runtime.subject import Subject
 
-__all__ = ["Driver", "connect", "requested_target"]
+__all__ = ["Driver", "check_serves", "connect", "requested_target"]
 
 
 def requested_target(position: float, data: Any) -> float:
@@ -98,6 +104,10 @@ class Driver:
             args = self.arguments(notification.method, notification.data)
             getattr(self, function)(*args)
 
+    def serves(self) -> frozenset[str]:
+        """The observer methods :meth:`update` handles (rule 6): the keys of ``methods``."""
+        return frozenset(self.methods)
+
     def arguments(self, method: str, data: Any) -> tuple[Any, ...]:
         """The API call's arguments for ``method`` given the event data; none by default."""
         return ()
@@ -144,7 +154,30 @@ def connect(
     invokes: Iterable[int] | None = None,
     period: float = DEFAULT_PERIOD,
 ) -> tuple[Monitor, ...]:
-    """Bind ``driver`` to ``subject``, attach it for ``invokes`` and give it its monitors."""
+    """Bind ``driver`` to ``subject``, attach it for ``invokes`` and give it its monitors.
+
+    Raises :class:`StatectlError` before binding anything when the driver lacks an
+    observer method those invokes need (rule 6).
+    """
+    check_serves(subject, driver, invokes)
     driver.bind(subject.post, subject.clock)
     subject.attach(driver, invokes)
     return attach_monitors(subject, driver, period=period)
+
+
+def check_serves(subject: Subject, driver: object, invokes: Iterable[int] | None = None) -> None:
+    """Rule 6: the driver serves every observer method of ``invokes`` (default: all of them)."""
+    serves = getattr(driver, "serves", None)
+    if not callable(serves):
+        return
+    served = frozenset(serves())
+    wanted = None if invokes is None else frozenset(invokes)
+    needed = {i.method for i in subject.chart.invokes if wanted is None or i.number in wanted}
+    missing = sorted(needed - served)
+    if missing:
+        available = ", ".join(f"{m}()" for m in sorted(served)) or "none"
+        raise StatectlError(
+            f"{type(driver).__name__} cannot drive {subject.name}: its chart calls observer "
+            f"method(s) {', '.join(f'{m}()' for m in missing)} that the driver does not serve; "
+            f"available: {available}"
+        )

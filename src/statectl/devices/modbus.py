@@ -181,6 +181,10 @@ class ModbusIO(Driver):
 
     # -- observer calls -------------------------------------------------------------------------
 
+    def serves(self) -> frozenset[str]:
+        """The observer methods its ``actions`` map (base rule 6)."""
+        return frozenset(self.actions)
+
     def update(self, notification: Notification) -> None:
         action = self.actions.get(notification.method)
         if action is None:

@@ -255,6 +255,10 @@ class SimTwin(Driver):
 
     # -- the driver protocol ------------------------------------------------------------------
 
+    def serves(self) -> frozenset[str]:
+        """Every observer method of its own chart (base rule 6)."""
+        return frozenset(api.method for api in self.chart.apis)
+
     def update(self, notification: Notification) -> None:
         method, event = notification.method, notification.event
         with self._lock:

@@ -13,10 +13,12 @@ from collections.abc import Callable
 from pathlib import Path
 
 from statectl.cell import load_cell
-from statectl.errors import Diagnostic
+from statectl.errors import Diagnostic, DiagnosticError, Location
 from statectl.explore.diagrams import to_mermaid, to_plantuml
 from statectl.explore.report import Report
 from statectl.explore.search import Progress, explore
+from statectl.tables import write_files
+from statectl.tables.schema import diag
 
 __all__ = ["verify_cell", "write_traces"]
 
@@ -41,8 +43,14 @@ def _slug(text: str) -> str:
 def write_traces(report: Report, directory: str | os.PathLike[str]) -> list[Path]:
     """Per failing finding: ``.trace.json`` (replayable), ``.mmd`` and ``.puml`` diagrams."""
     folder = Path(directory)
-    folder.mkdir(parents=True, exist_ok=True)
-    written: list[Path] = []
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        why = "it is a file, not a directory" if folder.is_file() else exc.strerror or str(exc)
+        raise DiagnosticError(
+            [diag("T110", Location(str(folder)), f"cannot write: {why}")]
+        ) from None
+    contents: dict[Path, str | bytes] = {}
     for i, f in enumerate(report.failures, 1):
         if f.trace is None:
             continue
@@ -54,7 +62,6 @@ def write_traces(report: Report, directory: str | os.PathLike[str]) -> list[Path
             (".mmd", to_mermaid(f.trace, title)),
             (".puml", to_plantuml(f.trace, title)),
         ):
-            path = stem.with_name(stem.name + suffix)
-            path.write_text(text, encoding="utf-8")
-            written.append(path)
-    return written
+            contents[stem.with_name(stem.name + suffix)] = text
+    write_files(contents)  # all or nothing; T110 if it cannot be written
+    return list(contents)

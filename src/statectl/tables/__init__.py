@@ -54,6 +54,7 @@ __all__ = [
     "load",
     "save",
     "strip_locations",
+    "write_files",
 ]
 
 
@@ -202,6 +203,44 @@ def _contents(
     return {path: dump(tables, fmt)}, ()
 
 
+def write_files(
+    contents: dict[Path, str | bytes], stale: tuple[Path, ...] = (), *, make_dirs: bool = False
+) -> None:
+    """Write every file atomically (rule 4), the one way every command writes its output.
+
+    Each file goes to a temporary name beside it and all are renamed into place
+    once all were written; on any failure nothing is left behind and an existing
+    file is untouched. ``make_dirs`` creates missing parent folders first (an
+    output directory), else a missing folder is an error. Raises
+    :class:`DiagnosticError` (T110) naming the file that could not be written and why.
+    """
+    target: Path | None = None
+    try:
+        for target in contents:
+            if target.is_dir():
+                raise _NotWritable(target, "it is a directory; name a file in it")
+            if make_dirs:
+                target.parent.mkdir(parents=True, exist_ok=True)
+            elif target.parent.exists() and not target.parent.is_dir():
+                raise _NotWritable(target, f"{target.parent} is a file, not a directory")
+            elif not target.parent.is_dir():
+                raise _NotWritable(target, f"no such directory {target.parent}; create it first")
+        _write_all(contents, stale)
+    except _NotWritable as exc:
+        raise DiagnosticError([diag("T110", Location(str(exc.path)), exc.reason)]) from None
+    except OSError as exc:
+        where = str(target) if target is not None else str(exc.filename)
+        raise DiagnosticError(
+            [diag("T110", Location(where), f"cannot write: {exc.strerror or exc}")]
+        ) from exc
+
+
+class _NotWritable(Exception):
+    def __init__(self, path: Path, reason: str) -> None:
+        super().__init__(reason)
+        self.path, self.reason = path, reason
+
+
 def _write_all(contents: dict[Path, str | bytes], stale: tuple[Path, ...] = ()) -> None:
     """Write every file to a temporary name, rename all into place, then drop ``stale``."""
     temps: list[tuple[str, Path]] = []
@@ -245,10 +284,5 @@ def save(
         raise DiagnosticError(
             [diag("T108", Location(str(p)), f"the tables cannot be written as {f.value}: {exc}")]
         ) from exc
-    try:
-        _write_all(contents, stale)
-    except OSError as exc:
-        raise DiagnosticError(
-            [diag("T110", Location(str(p)), f"cannot write: {exc.strerror or exc}")]
-        ) from exc
+    write_files(contents, stale)
     return list(contents)

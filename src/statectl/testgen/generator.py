@@ -7,7 +7,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from statectl.build import load_chart
-from statectl.errors import StatectlError
+from statectl.errors import DiagnosticError, StatectlError
+from statectl.tables import write_files
 from statectl.testgen.cases import CRITERIA, Suite, cases_for, count_steps
 from statectl.testgen.graphwalker import graphwalker_model
 from statectl.testgen.paths import MAX_NODES, explore
@@ -38,17 +39,13 @@ def module_name(device: str, criterion: str) -> str:
 
 
 def write_atomic(path: Path, text: str) -> None:
-    """Write ``path`` whole or not at all (a temporary file renamed into place)."""
-    tmp = path.with_name(f".{path.name}.tmp")
+    """Write ``path`` whole or not at all, as every command writes (tables.write_files)."""
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp.write_text(text, encoding="utf-8")
-        tmp.replace(path)
-    except OSError as exc:
-        if tmp.is_file():
-            tmp.unlink()
+        write_files({path: text}, make_dirs=True)
+    except DiagnosticError as exc:
+        why = "; ".join(d.message.removeprefix("cannot write: ") for d in exc.diagnostics)
         raise StatectlError(
-            f"cannot write {path}: {exc.strerror or exc}; give --out a writable directory"
+            f"cannot write {path}: {why}; give --out a writable directory"
         ) from None
 
 
