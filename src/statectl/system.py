@@ -202,11 +202,8 @@ class System:
             raise StatectlError(f"no device {name!r}; devices: {', '.join(self.subjects)}")
         return name
 
-    def post(self, device: str | None, event: str, data: Any = None) -> Ticket | None:
-        """Accept an event from outside (any thread); with a journal the ticket says when.
-
-        Never blocks; with ``max_queue`` a full device raises :class:`QueueFull` (rule 4).
-        """
+    def _admit(self, device: str | None) -> str:
+        """The device's name, once its queue has room for one more event (rule 4)."""
         name = self.device(device)
         limit = self.max_queue
         if limit is not None and self.subjects[name].queued >= limit:
@@ -214,6 +211,14 @@ class System:
                 f"{name}: {limit} events are queued already (max_queue); the producer "
                 "outruns the device: slow down, or retry once it has caught up"
             )
+        return name
+
+    def post(self, device: str | None, event: str, data: Any = None) -> Ticket | None:
+        """Accept an event from outside (any thread); with a journal the ticket says when.
+
+        Never blocks; with ``max_queue`` a full device raises :class:`QueueFull` (rule 4).
+        """
+        name = self._admit(device)
         bound = self.bound.get(name)
         if bound is not None:
             ticket = bound.post(event, data)
@@ -324,11 +329,8 @@ class System:
                 "send() runs on a System without a journal; with one, post() and wait "
                 "for the ticket"
             )
-        name = self.device(device)
-        limit = self.max_queue
+        name = self._admit(device)
         subject = self.subjects[name]
-        if limit is not None and subject.queued >= limit:
-            raise QueueFull(f"{name}: {limit} events are queued already (max_queue)")
         loop = asyncio.get_running_loop()
         done: asyncio.Future[str] = loop.create_future()
         subject.post(
