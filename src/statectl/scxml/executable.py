@@ -29,7 +29,7 @@ from statectl.model import (
     State,
     Transition,
 )
-from statectl.scxml.safecheck import src_escapes
+from statectl.scxml.safecheck import src_outside
 from statectl.scxml.xmltree import (
     SCXML_NS,
     STATECTL_NS,
@@ -200,16 +200,7 @@ class ContentReader:
         """A ``<content src>`` or ``<script src>`` read at load, bounded; an untrusted
         (safe or null) document reads only regular files inside its own directory."""
         path = self.base / src.strip().removeprefix("file:")
-        why = None if self.trusted else src_escapes(src)
-        if why is None and not self.trusted:
-            try:
-                inside = path.resolve().is_relative_to(self.base.resolve())
-            except (OSError, RuntimeError):
-                inside = False
-            if not inside:
-                why = "leaves the document's directory through a link"
-            elif not path.is_file():
-                why = "is not a regular file"
+        why = None if self.trusted else src_outside(src, path, self.base.resolve())
         if why is not None:
             self.problem("S607", node, f"src {src!r} {why}", "keep src files beside the document")
             return None

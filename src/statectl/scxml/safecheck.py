@@ -26,6 +26,7 @@ Rules:
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
+from pathlib import Path
 
 from statectl.errors import Diagnostic, Location, Severity
 from statectl.expr import CALLABLE_NAMES, check_names, compile_expression
@@ -62,6 +63,22 @@ def src_escapes(src: str) -> str | None:
     if ".." in path.replace("\\", "/").split("/"):
         return "steps out with '..'"
     return None
+
+
+def src_outside(src: str, path: Path, root: Path) -> str | None:
+    """Why ``src`` (read as ``path``) is not inside ``root``, or ``None`` when it is.
+
+    The written name must stay inside (:func:`src_escapes`), and so must the file it
+    resolves to: a symbolic link out of the directory is refused too.
+    """
+    why = src_escapes(src)
+    if why is not None:
+        return why
+    try:
+        inside = path.resolve().is_relative_to(root)
+    except (OSError, RuntimeError):  # a link loop
+        inside = False
+    return None if inside else "leaves the document's directory through a link"
 
 
 def _foreach_names(actions: Iterable[Action]) -> Iterator[str]:

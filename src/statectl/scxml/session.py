@@ -68,7 +68,7 @@ from statectl.scxml.datamodel import (
     inline_value,
     make_datamodel,
 )
-from statectl.scxml.safecheck import src_escapes
+from statectl.scxml.safecheck import src_outside
 from statectl.scxml.scheduler import (
     Clock,
     RealClock,
@@ -82,6 +82,7 @@ from statectl.scxml.sending import (
     SCXML_IO,
     SendError,
 )
+from statectl.scxml.xmltree import MAX_SRC_BYTES, read_src_text
 from statectl.semantics import (
     Event,
     Machine,
@@ -105,10 +106,6 @@ __all__ = [
     "SessionTimeout",
     "SimulatedClock",
 ]
-
-
-#: Largest ``src`` file a ``<data>`` or ``<invoke>`` reads.
-MAX_SRC_BYTES = 1 << 20
 
 
 class EventData(dict[str, Any]):
@@ -242,23 +239,15 @@ class Session:
                     f"src {src!r} refused: a {kind!r} document reads no files unless run "
                     "with --allow-src (then only inside its own directory)"
                 )
-            why = src_escapes(src)
-            if why is None and not path.resolve().is_relative_to(self.src_root):
-                why = "leaves the document's directory through a link"
+            why = src_outside(src, path, self.src_root)
             if why is not None:
                 raise EvaluationError(f"src {src!r} refused: it {why}")
         try:
-            if not path.is_file():
-                raise EvaluationError(f"src {src!r} is not a regular file")
-            with path.open("rb") as stream:
-                raw = stream.read(MAX_SRC_BYTES + 1)
-            if len(raw) > MAX_SRC_BYTES:
-                raise EvaluationError(f"src {src!r} is larger than {MAX_SRC_BYTES:,} bytes")
-            return raw.decode("utf-8"), path.parent
+            return read_src_text(path), path.parent
         except OSError as exc:
             raise EvaluationError(f"cannot read src {src!r}: {exc.strerror}") from exc
-        except UnicodeDecodeError as exc:
-            raise EvaluationError(f"src {src!r} is not UTF-8 text") from exc
+        except ValueError as exc:
+            raise EvaluationError(f"src {src!r} {exc}") from exc
 
     def settle(self) -> None:
         """The inner loop of ``mainEventLoop``, then the invokes it made due."""

@@ -35,9 +35,11 @@ class _Refused(Exception):
 def read_src_text(path: Path) -> str:
     """A ``src`` file's text, read with a bound: at most :data:`MAX_SRC_BYTES`, UTF-8.
 
-    Raises ``OSError`` if it cannot be read and ``ValueError`` if it is too large
-    (an endless stream such as ``/dev/zero`` stops here) or not UTF-8.
+    Raises ``OSError`` if it cannot be read and ``ValueError`` if it is not a regular
+    file (``/dev/zero`` is refused unread), too large or not UTF-8.
     """
+    if not path.is_file():
+        raise ValueError("is not a regular file")
     with path.open("rb") as fh:
         data = fh.read(MAX_SRC_BYTES + 1)
     if len(data) > MAX_SRC_BYTES:
