@@ -540,36 +540,32 @@ class Subject(Worker):
                 or reason is None
                 or (self.policy == "error" and reason is not Unhandled.DECLARED_IGNORED)
             ):
-                self._process_slow(event, data)  # records, and the rejection's error
+                self._process_slow(event, data, plan)  # records, and the rejection's error
             else:
                 self._counts += 1
                 for callback in self._steppers:
                     callback(event, data, reason)
             return
         if self._listeners:
-            now = self.clock.now()
-            self._counts += 1
-            self.emit(EventReceived(self.name, now, event, data))
-            self._commit(plan.target)
-            self._perform(plan.step, data, now, True)
+            self._process_slow(event, data, plan)  # the records, from the plan's step
+            return
+        self._snapshot = plan.target
+        self._table = plan.table
+        if data is None:
+            calls = self._calls
+            entry = calls.get(plan) if calls is not None else None
+            counts, call, arg = entry if entry is not None else self._call_for(plan)
+            self._counts += counts
+            if call is not None:
+                call(arg)
         else:
-            self._snapshot = plan.target
-            self._table = plan.table
-            if data is None:
-                calls = self._calls
-                entry = calls.get(plan) if calls is not None else None
-                counts, call, arg = entry if entry is not None else self._call_for(plan)
-                self._counts += counts
-                if call is not None:
-                    call(arg)
-            else:
-                self._counts += 1
-                if self._watch:
-                    self._perform(plan.step, data, 0.0, False)
-                elif plan.notifies:
-                    self._issue(plan, data)
-            if plan.final and not self._finished:
-                self._finish(0.0, False)
+            self._counts += 1
+            if self._watch:
+                self._perform(plan.step, data, 0.0, False)
+            elif plan.notifies:
+                self._issue(plan, data)
+        if plan.final and not self._finished:
+            self._finish(0.0, False)
         for callback in self._steppers:
             callback(event, data, "handled")
 
@@ -587,7 +583,9 @@ class Subject(Worker):
             self._steppers = tuple(c for c in self._steppers if c is not hear)
             then(heard[0] if heard else "handled")
 
-    def _process_slow(self, event: str, data: Any) -> None:
+    def _process_slow(self, event: str, data: Any, plan: Plan | None = None) -> None:
+        """The full path: records for listeners, reasons named; the kernel asked only
+        when there is no ``plan`` to take the step from."""
         snapshot = self._snapshot
         assert snapshot is not None
         self._counts += 1
@@ -595,14 +593,17 @@ class Subject(Worker):
         listening = bool(self._listeners)
         if listening:
             self.emit(EventReceived(self.name, now, event, data))
-        if event not in self.machine.event_names:
+        if plan is None and event not in self.machine.event_names:
             self._unhandled(event, data, Unhandled.UNKNOWN_EVENT, now, snapshot)
             return
-        decision = step(self.machine, snapshot, event, self._data, data)
+        if plan is not None and (plan.handled or plan.step.unhandled is not None):
+            decision = plan.step
+        else:
+            decision = step(self.machine, snapshot, event, self._data, data)
         if decision.unhandled is not None:
             self._unhandled(event, data, decision.unhandled, now, snapshot)
             return
-        self._commit(decision.target)
+        self._commit(plan.target if plan is not None else decision.target)
         self._perform(decision, data, now, listening)
         for callback in self._steppers:
             callback(event, data, "handled")
