@@ -39,15 +39,12 @@ from statectl.semantics.algorithm import (
     exit_interpreter,
     get_transition_domain,
     guard_env,
-    initial,
     macrostep,
     microstep,
     process_event,
     remove_conflicting_transitions,
     select_eventless_transitions,
     select_transitions,
-    step,
-    unhandled_reason,
 )
 from statectl.semantics.machine import Machine, compiled, name_match, structural
 from statectl.semantics.records import (
@@ -67,6 +64,7 @@ from statectl.semantics.records import (
     Step,
     Unhandled,
 )
+from statectl.semantics.stepping import initial, step, unhandled_reason
 
 __all__ = [
     "MAX_GUARD_PATHS",
