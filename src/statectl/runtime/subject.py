@@ -50,7 +50,7 @@ from typing import Any
 
 from statectl.errors import StatectlError
 from statectl.expr import compile_expression
-from statectl.model import Action, Chart, Invoke, Notify
+from statectl.model import Action, Chart, Notify
 from statectl.observers import Observer
 from statectl.runtime.clock import Clock, SimClock
 from statectl.runtime.hooks import (
@@ -68,7 +68,7 @@ from statectl.runtime.records import (
     Started,
     StateEntered,
 )
-from statectl.runtime.worker import Worker
+from statectl.runtime.wiring import Wiring
 from statectl.semantics import Plan, Snapshot, Step, Unhandled, compiled, initial, step
 
 __all__ = ["ApiLogging", "Listener", "Policy", "StateWatcher", "StepListener", "Subject"]
@@ -81,27 +81,20 @@ _NO_PLANS: dict[str, Plan] = {}
 _Item = tuple[str | None, Any, Callable[..., object] | None]
 
 
-def _describe_invoke(i: Invoke) -> str:
-    return f"#{i.number} {i.name} ({i.method}())"
-
-
-class Subject(Worker):
+class Subject(Wiring):
     """A device's chart running on a clock; observers get the notifications meant for them."""
 
     __slots__ = (
         "_busy",
         "_closed",
         "_data",
-        "_listeners",
         "_name",
         "_queue",
         "_queued_hook",
         "_routes",
         "_snapshot",
-        "_steppers",
         "_table",
         "_watch",
-        "_watchers",
         "chart",
         "clock",
         "machine",
@@ -196,95 +189,6 @@ class Subject(Worker):
     def name(self, value: str) -> None:
         self._name = value
         self._calls = None
-
-    # -- wiring ----------------------------------------------------------------------------
-
-    def attach(self, observer: Observer, invokes: Iterable[int] | None = None) -> None:
-        """Register ``observer`` for these invoke numbers (default: every invoke of the chart)."""
-        by_number = {i.number: i for i in self.chart.invokes}
-        numbers = tuple(by_number) if invokes is None else tuple(invokes)
-        available = ", ".join(_describe_invoke(i) for i in by_number.values()) or "none"
-        unknown = [n for n in numbers if n not in by_number]
-        if unknown:
-            raise StatectlError(
-                f"{self.name}: no invoke number {unknown} in chart {self.chart.name!r} "
-                f"(available: {available})"
-            )
-        routes = self._routes
-        taken = [n for n in numbers if n in routes and routes[n][0] is not observer]
-        if taken:
-            holders = ", ".join(f"#{n} by {type(routes[n][0]).__name__}" for n in taken)
-            raise StatectlError(
-                f"{self.name}: invoke numbers already claimed ({holders}); a notification "
-                "goes to exactly one observer, so attach each number once"
-            )
-        logging = isinstance(observer, ApiLogging)
-        for n in numbers:
-            routes[n] = (observer, logging)
-        self._calls = None
-
-    def observer_for(self, invoke: int) -> Observer | None:
-        route = self._routes.get(invoke)
-        return route[0] if route is not None else None
-
-    def listen(self, callback: Listener) -> Callable[[], None]:
-        """Receive every record from now on; returns a function that stops it."""
-        self._listeners = (*self._listeners, callback)
-        self._refresh()
-
-        def unlisten() -> None:
-            listeners = self._listeners
-            if callback in listeners:
-                at = listeners.index(callback)
-                self._listeners = listeners[:at] + listeners[at + 1 :]
-                self._refresh()
-
-        return unlisten
-
-    def on_step(self, callback: StepListener) -> Callable[[], None]:
-        """Hear ``(event, data, outcome)`` on the owner after each event; returns the undo.
-
-        Unlike :meth:`listen` it builds no records (rule 4). The outcome is
-        ``handled`` or the reason the event changed nothing.
-        """
-        self._steppers = (*self._steppers, callback)
-
-        def off() -> None:
-            self._steppers = tuple(c for c in self._steppers if c is not callback)
-
-        return off
-
-    def watch(self, states: Iterable[str], watcher: StateWatcher) -> Callable[[], None]:
-        """Tell ``watcher`` when one of ``states`` is entered or exited; returns the undo.
-
-        Only the plans that enter or exit a watched state pay for it (rule 4).
-        Watch before :meth:`start` to hear the initial states entered.
-        """
-        names = tuple(dict.fromkeys(states))
-        unknown = [n for n in names if n not in self.machine.order]
-        if unknown:
-            raise StatectlError(f"{self.name}: no state {unknown} in chart {self.chart.name!r}")
-        for n in names:
-            self._watch[n] = (*self._watch.get(n, ()), watcher)
-        self._watchers = (*self._watchers, watcher)
-        self._calls = None
-
-        def off() -> None:
-            for n in names:
-                left = tuple(w for w in self._watch.get(n, ()) if w is not watcher)
-                if left:
-                    self._watch[n] = left
-                else:
-                    self._watch.pop(n, None)
-            self._watchers = tuple(w for w in self._watchers if w is not watcher)
-            self._calls = None
-
-        return off
-
-    @property
-    def listening(self) -> bool:
-        """Whether anyone receives records (build one only then)."""
-        return bool(self._listeners)
 
     def _refresh(self) -> None:
         """Recompute whether :meth:`dispatch` may process an event at once, without the queue.
