@@ -136,16 +136,19 @@ def statectl_chart(request: pytest.FixtureRequest) -> Chart | None:
     ``None`` when the module names none: ``statectl_device`` is then the callable
     ``statectl_device("motor.yaml", driver=...)``.
     """
-    tables = getattr(request.module, "STATECTL_TABLES", None)
-    if tables is None:
-        return None
-    if not isinstance(tables, str):
+    tables = _module_path(request, "STATECTL_TABLES", "the device file's path")
+    return None if tables is None else _chart_of(request, tables, "STATECTL_TABLES")
+
+
+def _module_path(request: pytest.FixtureRequest, name: str, what: str) -> str | None:
+    """The path a test module names in ``name`` (relative to it), ``None`` when it names none."""
+    given = getattr(request.module, name, None)
+    if given is not None and not isinstance(given, str):
         pytest.fail(
-            f"{request.module.__name__}: STATECTL_TABLES must be the device file's path "
-            "(relative to the module)",
+            f"{request.module.__name__}: {name} must be {what} (relative to the module)",
             pytrace=False,
         )
-    return _chart_of(request, tables, "STATECTL_TABLES")
+    return given
 
 
 class DeviceMaker:
@@ -299,16 +302,8 @@ def statectl_recorder(statectl_device: DeviceUnderTest | DeviceMaker) -> list[Re
 @pytest.fixture(scope="module")
 def statectl_cell_model(request: pytest.FixtureRequest) -> Cell | None:
     """The cell of the test module's ``STATECTL_CELL`` (relative to the module); else ``None``."""
-    given = getattr(request.module, "STATECTL_CELL", None)
-    if given is None:
-        return None
-    if not isinstance(given, str):
-        pytest.fail(
-            f"{request.module.__name__}: STATECTL_CELL must be the cell file's path "
-            "(relative to the module)",
-            pytrace=False,
-        )
-    return _cell_of(request, given, "STATECTL_CELL")
+    given = _module_path(request, "STATECTL_CELL", "the cell file's path")
+    return None if given is None else _cell_of(request, given, "STATECTL_CELL")
 
 
 def _cell_of(request: pytest.FixtureRequest, given: str, what: str) -> Cell:
