@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 from statectl.demo import motor_chart
+from statectl.devices import make_driver
 from statectl.journal import Guarantee, Journal, JournalReader, StepKind, Sync
 from statectl.observers import Notification
 from statectl.runtime import SimClock, WallClock
@@ -41,13 +42,16 @@ CYCLE = (
 def durable_rate(directory: Path, n: int, sync: Sync) -> tuple[float, int, int]:
     """Events/s through a journalled Motor, end to end: accepted, processed, committed.
 
-    One thread posts the paper cycle through :meth:`System.post` (inbox rows), the
-    owner loop processes each event (a step row with its snapshot), and the clock
-    stops when every event was processed and the journal has committed everything.
-    Returns (events/s, commits, steps journalled).
+    The Motor is wired as ``statectl demo`` wires it (the simulated motor's API and its
+    Moving monitor). One thread posts the paper cycle through :meth:`System.post`
+    (inbox rows), the owner loop processes each event (a step row with its snapshot,
+    the driver's API calls), and the clock stops when every event was processed and
+    the journal has committed everything. Returns (events/s, commits, steps journalled).
     """
     journal = Journal(directory / f"rate-{sync.value}.db", sync=sync)
-    system = System((DeviceSetup("Motor", motor_chart()),), SimClock(), journal)
+    chart = motor_chart()
+    motor_driver = make_driver("sim-motor", {}, chart=chart)
+    system = System((DeviceSetup("Motor", chart, driver=motor_driver),), SimClock(), journal)
     system.start()
     motor = system.subjects["Motor"]
     halt = threading.Event()
@@ -206,7 +210,8 @@ def main(argv: list[str] | None = None) -> int:
                 else ("  (target >= 50,000: " + ("met" if rate >= 50_000 else "MISSED") + ")")
             )
             print(
-                f"journalled Motor, paper cycle, end to end, synchronous={sync.value.upper():6}: "
+                "journalled Motor wired as the demo, paper cycle, end to end, "
+                f"sync={sync.value.upper():6}: "
                 f"{rate:>9,.0f} events/s ({steps:,} steps journalled, {commits} commits){verdict}"
             )
         resumed, fill = recovery_time(d, args.recover)
