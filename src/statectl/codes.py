@@ -156,6 +156,8 @@ ALL: tuple[Code, ...] = (
     ),
     _c("B222", _I, "a guard outside the safe expression language does not fit the tables", _TABLES),
     _c("B223", _I, "the tables made from a chart would not build the same chart", _TABLES),
+    _c("B236", _E, "a state number that is not a whole number from 0 to 2**31 - 1", _TABLES),
+    _c("B237", _E, "two states of one device with the same number", _TABLES),
     # -- X3xx: the safe expression language (statectl.expr, scxml.safecheck) --------------
     _c("X301", _E, "an expression does not parse (or is nested too deeply to analyse)", _BUILDER),
     _c("X302", _E, "an expression uses something the safe expression language refuses", _BUILDER),
@@ -201,6 +203,12 @@ ALL: tuple[Code, ...] = (
         _W,
         "fault event leaving a state that is not monitoring required",
         _check("c408--fault-without-a-monitor-warning"),
+    ),
+    _c(
+        "C418",
+        _W,
+        "the device declares a profile statectl does not ship",
+        _check("c418--unknown-profile-warning"),
     ),
     # -- D5xx: driver and run configs (statectl.devices.config) ---------------------------
     _c("D501", _E, "the driver or run config cannot be read", _DRIVERS),

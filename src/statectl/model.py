@@ -245,6 +245,7 @@ class State:
     data: tuple[DataItem, ...] = ()  # ``<datamodel>`` declared in this state
     invokes: tuple[InvokeDef, ...] = ()
     donedata: DoneData | None = None  # of a final state
+    number: int | None = None  # the standard's state number (tables' ``number`` column)
 
 
 @dataclass(frozen=True, slots=True)
@@ -325,6 +326,7 @@ class Chart:
     origin: Location = field(default=NOWHERE)
     binding: str = "early"  # SCXML data binding: "early" or "late"
     script: tuple[Action, ...] = ()  # SCXML top-level ``<script>``, run once at start
+    profile: str = ""  # the standard profile the device file declares (docs/profiles.md)
     #: lookups by name, built on first use: a cache, not part of the value
     _index: dict[str, dict[Any, Any]] = field(
         default_factory=dict, init=False, repr=False, compare=False, hash=False

@@ -18,6 +18,8 @@ C407 warning  A ``monitoring required`` state has no ``fault`` event leaving it 
               transitions or a superstate's), so its monitor would have nothing to raise.
 C408 warning  A ``fault`` event leaves a state that is not ``monitoring required`` and has
               no monitored substate, so no monitor is running there to raise it.
+C418 warning  The device file declares a ``profile`` statectl does not ship
+              (:mod:`statectl.profiles`), so nothing that reads profiles will know it.
 
 Undefined guard names and other table errors are the builder's (X3xx, T/B codes);
 :func:`check_paths` reports those too, then checks each chart that built, and its
@@ -34,6 +36,7 @@ from statectl.codes import family
 from statectl.errors import Diagnostic, Location, Severity, has_errors
 from statectl.guards import guards_exclusive
 from statectl.model import Chart, ControlKind, EventKind, State, StateKind, Transition
+from statectl.profiles import PROFILES, find
 from statectl.recovery import check_recovery
 from statectl.semantics import entry_set, structural
 from statectl.tables import load
@@ -398,6 +401,26 @@ def _check_monitors(st: _Structure) -> Iterator[Diagnostic]:
                 )
 
 
+def _check_profile(st: _Structure) -> Iterator[Diagnostic]:
+    profile = st.chart.profile
+    if profile and find(profile) is None:
+        names = [p.name for p in PROFILES]
+        yield Diagnostic(
+            "C418",
+            Severity.WARNING,
+            st.chart.origin,
+            f"profile {profile!r} is not a profile statectl ships",
+            _did_you_mean(profile, names) + "shipped: " + ", ".join(names),
+        )
+
+
+def _did_you_mean(word: str, choices: Sequence[str]) -> str:
+    import difflib
+
+    close = difflib.get_close_matches(word.lower(), list(choices), n=1, cutoff=0.6)
+    return f"did you mean {close[0]!r}? " if close else ""
+
+
 _RULES: tuple[Callable[[_Structure], Iterator[Diagnostic]], ...] = (
     _check_reachable,
     _check_way_out,
@@ -406,6 +429,7 @@ _RULES: tuple[Callable[[_Structure], Iterator[Diagnostic]], ...] = (
     _check_unused_events,
     _check_contradictory_ignores,
     _check_monitors,
+    _check_profile,
 )
 
 

@@ -50,6 +50,7 @@ from typing import Any
 
 from statectl.builder.common import GUARD_NAMES, _compile, _d, _hint, _literal
 from statectl.builder.events import _check_invokes, _event_defs, _merge_events
+from statectl.builder.numbers import state_numbers
 from statectl.builder.states import (
     _defaults,
     _history_default,
@@ -90,6 +91,7 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
         name: _kind(merged[name], [c for c in children[name] if c not in removed], diags)
         for name in kept
     }
+    numbers = state_numbers({n: (merged[n].number, merged[n].rows[0]) for n in kept}, kept, diags)
     states: list[State] = []
     for name in kept:
         m = merged[name]
@@ -122,6 +124,7 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
                 component=component,
                 history_default=_history_default(m, kinds, merged, children, removed, diags),
                 origin=m.rows[0],
+                number=numbers.get(name),
             )
         )
     top = [n for n in kept if not merged[n].parent]
@@ -230,6 +233,7 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
         data=tuple(DataItem(n, _literal(v), source) for n, v in tables.data),
         component=tables.states[0].component if tables.states else "",
         origin=source,
+        profile=tables.profile,
     )
     return chart, diags
 

@@ -217,6 +217,7 @@ def _rows_of(chart: Chart) -> tuple[DeviceTables, Chart]:
                 parent=s.parent or "",
                 type=kind,
                 default=s.history_default if s.kind.is_history else (),
+                number="" if s.number is None else str(s.number),
             )
         )
         expected_states.append(dataclasses.replace(s, controls=frozenset(controls)))
@@ -246,7 +247,9 @@ def _rows_of(chart: Chart) -> tuple[DeviceTables, Chart]:
         for t, spec in zip(chart.transitions, specs, strict=True)
     )
     data = tuple((d.name, _data_value(d.expr)[1]) for d in chart.data)
-    tables = DeviceTables(chart.name, tuple(states), events, data, chart.origin)
+    tables = DeviceTables(
+        chart.name, tuple(states), events, data, chart.origin, profile=chart.profile
+    )
     expected = dataclasses.replace(
         chart,
         states=tuple(expected_states),

@@ -35,6 +35,7 @@ class _Merged:
     rows: tuple[Location, ...]
     type: StateKind | None = None
     default: tuple[str, ...] = ()
+    number: str = ""  # the state number's text, checked by statectl.builder.numbers
 
 
 def _merge_states(rows: Sequence[StateRow], diags: list[Diagnostic]) -> dict[str, _Merged]:
@@ -52,6 +53,7 @@ def _merge_states(rows: Sequence[StateRow], diags: list[Diagnostic]) -> dict[str
                 ("parent", list(dict.fromkeys(r.parent for r in group))),
                 ("type", _unique([r.type_text for r in group])),
                 ("default", _unique([", ".join(r.default) for r in group])),
+                ("number", _unique([r.number for r in group])),
             ):
                 if len(values) > 1:
                     diags.append(
@@ -88,6 +90,7 @@ def _merge_states(rows: Sequence[StateRow], diags: list[Diagnostic]) -> dict[str
             rows=places,
             type=next((r.type for r in group if r.type is not None), None),
             default=next((r.default for r in group if r.default), ()),
+            number=next((r.number for r in group if r.number), ""),
         )
     return merged
 

@@ -246,6 +246,9 @@ def build_parser() -> argparse.ArgumentParser:
     from statectl.testgen.commands import register as register_testgen
 
     register_testgen(sub)  # testgen, coverage (src/statectl/testgen/commands.py)
+    from statectl.cli.profiles import register as register_profiles
+
+    register_profiles(sub)  # profiles, new (src/statectl/cli/profiles.py)
     return p
 
 

@@ -2,7 +2,9 @@
 
 Rules:
 1. A device's states are numbered 1.. in chart order (history pseudo-states are
-   not states a client can be in, so they get none); its transitions 1.. in chart
+   not states a client can be in, so they get none); a state with a ``number`` in
+   its table (a standard's, docs/profiles.md) keeps it, and then the others count
+   on from the highest given one. Its transitions are numbered 1.. in chart
    order. The numbers are the ``StateNumber`` / ``TransitionNumber`` properties and
    the ``Number`` of ``CurrentState`` / ``LastTransition``.
 2. A *machine* is one set of sibling states (OPC 10000-16: a finite state machine
@@ -57,7 +59,9 @@ class Layout:
 def layout(chart: Chart) -> Layout:
     """The device's machines and numbers (rules 1-4)."""
     states = [s for s in chart.states if not s.kind.is_history]
-    numbers = {s.name: i for i, s in enumerate(states, 1)}
+    given = [s.number for s in states if s.number is not None]
+    after = iter(range(max(given, default=0) + 1, len(states) + max(given, default=0) + 1))
+    numbers = {s.name: s.number if s.number is not None else next(after) for s in states}
     machines: list[MachineSpec] = []
     home: dict[str, int] = {}  # state -> the machine that holds it
 

@@ -201,6 +201,7 @@ def state_row(row: RawRow, diags: list[Diagnostic]) -> StateRow:
         where=row.where,
         type=_type(row, diags),
         default=_items(row, "default", diags)[0],
+        number=_text(row, "number", diags),
     )
 
 

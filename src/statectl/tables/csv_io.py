@@ -41,6 +41,20 @@ from statectl.tables.schema import (
 __all__ = ["CsvFiles", "csv_paths", "dump_csv", "read_csv"]
 
 DEVICE_LINE = re.compile(r"^#\s*device\s*:\s*(.*)$", re.IGNORECASE)
+PROFILE_LINE = re.compile(r"^#\s*profile\s*:\s*(.*)$", re.IGNORECASE)
+
+
+def _profile(text: str) -> str:
+    """The ``# profile: NAME`` comment among the states file's first comment lines."""
+    for line in text.split("\n"):
+        if not line.lstrip().startswith("#"):
+            break
+        m = PROFILE_LINE.match(line.strip())
+        if m:
+            return m.group(1).strip()
+    return ""
+
+
 SUFFIXES = (".states.csv", ".events.csv", ".data.csv", ".recovery.csv")
 
 
@@ -186,14 +200,23 @@ def read_csv(
     if recovery is not None:
         _, recovery_table = _table("recovery", recovery[0], recovery[1], diags)
     result = make_tables(
-        device, state_table, event_table, entries, Location(states[1], 1), diags, recovery_table
+        device,
+        state_table,
+        event_table,
+        entries,
+        Location(states[1], 1),
+        diags,
+        recovery_table,
+        _profile(states[0]),
     )
     return result, diags
 
 
-def _write(header: tuple[str, ...], rows: list[list[str]], device: str) -> str:
+def _write(header: tuple[str, ...], rows: list[list[str]], device: str, profile: str = "") -> str:
     out = io.StringIO()
     out.write(f"# device: {device}\n")
+    if profile:
+        out.write(f"# profile: {profile}\n")
     writer = csv.writer(out, lineterminator="\n")
     writer.writerow(header)
     writer.writerows(rows)
@@ -207,6 +230,7 @@ def dump_csv(tables: DeviceTables) -> tuple[str, str, str | None, str | None]:
         columns,
         [state_cells(s, columns) for s in tables.states],
         tables.device,
+        tables.profile,
     )
     events = _write(
         EVENT_COLUMNS,

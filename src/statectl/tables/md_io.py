@@ -38,6 +38,7 @@ __all__ = ["dump_md", "escape", "read_md", "unescape"]
 DEVICE = re.compile(r"^#\s+device\s*:\s*(.*)$", re.IGNORECASE)
 SECTION = re.compile(r"^##\s+(states|events|data|recovery)\s*$", re.IGNORECASE)
 SEPARATOR = re.compile(r"^:?-+:?$")
+PROFILE = re.compile(r"^profile\s*:\s*(.*)$", re.IGNORECASE)
 UNESCAPE = {"|": "|", "\\": "\\", "n": "\n", "r": "\r"}
 
 
@@ -129,6 +130,7 @@ def read_md(text: str, file: str, stem: str) -> tuple[DeviceTables | None, list[
     """Read a Markdown device file; ``stem`` names the device without a heading."""
     diags: list[Diagnostic] = []
     device: str | None = None
+    profile: str | None = None
     section: str | None = None
     blocks: dict[str, list[tuple[int, str]]] = {}
     closed: set[str] = set()
@@ -143,6 +145,8 @@ def read_md(text: str, file: str, stem: str) -> tuple[DeviceTables | None, list[
                 closed.add(section)
             section = s.group(1).lower() if s else None
             continue
+        if section is None and profile is None and (p := PROFILE.match(line)):
+            profile = p.group(1).strip()  # a 'Profile: NAME' line before the first table
         if section is None or section in closed:
             continue
         if line.startswith("|"):
@@ -183,6 +187,7 @@ def read_md(text: str, file: str, stem: str) -> tuple[DeviceTables | None, list[
         Location(file, 1),
         diags,
         tables["recovery"],
+        profile or "",
     )
     return result, diags
 
@@ -197,7 +202,10 @@ def _table(header: tuple[str, ...], rows: list[list[str]]) -> list[str]:
 def dump_md(tables: DeviceTables) -> str:
     """The tables as Markdown that :func:`read_md` reads back unchanged."""
     columns = state_columns(tables)
-    lines = [f"# Device: {tables.device}", "", "## States", ""]
+    lines = [f"# Device: {tables.device}", ""]
+    if tables.profile:
+        lines += [f"Profile: {tables.profile}", ""]
+    lines += ["## States", ""]
     lines += _table(
         columns,
         [state_cells(s, columns) for s in tables.states],

@@ -26,6 +26,7 @@ STATE_COLUMNS = (
     "parent",
     "type",
     "default",
+    "number",
 )
 #: The columns every writer emits; ``type`` and ``default`` only when a row uses them.
 FLAT_STATE_COLUMNS = STATE_COLUMNS[:7]
@@ -62,6 +63,7 @@ ALIASES: Mapping[str, str] = {
     "ignores": "ignore",
     "state type": "type",
     "history default": "default",
+    "state number": "number",
 }
 #: Spellings accepted in the ``type`` column, after lowering and collapsing spaces.
 TYPE_WORDS: Mapping[str, StateKind] = {
@@ -112,6 +114,7 @@ class StateRow:
     where: Location = NOWHERE
     type: StateKind | None = None  # None: atomic, or compound when it has children
     default: tuple[str, ...] = ()  # a history state's targets before it recorded anything
+    number: str = ""  # the standard's state number (a profile's), checked by build (B236)
 
     @property
     def type_text(self) -> str:
@@ -161,6 +164,7 @@ class DeviceTables:
     data: tuple[tuple[str, object], ...] = ()
     source: Location = NOWHERE
     recovery: tuple[RecoveryRow, ...] = ()  # the third table; empty: none (rule 5a)
+    profile: str = ""  # the standard profile the device declares (docs/profiles.md)
 
 
 def strip_locations(tables: DeviceTables) -> DeviceTables:

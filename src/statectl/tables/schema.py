@@ -154,6 +154,7 @@ def make_tables(
     source: Location,
     diags: list[Diagnostic],
     recovery: RawTable | None = None,
+    profile: str = "",
 ) -> DeviceTables | None:
     """Check raw tables and build :class:`DeviceTables`.
 
@@ -187,14 +188,19 @@ def make_tables(
         data_items,
         source,
         recovery_rows,
+        profile.strip(),
     )
 
 
 def state_columns(tables: DeviceTables) -> tuple[str, ...]:
-    """The state columns a writer emits: the flat ones, plus ``type``/``default`` if used."""
+    """The state columns a writer emits: the flat ones, and ``type``/``default``/``number``
+    when a row uses them."""
+    columns: tuple[str, ...] = FLAT_STATE_COLUMNS
     if any(s.type is not None or s.default for s in tables.states):
-        return STATE_COLUMNS
-    return FLAT_STATE_COLUMNS
+        columns += ("type", "default")
+    if any(s.number for s in tables.states):
+        columns += ("number",)
+    return columns
 
 
 def state_cells(s: StateRow, columns: Sequence[str]) -> list[str]:
@@ -209,6 +215,7 @@ def state_cells(s: StateRow, columns: Sequence[str]) -> list[str]:
         "parent": s.parent,
         "type": s.type_text,
         "default": ", ".join(s.default),
+        "number": s.number,
     }
     return [cells[c] for c in columns]
 

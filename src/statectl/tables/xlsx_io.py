@@ -171,17 +171,23 @@ def read_xlsx(content: bytes, file: str, stem: str) -> tuple[DeviceTables | None
         if "recovery" in sheets:
             recovery = _table("recovery", sheets["recovery"], file, diags)
         device = stem
+        profile = ""
         if "device" in sheets:
             for _, values in _rows(sheets["device"]):
                 if len(values) >= 2 and str(values[0] or "").strip().lower() == "device":
                     device = str(_cell(values[1])) if isinstance(_cell(values[1]), str) else stem
+                    break
+            # an optional 'profile' row below it (docs/profiles.md)
+            for _, values in _rows(sheets["device"]):
+                if len(values) >= 2 and str(values[0] or "").strip().lower() == "profile":
+                    profile = str(_cell(values[1])) if isinstance(_cell(values[1]), str) else ""
                     break
     except Exception as exc:  # a workbook can fail lazily while its sheets are read
         return None, [*diags, diag("T101", source, f"not a readable XLSX workbook: {exc}")]
     finally:
         wb.close()
     result = make_tables(
-        device, tables["states"], tables["events"], entries, source, diags, recovery
+        device, tables["states"], tables["events"], entries, source, diags, recovery, profile
     )
     return result, diags
 
@@ -231,7 +237,8 @@ def dump_xlsx(tables: DeviceTables) -> bytes:
             recovery_columns(tables),
             (recovery_cells(r, recovery_columns(tables)) for r in tables.recovery),
         )
-    _fill(wb.create_sheet(SHEETS["device"]), ("device", tables.device), ())
+    profile = [["profile", tables.profile]] if tables.profile else []
+    _fill(wb.create_sheet(SHEETS["device"]), ("device", tables.device), profile)
     out = io.BytesIO()
     wb.save(out)
     return out.getvalue()

@@ -43,7 +43,7 @@ from statectl.tables.schema import (
 __all__ = ["dump_yaml", "read_yaml"]
 
 NULL_TAG = "tag:yaml.org,2002:null"
-TOP_KEYS = ("device", "states", "events", "data", "recovery")
+TOP_KEYS = ("device", "profile", "states", "events", "data", "recovery")
 
 
 def _at(file: str, node: yaml.Node) -> Location:
@@ -210,6 +210,14 @@ def read_yaml(text: str, file: str) -> tuple[DeviceTables | None, list[Diagnosti
         else:
             diags.append(diag("T108", at, "'device' must be text"))
             device = "?"
+    profile = ""
+    if "profile" in found:  # the standard profile the device follows (docs/profiles.md)
+        value, at = found["profile"]
+        cell = _cell(value)
+        if isinstance(cell, str):
+            profile = cell
+        else:
+            diags.append(diag("T108", at, "'profile' must be text"))
     tables: dict[str, RawTable | None] = {}
     for table in ("states", "events"):
         if table not in found:
@@ -226,7 +234,9 @@ def read_yaml(text: str, file: str) -> tuple[DeviceTables | None, list[Diagnosti
     if "device" not in found:
         diags.append(diag("T104", source, "the file has no 'device' name", "add 'device: NAME'"))
         device = "?"
-    result = make_tables(device, tables["states"], tables["events"], data, source, diags, recovery)
+    result = make_tables(
+        device, tables["states"], tables["events"], data, source, diags, recovery, profile
+    )
     return result, diags
 
 
@@ -255,6 +265,9 @@ def _state_doc(tables: DeviceTables) -> list[dict[str, Any]]:
             row["default"] = s.default[0]
         elif s.default:
             row["default"] = list(s.default)
+        if s.number:  # a whole number is written as one, so it reads back the same
+            n = s.number
+            row["number"] = int(n) if n.isdigit() and str(int(n)) == n else n
         rows.append(row)
     return rows
 
@@ -343,6 +356,7 @@ def dump_yaml(tables: DeviceTables) -> str:
     """The tables as YAML text in the Motor's layout."""
     doc: dict[str, Any] = {
         "device": tables.device,
+        **({"profile": tables.profile} if tables.profile else {}),
         "states": _state_doc(tables),
         "events": _event_doc(tables),
     }
