@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 from importlib import resources
+from pathlib import Path
 
 import pytest
 
@@ -13,6 +14,7 @@ from statectl.devices.cia402.profile import STATUS_MASKS, PowerState, drive_step
 from statectl.errors import Severity
 from statectl.model import Chart, StateKind
 from statectl.profiles import PROFILES, find, profile_tables
+from statectl.render import render
 from statectl.rules import check_paths
 from statectl.semantics import Machine, Snapshot, step
 from statectl.tables import load, strip_locations
@@ -213,3 +215,14 @@ def test_find_is_lenient_about_spelling(given: str, found: str | None) -> None:
     """A profile is found by name whatever its case and whether '_' or '-' joins it."""
     profile = find(given)
     assert (profile.name if profile else None) == found
+
+
+DOCS = Path(__file__).resolve().parents[1] / "docs" / "profiles.md"
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_docs_show_the_current_diagram(name: str) -> None:
+    """docs/profiles.md embeds each profile's diagram exactly as `statectl render
+    --format mermaid` draws it now."""
+    drawn = render(chart_of(name), "mermaid").rstrip("\n")
+    assert f"```mermaid\n{drawn}\n```" in DOCS.read_text(encoding="utf-8")

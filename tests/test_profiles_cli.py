@@ -147,6 +147,8 @@ def _numbered(*numbers: str) -> list[object]:
         (("-1", "1", "2"), [("B236", Severity.ERROR)]),
         (("1.5", "1", "2"), [("B236", Severity.ERROR)]),
         (("99999999999", "1", "2"), [("B236", Severity.ERROR)]),
+        (("9" * 5000, "1", "2"), [("B236", Severity.ERROR)]),
+        (("\u00b2", "1", "2"), [("B236", Severity.ERROR)]),
         (("3", "3", "2"), [("B237", Severity.ERROR)]),
     ],
 )
@@ -179,3 +181,20 @@ def test_unknown_profile_warns(profile: str, warned: bool) -> None:
     assert bool(found) == warned
     if warned:
         assert "did you mean 'packml'" in found[0].hint
+
+
+@pytest.mark.parametrize(("digits", "refused"), [(8, False), (1000, False), (1100, True)])
+def test_huge_hex_data_is_refused(tmp_path: Path, digits: int, refused: bool) -> None:
+    """A hex data literal too large to write back (the CiA 402 masks are hex) is T108, not a
+    crash; a large but writable one loads."""
+    path = tmp_path / "d.yaml"
+    path.write_text(
+        "device: D\nstates:\n  - {state: A, control: default}\n"
+        "events:\n  - {event: e, old: A, new: A}\n"
+        f"data:\n  mask: 0x{'F' * digits}\n",
+        encoding="utf-8",
+    )
+    tables, diags = load(path)
+    assert ("T108" in [d.code for d in diags]) == refused
+    if not refused:
+        assert tables is not None and build(tables)[0] is not None

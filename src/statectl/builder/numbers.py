@@ -31,7 +31,8 @@ def state_numbers(
         text, where = texts.get(name, ("", Location()))
         if not text:
             continue
-        if not text.isdigit() or int(text) > MAX_NUMBER:
+        digits = text.isascii() and text.isdigit() and len(text) <= len(str(MAX_NUMBER))
+        if not digits or int(text) > MAX_NUMBER:
             diags.append(
                 _d(
                     "B236",

@@ -17,8 +17,15 @@ from statectl.tables.safeyaml import YamlRefused, load_value
 # --- data literals ----------------------------------------------------------------------
 
 
+#: The largest whole number a data value may be: a hex literal has no digit limit, and
+#: Python cannot write a number of more than 4300 decimal digits back (about 14,000 bits).
+MAX_INT_BITS = 4096
+
+
 def normalize_value(value: object) -> object | Bad:
     """A YAML literal as the tables keep it (lists become tuples), or what is wrong."""
+    if isinstance(value, int) and value.bit_length() > MAX_INT_BITS:  # 0x999..., no repr
+        return Bad(f"a whole number of more than {MAX_INT_BITS} bits")
     if value is None or isinstance(value, bool | int | float | str):
         return value
     if isinstance(value, list | tuple):

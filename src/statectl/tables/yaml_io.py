@@ -267,7 +267,8 @@ def _state_doc(tables: DeviceTables) -> list[dict[str, Any]]:
             row["default"] = list(s.default)
         if s.number:  # a whole number is written as one, so it reads back the same
             n = s.number
-            row["number"] = int(n) if n.isdigit() and str(int(n)) == n else n
+            whole = n.isascii() and n.isdigit() and len(n) < 19 and str(int(n)) == n
+            row["number"] = int(n) if whole else n
         rows.append(row)
     return rows
 
