@@ -1,7 +1,8 @@
 """``statectl run --opcua``: the running devices as an OPC UA address space (asyncua).
 
 :mod:`statectl.opcua.space` works out the machines and numbers from a chart;
-:mod:`statectl.opcua.server` serves them on their own loop thread. asyncua is the
+:mod:`statectl.opcua.server` serves them on their own loop thread;
+:mod:`statectl.opcua.packml` names a ``profile: packml`` device as OPC 30050 does. asyncua is the
 ``opcua`` extra: ``pip install 'statectl[opcua]'``.
 """
 

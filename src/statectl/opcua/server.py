@@ -18,7 +18,9 @@ Rules:
    an empty ``CurrentState``.
 3. Each command event is a method of the device object with no inputs and two
    outputs: ``Handled`` and ``Reason`` (empty when handled, else why the event
-   changed nothing, or why it was not accepted).
+   changed nothing, or why it was not accepted). A device whose file declares
+   ``profile: packml`` gets the PackML companion's names too
+   (:mod:`statectl.opcua.packml`).
 4. Security: anonymous sessions may browse, read and subscribe; calling a method
    needs the configured user (a session with wrong credentials is refused). The
    endpoints offer only the configured policies (Basic256Sha256 SignAndEncrypt
@@ -29,6 +31,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import hmac
 import threading
 from collections import deque
@@ -41,6 +44,7 @@ from urllib.parse import urlparse
 
 from statectl.errors import StatectlError
 from statectl.opcua.certs import APP_URI, default_directory, ensure_certificate
+from statectl.opcua.packml import PackmlNaming, PackmlSpace, naming, packml_call
 from statectl.opcua.space import Layout, layout
 from statectl.runtime import InvokeIssued, Record, Started, TransitionTaken
 from statectl.system import QueueFull, System
@@ -114,6 +118,7 @@ class OpcuaServer:
         self._updates: deque[tuple[_Device, frozenset[str], list[Record]]] = deque()
         self._kick: Any = None  # an asyncio.Event of the server's loop
         self._loop_thread: int | None = None
+        self._packml_space: PackmlSpace | None = None  # when a device declares PackML
 
     # -- hooks on the owner (rule 1) ------------------------------------------------------
 
@@ -240,8 +245,12 @@ class OpcuaServer:
         fsm = server.get_node(ua.NodeId(ua.ObjectIds.FiniteStateMachineType))
         kind = await fsm.add_object_type(idx, "StatectlStateMachineType")
         objects = server.nodes.objects
+        charts = {n: s.chart for n, s in self.system.subjects.items()}
+        names = {n: naming(charts[n], d.layout) for n, d in self._devices.items()}
+        packml = await PackmlSpace.create(server, kind, idx) if any(names.values()) else None
+        self._packml_space = packml
         for name, device in self._devices.items():
-            chart = self.system.subjects[name].chart
+            chart = charts[name]
             node = await objects.add_object(idx, name)
             await node.set_event_notifier([ua.EventNotifier.SubscribeToEvents])
             device.node = node
@@ -264,21 +273,30 @@ class OpcuaServer:
             device.last_invoke = await node.add_variable(
                 idx, "LastInvoke", ua.Variant(-1, ua.VariantType.Int32)
             )
-            await self._machines(node, kind, idx, device, methods, chart.initial)
+            pack = names[name]
+            made = await self._machines(node, kind, idx, device, methods, chart.initial, pack)
+            if packml is not None and pack is not None:
+                await packml.finish(node, made, pack, functools.partial(self._packml, name))
 
     async def _machines(
         self, node: Any, kind: Any, idx: int, device: _Device, methods: dict[str, Any],
-        initial: Sequence[str],
-    ) -> None:  # fmt: skip
+        initial: Sequence[str], pack: PackmlNaming | None = None,
+    ) -> list[Any]:  # fmt: skip
         ua = _ua()
 
         lay = device.layout
         made: list[Any] = []
         device.machines, device.state_nodes, device.transition_nodes = [], {}, {}
         chart_initial = set(initial)
-        for spec in lay.machines:
+        packml = self._packml_space
+        for at, spec in enumerate(lay.machines):
             holder = node if spec.holder is None else device.state_nodes[spec.holder]
-            machine = await holder.add_object(idx, spec.name, objecttype=kind.nodeid)
+            where, bname, otype = (packml and packml.machine(pack, at)) or (
+                idx,
+                spec.name,
+                kind.nodeid,
+            )
+            machine = await holder.add_object(where, bname, objecttype=otype)
             made.append(machine)
             if spec.holder is not None:
                 await holder.add_reference(machine.nodeid, ua.ObjectIds.HasSubStateMachine)
@@ -325,6 +343,7 @@ class OpcuaServer:
                     if event in methods:
                         await tnode.add_reference(methods[event].nodeid, ua.ObjectIds.HasCause)
                 device.transition_nodes[number] = tnode
+        return made
 
     # -- updates on the loop (rule 1) ------------------------------------------------------
 
@@ -409,16 +428,8 @@ class OpcuaServer:
     def _method(self, device: str, event: str) -> Callable[..., Any]:
         ua = _ua()
 
-        system = self.system
-
         async def call(_parent: Any, *_args: Any) -> list[Any]:
-            try:
-                if system.journal is None:
-                    outcome = await _send(system, device, event)
-                else:
-                    outcome = await self._journalled(device, event)
-            except StatectlError as exc:
-                outcome = str(exc)
+            outcome = await self._outcome(device, event)
             handled = outcome == "handled"
             return [
                 ua.Variant(handled, ua.VariantType.Boolean),
@@ -426,6 +437,19 @@ class OpcuaServer:
             ]
 
         return call
+
+    def _packml(self, device: str, event: str) -> Callable[..., Any]:
+        """A PackML command method: the same call, answered with a status code."""
+        return packml_call(lambda: self._outcome(device, event))
+
+    async def _outcome(self, device: str, event: str) -> str:
+        """Post ``event`` and wait for the device's step: ``handled`` or why not."""
+        try:
+            if self.system.journal is None:
+                return await _send(self.system, device, event)
+            return await self._journalled(device, event)
+        except StatectlError as exc:
+            return str(exc)
 
     async def _journalled(self, device: str, event: str) -> str:
         """Post through the journal and wait for the device's step on ``event``."""
