@@ -35,6 +35,8 @@ class _Merged:
     rows: tuple[Location, ...]
     type: StateKind | None = None
     default: tuple[str, ...] = ()
+    timeout: str = ""
+    defer: tuple[str, ...] = ()
 
 
 def _merge_states(rows: Sequence[StateRow], diags: list[Diagnostic]) -> dict[str, _Merged]:
@@ -52,6 +54,7 @@ def _merge_states(rows: Sequence[StateRow], diags: list[Diagnostic]) -> dict[str
                 ("parent", list(dict.fromkeys(r.parent for r in group))),
                 ("type", _unique([r.type_text for r in group])),
                 ("default", _unique([", ".join(r.default) for r in group])),
+                ("timeout", _unique([r.timeout for r in group])),
             ):
                 if len(values) > 1:
                     diags.append(
@@ -88,6 +91,8 @@ def _merge_states(rows: Sequence[StateRow], diags: list[Diagnostic]) -> dict[str
             rows=places,
             type=next((r.type for r in group if r.type is not None), None),
             default=next((r.default for r in group if r.default), ()),
+            timeout=next((r.timeout for r in group if r.timeout), ""),
+            defer=tuple(_unique([d for r in group for d in r.defer])),
         )
     return merged
 

@@ -26,6 +26,8 @@ STATE_COLUMNS = (
     "parent",
     "type",
     "default",
+    "timeout",
+    "defer",
 )
 #: The columns every writer emits; ``type`` and ``default`` only when a row uses them.
 FLAT_STATE_COLUMNS = STATE_COLUMNS[:7]
@@ -62,6 +64,8 @@ ALIASES: Mapping[str, str] = {
     "ignores": "ignore",
     "state type": "type",
     "history default": "default",
+    "deferred": "defer",
+    "defers": "defer",
 }
 #: Spellings accepted in the ``type`` column, after lowering and collapsing spaces.
 TYPE_WORDS: Mapping[str, StateKind] = {
@@ -112,6 +116,8 @@ class StateRow:
     where: Location = NOWHERE
     type: StateKind | None = None  # None: atomic, or compound when it has children
     default: tuple[str, ...] = ()  # a history state's targets before it recorded anything
+    timeout: str = ""  # ``DURATION -> EVENT`` (statectl.tables.timeouts), empty: none
+    defer: tuple[str, ...] = ()  # events kept while the state is active
 
     @property
     def type_text(self) -> str:

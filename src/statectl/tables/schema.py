@@ -92,6 +92,7 @@ from statectl.tables.rows import (
     strip_locations,
     unknown_column,
 )
+from statectl.tables.timeouts import optional_state_columns
 
 #: Every public name, those defined in rows, literals and cells too (re-exported).
 __all__ = [
@@ -192,9 +193,10 @@ def make_tables(
 
 def state_columns(tables: DeviceTables) -> tuple[str, ...]:
     """The state columns a writer emits: the flat ones, plus ``type``/``default`` if used."""
+    columns: tuple[str, ...] = FLAT_STATE_COLUMNS
     if any(s.type is not None or s.default for s in tables.states):
-        return STATE_COLUMNS
-    return FLAT_STATE_COLUMNS
+        columns = STATE_COLUMNS[:9]
+    return columns + optional_state_columns(tables)
 
 
 def state_cells(s: StateRow, columns: Sequence[str]) -> list[str]:
@@ -209,6 +211,8 @@ def state_cells(s: StateRow, columns: Sequence[str]) -> list[str]:
         "parent": s.parent,
         "type": s.type_text,
         "default": ", ".join(s.default),
+        "timeout": s.timeout,
+        "defer": ", ".join(s.defer),
     }
     return [cells[c] for c in columns]
 
@@ -241,6 +245,9 @@ def validate_for_writing(tables: DeviceTables, where: Location) -> list[Diagnost
         for item in s.ignore:
             if "," in item or item != item.strip() or not item:
                 diags.append(diag("T111", s.where, f"ignore item {item!r} cannot be written"))
+        for item in s.defer:
+            if "," in item or item != item.strip() or not item:
+                diags.append(diag("T111", s.where, f"defer item {item!r} cannot be written"))
         for item in s.default:
             if "," in item or item != item.strip() or not item:
                 diags.append(diag("T111", s.where, f"default item {item!r} cannot be written"))

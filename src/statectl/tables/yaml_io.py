@@ -255,6 +255,10 @@ def _state_doc(tables: DeviceTables) -> list[dict[str, Any]]:
             row["default"] = s.default[0]
         elif s.default:
             row["default"] = list(s.default)
+        if s.timeout:
+            row["timeout"] = s.timeout
+        if s.defer:
+            row["defer"] = list(s.defer)
         rows.append(row)
     return rows
 
