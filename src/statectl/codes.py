@@ -320,6 +320,9 @@ ALL: tuple[Code, ...] = (
     _c("G707", _E, "a step that does not settle (livelock) or fails in the semantics", _CODEGEN),
     _c("G708", _W, "a Log action the generated code skips", _CODEGEN),
     _c("G709", _E, "a Notify of an invoke number the chart does not declare", _CODEGEN),
+    _c("G710", _E, "a state's timeout names an event the chart does not know", _CODEGEN),
+    _c("G711", _E, "a timeout that is not a whole number of milliseconds (1 to 2^31-1)", _CODEGEN),
+    _c("G712", _E, "a timeout on a state past the timeout table's index (32768 states)", _CODEGEN),
     # -- V8xx: cell files (statectl.cell) -------------------------------------------------
     _c("V801", _E, "the cell file cannot be read or is not a YAML mapping", _CELLS),
     _c("V802", _E, "an unknown key", _CELLS),
