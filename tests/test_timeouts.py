@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from statectl.build import build, chart_to_tables, load_and_build
+from statectl.build import build, chart_to_tables, load_and_build, load_chart, strip_origins
 from statectl.errors import Severity
 from statectl.explore import verify_cell
 from statectl.model import Chart, Timeout
@@ -15,6 +15,7 @@ from statectl.rules import check_paths
 from statectl.runtime import SimClock, Subject
 from statectl.runtime.clock import WallClock
 from statectl.runtime.records import EventReceived, Record
+from statectl.scxml_io import read_scxml, write_scxml
 from statectl.tables import load, save, strip_locations
 from statectl.tables.timeouts import format_timeout, parse_timeout
 
@@ -374,3 +375,31 @@ def test_verify_offers_the_timeout_where_it_can_happen(tmp_path: Path) -> None:
         encoding="utf-8",
     )
     assert failures(cell) == []
+
+
+# -- SCXML ----------------------------------------------------------------------------------
+
+
+def test_scxml_export_writes_the_timeout_as_a_delayed_send_and_cancel() -> None:
+    """The exported state sends its timeout event with a delay on entry and cancels on exit."""
+    text = write_scxml(load_chart(CLAMP))
+    state = text[text.index('<state id="Closing"') : text.index('<state id="Clamped"')]
+    assert (
+        '<send event="Close_timeout" statectl:event-name="Close timeout" delay="2000ms" '
+        'id="statectl.timeout.Closing"/>' in state
+    )
+    assert '<cancel sendid="statectl.timeout.Closing"/>' in state
+    assert state.index("<onentry") < state.index("<send") < state.index("<onexit")
+    assert '<statectl:defer event="Release"/>' in state
+
+
+def test_scxml_round_trip_keeps_timeout_and_defer() -> None:
+    """Reading the export back gives the very chart, and tables with the same cells."""
+    chart = load_chart(CLAMP)
+    again, diags = read_scxml(write_scxml(chart))
+    assert again is not None and not diags
+    assert strip_origins(again) == strip_origins(chart)
+    tables, info = chart_to_tables(again)
+    assert tables is not None, info
+    closing = next(s for s in tables.states if s.state == "Closing")
+    assert (closing.timeout, closing.defer) == ("2s -> Close timeout", ("Release",))
