@@ -22,6 +22,7 @@ from statectl.tables import (
 )
 from statectl.tables.csv_io import dump_csv, read_csv
 from statectl.tables.md_io import dump_md, read_md
+from statectl.tables.timeouts import format_timeout
 from statectl.tables.xlsx_io import dump_xlsx, read_xlsx
 from statectl.tables.yaml_io import dump_yaml, read_yaml
 
@@ -85,6 +86,9 @@ state_rows = st.builds(
     parent=optional_names,
     type=st.none() | st.sampled_from(list(StateKind)),
     default=st.lists(names, max_size=2).map(tuple),
+    timeout=st.just("")
+    | st.builds(format_timeout, st.integers(1, 10**6).map(lambda ms: ms / 1000), names),
+    defer=st.lists(names, max_size=2).map(tuple),
 )
 event_rows = st.builds(
     EventRow,

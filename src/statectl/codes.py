@@ -111,6 +111,12 @@ ALL: tuple[Code, ...] = (
         "a workbook that unpacks to more than the limit (a zip bomb): see docs/limits.md",
         _TABLES,
     ),
+    _c(
+        "T118",
+        _E,
+        "a timeout cell that is not DURATION -> EVENT (unit ms, s or min; 1 ms to 2^31-1 ms)",
+        _TABLES,
+    ),
     # -- B2xx: building a chart from tables, and tables from a chart (statectl.build) -----
     _c("B201", _E, "an event row's old or new state is not in the State Definition table", _TABLES),
     _c("B202", _E, "no state is marked default", _TABLES),
@@ -158,6 +164,11 @@ ALL: tuple[Code, ...] = (
     _c("B223", _I, "the tables made from a chart would not build the same chart", _TABLES),
     _c("B236", _E, "a state number that is not a whole number from 0 to 2**31 - 1", _TABLES),
     _c("B237", _E, "two states of one device with the same number", _TABLES),
+    _c("B224", _E, "a state's timeout names an event that is not in the events table", _TABLES),
+    _c("B225", _E, "a timeout or defer on a history or final state (never active)", _TABLES),
+    _c("B226", _E, "a defer cell names an event that is not in the events table", _TABLES),
+    _c("B227", _E, "a state defers an event it (or an ancestor) handles", _TABLES),
+    _c("B228", _W, "a state's api names a method no event entering or leaving it uses", _TABLES),
     # -- X3xx: the safe expression language (statectl.expr, scxml.safecheck) --------------
     _c("X301", _E, "an expression does not parse (or is nested too deeply to analyse)", _BUILDER),
     _c("X302", _E, "an expression uses something the safe expression language refuses", _BUILDER),
@@ -209,6 +220,24 @@ ALL: tuple[Code, ...] = (
         _W,
         "the device declares a profile statectl does not ship",
         _check("c418--unknown-profile-warning"),
+    ),
+    _c(
+        "C409",
+        _E,
+        "a state's timeout event is not handled in that state",
+        _check("c409--unhandled-timeout-error"),
+    ),
+    _c(
+        "C410",
+        _W,
+        "a deferred event is released into a state that neither handles, defers nor ignores it",
+        _check("c410--deferred-event-dropped-warning"),
+    ),
+    _c(
+        "C411",
+        _W,
+        "an 'event trigger required' state that no command or fault event enters",
+        _check("c411--trigger-state-entered-by-no-command-warning"),
     ),
     # -- D5xx: driver and run configs (statectl.devices.config) ---------------------------
     _c("D501", _E, "the driver or run config cannot be read", _DRIVERS),
@@ -299,6 +328,9 @@ ALL: tuple[Code, ...] = (
     _c("G707", _E, "a step that does not settle (livelock) or fails in the semantics", _CODEGEN),
     _c("G708", _W, "a Log action the generated code skips", _CODEGEN),
     _c("G709", _E, "a Notify of an invoke number the chart does not declare", _CODEGEN),
+    _c("G710", _E, "a state's timeout names an event the chart does not know", _CODEGEN),
+    _c("G711", _E, "a timeout that is not a whole number of milliseconds (1 to 2^31-1)", _CODEGEN),
+    _c("G712", _E, "a timeout on a state past the timeout table's index (32768 states)", _CODEGEN),
     # -- V8xx: cell files (statectl.cell) -------------------------------------------------
     _c("V801", _E, "the cell file cannot be read or is not a YAML mapping", _CELLS),
     _c("V802", _E, "an unknown key", _CELLS),

@@ -45,6 +45,7 @@ __all__ = [
     "Send",
     "State",
     "StateKind",
+    "Timeout",
     "Transition",
 ]
 
@@ -226,6 +227,16 @@ class InvokeDef:
 
 
 @dataclass(frozen=True, slots=True)
+class Timeout:
+    """A state's timeout: ``event`` is raised ``seconds`` after the state is entered,
+    unless it was left first (statectl.runtime.timers arms and cancels it)."""
+
+    seconds: float
+    event: str
+    origin: Location = NOWHERE
+
+
+@dataclass(frozen=True, slots=True)
 class State:
     """A chart state; ``parent`` is ``None`` for a top-level state."""
 
@@ -246,6 +257,8 @@ class State:
     invokes: tuple[InvokeDef, ...] = ()
     donedata: DoneData | None = None  # of a final state
     number: int | None = None  # the standard's state number (tables' ``number`` column)
+    timeout: Timeout | None = None  # the state table's ``timeout`` cell
+    defer: tuple[str, ...] = ()  # events kept while this state is active (``defer`` cell)
 
 
 @dataclass(frozen=True, slots=True)

@@ -50,6 +50,7 @@ from typing import Any
 
 from statectl.builder.common import GUARD_NAMES, _compile, _d, _hint, _literal
 from statectl.builder.events import _check_invokes, _event_defs, _merge_events
+from statectl.builder.extras import check_apis, expand_ignore, state_extras
 from statectl.builder.numbers import state_numbers
 from statectl.builder.states import (
     _defaults,
@@ -202,10 +203,15 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
 
     event_names = [e.name for e in events]
     declared = set(event_names)
+    extras = state_extras(merged, kinds, rows, event_names, diags)
+    states = [
+        dataclasses.replace(s, timeout=extras[s.name][0], defer=extras[s.name][1]) for s in states
+    ]
+    check_apis(merged, rows, diags)
     ignored: set[tuple[str, str]] = set()
     for name in kept:
         m = merged[name]
-        for event in m.ignore:
+        for event in expand_ignore(name, merged, rows, event_names):
             if event in declared:
                 ignored.add((name, event))
             else:

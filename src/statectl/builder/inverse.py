@@ -31,6 +31,7 @@ from statectl.tables.schema import (
     normalize_value,
     validate_for_writing,
 )
+from statectl.tables.timeouts import format_timeout
 
 # -- the inverse: a chart back to tables -------------------------------------------------
 
@@ -218,6 +219,8 @@ def _rows_of(chart: Chart) -> tuple[DeviceTables, Chart]:
                 type=kind,
                 default=s.history_default if s.kind.is_history else (),
                 number="" if s.number is None else str(s.number),
+                timeout=format_timeout(s.timeout.seconds, s.timeout.event) if s.timeout else "",
+                defer=s.defer,
             )
         )
         expected_states.append(dataclasses.replace(s, controls=frozenset(controls)))

@@ -36,6 +36,8 @@ class _Merged:
     type: StateKind | None = None
     default: tuple[str, ...] = ()
     number: str = ""  # the state number's text, checked by statectl.builder.numbers
+    timeout: str = ""
+    defer: tuple[str, ...] = ()
 
 
 def _merge_states(rows: Sequence[StateRow], diags: list[Diagnostic]) -> dict[str, _Merged]:
@@ -54,6 +56,7 @@ def _merge_states(rows: Sequence[StateRow], diags: list[Diagnostic]) -> dict[str
                 ("type", _unique([r.type_text for r in group])),
                 ("default", _unique([", ".join(r.default) for r in group])),
                 ("number", _unique([r.number for r in group])),
+                ("timeout", _unique([r.timeout for r in group])),
             ):
                 if len(values) > 1:
                     diags.append(
@@ -91,6 +94,8 @@ def _merge_states(rows: Sequence[StateRow], diags: list[Diagnostic]) -> dict[str
             type=next((r.type for r in group if r.type is not None), None),
             default=next((r.default for r in group if r.default), ()),
             number=next((r.number for r in group if r.number), ""),
+            timeout=next((r.timeout for r in group if r.timeout), ""),
+            defer=tuple(_unique([d for r in group for d in r.defer])),
         )
     return merged
 

@@ -6,7 +6,7 @@ C++ text; the header around it is :mod:`statectl.codegen.cpp_header`."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 from statectl.codegen.flatten import (
     Decision,
@@ -178,7 +178,7 @@ class Basic@CLS@ : public statectl::Subject<Invoke, kInvokeCount> {
     }
     const auto s = static_cast<std::size_t>(state);
     return ((detail::kActive[state_ & kConfigurationMask][s / 64] >> (s % 64)) & 1u) != 0;
-  }
+  }@TIMER_PUBLIC@
 
   std::uint16_t configuration() const noexcept {
     return static_cast<std::uint16_t>(state_ & kConfigurationMask);
@@ -259,14 +259,14 @@ class Basic@CLS@ : public statectl::Subject<Invoke, kInvokeCount> {
     constexpr detail::Effect fx = detail::kEffects[F];
     if constexpr (fx.op == detail::kExit) {
       STATECTL_TRACE_CALL(tracer_, exited(detail::kDevice, detail::kStateNames[fx.arg]));
-      hooks.on_exit(static_cast<State>(fx.arg));
+      hooks.on_exit(static_cast<State>(fx.arg));@TIMER_EXIT@
     } else if constexpr (fx.op == detail::kTake) {
       STATECTL_TRACE_CALL(tracer_, taken(detail::kDevice, detail::kTransitions[fx.arg].source,
                                          detail::kTransitions[fx.arg].targets,
                                          detail::kTransitions[fx.arg].label));
     } else if constexpr (fx.op == detail::kEnter) {
       STATECTL_TRACE_CALL(tracer_, entered(detail::kDevice, detail::kStateNames[fx.arg]));
-      hooks.on_entry(static_cast<State>(fx.arg));
+      hooks.on_entry(static_cast<State>(fx.arg));@TIMER_ENTER@
     } else {
       STATECTL_TRACE_CALL(tracer_, invoked(detail::kDevice, fx.arg, detail::kInvokes[fx.arg].name,
                                            detail::kInvokes[fx.arg].method));
@@ -276,12 +276,12 @@ class Basic@CLS@ : public statectl::Subject<Invoke, kInvokeCount> {
 
   void finish() noexcept {
     if (!finished_) {
-      finished_ = true;
+      finished_ = true;@TIMER_FINISH@
       STATECTL_TRACE_CALL(tracer_, finished(detail::kDevice));
     }
   }
 
-  bool finished_ = false;
+  bool finished_ = false;@TIMER_FIELDS@
 #if STATECTL_TRACE
   statectl::Tracer* tracer_ = nullptr;
 #endif
@@ -339,11 +339,16 @@ _NO_EVENTS = """\
     fault(static_cast<std::size_t>(event));  // the chart has no events: always 101"""
 
 
-def _device_class(cls: str, start: int, cases: str, has_cells: bool) -> str:
+def _device_class(
+    cls: str, start: int, cases: str, has_cells: bool, parts: Mapping[str, str]
+) -> str:
     macro = f"STATECTL_{cls.upper()}_QUEUE_CAPACITY"
     body = _DISPATCH.replace("@CASES@", cases) if has_cells else _NO_EVENTS
+    device = _DEVICE
+    for place, text in parts.items():  # per-state timeouts (cpp_timers), empty without
+        device = device.replace(place, text)
     return (
-        _DEVICE.replace("@CLS@", cls)
+        device.replace("@CLS@", cls)
         .replace("@QUEUE_MACRO@", macro)
         .replace("@START@", f"run<{start}>(0)")
         .replace("@DISPATCH@", body)

@@ -49,6 +49,7 @@ from typing import Any
 
 from statectl.codegen.checks import _check_actions, _context
 from statectl.codegen.cpp_names import identifiers
+from statectl.codegen.cpp_timers import check_timeouts
 from statectl.codegen.flat import (
     Configuration,
     ContextField,
@@ -319,6 +320,7 @@ def flatten(chart: Chart) -> tuple[FlatChart | None, list[Diagnostic]]:
         )
         return None, diags
     _check_actions(chart, where, diags)
+    check_timeouts(chart, where, diags)  # G710-G712 (cpp_timers)
     values, fields = _context(chart, diags)
     if any(d.severity is Severity.ERROR for d in diags):
         return None, diags

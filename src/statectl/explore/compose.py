@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 from statectl.cell import Cell, GlobalExpr, InputKind, Link, Trigger
 from statectl.explore.local import LocalSpace, Outcome
+from statectl.explore.timeouts import timeout_events, timing_out
 from statectl.model import EventKind
 from statectl.semantics import Unhandled
 
@@ -178,6 +179,8 @@ class Composed:
                 for ev in space.events:
                     if space.kind[ev] is EventKind.COMPLETION:
                         out.append(Stimulus(InputKind.COMPLETION, d, ev))
+        for d, space in enumerate(self.spaces):  # a state's timeout: the device raises it
+            out.extend(Stimulus(InputKind.COMPLETION, d, ev) for ev in timeout_events(space.chart))
         return tuple(dict.fromkeys(out))
 
     def _initial(self) -> tuple[int, ...]:
@@ -192,7 +195,10 @@ class Composed:
         if s.kind is InputKind.FAULT and not space.monitored[lid]:
             return False
         if s.kind is InputKind.COMPLETION:
-            return any(o.handled for o in space.outcomes(lid, s.event))
+            if timing_out(space, lid, s.event):
+                return True
+            completion = self.cell.completions and space.kind[s.event] is EventKind.COMPLETION
+            return completion and any(o.handled for o in space.outcomes(lid, s.event))
         return True
 
     def fires(self, d: int, outcome: Outcome) -> tuple[int, ...]:

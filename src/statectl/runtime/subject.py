@@ -68,6 +68,7 @@ from statectl.runtime.records import (
     Started,
     StateEntered,
 )
+from statectl.runtime.timers import attach_timers
 from statectl.runtime.wiring import Wiring
 from statectl.semantics import Plan, Snapshot, Step, Unhandled, compiled, initial, step
 
@@ -145,6 +146,8 @@ class Subject(Wiring):
         self._serving = False
         self._worker: threading.Thread | None = None
         self._counts = 0  # events processed + invokes issued << _INVOKES, one add per event
+        if any(s.timeout is not None for s in chart.states):
+            attach_timers(self)  # per-state timeouts (runtime/timers.py)
 
     @staticmethod
     def _initial_data(chart: Chart, given: Mapping[str, Any] | None) -> dict[str, Any]:
@@ -401,6 +404,14 @@ class Subject(Wiring):
             return 1
         self.post(event, data)
         return self.run_until_idle()
+
+    def deliver(self, event: str, data: Any = None) -> None:
+        """Process ``event`` now, on the owner, at this point of the queue (a timer's
+        ``call_soon`` callback uses it); outside a run it is :meth:`dispatch`."""
+        if not self._busy:
+            self.dispatch(event, data)
+            return
+        self._process(event, data)
 
     def advance(self, seconds: float) -> int:
         """On a :class:`SimClock`: move time on, draining the queue after every timer."""

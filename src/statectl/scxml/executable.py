@@ -30,6 +30,7 @@ from statectl.model import (
     Transition,
 )
 from statectl.scxml.safecheck import src_outside
+from statectl.scxml.timeouts import is_timeout_handler
 from statectl.scxml.xmltree import (
     SCXML_NS,
     STATECTL_NS,
@@ -212,7 +213,7 @@ class ContentReader:
             return None
 
     def handlers(self, node: _Node, tag: str) -> tuple[Action, ...]:
-        blocks = [self.executable(h) for h in node.scxml_children(tag)]
+        blocks = [self.executable(h) for h in node.scxml_children(tag) if not is_timeout_handler(h)]
         if len(blocks) == 1:
             return blocks[0]
         return tuple(Block(b) for b in blocks)

@@ -55,6 +55,7 @@ from statectl.model import (
 )
 from statectl.scxml.executable import ContentReader
 from statectl.scxml.safecheck import check_safe
+from statectl.scxml.timeouts import read_defer, read_timeout
 from statectl.scxml.xmltree import (
     MAX_SRC_BYTES,
     MAX_XML_DEPTH,
@@ -184,6 +185,8 @@ class _Reader(ContentReader):
             data=self.data_items(node),
             invokes=tuple(self.invoke_def(i) for i in node.scxml_children("invoke")),
             donedata=donedata,
+            timeout=read_timeout(node),
+            defer=read_defer(node),
         )
         for c in children:
             self.state(c, name)

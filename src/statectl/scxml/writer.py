@@ -44,6 +44,7 @@ from statectl.model import (
     Transition,
 )
 from statectl.scxml.reader import SCXML_NS, STATECTL_NS
+from statectl.scxml.timeouts import timeout_lines
 
 __all__ = ["write_scxml"]
 
@@ -270,6 +271,8 @@ class _Writer:
         self.datamodel(depth, s.data)
         self.handlers(depth, "onentry", s.on_entry)
         self.handlers(depth, "onexit", s.on_exit)
+        for extra, line in timeout_lines(s):  # statectl.scxml.timeouts
+            self.emit(depth + extra, line)
         for event in sorted(e for state, e in self.chart.ignored if state == s.name):
             self.emit(depth, f"<statectl:ignore{_attrs(event=event)}/>")
         for index, t in self.by_source.get(s.name, []):

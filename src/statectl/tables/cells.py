@@ -28,6 +28,7 @@ from statectl.tables.rows import (
     normalize_column,
     unknown_column,
 )
+from statectl.tables.timeouts import timeout_cell
 
 
 def check_header(
@@ -202,6 +203,8 @@ def state_row(row: RawRow, diags: list[Diagnostic]) -> StateRow:
         type=_type(row, diags),
         default=_items(row, "default", diags)[0],
         number=_text(row, "number", diags),
+        timeout=timeout_cell(row, diags),
+        defer=_items(row, "defer", diags)[0],
     )
 
 

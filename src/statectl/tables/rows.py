@@ -27,6 +27,8 @@ STATE_COLUMNS = (
     "type",
     "default",
     "number",
+    "timeout",
+    "defer",
 )
 #: The columns every writer emits; ``type`` and ``default`` only when a row uses them.
 FLAT_STATE_COLUMNS = STATE_COLUMNS[:7]
@@ -64,6 +66,8 @@ ALIASES: Mapping[str, str] = {
     "state type": "type",
     "history default": "default",
     "state number": "number",
+    "deferred": "defer",
+    "defers": "defer",
 }
 #: Spellings accepted in the ``type`` column, after lowering and collapsing spaces.
 TYPE_WORDS: Mapping[str, StateKind] = {
@@ -115,6 +119,8 @@ class StateRow:
     type: StateKind | None = None  # None: atomic, or compound when it has children
     default: tuple[str, ...] = ()  # a history state's targets before it recorded anything
     number: str = ""  # the standard's state number (a profile's), checked by build (B236)
+    timeout: str = ""  # ``DURATION -> EVENT`` (statectl.tables.timeouts), empty: none
+    defer: tuple[str, ...] = ()  # events kept while the state is active
 
     @property
     def type_text(self) -> str:

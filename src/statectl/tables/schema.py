@@ -92,6 +92,7 @@ from statectl.tables.rows import (
     strip_locations,
     unknown_column,
 )
+from statectl.tables.timeouts import optional_state_columns
 
 #: Every public name, those defined in rows, literals and cells too (re-exported).
 __all__ = [
@@ -193,14 +194,14 @@ def make_tables(
 
 
 def state_columns(tables: DeviceTables) -> tuple[str, ...]:
-    """The state columns a writer emits: the flat ones, and ``type``/``default``/``number``
-    when a row uses them."""
+    """The state columns a writer emits: the flat ones, and ``type``/``default``/``number``/
+    ``timeout``/``defer`` when a row uses them."""
     columns: tuple[str, ...] = FLAT_STATE_COLUMNS
     if any(s.type is not None or s.default for s in tables.states):
         columns += ("type", "default")
     if any(s.number for s in tables.states):
         columns += ("number",)
-    return columns
+    return columns + optional_state_columns(tables)
 
 
 def state_cells(s: StateRow, columns: Sequence[str]) -> list[str]:
@@ -216,6 +217,8 @@ def state_cells(s: StateRow, columns: Sequence[str]) -> list[str]:
         "type": s.type_text,
         "default": ", ".join(s.default),
         "number": s.number,
+        "timeout": s.timeout,
+        "defer": ", ".join(s.defer),
     }
     return [cells[c] for c in columns]
 
@@ -248,6 +251,9 @@ def validate_for_writing(tables: DeviceTables, where: Location) -> list[Diagnost
         for item in s.ignore:
             if "," in item or item != item.strip() or not item:
                 diags.append(diag("T111", s.where, f"ignore item {item!r} cannot be written"))
+        for item in s.defer:
+            if "," in item or item != item.strip() or not item:
+                diags.append(diag("T111", s.where, f"defer item {item!r} cannot be written"))
         for item in s.default:
             if "," in item or item != item.strip() or not item:
                 diags.append(diag("T111", s.where, f"default item {item!r} cannot be written"))

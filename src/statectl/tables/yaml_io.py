@@ -269,6 +269,10 @@ def _state_doc(tables: DeviceTables) -> list[dict[str, Any]]:
             n = s.number
             whole = n.isascii() and n.isdigit() and len(n) < 19 and str(int(n)) == n
             row["number"] = int(n) if whole else n
+        if s.timeout:
+            row["timeout"] = s.timeout
+        if s.defer:
+            row["defer"] = list(s.defer)
         rows.append(row)
     return rows
 

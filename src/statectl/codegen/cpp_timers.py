@@ -1,0 +1,184 @@
+"""Per-state timeouts in the generated C++: counted on a millisecond tick the controller supplies.
+
+Rules:
+1. Generated code reads no clock. ``tick(now_ms)`` takes a monotonic millisecond count
+   from the controller (any ``uint32_t`` that wraps; call it at least every 2^31 ms);
+   a step that enters a state with a timeout arms it at the last tick's time plus its
+   duration, a step that leaves it (or the end of the run) disarms it.
+2. ``tick`` first runs the queued events, then fires every armed timeout that is due,
+   earliest deadline first (ties: the one armed first), each as ``dispatch`` of its
+   event at its deadline (an entry it causes is armed from there) followed by
+   ``run_until_idle``: exactly what the Python runtime does when a SimClock advances,
+   so the traces are equal (tests/test_codegen_timers.py).
+3. A chart without timeouts gets none of this: no member, no table, not a byte.
+4. G710 a timeout whose event the chart does not know, G711 a duration that is not a
+   whole number of milliseconds from 1 to 2^31-1, G712 a timeout on a state the flat
+   tables cannot index (more than 32767 states).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from statectl.codegen.flat import FlatChart
+from statectl.errors import Diagnostic, Location, Severity
+from statectl.model import Chart
+
+__all__ = ["check_timeouts", "device_parts", "timer_tables"]
+
+_MAX_MS = 2**31 - 1
+
+
+def check_timeouts(chart: Chart, where: Location, diags: list[Diagnostic]) -> None:
+    """G710-G712 for the chart's timeouts, before anything is flattened."""
+    events = set(chart.event_names)
+    for index, s in enumerate(chart.states):
+        t = s.timeout
+        if t is None:
+            continue
+        at = t.origin if t.origin.file is not None else where
+        if t.event not in events:
+            diags.append(
+                Diagnostic(
+                    "G710",
+                    Severity.ERROR,
+                    at,
+                    f"state {s.name!r} times out with {t.event!r}, which the chart does not know",
+                    "declare the event (an event row) so the C++ has an Event for it",
+                )
+            )
+        ms = t.seconds * 1000
+        if not (1 <= ms <= _MAX_MS) or abs(ms - round(ms)) > 1e-6:
+            diags.append(
+                Diagnostic(
+                    "G711",
+                    Severity.ERROR,
+                    at,
+                    f"state {s.name!r}: timeout {t.seconds!r} s is not a whole number of "
+                    f"milliseconds from 1 to {_MAX_MS}",
+                    "the C++ counts milliseconds in a uint32_t: round the duration",
+                )
+            )
+        if index > 32767:
+            diags.append(
+                Diagnostic(
+                    "G712",
+                    Severity.ERROR,
+                    at,
+                    f"state {s.name!r} (number {index}) is past the timeout table's int16 index",
+                    "a chart with timeouts may have at most 32768 states",
+                )
+            )
+
+
+def _timeouts(flat: FlatChart) -> list[tuple[str, int, int]]:
+    """(state, milliseconds, event index) per state with a timeout, in state order."""
+    out = []
+    for name in flat.states:
+        t = flat.chart.state(name).timeout
+        if t is not None:
+            out.append((name, round(t.seconds * 1000), flat.events.index(t.event)))
+    return out
+
+
+def timer_tables(flat: FlatChart) -> list[str]:
+    """The ``detail`` tables of the timeouts (nothing for a chart without any)."""
+    timeouts = _timeouts(flat)
+    if not timeouts:
+        return []
+    slot = {name: k for k, (name, _, _) in enumerate(timeouts)}
+    lines = [
+        "// Per-state timeouts (the state table's timeout cells), counted by tick(now_ms).",
+        f"inline constexpr std::size_t kTimeoutCount = {len(timeouts)};",
+        "inline constexpr std::uint32_t kTimeoutMs[kTimeoutCount] = {",
+        *(f"    {ms}u,  // {name}" for name, ms, _ in timeouts),
+        "};",
+        "inline constexpr Event kTimeoutEvent[kTimeoutCount] = {",
+        *(f"    Event({e}),  // {flat.events[e]}" for _, _, e in timeouts),
+        "};",
+        "// The timeout slot of each state, -1 for none.",
+        "inline constexpr std::int16_t kTimeoutOf[kStateCount] = {",
+        "    " + ", ".join(str(slot.get(s, -1)) for s in flat.states) + ",",
+        "};",
+        "",
+    ]
+    return lines
+
+
+_PUBLIC = """
+
+  /// Per-state timeouts: tell the device the time, a monotonic millisecond count from the
+  /// controller (wrapping at 2^32 is fine; call at least every 2^31 ms). Runs the queued
+  /// events, then every timeout due by now_ms, earliest first, each at its deadline.
+  void tick(std::uint32_t now_ms) noexcept {
+    run_until_idle();
+    for (;;) {
+      std::size_t due = detail::kTimeoutCount;
+      for (std::size_t k = 0; k < detail::kTimeoutCount; ++k) {
+        if (!timeout_armed_[k] ||
+            static_cast<std::int32_t>(now_ms - timeout_deadline_[k]) < 0) {
+          continue;
+        }
+        if (due != detail::kTimeoutCount) {
+          const auto d = static_cast<std::int32_t>(timeout_deadline_[k] - timeout_deadline_[due]);
+          const auto s = static_cast<std::int32_t>(timeout_seq_[k] - timeout_seq_[due]);
+          if (d > 0 || (d == 0 && s > 0)) {
+            continue;
+          }
+        }
+        due = k;
+      }
+      if (due == detail::kTimeoutCount) {
+        break;
+      }
+      now_ms_ = timeout_deadline_[due];
+      timeout_armed_[due] = false;
+      dispatch(detail::kTimeoutEvent[due]);
+      run_until_idle();
+    }
+    now_ms_ = now_ms;
+  }
+
+  /// The time of the last tick (what an entry arms its timeout from).
+  std::uint32_t now_ms() const noexcept { return now_ms_; }
+
+  /// Is the timeout of chart state `state` running?
+  bool timing(State state) const noexcept {
+    const int slot = detail::kTimeoutOf[static_cast<std::size_t>(state)];
+    return slot >= 0 && timeout_armed_[static_cast<std::size_t>(slot)];
+  }"""
+
+_ENTER = """
+      if constexpr (detail::kTimeoutOf[fx.arg] >= 0) {
+        constexpr auto k = static_cast<std::size_t>(detail::kTimeoutOf[fx.arg]);
+        timeout_armed_[k] = true;
+        timeout_deadline_[k] = now_ms_ + detail::kTimeoutMs[k];
+        timeout_seq_[k] = timeout_next_seq_++;
+      }"""
+
+_EXIT = """
+      if constexpr (detail::kTimeoutOf[fx.arg] >= 0) {
+        timeout_armed_[static_cast<std::size_t>(detail::kTimeoutOf[fx.arg])] = false;
+      }"""
+
+_FINISH = """
+      for (bool& armed : timeout_armed_) {
+        armed = false;
+      }"""
+
+_FIELDS = """
+  std::uint32_t now_ms_ = 0;
+  std::uint32_t timeout_next_seq_ = 0;
+  bool timeout_armed_[detail::kTimeoutCount] = {};
+  std::uint32_t timeout_deadline_[detail::kTimeoutCount] = {};
+  std::uint32_t timeout_seq_[detail::kTimeoutCount] = {};"""
+
+#: The placeholders of the device class template (cpp_tables._DEVICE).
+PLACES = ("@TIMER_PUBLIC@", "@TIMER_ENTER@", "@TIMER_EXIT@", "@TIMER_FINISH@", "@TIMER_FIELDS@")
+
+
+def device_parts(flat: FlatChart) -> Mapping[str, str]:
+    """The device class's timeout code per placeholder; all empty without timeouts."""
+    if not _timeouts(flat):
+        return dict.fromkeys(PLACES, "")
+    return dict(zip(PLACES, (_PUBLIC, _ENTER, _EXIT, _FINISH, _FIELDS), strict=True))
