@@ -111,6 +111,9 @@ ALL: tuple[Code, ...] = (
         "a workbook that unpacks to more than the limit (a zip bomb): see docs/limits.md",
         _TABLES,
     ),
+    _c("T122", _E, "a bad event data declaration (data column: 'name: type, ...')", _TABLES),
+    _c("T123", _E, "a bad assign cell ('name = expression; ...')", _TABLES),
+    _c("T124", _E, "an XLSX formula cell with no saved value (read it would be empty)", _TABLES),
     # -- B2xx: building a chart from tables, and tables from a chart (statectl.build) -----
     _c("B201", _E, "an event row's old or new state is not in the State Definition table", _TABLES),
     _c("B202", _E, "no state is marked default", _TABLES),
@@ -156,6 +159,17 @@ ALL: tuple[Code, ...] = (
     ),
     _c("B222", _I, "a guard outside the safe expression language does not fit the tables", _TABLES),
     _c("B223", _I, "the tables made from a chart would not build the same chart", _TABLES),
+    _c("B230", _E, "rows for one event declare different data", _TABLES),
+    _c(
+        "B231",
+        _E,
+        "event data read with a spelling that cannot work (_event.data.NAME does)",
+        _TABLES,
+    ),
+    _c("B232", _E, "a guard or assignment reads a field the event does not declare", _TABLES),
+    _c("B233", _W, "a guard or assignment reads data of an event that declares none", _TABLES),
+    _c("B234", _E, "an assignment to a name that is not a data item", _TABLES),
+    _c("B235", _E, "identical event rows that disagree on their assignments", _TABLES),
     # -- X3xx: the safe expression language (statectl.expr, scxml.safecheck) --------------
     _c("X301", _E, "an expression does not parse (or is nested too deeply to analyse)", _BUILDER),
     _c("X302", _E, "an expression uses something the safe expression language refuses", _BUILDER),
