@@ -175,3 +175,49 @@ def test_load_and_build_of_the_motor_is_clean() -> None:
     chart, diags = load_and_build(MOTOR)
     assert chart is not None
     assert not [d for d in diags if d.severity is Severity.ERROR]
+
+
+# --- the Recovery table through SCXML ---------------------------------------------------
+
+
+def test_scxml_export_carries_the_motors_recovery_table(tmp_path: Path) -> None:
+    """Export then import keeps the Motor's Recovery rules and its chart."""
+    from statectl.build import load_chart, strip_origins
+    from statectl.tables import strip_locations
+
+    doc, back = tmp_path / "motor.scxml", tmp_path / "motor.yaml"
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["scxml", "export", str(MOTOR), "--out", str(doc)], out, err) == 0, err.getvalue()
+    assert doc.read_text().count("<statectl:recovery ") == 2
+    assert main(["scxml", "import", str(doc), "--out", str(back)], out, err) == 0, err.getvalue()
+    original, _ = load(MOTOR)
+    again, diags = load(back)
+    assert original is not None and again is not None and not diags
+    assert strip_locations(again).recovery == strip_locations(original).recovery
+    assert strip_origins(load_chart(back)) == strip_origins(load_chart(MOTOR))
+
+
+@pytest.mark.parametrize(
+    ("element", "word"),
+    [
+        ('<statectl:recovery state="Returning" redo="maybe"/>', "redo"),
+        ('<statectl:recovery state="Moving"/>', "neither"),
+        ('<statectl:recovery event="Error"/>', "'state'"),
+        ('<statectl:recovery state="Moving" event="Error" when="now"/>', "unknown attribute"),
+        ('<statectl:recovery state="Moving" event="Error" data="{a: [1"/>', "plain value"),
+    ],
+)
+def test_a_bad_recovery_element_is_refused_on_import(element: str, word: str) -> None:
+    """A <statectl:recovery> that is no valid Recovery row is S623, with its line."""
+    from statectl.errors import DiagnosticError
+    from statectl.scxml_io import export_file, import_text
+
+    text = export_file(MOTOR)
+    lines = [ln for ln in text.split("\n") if "<statectl:recovery " not in ln]
+    lines.insert(2, "  " + element)
+    with pytest.raises(DiagnosticError) as caught:
+        import_text("\n".join(lines), "m.scxml")
+    found = [d for d in caught.value.diagnostics if d.code == "S623"]
+    assert found, caught.value.diagnostics
+    assert all(d.where.line == 3 for d in found)
+    assert any(word in d.message for d in found), found

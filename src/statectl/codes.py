@@ -248,6 +248,7 @@ ALL: tuple[Code, ...] = (
     _c("S620", _E, "elements nested deeper than the limit (MAX_XML_DEPTH)", _SCXML),
     _c("S621", _E, "an encoding the document declares cannot be read", _SCXML),
     _c("S622", _E, "the DTD declares an entity: refused", _SCXML),
+    _c("S623", _E, "a <statectl:recovery> element that is no valid Recovery row", _SCXML),
     # -- J6xx: the Recovery table against its chart (statectl.recovery) -------------------
     _c(
         "J603",
