@@ -6,7 +6,7 @@ import io
 from pathlib import Path
 
 import pytest
-from tests.support import Recorder
+from support import Recorder
 
 from statectl.build import build, chart_to_tables, strip_origins
 from statectl.cli.run import run
@@ -209,3 +209,85 @@ def test_run_refuses_a_stdin_line_with_data_the_event_does_not_declare(
     assert word in err.getvalue()
     if code:
         assert "line 1:" in err.getvalue()
+
+
+# --- generated C++ -------------------------------------------------------------------------
+
+COUNTER = """\
+device: Counter
+data:
+  count: 0
+  limit: 3
+  other: 10
+states:
+  - {state: Idle, control: default}
+  - {state: Busy, control: event trigger required}
+events:
+  - {event: Go, guard: count < limit, old: Idle, new: Busy, api: Go, assign: "count = count + 1"}
+  - {event: Go completion, old: Busy, new: Idle, kind: completion, api: Go}
+  - {event: Swap, old: Idle, new: Idle, assign: "count = other; other = count"}
+"""
+
+
+def _counter(assign_swap: str = "count = other; other = count") -> Chart:
+    text = COUNTER.replace("count = other; other = count", assign_swap)
+    tables, diags = read_yaml(text, "counter.yaml")
+    assert tables is not None, diags
+    chart, more = build(tables)
+    assert chart is not None, more
+    return chart
+
+
+def test_codegen_turns_assignments_into_assign_effects() -> None:
+    """Each transition's assignments become one ASSIGN effect, first in its step."""
+    from statectl.codegen.flat import EffectKind, Outcome
+    from statectl.codegen.flatten import flatten
+
+    flat, diags = flatten(_counter())
+    assert flat is not None and not diags, diags
+    assert [g.source for g in flat.assignments] == [
+        "count = count + 1",
+        "count = other; other = count",
+    ]
+    assert flat.assignments[1].stores == (("count", "c.other"), ("other", "c.count"))
+    go = flat.dispatch[0][flat.events.index("Go")]
+    leaves = [go] if isinstance(go, Outcome) else [go.if_true, go.if_false]
+    taken = next(o for o in leaves if isinstance(o, Outcome) and o.handled)
+    assert taken.effects[0].kind is EffectKind.ASSIGN
+
+
+@pytest.mark.parametrize(
+    ("swap", "word"),
+    [
+        ("count = count / 2", "does not translate"),
+        ("count = _event.data.n", "_event"),
+        ("count = 1 if previous == 'Busy' else 0", "previous"),
+    ],
+)
+def test_codegen_refuses_an_assignment_it_cannot_perform(swap: str, word: str) -> None:
+    """An assignment C++ cannot perform is G713 at the row, not dropped."""
+    from statectl.codegen.flatten import flatten
+
+    _, diags = flatten(_counter(swap))
+    g713 = [d for d in diags if d.code == "G713"]
+    assert g713, diags
+    assert word in g713[0].message
+    assert g713[0].where.line == 12
+
+
+def test_generated_cpp_performs_the_assignments_as_python_does(tmp_path: Path) -> None:
+    """The generated device counts and swaps as the Python runtime does (same traces)."""
+    from codegen_support import CppDevice, assert_equivalent, needs_gxx
+
+    if needs_gxx.args[0]:
+        pytest.skip("no g++ on this machine")
+    device = CppDevice(_counter(), tmp_path)
+    go = ["Go", "Go completion"]
+    assert_equivalent(
+        device,
+        [
+            ({}, go * 4),
+            ({"limit": 1}, go * 2),
+            ({}, ["Swap", *go * 2, "Swap", *go]),  # count = 10 after Swap: Go is refused
+        ],
+    )
