@@ -6,7 +6,6 @@ import io
 from pathlib import Path
 
 import pytest
-from support import Recorder
 
 from statectl.build import build, chart_to_tables, strip_origins
 from statectl.cli.run import run
@@ -17,6 +16,7 @@ from statectl.runtime.clock import SimClock
 from statectl.runtime.eventdata import AssignError
 from statectl.scxml import read_scxml, write_scxml
 from statectl.tables.yaml_io import read_yaml
+from support import Recorder
 
 INDEXER = """\
 device: Indexer
