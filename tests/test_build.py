@@ -259,7 +259,8 @@ def test_build_diagnostic(text: str, code: str, severity: Severity, word: str) -
 
 def test_identical_event_rows_become_one_transition() -> None:
     """Merging identical rows leaves one transition per (event, old, new, guard)."""
-    chart, _ = build(tables_of(with_rows(events="  - event: go\n    old: A\n    new: B\n")))
+    row = "  - event: go\n    old: A\n    new: B\n    api: Go\n"
+    chart, _ = build(tables_of(with_rows(events=row)))
     assert chart is not None
     assert [t.events for t in chart.transitions] == [("go",), ("back",)]
 

@@ -99,7 +99,7 @@ def test_guard_over_context_becomes_a_runtime_decision() -> None:
     ("changes", "code"),
     [
         ({"transitions": (Transition("A", ("go",), ("B",), actions=(Script("x = 1"),)),)}, "G701"),
-        ({"transitions": (Transition("A", ("go",), ("B",), actions=(Assign("x", "1"),)),)}, "G701"),
+        ({"transitions": (Transition("A", ("go",), ("B",), actions=(Assign("x", "1"),)),)}, "G713"),
         (
             {
                 "transitions": (Transition("A", ("go",), ("B",), guard="n // 2 > 0"),),

@@ -117,6 +117,9 @@ ALL: tuple[Code, ...] = (
         "a timeout cell that is not DURATION -> EVENT (unit ms, s or min; 1 ms to 2^31-1 ms)",
         _TABLES,
     ),
+    _c("T122", _E, "a bad event data declaration (data column: 'name: type, ...')", _TABLES),
+    _c("T123", _E, "a bad assign cell ('name = expression; ...')", _TABLES),
+    _c("T124", _E, "an XLSX formula cell with no saved value (read it would be empty)", _TABLES),
     # -- B2xx: building a chart from tables, and tables from a chart (statectl.build) -----
     _c("B201", _E, "an event row's old or new state is not in the State Definition table", _TABLES),
     _c("B202", _E, "no state is marked default", _TABLES),
@@ -169,6 +172,17 @@ ALL: tuple[Code, ...] = (
     _c("B226", _E, "a defer cell names an event that is not in the events table", _TABLES),
     _c("B227", _E, "a state defers an event it (or an ancestor) handles", _TABLES),
     _c("B228", _W, "a state's api names a method no event entering or leaving it uses", _TABLES),
+    _c("B230", _E, "rows for one event declare different data", _TABLES),
+    _c(
+        "B231",
+        _E,
+        "event data read with a spelling that cannot work (_event.data.NAME does)",
+        _TABLES,
+    ),
+    _c("B232", _E, "a guard or assignment reads a field the event does not declare", _TABLES),
+    _c("B233", _W, "a guard or assignment reads data of an event that declares none", _TABLES),
+    _c("B234", _E, "an assignment to a name that is not a data item", _TABLES),
+    _c("B235", _E, "identical event rows that disagree on their assignments", _TABLES),
     # -- X3xx: the safe expression language (statectl.expr, scxml.safecheck) --------------
     _c("X301", _E, "an expression does not parse (or is nested too deeply to analyse)", _BUILDER),
     _c("X302", _E, "an expression uses something the safe expression language refuses", _BUILDER),
@@ -271,6 +285,7 @@ ALL: tuple[Code, ...] = (
     _c("S620", _E, "elements nested deeper than the limit (MAX_XML_DEPTH)", _SCXML),
     _c("S621", _E, "an encoding the document declares cannot be read", _SCXML),
     _c("S622", _E, "the DTD declares an entity: refused", _SCXML),
+    _c("S623", _E, "a <statectl:recovery> element that is no valid Recovery row", _SCXML),
     # -- J6xx: the Recovery table against its chart (statectl.recovery) -------------------
     _c(
         "J603",
@@ -331,6 +346,7 @@ ALL: tuple[Code, ...] = (
     _c("G710", _E, "a state's timeout names an event the chart does not know", _CODEGEN),
     _c("G711", _E, "a timeout that is not a whole number of milliseconds (1 to 2^31-1)", _CODEGEN),
     _c("G712", _E, "a timeout on a state past the timeout table's index (32768 states)", _CODEGEN),
+    _c("G713", _E, "an assignment the generated code cannot perform", _CODEGEN),
     # -- V8xx: cell files (statectl.cell) -------------------------------------------------
     _c("V801", _E, "the cell file cannot be read or is not a YAML mapping", _CELLS),
     _c("V802", _E, "an unknown key", _CELLS),

@@ -290,6 +290,8 @@ class EventDef:
     api: str | None = None  # the observer method (device API) this event drives or reports on
     description: str = ""
     origin: Location = NOWHERE
+    #: declared data fields ``((name, type), ...)``; empty: the event declares none
+    fields: tuple[tuple[str, str], ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

@@ -11,6 +11,10 @@ Rules:
    the info diagnostics say why; nothing is written then.
 3. A document with errors raises :class:`~statectl.errors.DiagnosticError`
    carrying every diagnostic, as :func:`statectl.build.load_chart` does.
+4. The Recovery table is no part of the chart: export writes each row as a
+   ``<statectl:recovery state event data/>`` (or ``redo="yes"``) element at the
+   top of the document and import reads them back, checked as the table's rows
+   are (S623 for a bad one), so a device file survives the round trip whole.
 
 This module sits above both :mod:`statectl.scxml` and :mod:`statectl.build`, which
 must not import each other.
@@ -18,14 +22,24 @@ must not import each other.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from pathlib import Path
+from xml.sax.saxutils import quoteattr
 
 from statectl.build import chart_to_tables, load_chart
 from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, has_errors
 from statectl.model import Chart
 from statectl.scxml import read_scxml, write_scxml
-from statectl.tables import DeviceTables, save
+from statectl.scxml.reader import statectl_elements
+from statectl.tables import DeviceTables, load, save
+from statectl.tables.schema import (
+    RECOVERY_COLUMNS,
+    RawRow,
+    RecoveryRow,
+    format_literal,
+    recovery_row,
+)
 
 __all__ = ["export_file", "import_file", "import_text"]
 
@@ -41,8 +55,65 @@ def import_text(
     chart, diagnostics = read_scxml(text, file, base)
     if chart is None or has_errors(diagnostics):
         raise DiagnosticError(diagnostics)
+    recovery, problems = _recovery_rows(text, file)
+    if problems:
+        raise DiagnosticError([*diagnostics, *problems])
     tables, why = chart_to_tables(chart)
+    if tables is not None and recovery:
+        tables = dataclasses.replace(tables, recovery=recovery)
     return tables, chart, [*diagnostics, *why]
+
+
+def _recovery_rows(
+    text: str | bytes, file: str
+) -> tuple[tuple[RecoveryRow, ...], list[Diagnostic]]:
+    """The Recovery table the document carries as ``<statectl:recovery>`` (rule 4)."""
+    rows: list[RecoveryRow] = []
+    problems: list[Diagnostic] = []
+    for attrs, line in statectl_elements(text, "recovery"):
+        where = Location(file, line)
+        found: list[Diagnostic] = []
+        unknown = sorted(set(attrs) - set(RECOVERY_COLUMNS))
+        for name in unknown:
+            found.append(
+                Diagnostic(
+                    "T103",
+                    Severity.ERROR,
+                    where,
+                    f"unknown attribute {name!r}",
+                    "known: " + ", ".join(RECOVERY_COLUMNS),
+                )
+            )
+        cells = {k: (v, where) for k, v in attrs.items() if k in RECOVERY_COLUMNS}
+        row = recovery_row(RawRow(where, cells), found)
+        problems.extend(
+            Diagnostic(
+                "S623",
+                Severity.ERROR,
+                d.where,
+                f"<statectl:recovery>: {d.message}",
+                d.hint or 'write state= with event= (and data=) or redo="yes"',
+            )
+            for d in found
+        )
+        rows.append(row)
+    return tuple(rows), problems
+
+
+def _recovery_elements(tables: DeviceTables) -> list[str]:
+    """The Recovery table as ``<statectl:recovery>`` elements (rule 4)."""
+    out = []
+    for r in tables.recovery:
+        attrs = {"state": r.state}
+        if r.redo:
+            attrs["redo"] = "yes"
+        else:
+            attrs["event"] = r.event
+        if r.data is not None:
+            attrs["data"] = format_literal(r.data)
+        shown = "".join(f" {k}={quoteattr(v)}" for k, v in attrs.items())
+        out.append(f"  <statectl:recovery{shown}/>")
+    return out
 
 
 def import_file(
@@ -81,4 +152,12 @@ def export_file(path: str | os.PathLike[str]) -> str:
 
     Raises :class:`DiagnosticError` if the device file does not build.
     """
-    return write_scxml(load_chart(path))
+    chart = load_chart(path)
+    text = write_scxml(chart)
+    tables, _ = load(path)
+    if tables is None or not tables.recovery:
+        return text
+    lines = text.split("\n")
+    at = next(i for i, line in enumerate(lines) if line.startswith("<scxml")) + 1
+    lines[at:at] = _recovery_elements(tables)
+    return "\n".join(lines)

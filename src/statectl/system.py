@@ -101,6 +101,10 @@ class System:
     _live: bool = False  # started and not closing: the writer may drain
     #: devices that had something queued since the owner last looked (rule 1)
     _ready: deque[Subject] = field(default_factory=deque)
+    #: simulated seconds a batch settle lets pass at most (``statectl run --settle-limit``)
+    settle_limit: float = SETTLE_LIMIT
+    #: settles that stopped at ``settle_limit`` with device work still pending
+    settle_cut: int = 0
 
     def __post_init__(self) -> None:
         if self.max_queue is not None and self.max_queue < 1:
@@ -254,8 +258,9 @@ class System:
             clock.advance(seconds, settle=self._drain)
             self._drain()
 
-    def settle(self, limit: float = SETTLE_LIMIT) -> None:
-        """On a SimClock: let time pass until the work in flight is done (or ``limit`` seconds).
+    def settle(self, limit: float | None = None) -> None:
+        """On a SimClock: let time pass until the work in flight is done (or ``limit`` seconds,
+        default :attr:`settle_limit`; a settle cut short there is counted in :attr:`settle_cut`).
 
         Work is every timer but the background ones: a monitor polls for as long as
         its state is active, so waiting for it would always run to the limit. Polls
@@ -266,11 +271,13 @@ class System:
             if not isinstance(clock, SimClock):
                 self._drain()
                 return
-            end = clock.now() + limit
+            end = clock.now() + (self.settle_limit if limit is None else limit)
             self._drain()
             while True:
                 self._commit()
                 due = clock.next_deadline(work_only=True)
+                if due is not None and due > end:
+                    self.settle_cut += 1  # work pending at the limit: the run says so
                 if due is None or due > end:
                     break
                 clock.run_until(due, settle=self._drain)

@@ -49,6 +49,7 @@ import dataclasses
 from typing import Any
 
 from statectl.builder.common import GUARD_NAMES, _compile, _d, _hint, _literal
+from statectl.builder.eventdata import assign_actions, check_guard, event_fields
 from statectl.builder.events import _check_invokes, _event_defs, _merge_events
 from statectl.builder.extras import check_apis, expand_ignore, state_extras
 from statectl.builder.numbers import state_numbers
@@ -61,7 +62,6 @@ from statectl.builder.states import (
     _removed,
 )
 from statectl.errors import Diagnostic, Location, Severity, has_errors
-from statectl.expr import check_names
 from statectl.model import (
     Action,
     Chart,
@@ -157,6 +157,8 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
     state_names = list(merged)
     data_names = [name for name, _ in tables.data]
     known = set(data_names) | GUARD_NAMES
+    fields = event_fields(tables.events, diags)
+    assigns: dict[tuple[str, ...], tuple[Action, ...]] = {}  # a row's assignments (eventdata)
     for r in tables.events:
         for column in ("old", "new"):
             target = getattr(r, column)
@@ -174,10 +176,14 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
             expression, problems = _compile(r.guard, r.where)
             diags.extend(problems)
             if expression is not None:
-                diags.extend(check_names(expression, known, r.where))
+                diags.extend(check_guard(expression, r, known, fields, data_names))
+        made = assign_actions(r, known, fields, data_names, diags)
+        assigns.setdefault((r.event, r.old, r.new, r.guard), made)
 
     rows = _merge_events(tables.events, diags)
-    events = _event_defs(rows, diags)
+    events = tuple(
+        dataclasses.replace(e, fields=fields.get(e.name, ())) for e in _event_defs(rows, diags)
+    )
     _check_invokes(rows, diags)
     apis, invokes = derive_invokes(
         [EventSpec(r.event, r.kind, r.api or None, r.new, r.invoke or None) for r in rows]
@@ -185,10 +191,10 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
     by_method: dict[str, Invoke] = {i.method: i for i in invokes}
     transitions: list[Transition] = []
     for r in rows:
-        actions: tuple[Action, ...] = ()
+        actions: tuple[Action, ...] = assigns.get((r.event, r.old, r.new, r.guard), ())
         invoke = by_method.get(r.api)
         if r.kind in DRIVING_KINDS and invoke is not None:
-            actions = (Notify(invoke.number, invoke.name, invoke.method, r.event),)
+            actions += (Notify(invoke.number, invoke.name, invoke.method, r.event),)
         transitions.append(
             Transition(
                 source=r.old,

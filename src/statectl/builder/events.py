@@ -5,9 +5,11 @@ from :mod:`statectl.builder.chart` because the event rows are checked on their o
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 
 from statectl.builder.common import _d, _rows_text, _unique
+from statectl.builder.eventdata import merge_conflicts
 from statectl.errors import Diagnostic, Severity
 from statectl.model import (
     EventDef,
@@ -25,6 +27,7 @@ def _merge_events(rows: Sequence[EventRow], diags: list[Diagnostic]) -> list[Eve
     for (event, old, new, _), group in groups.items():
         first = group[0]
         if len(group) > 1:
+            merge_conflicts(group, diags)
             diags.append(
                 _d(
                     "B204",
@@ -36,16 +39,11 @@ def _merge_events(rows: Sequence[EventRow], diags: list[Diagnostic]) -> list[Eve
                 )
             )
             conditions = "; ".join(_unique([r.condition for r in group]))
-            first = EventRow(
-                first.event,
-                conditions,
-                first.guard,
-                first.old,
-                first.new,
-                first.kind,
-                first.api,
-                first.invoke or next((r.invoke for r in group if r.invoke), ""),
-                first.where,
+            first = dataclasses.replace(
+                first,
+                condition=conditions,
+                invoke=first.invoke or next((r.invoke for r in group if r.invoke), ""),
+                fields=first.fields or next((r.fields for r in group if r.fields), ()),
             )
         merged.append(first)
     return merged

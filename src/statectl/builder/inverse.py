@@ -14,6 +14,7 @@ from statectl.builder.common import GUARD_NAMES, _compile, _literal
 from statectl.errors import Diagnostic, Location, Severity
 from statectl.expr import check_names
 from statectl.model import (
+    Assign,
     Chart,
     ControlKind,
     DataItem,
@@ -21,6 +22,7 @@ from statectl.model import (
     Notify,
     State,
     StateKind,
+    Transition,
 )
 from statectl.observers import EventSpec, derive_invokes
 from statectl.tables import DeviceTables
@@ -140,7 +142,7 @@ def _misfits(chart: Chart) -> list[Diagnostic]:
             shape = "has no target" if not t.targets else "has several targets"
         elif t.internal:
             shape = "is internal"
-        elif any(not isinstance(a, Notify) for a in t.actions):
+        elif any(not _table_action(a) for a in t.actions):
             out.append(
                 _info(
                     "B220",
@@ -172,6 +174,11 @@ def _misfits(chart: Chart) -> list[Diagnostic]:
                     )
                 )
     return out
+
+
+def _table_action(a: object) -> bool:
+    """An action an event row holds: its notification, or an assignment (``assign``)."""
+    return isinstance(a, Notify) or (isinstance(a, Assign) and a.expr is not None)
 
 
 def _split_component(text: str, component: str) -> tuple[str, str]:
@@ -235,6 +242,9 @@ def _rows_of(chart: Chart) -> tuple[DeviceTables, Chart]:
         for t in chart.transitions
     ]
     derived = {i.method: i.name for i in derive_invokes(specs)[1]}
+    first_row: dict[str, Transition] = {}  # an event's data is declared on its first row
+    for t in chart.transitions:
+        first_row.setdefault(t.events[0], t)
     explicit = {i.method: i.name for i in chart.invokes if derived.get(i.method) != i.name}
     events = tuple(
         EventRow(
@@ -246,6 +256,10 @@ def _rows_of(chart: Chart) -> tuple[DeviceTables, Chart]:
             kind=spec.kind,
             api=spec.api or "",
             invoke=explicit.get(spec.api or "", ""),
+            fields=declared[t.events[0]].fields
+            if t.events[0] in declared and first_row.get(t.events[0]) is t
+            else (),
+            assign=tuple((a.location, a.expr or "") for a in t.actions if isinstance(a, Assign)),
         )
         for t, spec in zip(chart.transitions, specs, strict=True)
     )

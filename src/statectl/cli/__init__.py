@@ -184,6 +184,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     s.add_argument("--realtime", action="store_true", help="run on the wall clock")
     s.add_argument(
+        "--settle-limit",
+        type=float,
+        metavar="SECONDS",
+        help="batch runs: simulated seconds each event may take to settle (default 60); "
+        "a run that stops settling there says so and exits 1",
+    )
+    s.add_argument(
         "--opcua",
         nargs="?",
         const="",

@@ -271,6 +271,7 @@ def cmd_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         guarantee=args.guarantee,
         realtime=args.realtime,
         opcua=args.opcua,
+        settle_limit=args.settle_limit,
         out=out,
         err=err,
     )

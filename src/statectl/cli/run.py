@@ -54,6 +54,7 @@ from typing import Any, TextIO
 
 from statectl.cell import Cell, load_cell
 from statectl.cli.commands import OK, PROBLEMS, USAGE
+from statectl.cli.settle import unsettled_note
 from statectl.devices import (
     MIN_TOKEN,
     DashboardConfig,
@@ -149,6 +150,7 @@ class _Problems:
         self._lock = threading.Lock()  # the feeder thread and the owner both count
         self.lines = 0  # event lines reported and skipped
         self.unknown = 0  # events no chart knows, or rejected under the 'error' policy
+        self.unsettled = ""  # a batch settle stopped at --settle-limit: what to say
 
     def record(self, record: object) -> None:
         """A listener: count the events a device refused or did not know."""
@@ -170,6 +172,8 @@ class _Problems:
             parts.append(f"{self.lines} event line(s) reported above and skipped")
         if self.unknown:
             parts.append(f"{self.unknown} event(s) unknown to the device or rejected")
+        if self.unsettled:
+            parts.append(self.unsettled)
         return "; ".join(parts) or None
 
 
@@ -242,6 +246,7 @@ def run(
     guarantee: str = "prompt",
     realtime: bool = False,
     opcua: str | None = None,
+    settle_limit: float | None = None,
     events: TextIO | None = None,
     out: TextIO = sys.stdout,
     err: TextIO = sys.stderr,
@@ -266,6 +271,11 @@ def run(
         return USAGE
     if not Path(path).exists():
         err.write(f"statectl run: {path}: no such file\n")
+        return USAGE
+    if settle_limit is not None and not settle_limit > 0:
+        err.write(
+            f"statectl run: --settle-limit must be more than 0 seconds (got {settle_limit})\n"
+        )
         return USAGE
     if port is not None and not 0 <= port <= MAX_PORT:
         err.write(f"statectl run: --port must be 0 (any free port) to {MAX_PORT} (got {port})\n")
@@ -317,6 +327,8 @@ def run(
         if table.ship is not None:
             shipping = _start_shipping(table.ship, store, config, err)
         system = System(setups, clock, store, cell)
+        if settle_limit is not None:
+            system.settle_limit = settle_limit
         width = max(len(n) for n in system.subjects)
         if driver is None and config is None:
             out.write(f"no driver configured: simulated twins for {', '.join(drivers)}\n")
@@ -366,6 +378,7 @@ def run(
             lines = events if events is not None else sys.stdin
             _feed(system, lines, err, batch=True, problems=problems)
             system.quiesce()
+            problems.unsettled = unsettled_note(system)
             for name, subject in system.subjects.items():
                 final = ", ".join(sorted(subject.configuration))
                 out.write(f"final state {final}\n" if cell is None else f"final {name}: {final}\n")

@@ -14,6 +14,7 @@ from statectl.errors import Diagnostic, Location, Severity
 from statectl.expr import compile_expression
 from statectl.model import (
     Action,
+    Assign,
     Chart,
     Log,
     Notify,
@@ -57,8 +58,8 @@ def _check_actions(chart: Chart, where: Location, diags: list[Diagnostic]) -> No
     blocks.append(("top-level <script>", where, chart.script))
     for what, at, actions in blocks:
         for a in actions:
-            if isinstance(a, Raise):
-                continue
+            if isinstance(a, Raise) or (isinstance(a, Assign) and a.expr is not None):
+                continue  # an assignment is checked as it is translated (codegen.assign)
             if isinstance(a, Notify):
                 if a.invoke not in numbers:
                     diags.append(

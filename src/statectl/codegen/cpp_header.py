@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 
+from statectl.codegen.cpp_assign import assign_functions
 from statectl.codegen.cpp_tables import (
     _OPS,
     _c,
@@ -130,11 +131,11 @@ def _header(flat: FlatChart, cls: str, ns: str) -> str:
     add("")
     add("using V = std::int64_t;")
     add("")
-    add("enum Op : std::uint8_t { kExit, kTake, kEnter, kInvoke };")
+    add("enum Op : std::uint8_t { kExit, kTake, kEnter, kInvoke, kAssign };")
     add("")
     add("struct Effect {")
     add("  Op op;")
-    add("  std::uint16_t arg;  // state, transition or invoke number")
+    add("  std::uint16_t arg;  // state, transition, invoke number or assignment group")
     add("};")
     add("")
     add("// flags: bit 0 handled, bit 1 reached a top-level final state,")
@@ -220,6 +221,7 @@ def _header(flat: FlatChart, cls: str, ns: str) -> str:
     else:
         add("inline constexpr GuardFn kGuards[1] = {nullptr};  // unused: no runtime guards")
     add("")
+    w.extend(assign_functions(flat))
     # effects
     add(f"inline constexpr Effect kEffects[{max(1, len(tables.effects))}] = {{")
     iw = _width(range(len(tables.effects)))

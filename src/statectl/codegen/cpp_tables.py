@@ -31,6 +31,7 @@ _OPS = {
     EffectKind.TAKE: "kTake",
     EffectKind.ENTER: "kEnter",
     EffectKind.INVOKE: "kInvoke",
+    EffectKind.ASSIGN: "kAssign",
 }
 
 
@@ -102,6 +103,8 @@ class _Tables:
         if e.kind is EffectKind.TAKE:
             t = flat.transitions[e.index]
             return f"{t.source} + {t.label} = {', '.join(t.targets) or '(targetless)'}"
+        if e.kind is EffectKind.ASSIGN:
+            return f"assign {flat.assignments[e.index].source}"
         if e.kind is EffectKind.INVOKE:
             inv = next(i for i in flat.chart.invokes if i.number == e.index)
             return f"invoke #{inv.number} {inv.name}"
@@ -267,6 +270,8 @@ class Basic@CLS@ : public statectl::Subject<Invoke, kInvokeCount> {
     } else if constexpr (fx.op == detail::kEnter) {
       STATECTL_TRACE_CALL(tracer_, entered(detail::kDevice, detail::kStateNames[fx.arg]));
       hooks.on_entry(static_cast<State>(fx.arg));@TIMER_ENTER@
+    } else if constexpr (fx.op == detail::kAssign) {
+      detail::kAssigns[fx.arg](context);  // the row's assign: all values, then all stores
     } else {
       STATECTL_TRACE_CALL(tracer_, invoked(detail::kDevice, fx.arg, detail::kInvokes[fx.arg].name,
                                            detail::kInvokes[fx.arg].method));

@@ -23,6 +23,7 @@ class EffectKind(enum.Enum):
     TAKE = "take"
     ENTER = "enter"
     INVOKE = "invoke"
+    ASSIGN = "assign"  # index: an Assignments group (codegen.assign)
 
 
 @dataclass(frozen=True, slots=True)
@@ -97,3 +98,17 @@ class FlatChart:
     dispatch: tuple[tuple[Tree, ...], ...]  # [configuration][event]
     guards: tuple[RuntimeGuard, ...]
     context: tuple[ContextField, ...]
+    assignments: tuple[Assignments, ...] = ()  # the ASSIGN effects' groups
+
+
+@dataclass(frozen=True, slots=True)
+class Assignments:
+    """One transition's data assignments as C++: every value computed, then all stored.
+
+    ``stores`` pairs a context field's C++ name with the C++ expression of its new
+    value over the context before the step (``c.indexed + 1``).
+    """
+
+    index: int
+    source: str  # ``indexed = indexed + 1; ...`` as the table wrote it
+    stores: tuple[tuple[str, str], ...]

@@ -32,7 +32,8 @@ here, at generation time, and the C++ only looks the decision up. Rules:
    not translate, G703 a guard reading ``_event``, G704 a context field that is not
    an integer, G705 a non-``safe`` datamodel, G706 too many configurations or
    guard paths, G707 a step that does not settle, G708 a ``Log`` the generated code
-   skips (warning), G709 a ``Notify`` of an invoke number the chart does not declare.
+   skips (warning), G709 a ``Notify`` of an invoke number the chart does not declare,
+   G713 an assignment the generated code cannot perform (:mod:`~statectl.codegen.assign`).
 
 This module explores; the values it produces are in :mod:`statectl.codegen.flat`, the
 checks before exploring in :mod:`~statectl.codegen.checks`, guard translation in
@@ -47,6 +48,7 @@ from collections import deque
 from collections.abc import Iterable, Mapping
 from typing import Any
 
+from statectl.codegen.assign import AssignTable
 from statectl.codegen.checks import _check_actions, _context
 from statectl.codegen.cpp_names import identifiers
 from statectl.codegen.cpp_timers import check_timeouts
@@ -66,6 +68,7 @@ from statectl.codes import family
 from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, StatectlError
 from statectl.expr import Expression, compile_expression
 from statectl.model import (
+    Assign,
     Chart,
     Notify,
     Transition,
@@ -154,6 +157,7 @@ class _Flattener:
         self.reported: set[tuple[str, str]] = set()
         self.snapshots: dict[Snapshot, int] = {}
         self.queue: deque[Snapshot] = deque()
+        self.assigns = AssignTable(self.fields, self.diags)
 
     # guards
 
@@ -240,6 +244,9 @@ class _Flattener:
     def effects(self, microsteps: Iterable[Microstep]) -> tuple[Effect, ...]:
         out: list[Effect] = []
         for micro in microsteps:
+            assigns = [a for a in micro.actions if isinstance(a, Assign)]
+            if assigns:  # first: the data changes before the step is performed (codegen.assign)
+                out.append(Effect(EffectKind.ASSIGN, self.assigns.group(assigns)))
             out += [Effect(EffectKind.EXIT, self.order[s]) for s in micro.exited]
             out += [
                 Effect(EffectKind.TAKE, self.transition_index[id(t)]) for t in micro.transitions
@@ -372,5 +379,6 @@ def flatten(chart: Chart) -> tuple[FlatChart | None, list[Diagnostic]]:
         tuple(rows),
         tuple(sorted(f.guards.values(), key=lambda g: g.index)),
         tuple(fields),
+        tuple(f.assigns.groups),
     )
     return flat, diags

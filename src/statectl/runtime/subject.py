@@ -53,6 +53,12 @@ from statectl.expr import compile_expression
 from statectl.model import Action, Chart, Notify
 from statectl.observers import Observer
 from statectl.runtime.clock import Clock, SimClock
+from statectl.runtime.eventdata import (
+    apply_assignments,
+    check_event_data,
+    declared_fields,
+    refuse_failure,
+)
 from statectl.runtime.hooks import (
     ApiLogging,
     Listener,
@@ -89,6 +95,7 @@ class Subject(Wiring):
         "_busy",
         "_closed",
         "_data",
+        "_declared",
         "_name",
         "_queue",
         "_queued_hook",
@@ -122,6 +129,7 @@ class Subject(Wiring):
             self._data = self._initial_data(chart, data)
         else:
             self._data = dict(data) if data else {}
+        self._declared = declared_fields(chart)  # event -> declared data fields, or None
         # invoke number -> (observer, it keeps an api_log: checked once at attach)
         self._routes: dict[int, tuple[Observer, bool]] = {}
         # plan -> (invokes it counts, callable, argument): what the plan path calls for it;
@@ -251,6 +259,8 @@ class Subject(Wiring):
             raise StatectlError(f"an event name must be a str (got {event!r})")
         if self._closed:
             raise StatectlError(f"{self.name} is closed; event {event!r} cannot be posted")
+        if data is not None and self._declared is not None:
+            check_event_data(self._declared, self._name, event, data)
         self._queue.append((event, data, then))
         self._fast = False  # after the append: see _refresh()
         wake = self._wake
@@ -393,6 +403,8 @@ class Subject(Wiring):
         The synchronous form of :meth:`post` then :meth:`run_until_idle`: the same
         path, records, observer calls and errors; returns how many events ran.
         """
+        if data is not None and self._declared is not None:
+            check_event_data(self._declared, self._name, event, data)
         if self._fast and not self._busy and type(event) is str:  # _fast: nothing queued
             self._busy = True
             try:
@@ -516,8 +528,13 @@ class Subject(Wiring):
         else:
             decision = step(self.machine, snapshot, event, self._data, data)
         if decision.unhandled is not None:
+            if decision.failure is not None:
+                refuse_failure(self, event, data, decision.failure, now)
             self._unhandled(event, data, decision.unhandled, now, snapshot)
             return
+        updates = apply_assignments(self, decision, event, data) if self._data else None
+        if updates:
+            self._data.update(updates)
         self._commit(plan.target if plan is not None else decision.target)
         self._perform(decision, data, now, listening)
         for callback in self._steppers:

@@ -75,7 +75,14 @@ __all__ = [
     "read_scxml",
     "read_scxml_file",
     "read_src_text",
+    "statectl_elements",
 ]
+
+
+def _fields(text: str) -> tuple[tuple[str, str], ...]:
+    """``statectl:event data="pressure: float, part: str"``: the event's declared fields."""
+    pairs = (part.partition(":") for part in text.split(","))
+    return tuple((k.strip(), v.strip()) for k, _, v in pairs if k.strip())
 
 
 class _Reader(ContentReader):
@@ -266,6 +273,7 @@ class _Reader(ContentReader):
                         c.get("api"),
                         c.get("description") or "",
                         self.at(c),
+                        _fields(c.get("data") or ""),
                     )
                 )
             elif c.tag == "api":
@@ -370,3 +378,16 @@ def read_scxml_file(path: str) -> Chart:
     if chart is None:
         raise DiagnosticError(diagnostics)
     return chart
+
+
+def statectl_elements(text: str | bytes, tag: str) -> list[tuple[dict[str, str], int]]:
+    """The ``statectl:TAG`` children of the root, as (attributes, line), in order.
+
+    Device facts that are no part of the chart (the Recovery table travels as
+    ``<statectl:recovery>``) are read by the layer that owns them; a document that
+    does not parse has none (:func:`read_scxml` reports why).
+    """
+    root, _ = _parse_xml(text, "<memory>")
+    if root is None:
+        return []
+    return [(dict(c.attrs), c.line) for c in root.children if c.ns == STATECTL_NS and c.tag == tag]

@@ -291,7 +291,11 @@ class _Writer:
         c = self.chart
         for e in c.events:
             attrs = _attrs(
-                name=e.name, kind=e.kind.value, api=e.api, description=e.description or None
+                name=e.name,
+                kind=e.kind.value,
+                api=e.api,
+                description=e.description or None,
+                data=", ".join(f"{k}: {v}" for k, v in e.fields) or None,
             )
             self.emit(depth, f"<statectl:event{attrs}/>")
         for a in c.apis:

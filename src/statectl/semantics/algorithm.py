@@ -11,6 +11,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from statectl.model import Action, Raise, StateKind, Transition
+from statectl.semantics.eventview import EventView, GuardFailure
 from statectl.semantics.machine import Machine
 from statectl.semantics.records import (
     MAX_MICROSTEPS,
@@ -46,7 +47,7 @@ def guard_env(run: Run, event_data: Any = None) -> dict[str, Any]:
     env: dict[str, Any] = dict(run.data)
     env["previous"] = run.previous
     env["In"] = run.active.__contains__
-    env["_event"] = {"name": run.event, "data": event_data}
+    env["_event"] = EventView(run.event, event_data)
     return env
 
 
@@ -76,7 +77,11 @@ def condition_match(m: Machine, run: Run, t: Transition, event_data: Any) -> boo
         if forced is not None:
             run.guarded = True
             return forced
-    value = _evaluate(m, guard, guard_env(run, event_data))
+    try:
+        value = bool(m.guards[guard].evaluate(guard_env(run, event_data)))
+    except Exception as exc:  # no silent false (eventview rule 3): the host reports it
+        value = False
+        run.failed(GuardFailure(guard, run.event, t.origin, f"{type(exc).__name__}: {exc}"))
     if guard not in m.snapshot_guards:
         run.guarded = True
         consulted = run.consulted

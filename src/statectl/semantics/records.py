@@ -59,6 +59,7 @@ class Unhandled(enum.StrEnum):
     GUARD_FALSE = "guard false"  # a transition exists for it, but no guard held
     NO_TRANSITION = "no transition"  # no transition and not declared ignored
     UNKNOWN_EVENT = "unknown event"  # not an event of the chart (decided by the host)
+    GUARD_ERROR = "guard error"  # a guard raised: refused, never a silent false (eventview)
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,6 +102,7 @@ class Step:
     final: bool  # a top-level final state was reached
     guarded: bool = False  # a guard over data (or a forced one) was consulted
     unhandled: Unhandled | None = None  # why not handled; None when handled
+    failure: Any = None  # the GuardFailure of a GUARD_ERROR step (semantics.eventview)
 
     @property
     def actions(self) -> tuple[Action, ...]:
@@ -181,6 +183,13 @@ class Run:
     oracle: GuardOracle | None = None
     # the guards over data consulted, in order, with what they saw (see machine.GuardTrie)
     consulted: list[Consult] | None = None
+    failures: list[Any] | None = None  # guards that raised (semantics.eventview rule 3)
+
+    def failed(self, failure: Any) -> None:
+        """Note a guard that raised; the step it is part of is refused."""
+        if self.failures is None:
+            self.failures = []
+        self.failures.append(failure)
 
     def raise_event(self, event: Event) -> None:
         """Append to the internal queue (``<raise>``, ``error.*``, ``done.state.*``)."""

@@ -12,7 +12,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from statectl.semantics.algorithm import _evaluate, enter_initial_states, macrostep, process_event
+from statectl.model import Assign
+from statectl.semantics.algorithm import enter_initial_states, macrostep, process_event
+from statectl.semantics.eventview import EventView, GuardError, GuardFailure
 from statectl.semantics.machine import Machine
 from statectl.semantics.records import (
     MAX_GUARD_PATHS,
@@ -47,6 +49,9 @@ def initial(
     run = Run(set(), {}, None, data or {}, oracle=oracle)
     steps = [enter_initial_states(m, run)]
     macrostep(m, run, steps)
+    if run.failures:
+        failure: GuardFailure = run.failures[0]
+        raise GuardError(failure.message(m.chart.name))
     empty = Snapshot(frozenset())
     target = m.intern(_snapshot(run))
     result = Step(None, empty, target, tuple(steps), True, False, run.final, run.guarded)
@@ -65,6 +70,11 @@ def unhandled_reason(m: Machine, snapshot: Snapshot, event: str) -> Unhandled:
     return Unhandled.NO_TRANSITION
 
 
+def _assigns(result: Step) -> bool:
+    """Whether the step changes data: the host must perform it in full, never as a plan."""
+    return any(type(a) is Assign for a in result.actions)
+
+
 def _replay(
     m: Machine,
     paths: list[tuple[tuple[Consult, ...], Step]],
@@ -78,8 +88,12 @@ def _replay(
             env: dict[str, Any] = dict(base)
             env["previous"] = c.previous
             env["In"] = c.active.__contains__
-            env["_event"] = {"name": c.event, "data": event_data if c.external else c.data}
-            if _evaluate(m, c.guard, env) is not c.value:
+            env["_event"] = EventView(c.event, event_data if c.external else c.data)
+            try:
+                value = bool(m.guards[c.guard].evaluate(env))
+            except Exception:  # a failing guard: take the full path, which reports it
+                break
+            if value is not c.value:
                 break
         else:
             return result
@@ -134,6 +148,19 @@ def step(
         macrostep(m, run, steps)
     else:
         reason = unhandled_reason(m, snapshot, event)
+    if run.failures:  # a guard raised: nothing is taken, nothing memoised (eventview rule 3)
+        return Step(
+            event,
+            snapshot,
+            snapshot,
+            (),
+            False,
+            False,
+            False,
+            True,
+            Unhandled.GUARD_ERROR,
+            run.failures[0],
+        )
     result = Step(
         event,
         snapshot,
@@ -149,7 +176,7 @@ def step(
         if not run.guarded:
             if len(m._memo) < MEMO_LIMIT:
                 m._memo[key] = result
-                if event in m.event_names:
+                if event in m.event_names and not _assigns(result):
                     m._install(snapshot, event, result)
         elif run.consulted is not None and len(m._guarded) < MEMO_LIMIT:
             paths = m._guarded.setdefault(key, [])

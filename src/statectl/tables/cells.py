@@ -10,6 +10,7 @@ from collections.abc import Sequence
 
 from statectl.errors import Diagnostic, Location
 from statectl.model import ControlKind, EventKind, StateKind
+from statectl.tables.eventdata import event_data_cells
 from statectl.tables.literals import parse_payload
 from statectl.tables.rows import (
     COLUMNS,
@@ -230,6 +231,7 @@ def event_row(row: RawRow, diags: list[Diagnostic]) -> EventRow:
         api=_text(row, "api", diags),
         invoke=_text(row, "invoke", diags),
         where=row.where,
+        **event_data_cells(row, diags),
     )
 
 

@@ -21,9 +21,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from statectl.errors import Diagnostic, Location
+from statectl.tables.eventdata import event_columns, event_extra_cells
 from statectl.tables.schema import (
     DATA_COLUMNS,
-    EVENT_COLUMNS,
+    FLAT_EVENT_COLUMNS,
     DeviceTables,
     RawRow,
     RawTable,
@@ -232,10 +233,21 @@ def dump_csv(tables: DeviceTables) -> tuple[str, str, str | None, str | None]:
         tables.device,
         tables.profile,
     )
+    ecols = event_columns(tables.events, FLAT_EVENT_COLUMNS)
     events = _write(
-        EVENT_COLUMNS,
+        ecols,
         [
-            [e.event, e.condition, e.guard, e.old, e.new, e.kind.value, e.api, e.invoke]
+            [
+                e.event,
+                e.condition,
+                e.guard,
+                e.old,
+                e.new,
+                e.kind.value,
+                e.api,
+                e.invoke,
+                *event_extra_cells(e, ecols),
+            ]
             for e in tables.events
         ],
         tables.device,

@@ -16,9 +16,10 @@ from __future__ import annotations
 import re
 
 from statectl.errors import Diagnostic, Location
+from statectl.tables.eventdata import event_columns, event_extra_cells
 from statectl.tables.schema import (
     DATA_COLUMNS,
-    EVENT_COLUMNS,
+    FLAT_EVENT_COLUMNS,
     DeviceTables,
     RawRow,
     RawTable,
@@ -211,10 +212,21 @@ def dump_md(tables: DeviceTables) -> str:
         [state_cells(s, columns) for s in tables.states],
     )
     lines += ["", "## Events", ""]
+    ecols = event_columns(tables.events, FLAT_EVENT_COLUMNS)
     lines += _table(
-        EVENT_COLUMNS,
+        ecols,
         [
-            [e.event, e.condition, e.guard, e.old, e.new, e.kind.value, e.api, e.invoke]
+            [
+                e.event,
+                e.condition,
+                e.guard,
+                e.old,
+                e.new,
+                e.kind.value,
+                e.api,
+                e.invoke,
+                *event_extra_cells(e, ecols),
+            ]
             for e in tables.events
         ],
     )

@@ -32,7 +32,20 @@ STATE_COLUMNS = (
 )
 #: The columns every writer emits; ``type`` and ``default`` only when a row uses them.
 FLAT_STATE_COLUMNS = STATE_COLUMNS[:7]
-EVENT_COLUMNS = ("event", "condition", "guard", "old", "new", "kind", "api", "invoke")
+EVENT_COLUMNS = (
+    "event",
+    "condition",
+    "guard",
+    "old",
+    "new",
+    "kind",
+    "api",
+    "invoke",
+    "data",
+    "assign",
+)
+#: The event columns every writer emits; ``data`` and ``assign`` only when a row uses them.
+FLAT_EVENT_COLUMNS = EVENT_COLUMNS[:8]
 DATA_COLUMNS = ("name", "value")
 RECOVERY_COLUMNS = ("state", "event", "data", "redo")
 #: The recovery columns every writer emits; ``redo`` only when a row uses it.
@@ -141,6 +154,10 @@ class EventRow:
     api: str
     invoke: str = ""  # explicit invoke name; empty: derived (observers rule 5)
     where: Location = NOWHERE
+    #: declared event data ``((field, type), ...)`` (tables.eventdata rule 1)
+    fields: tuple[tuple[str, str], ...] = ()
+    #: data assignments ``((name, expression), ...)`` when taken (tables.eventdata rule 2)
+    assign: tuple[tuple[str, str], ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

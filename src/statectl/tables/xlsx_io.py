@@ -30,9 +30,10 @@ from openpyxl.worksheet.worksheet import (  # type: ignore[import-untyped, unuse
 )
 
 from statectl.errors import Diagnostic, Location
+from statectl.tables.eventdata import event_columns, event_extra_cells
 from statectl.tables.schema import (
     DATA_COLUMNS,
-    EVENT_COLUMNS,
+    FLAT_EVENT_COLUMNS,
     Bad,
     Cell,
     DeviceTables,
@@ -48,6 +49,7 @@ from statectl.tables.schema import (
     state_cells,
     state_columns,
 )
+from statectl.tables.xlsx_formulas import uncached_formulas
 
 __all__ = ["dump_xlsx", "read_xlsx"]
 
@@ -141,6 +143,9 @@ def read_xlsx(content: bytes, file: str, stem: str) -> tuple[DeviceTables | None
         return None, [diag("T101", source, f"not a readable XLSX workbook: {exc}")]
     try:
         sheets = {str(name).strip().lower(): wb[name] for name in wb.sheetnames}
+        formulas = uncached_formulas(content, file, wb)
+        if formulas:
+            return None, formulas
         if "states" not in sheets and "events" not in sheets:
             return None, [
                 diag(
@@ -217,11 +222,22 @@ def dump_xlsx(tables: DeviceTables) -> bytes:
         columns,
         (state_cells(s, columns) for s in tables.states),
     )
+    ecols = event_columns(tables.events, FLAT_EVENT_COLUMNS)
     _fill(
         wb.create_sheet(SHEETS["events"]),
-        EVENT_COLUMNS,
+        ecols,
         (
-            [e.event, e.condition, e.guard, e.old, e.new, e.kind.value, e.api, e.invoke]
+            [
+                e.event,
+                e.condition,
+                e.guard,
+                e.old,
+                e.new,
+                e.kind.value,
+                e.api,
+                e.invoke,
+                *event_extra_cells(e, ecols),
+            ]
             for e in tables.events
         ),
     )

@@ -24,6 +24,7 @@ from typing import Any
 import yaml
 
 from statectl.errors import Diagnostic, Location
+from statectl.tables.eventdata import format_assign, format_fields, yaml_event_cell
 from statectl.tables.safeyaml import YamlRefused, compose, construct
 from statectl.tables.schema import (
     Bad,
@@ -119,13 +120,24 @@ def _table(
             continue
         cells = {
             name: (
-                _payload(value) if (table, name) == ("recovery", "data") else _cell(value),
+                _row_cell(table, name, value),
                 _at(file, value),
             )
             for name, value, _ in _pairs(file, item, diags)
         }
         rows.append(RawRow(_at(file, item), cells))
     return RawTable(table, at, tuple(rows))
+
+
+def _row_cell(table: str, column: str, node: yaml.Node) -> Cell:
+    """A row's cell: recovery data and event data/assign mappings become shared text."""
+    if (table, column) == ("recovery", "data"):
+        return _payload(node)
+    if table == "events":
+        mapped = yaml_event_cell(column, node)
+        if mapped is not None:
+            return mapped
+    return _cell(node)
 
 
 def _construct(node: yaml.Node) -> object:
@@ -292,6 +304,10 @@ def _event_doc(tables: DeviceTables) -> list[dict[str, Any]]:
             row["api"] = e.api
         if e.invoke:
             row["invoke"] = e.invoke
+        if e.fields:
+            row["data"] = format_fields(e.fields)
+        if e.assign:
+            row["assign"] = format_assign(e.assign)
         rows.append(row)
     return rows
 

@@ -33,11 +33,13 @@ from statectl.semantics import (
     Run,
     Snapshot,
     Step,
+    Unhandled,
     compiled,
     condition_match,
     initial,
     step,
 )
+from statectl.semantics.eventview import field_accepts
 
 __all__ = ["MAX_DATA", "MAX_NODES", "Edge", "Graph", "Node", "explore"]
 
@@ -185,7 +187,8 @@ def candidate_data(chart: Chart, m: Machine) -> tuple[Data, ...]:
 
 
 def _event_data_reads(source: str) -> tuple[set[str], bool]:
-    """The keys a guard reads of ``_event['data']``, and whether it reads it whole."""
+    """The keys a guard reads of ``_event.data`` (or ``_event['data']``), and whether it
+    reads it whole."""
     keys: set[str] = set()
     whole = False
     parents: dict[int, ast.AST] = {}
@@ -194,12 +197,17 @@ def _event_data_reads(source: str) -> tuple[set[str], bool]:
         for child in ast.iter_child_nodes(node):
             parents[id(child)] = node
     for node in ast.walk(tree):
-        if not (
+        subscript = (
             isinstance(node, ast.Subscript)
-            and isinstance(node.value, ast.Name)
-            and node.value.id == "_event"
             and isinstance(node.slice, ast.Constant)
             and node.slice.value == "data"
+        )
+        attribute = isinstance(node, ast.Attribute) and node.attr == "data"
+        if not (
+            (subscript or attribute)
+            and isinstance(node, ast.Subscript | ast.Attribute)
+            and isinstance(node.value, ast.Name)
+            and node.value.id == "_event"
         ):
             continue
         up = parents.get(id(node))
@@ -210,9 +218,18 @@ def _event_data_reads(source: str) -> tuple[set[str], bool]:
             and isinstance(up.slice.value, str)
         ):
             keys.add(up.slice.value)
+        elif isinstance(up, ast.Attribute) and up.value is node:
+            keys.add(up.attr)  # _event.data.x, the documented spelling
         else:
             whole = True
     return keys, whole
+
+
+def fits_declared(declared: dict[str, str], value: Any) -> bool:
+    """Whether ``value`` is data an event declaring ``declared`` fields accepts."""
+    if not isinstance(value, dict):
+        return False
+    return all(k in declared and field_accepts(declared[k], v) for k, v in value.items())
 
 
 def candidate_event_data(chart: Chart) -> dict[str, tuple[Any, ...]]:
@@ -239,7 +256,11 @@ def candidate_event_data(chart: Chart) -> dict[str, tuple[Any, ...]]:
                         break
             if whole:
                 values += lits
+            known = chart.event(event)
+            declared = dict(known.fields) if known is not None else {}
             for v in values:
+                if declared and not fits_declared(declared, v):
+                    continue  # the runtime would refuse it as it is posted
                 if not any(type(v) is type(w) and v == w for w in found):
                     found.append(v)
             out[event] = tuple(found[:MAX_DATA])
@@ -273,6 +294,8 @@ def explore(chart: Chart, *, max_nodes: int = MAX_NODES) -> Graph:
         for event in sendable:
             for sent in event_datas.get(event, (None,)):
                 decided = step(m, node.snapshot, event, values, sent)
+                if decided.unhandled is Unhandled.GUARD_ERROR:
+                    continue  # data the guard cannot read: no scenario, the runtime refuses it
                 target = Node(node.data, decided.target)
                 edge = Edge(node, event, decided, target, sent)
                 edges.append(edge)

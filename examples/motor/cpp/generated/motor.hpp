@@ -87,11 +87,11 @@ namespace detail {
 
 using V = std::int64_t;
 
-enum Op : std::uint8_t { kExit, kTake, kEnter, kInvoke };
+enum Op : std::uint8_t { kExit, kTake, kEnter, kInvoke, kAssign };
 
 struct Effect {
   Op op;
-  std::uint16_t arg;  // state, transition or invoke number
+  std::uint16_t arg;  // state, transition, invoke number or assignment group
 };
 
 // flags: bit 0 handled, bit 1 reached a top-level final state,
@@ -162,6 +162,11 @@ inline constexpr InvokeText kInvokes[kInvokeCount] = {
 using GuardFn = bool (*)(const Context&) noexcept;
 
 inline constexpr GuardFn kGuards[1] = {nullptr};  // unused: no runtime guards
+
+// Data assignments of the event rows (assign): values first, then the stores.
+
+using AssignFn = void (*)(Context&) noexcept;
+inline constexpr AssignFn kAssigns[1] = {nullptr};  // unused: no assign
 
 inline constexpr Effect kEffects[22] = {
     {kEnter, 0},  //  0: enter Blocked
@@ -418,6 +423,8 @@ class BasicMotor : public statectl::Subject<Invoke, kInvokeCount> {
     } else if constexpr (fx.op == detail::kEnter) {
       STATECTL_TRACE_CALL(tracer_, entered(detail::kDevice, detail::kStateNames[fx.arg]));
       hooks.on_entry(static_cast<State>(fx.arg));
+    } else if constexpr (fx.op == detail::kAssign) {
+      detail::kAssigns[fx.arg](context);  // the row's assign: all values, then all stores
     } else {
       STATECTL_TRACE_CALL(tracer_, invoked(detail::kDevice, fx.arg, detail::kInvokes[fx.arg].name,
                                            detail::kInvokes[fx.arg].method));
