@@ -173,3 +173,58 @@ def test_check_serves_names_missing_and_available() -> None:
     subject = _subject(GRIPPER)
     with pytest.raises(StatectlError, match=r"Grip\(\), Release\(\).*available: Error\(\)"):
         check_serves(subject, make_driver("sim-motor"))
+
+
+MISSING = [
+    # (argv naming an input file that does not exist, the words that say so)
+    (["check", "{gone}"], "no such file"),
+    (["build", "{gone}"], "no such file"),
+    (["observers", "{gone}"], "no such file"),
+    (["render", "{gone}"], "no such file"),
+    (["tables", "{gone}", "--to", "csv"], "no such file"),
+    (["codegen", "{gone}", "--out", "{tmp}/out"], "no such file"),
+    (["verify", "{gone}"], "no such file"),
+    (["run", "{gone}"], "no such file"),
+    (["run", str(MOTOR), "--config", "{gone}"], "no such file"),
+    (["run", str(CELL), "--replay", "{gone}"], "no such trace file"),
+    (["demo", "--config", "{gone}"], "no such file"),
+    (["journal", "show", "{gone}"], "no journal at"),
+    (["journal", "export", "{gone}"], "no journal at"),
+    (["journal", "replay", "{gone}"], "no journal at"),
+    (["journal", "ship", "{gone}", "--to", "postgresql://127.0.0.1:1/x"], "no journal at"),
+    (["scxml", "run", "{gone}"], "no such file"),
+    (["scxml", "import", "{gone}"], "no such file"),
+    (["scxml", "export", "{gone}"], "no such file"),
+    (["testgen", "{gone}", "--out", "{tmp}/out"], "no such file"),
+    (["coverage", "{gone}", str(MOTOR)], "no such file"),
+    (["coverage", str(MOTOR), "{gone}"], "no such file"),
+]
+
+
+@pytest.mark.parametrize(("argv", "says"), MISSING)
+def test_missing_input_is_exit_2(argv: list[str], says: str, tmp_path: Path) -> None:
+    """A missing input file is exit 2 in every command (README: usage error), never 1."""
+    gone = tmp_path / "gone.yaml"
+    done = statectl([a.replace("{gone}", str(gone)) for a in argv], tmp_path)
+    assert "Traceback" not in done.stderr, done.stderr
+    assert (done.returncode, says in done.stderr) == (2, True), done.stderr
+    assert str(gone) in done.stderr, done.stderr
+
+
+def test_missing_input_table_covers_every_command() -> None:
+    """Every command of the parser appears in the missing-input table (a new one must too)."""
+    import argparse
+
+    from statectl.cli import build_parser
+
+    def commands(parser: argparse.ArgumentParser, prefix: tuple[str, ...]) -> set[tuple[str, ...]]:
+        found: set[tuple[str, ...]] = set()
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    found |= commands(sub, (*prefix, name)) or {(*prefix, name)}
+        return found
+
+    listed = {tuple(a for a in argv[:2] if a.isalpha()) for argv, _ in MISSING}
+    listed |= {(argv[0],) for argv, _ in MISSING}
+    assert commands(build_parser(), ()) <= listed

@@ -257,7 +257,7 @@ def _command(args: argparse.Namespace) -> str:
 def _missing_input(args: argparse.Namespace) -> str | None:
     """The first input file named on the command line that does not exist (exit 2)."""
     paths: list[str] = []
-    for attr in ("file", "files", "cell"):
+    for attr in ("file", "files", "cell", "config"):
         value = getattr(args, attr, None)
         if isinstance(value, str):
             paths.append(value)
