@@ -145,7 +145,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument(
         "--driver",
         help="driver for every device: sim-twin (the default), sim-motor, "
-        "sim-stepper or package.module:Class",
+        "sim-stepper, package.module:Class, or none (the model alone: only the events given)",
+    )
+    s.add_argument(
+        "--json",
+        action="store_true",
+        help="one JSON object per event line (state after, handled or why not, invokes), "
+        "instead of the trace",
     )
     s.add_argument("--config", help="run configuration YAML: drivers, dashboard settings")
     s.add_argument("--dashboard", action="store_true", help="serve the live dashboard")

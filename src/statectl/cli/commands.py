@@ -248,6 +248,11 @@ def cmd_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     from statectl.runner import is_cell
 
     if args.replay is not None or args.walk is not None:
+        if args.json or args.driver == "none":
+            err.write(
+                "statectl run: --json and --driver none step event lines, not --walk/--replay\n"
+            )
+            return USAGE
         if not is_cell(args.file):
             err.write("statectl run: --replay and --walk take a cell file\n")
             return USAGE
@@ -273,6 +278,7 @@ def cmd_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         opcua=args.opcua,
         out=out,
         err=err,
+        as_json=args.json,
     )
 
 
