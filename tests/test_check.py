@@ -264,8 +264,8 @@ def test_unreachable_compound_is_reported_once() -> None:
 
 
 def test_codes_table_lists_every_code() -> None:
-    """CODES documents exactly the codes the rules can produce."""
-    assert sorted(CODES) == [f"C40{i}" for i in range(1, 9)]
+    """CODES documents exactly the codes the rules (C401-C408) and check's file kinds produce."""
+    assert sorted(CODES) == [*(f"C40{i}" for i in range(1, 9)), "C415", "C416"]
 
 
 # -- the exclusive-guard decision procedure ------------------------------------------------

@@ -228,3 +228,33 @@ def test_missing_input_table_covers_every_command() -> None:
     listed = {tuple(a for a in argv[:2] if a.isalpha()) for argv, _ in MISSING}
     listed |= {(argv[0],) for argv, _ in MISSING}
     assert commands(build_parser(), ()) <= listed
+
+
+MOTOR_XLSX = ROOT / "examples" / "motor" / "motor.xlsx"
+
+WRONG_KIND = [
+    # (argv, the code, the command it points to)
+    (["check", str(CELL)], "C415", f"use statectl verify {CELL}"),
+    (["check", str(MOTOR), str(CELL)], "C415", f"use statectl verify {CELL}"),
+    (["verify", str(MOTOR)], "C416", f"use statectl check {MOTOR}"),
+    (["verify", str(MOTOR_XLSX)], "C416", f"use statectl check {MOTOR_XLSX}"),
+    (["verify", "{tmp}/m.scxml"], "C416", "use statectl scxml run"),
+]
+
+
+@pytest.mark.parametrize(("argv", "code", "says"), WRONG_KIND)
+def test_a_file_of_the_other_kind_says_which_command_takes_it(
+    argv: list[str], code: str, says: str, tmp_path: Path
+) -> None:
+    """check on a cell / verify on a device file: one diagnostic naming the command, exit 1."""
+    if "{tmp}/m.scxml" in argv:
+        done = statectl(
+            ["scxml", "export", str(MOTOR), "--out", str(tmp_path / "m.scxml")], tmp_path
+        )
+        assert done.returncode == 0, done.stderr
+    done = statectl(argv, tmp_path)
+    text = done.stdout + done.stderr
+    assert "Traceback" not in text
+    assert done.returncode == 1, text
+    assert [line for line in text.splitlines() if f" {code} error: " in line and says in line], text
+    assert "V802" not in text and "T102" not in text, text

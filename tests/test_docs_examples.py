@@ -136,3 +136,14 @@ def test_python_example_runs(block: Block, tmp_path: Path) -> None:
     if block.kind != "script":
         assert re.search(r"\d+ passed", done.stdout), done.stdout[-2000:]
         assert not re.search(r"\d+ (failed|errors?)\b", done.stdout), done.stdout[-2000:]
+
+
+def test_every_cell_code_has_its_own_entry() -> None:
+    """Each V8xx code has a heading of its own in docs/cells.md with a fix, as C4xx codes do."""
+    from statectl.codes import REGISTRY
+
+    text = (ROOT / "docs" / "cells.md").read_text(encoding="utf-8")
+    entries = dict(re.findall(r"^### (V8\d\d) — .*?\n(.*?)(?=^#)", text, re.MULTILINE | re.DOTALL))
+    cell_codes = sorted(c for c in REGISTRY if c.startswith("V8"))
+    assert cell_codes and sorted(entries) == cell_codes
+    assert [c for c in cell_codes if "*Fix:*" not in entries[c]] == []

@@ -68,7 +68,10 @@ def cmd_check(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         if not Path(p).exists():
             err.write(f"statectl check: {p}: no such file\n")
             return USAGE
-    diags = check_paths(args.files)
+    from statectl.cli.kinds import cell_given_to_check
+
+    cells = {p: d for p in args.files if (d := cell_given_to_check(p)) is not None}  # C415
+    diags = [*cells.values(), *check_paths([p for p in args.files if p not in cells])]
     shown = [d for d in diags if args.verbose or d.severity is not Severity.INFO]
     _print_diagnostics(shown, out, args.json)
     failed = has_errors(diags) or (
