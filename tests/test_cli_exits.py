@@ -258,3 +258,51 @@ def test_a_file_of_the_other_kind_says_which_command_takes_it(
     assert done.returncode == 1, text
     assert [line for line in text.splitlines() if f" {code} error: " in line and says in line], text
     assert "V802" not in text and "T102" not in text, text
+
+
+VALVE = """\
+from typing import ClassVar
+
+from statectl.devices import Driver
+
+
+class Valve(Driver):
+    methods: ClassVar[dict[str, str]] = {"Grip": "close", "Release": "open"}
+    completions: ClassVar[dict[str, str]] = {"Grip": "Grip completion"}
+
+    def close(self) -> None:
+        self.log_call("close")
+        self.complete("Grip")
+
+    def open(self) -> None:
+        self.log_call("open")
+"""
+
+
+@pytest.mark.parametrize("where", ["model", "config"])
+def test_a_driver_module_beside_the_model_or_config_is_found(where: str, tmp_path: Path) -> None:
+    """``--driver valve:Valve`` (or a config naming it) imports valve.py beside that file."""
+    model_dir, config_dir, cwd = tmp_path / "model", tmp_path / "config", tmp_path / "elsewhere"
+    for d in (model_dir, config_dir, cwd):
+        d.mkdir()
+    (model_dir / "gripper.yaml").write_text(GRIPPER.read_text(encoding="utf-8"), encoding="utf-8")
+    home = model_dir if where == "model" else config_dir
+    (home / "valve.py").write_text(VALVE, encoding="utf-8")
+    argv = ["run", str(model_dir / "gripper.yaml")]
+    if where == "model":
+        argv += ["--driver", "valve:Valve"]
+    else:
+        config = config_dir / "run.yaml"
+        config.write_text("devices:\n  Gripper: {driver: 'valve:Valve'}\n", encoding="utf-8")
+        argv += ["--config", str(config)]
+    done = statectl(argv, cwd, "Grip\n")
+    assert done.returncode == 0, done.stderr
+    assert "Valve.close()" in done.stdout and "final state Closed" in done.stdout, done.stdout
+
+
+def test_a_driver_module_found_nowhere_says_what_to_do(tmp_path: Path) -> None:
+    """A module neither on the path nor beside the model: exit 1, saying where to put it."""
+    done = statectl(["run", str(GRIPPER), "--driver", "nosuch_valve:Valve"], tmp_path, "Grip\n")
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+    assert "put nosuch_valve.py" in done.stderr and "beside the model file" in done.stderr
+    assert "PYTHONPATH" in done.stderr

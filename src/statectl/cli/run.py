@@ -43,6 +43,10 @@ Rules:
     still issued and shown. ``--json`` writes one JSON object per event line
     instead of the trace (cli/steps.py), the banners going to stderr; it steps a
     batch run, so it cannot go with a live one.
+11. A driver named ``package.module:Class`` (``--driver`` or the config file) is
+    imported from the Python path, else from beside the model file or the config
+    file (their directories are searched after the path, so they never shadow an
+    installed package); a module found in neither is refused with what to do.
 """
 
 from __future__ import annotations
@@ -103,6 +107,15 @@ def _drivers(
     if driver == NO_DRIVER:
         return {}  # rule 10: the model alone
     return {d.name: make_driver(driver or "sim-twin", chart=d.chart) for d in devices}
+
+
+def _search_beside(*files: str | None) -> None:
+    """Rule 11: a driver module may sit beside the model or config file (searched last)."""
+    for f in files:
+        if f is not None:
+            folder = str(Path(f).resolve().parent)
+            if folder not in sys.path:
+                sys.path.append(folder)
 
 
 #: ``--driver none``: no driver at all, the model alone (rule 10).
@@ -328,6 +341,7 @@ def run(
     plant: Any = None  # the OPC UA server (cli/opcua.py)
     shipping: Any = None  # a ShipThread (journal/ship.py) when the config has 'ship:'
     try:
+        _search_beside(path, config)  # rule 11
         table = RunConfig(None, DashboardConfig())
         if config is not None:
             table = load_run_config(config)
