@@ -63,6 +63,7 @@ from typing import Any, TextIO
 
 from statectl.cell import Cell, load_cell
 from statectl.cli.commands import OK, PROBLEMS, USAGE
+from statectl.cli.steps import StepLog
 from statectl.devices import (
     MIN_TOKEN,
     DashboardConfig,
@@ -203,7 +204,7 @@ def _feed(
     *,
     batch: bool,
     problems: _Problems | None = None,
-    steps: Any = None,
+    steps: StepLog | None = None,
 ) -> None:
     """Post each event line; a batch run settles after each (rule 3); count bad lines (rule 9).
 
@@ -369,8 +370,6 @@ def run(
             info.write("no driver (--driver none): the model alone, only the events given\n")
         steps = None
         if as_json:
-            from statectl.cli.steps import StepLog
-
             steps = StepLog(system, out)
         else:
             system.listen(TraceWriter(out, device_width=width))
