@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
@@ -9,6 +10,15 @@ from statectl.observers import Notification
 
 ROOT = Path(__file__).resolve().parents[1]
 MOTOR = ROOT / "examples" / "motor" / "motor.yaml"
+
+#: Where the W3C SCXML conformance pack is read from (in place, never copied): the
+#: environment variable, else beside the clone (docs/testing.md, "The W3C pack").
+W3C_VARIABLE = "STATECTL_W3C_DIR"
+W3C_PACK = Path(
+    os.environ.get(W3C_VARIABLE) or ROOT.parent / "shared" / "conformance" / "w3c-scxml"
+)
+#: How a test that needs the pack says it was skipped; conftest.py's summary looks for it.
+W3C_SKIPPED = f"W3C pack not found at {W3C_PACK} (set {W3C_VARIABLE} to its directory)"
 
 
 class Recorder:

@@ -173,3 +173,140 @@ def test_check_serves_names_missing_and_available() -> None:
     subject = _subject(GRIPPER)
     with pytest.raises(StatectlError, match=r"Grip\(\), Release\(\).*available: Error\(\)"):
         check_serves(subject, make_driver("sim-motor"))
+
+
+MISSING = [
+    # (argv naming an input file that does not exist, the words that say so)
+    (["check", "{gone}"], "no such file"),
+    (["build", "{gone}"], "no such file"),
+    (["observers", "{gone}"], "no such file"),
+    (["render", "{gone}"], "no such file"),
+    (["tables", "{gone}", "--to", "csv"], "no such file"),
+    (["codegen", "{gone}", "--out", "{tmp}/out"], "no such file"),
+    (["verify", "{gone}"], "no such file"),
+    (["run", "{gone}"], "no such file"),
+    (["run", str(MOTOR), "--config", "{gone}"], "no such file"),
+    (["run", str(CELL), "--replay", "{gone}"], "no such trace file"),
+    (["demo", "--config", "{gone}"], "no such file"),
+    (["journal", "show", "{gone}"], "no journal at"),
+    (["journal", "export", "{gone}"], "no journal at"),
+    (["journal", "replay", "{gone}"], "no journal at"),
+    (["journal", "ship", "{gone}", "--to", "postgresql://127.0.0.1:1/x"], "no journal at"),
+    (["scxml", "run", "{gone}"], "no such file"),
+    (["scxml", "import", "{gone}"], "no such file"),
+    (["scxml", "export", "{gone}"], "no such file"),
+    (["testgen", "{gone}", "--out", "{tmp}/out"], "no such file"),
+    (["coverage", "{gone}", str(MOTOR)], "no such file"),
+    (["coverage", str(MOTOR), "{gone}"], "no such file"),
+]
+
+
+@pytest.mark.parametrize(("argv", "says"), MISSING)
+def test_missing_input_is_exit_2(argv: list[str], says: str, tmp_path: Path) -> None:
+    """A missing input file is exit 2 in every command (README: usage error), never 1."""
+    gone = tmp_path / "gone.yaml"
+    done = statectl([a.replace("{gone}", str(gone)) for a in argv], tmp_path)
+    assert "Traceback" not in done.stderr, done.stderr
+    assert (done.returncode, says in done.stderr) == (2, True), done.stderr
+    assert str(gone) in done.stderr, done.stderr
+
+
+def test_missing_input_table_covers_every_command() -> None:
+    """Every command of the parser appears in the missing-input table (a new one must too)."""
+    import argparse
+
+    from statectl.cli import build_parser
+
+    def commands(parser: argparse.ArgumentParser, prefix: tuple[str, ...]) -> set[tuple[str, ...]]:
+        found: set[tuple[str, ...]] = set()
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    found |= commands(sub, (*prefix, name)) or {(*prefix, name)}
+        return found
+
+    listed = {tuple(a for a in argv[:2] if a.isalpha()) for argv, _ in MISSING}
+    listed |= {(argv[0],) for argv, _ in MISSING}
+    assert commands(build_parser(), ()) - TAKES_NO_INPUT <= listed
+
+
+#: Commands that read no input file: they list or write from what the package ships.
+TAKES_NO_INPUT = {("profiles",), ("new",)}
+
+
+MOTOR_XLSX = ROOT / "examples" / "motor" / "motor.xlsx"
+
+WRONG_KIND = [
+    # (argv, the code, the command it points to)
+    (["check", str(CELL)], "C415", f"use statectl verify {CELL}"),
+    (["check", str(MOTOR), str(CELL)], "C415", f"use statectl verify {CELL}"),
+    (["verify", str(MOTOR)], "C416", f"use statectl check {MOTOR}"),
+    (["verify", str(MOTOR_XLSX)], "C416", f"use statectl check {MOTOR_XLSX}"),
+    (["verify", "{tmp}/m.scxml"], "C416", "use statectl scxml run"),
+]
+
+
+@pytest.mark.parametrize(("argv", "code", "says"), WRONG_KIND)
+def test_a_file_of_the_other_kind_says_which_command_takes_it(
+    argv: list[str], code: str, says: str, tmp_path: Path
+) -> None:
+    """check on a cell / verify on a device file: one diagnostic naming the command, exit 1."""
+    if "{tmp}/m.scxml" in argv:
+        done = statectl(
+            ["scxml", "export", str(MOTOR), "--out", str(tmp_path / "m.scxml")], tmp_path
+        )
+        assert done.returncode == 0, done.stderr
+    done = statectl(argv, tmp_path)
+    text = done.stdout + done.stderr
+    assert "Traceback" not in text
+    assert done.returncode == 1, text
+    assert [line for line in text.splitlines() if f" {code} error: " in line and says in line], text
+    assert "V802" not in text and "T102" not in text, text
+
+
+VALVE = """\
+from typing import ClassVar
+
+from statectl.devices import Driver
+
+
+class Valve(Driver):
+    methods: ClassVar[dict[str, str]] = {"Grip": "close", "Release": "open"}
+    completions: ClassVar[dict[str, str]] = {"Grip": "Grip completion"}
+
+    def close(self) -> None:
+        self.log_call("close")
+        self.complete("Grip")
+
+    def open(self) -> None:
+        self.log_call("open")
+"""
+
+
+@pytest.mark.parametrize("where", ["model", "config"])
+def test_a_driver_module_beside_the_model_or_config_is_found(where: str, tmp_path: Path) -> None:
+    """``--driver valve:Valve`` (or a config naming it) imports valve.py beside that file."""
+    model_dir, config_dir, cwd = tmp_path / "model", tmp_path / "config", tmp_path / "elsewhere"
+    for d in (model_dir, config_dir, cwd):
+        d.mkdir()
+    (model_dir / "gripper.yaml").write_text(GRIPPER.read_text(encoding="utf-8"), encoding="utf-8")
+    home = model_dir if where == "model" else config_dir
+    (home / "valve.py").write_text(VALVE, encoding="utf-8")
+    argv = ["run", str(model_dir / "gripper.yaml")]
+    if where == "model":
+        argv += ["--driver", "valve:Valve"]
+    else:
+        config = config_dir / "run.yaml"
+        config.write_text("devices:\n  Gripper: {driver: 'valve:Valve'}\n", encoding="utf-8")
+        argv += ["--config", str(config)]
+    done = statectl(argv, cwd, "Grip\n")
+    assert done.returncode == 0, done.stderr
+    assert "Valve.close()" in done.stdout and "final state Closed" in done.stdout, done.stdout
+
+
+def test_a_driver_module_found_nowhere_says_what_to_do(tmp_path: Path) -> None:
+    """A module neither on the path nor beside the model: exit 1, saying where to put it."""
+    done = statectl(["run", str(GRIPPER), "--driver", "nosuch_valve:Valve"], tmp_path, "Grip\n")
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+    assert "put nosuch_valve.py" in done.stderr and "beside the model file" in done.stderr
+    assert "PYTHONPATH" in done.stderr

@@ -34,6 +34,7 @@ from statectl.cell import load_cell
 from statectl.errors import StatectlError
 from statectl.scxml import read_scxml, write_scxml
 from statectl.tables import load, save
+from support import W3C_PACK, W3C_SKIPPED
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -43,7 +44,7 @@ RULES: Any = importlib.import_module(
     "statectl.rules" if importlib.util.find_spec("statectl.rules") else "statectl.check"
 )
 EXAMPLES = ROOT / "examples"
-PACK = ROOT.parent / "shared" / "conformance" / "w3c-scxml"
+PACK = W3C_PACK  # $STATECTL_W3C_DIR, else ../shared/conformance/w3c-scxml
 CASE_SECONDS = 10
 SEEDS = int(os.environ.get("STATECTL_FUZZ_SEEDS", "8"))  # mutants per mutator and file
 PACK_MUTANTS = 7  # mutants per W3C document (mutators drawn at random, each once)
@@ -296,7 +297,7 @@ def test_mutated_motor_in_other_formats(tmp_path: Path, fmt: str) -> None:
 PACK_DOCS = sorted(PACK.glob("*/*.scxml")) if PACK.is_dir() else []
 
 
-@pytest.mark.skipif(not PACK_DOCS, reason=f"W3C pack not found at {PACK}")
+@pytest.mark.skipif(not PACK_DOCS, reason=W3C_SKIPPED)
 def test_mutated_w3c_documents_load_or_are_refused(tmp_path: Path) -> None:
     """Mutants of every W3C document (read in place from ../shared) end well, in time."""
     findings: list[str] = []

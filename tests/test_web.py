@@ -206,3 +206,21 @@ def test_an_ipv6_loopback_dashboard_takes_its_bracketed_host() -> None:
         assert statuses == [200, 403]
     finally:
         dash.stop()
+
+
+@pytest.mark.parametrize(
+    ("body", "status", "says"),
+    [
+        ({"device": "Motor", "event": "Bogus"}, 422, "Motor has no event 'Bogus'; its events: "),
+        ({"event": "Movement completed"}, 422, "Motor has no event 'Movement completed'"),
+        ({"device": "Nope", "event": "Movement"}, 400, "no device 'Nope'"),
+    ],
+)
+def test_an_event_the_chart_does_not_know_is_refused(
+    served: Served, body: dict[str, str], status: int, says: str
+) -> None:
+    """An unknown event (or device) is refused with a 4xx naming it; nothing reaches the device."""
+    got, _, reply = served.request("POST", "/api/post", body, POST)
+    assert (got, says in json.loads(reply)["error"]) == (status, True), reply
+    served.system.drain()
+    assert served.system.subjects["Motor"].events_processed == 0

@@ -253,6 +253,19 @@ ALL: tuple[Code, ...] = (
         "an 'event trigger required' state that no command or fault event enters",
         _check("c411--trigger-state-entered-by-no-command-warning"),
     ),
+    # C415-C416: a file of the other kind (statectl.cli.kinds)
+    _c(
+        "C415",
+        _E,
+        "a cell file given to check: use verify",
+        _check("c415--a-cell-file-given-to-check-error"),
+    ),
+    _c(
+        "C416",
+        _E,
+        "a device file given to verify: use check",
+        _check("c416--a-device-file-given-to-verify-error"),
+    ),
     # -- D5xx: driver and run configs (statectl.devices.config) ---------------------------
     _c("D501", _E, "the driver or run config cannot be read", _DRIVERS),
     _c("D502", _E, "the config is not valid YAML (or an alias or too deep)", _DRIVERS),

@@ -145,7 +145,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument(
         "--driver",
         help="driver for every device: sim-twin (the default), sim-motor, "
-        "sim-stepper or package.module:Class",
+        "sim-stepper, package.module:Class, or none (the model alone: only the events given)",
+    )
+    s.add_argument(
+        "--json",
+        action="store_true",
+        help="one JSON object per event line (state after, handled or why not, invokes), "
+        "instead of the trace",
     )
     s.add_argument("--config", help="run configuration YAML: drivers, dashboard settings")
     s.add_argument("--dashboard", action="store_true", help="serve the live dashboard")
@@ -267,7 +273,7 @@ def _command(args: argparse.Namespace) -> str:
 def _missing_input(args: argparse.Namespace) -> str | None:
     """The first input file named on the command line that does not exist (exit 2)."""
     paths: list[str] = []
-    for attr in ("file", "files", "cell"):
+    for attr in ("file", "files", "cell", "config"):
         value = getattr(args, attr, None)
         if isinstance(value, str):
             paths.append(value)

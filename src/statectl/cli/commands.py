@@ -68,7 +68,10 @@ def cmd_check(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         if not Path(p).exists():
             err.write(f"statectl check: {p}: no such file\n")
             return USAGE
-    diags = check_paths(args.files)
+    from statectl.cli.kinds import cell_given_to_check
+
+    cells = {p: d for p in args.files if (d := cell_given_to_check(p)) is not None}  # C415
+    diags = [*cells.values(), *check_paths([p for p in args.files if p not in cells])]
     shown = [d for d in diags if args.verbose or d.severity is not Severity.INFO]
     _print_diagnostics(shown, out, args.json)
     failed = has_errors(diags) or (
@@ -248,6 +251,11 @@ def cmd_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     from statectl.runner import is_cell
 
     if args.replay is not None or args.walk is not None:
+        if args.json or args.driver == "none":
+            err.write(
+                "statectl run: --json and --driver none step event lines, not --walk/--replay\n"
+            )
+            return USAGE
         if not is_cell(args.file):
             err.write("statectl run: --replay and --walk take a cell file\n")
             return USAGE
@@ -274,6 +282,7 @@ def cmd_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         settle_limit=args.settle_limit,
         out=out,
         err=err,
+        as_json=args.json,
     )
 
 

@@ -38,6 +38,15 @@ Rules:
    policy, but then exits 1 with a line saying how many, so a batch run can be
    trusted in CI. A driver that lacks an observer method its chart calls is
    refused before anything runs (devices/base.py rule 6).
+10. ``--driver none`` runs the model alone: no driver, so nothing but the events
+    given happens (no completions, no monitors, no API calls); its invokes are
+    still issued and shown. ``--json`` writes one JSON object per event line
+    instead of the trace (cli/steps.py), the banners going to stderr; it steps a
+    batch run, so it cannot go with a live one.
+11. A driver named ``package.module:Class`` (``--driver`` or the config file) is
+    imported from the Python path, else from beside the model file or the config
+    file (their directories are searched after the path, so they never shadow an
+    installed package); a module found in neither is refused with what to do.
 """
 
 from __future__ import annotations
@@ -55,6 +64,7 @@ from typing import Any, TextIO
 from statectl.cell import Cell, load_cell
 from statectl.cli.commands import OK, PROBLEMS, USAGE
 from statectl.cli.settle import unsettled_note
+from statectl.cli.steps import StepLog
 from statectl.devices import (
     MIN_TOKEN,
     DashboardConfig,
@@ -96,8 +106,22 @@ def _drivers(
         if missing:
             raise StatectlError(f"{config}: no driver for device(s) {missing}")
         return {d.name: make_driver(*drivers[d.name], chart=d.chart) for d in devices}
+    if driver == NO_DRIVER:
+        return {}  # rule 10: the model alone
     return {d.name: make_driver(driver or "sim-twin", chart=d.chart) for d in devices}
 
+
+def _search_beside(*files: str | None) -> None:
+    """Rule 11: a driver module may sit beside the model or config file (searched last)."""
+    for f in files:
+        if f is not None:
+            folder = str(Path(f).resolve().parent)
+            if folder not in sys.path:
+                sys.path.append(folder)
+
+
+#: ``--driver none``: no driver at all, the model alone (rule 10).
+NO_DRIVER = "none"
 
 #: The highest TCP port number (``--port``).
 MAX_PORT = 65535
@@ -184,8 +208,12 @@ def _feed(
     *,
     batch: bool,
     problems: _Problems | None = None,
+    steps: StepLog | None = None,
 ) -> None:
-    """Post each event line; a batch run settles after each (rule 3); count bad lines (rule 9)."""
+    """Post each event line; a batch run settles after each (rule 3); count bad lines (rule 9).
+
+    ``steps`` (a :class:`~statectl.cli.steps.StepLog`, ``--json``) writes what each line did.
+    """
     for number, line in enumerate(lines, 1):
         try:
             parsed = parse_event_line(line)
@@ -197,6 +225,8 @@ def _feed(
                     system.quiesce()
                 else:
                     time.sleep(parsed)
+                if steps is not None:
+                    steps.advance(number, parsed)
                 continue
             device, event, data = parsed
             ticket = system.post(device, event, data)
@@ -204,12 +234,16 @@ def _feed(
                 if ticket is not None:
                     ticket.wait()
                 system.quiesce()
+            if steps is not None:
+                steps.event(number, device, event, data)
         except JournalError as exc:  # nothing more can be accepted: stop, say where
             raise JournalError(f"line {number}: {exc}") from None
         except StatectlError as exc:
             err.write(f"line {number}: {exc}\n")
             if problems is not None:
                 problems.bad_line()
+            if steps is not None:
+                steps.error(number, str(exc))
 
 
 def _load_cell(path: str, err: TextIO, journalled: bool) -> tuple[Cell, tuple[DeviceSetup, ...]]:
@@ -252,6 +286,7 @@ def run(
     err: TextIO = sys.stderr,
     stop: threading.Event | None = None,
     ready: Callable[[System, str | None], None] | None = None,
+    as_json: bool = False,
 ) -> int:
     """The whole ``statectl run``; returns the exit code (0 ok, 1 problems, 2 usage).
 
@@ -265,7 +300,14 @@ def run(
     journal that cannot be trusted is set aside (docs/journal.md, "Faults").
     ``opcua`` (``--opcua [URL]``; ``""``: the config's endpoint or the default)
     serves the devices over OPC UA, as does an ``opcua:`` section (docs/opcua.md).
+    ``driver="none"`` runs the model alone and ``as_json`` (``--json``) writes one
+    JSON object per event line (rule 10).
     """
+    if as_json and (dashboard or realtime or opcua is not None):
+        err.write(
+            "statectl run: --json steps a batch run; not with --dashboard, --realtime or --opcua\n"
+        )
+        return USAGE
     if (resume or fresh) and journal is None:
         err.write(f"statectl run: {'--resume' if resume else '--fresh'} needs --journal DB\n")
         return USAGE
@@ -310,11 +352,15 @@ def run(
     plant: Any = None  # the OPC UA server (cli/opcua.py)
     shipping: Any = None  # a ShipThread (journal/ship.py) when the config has 'ship:'
     try:
+        _search_beside(path, config)  # rule 11
         table = RunConfig(None, DashboardConfig())
         if config is not None:
             table = load_run_config(config)
         if opcua is None and table.opcua != OpcuaConfig():
             opcua, live = "", True  # an opcua: section serves it too
+            if as_json:
+                raise StatectlError(f"{config}: its opcua: section makes a live run; not --json")
+        info = err if as_json else out  # rule 10: --json writes nothing else to stdout
         drivers = _drivers(devices, driver, config, table)
         host, port, token, token_from = _dashboard_settings(
             host, port, token, config, table.dashboard
@@ -323,7 +369,7 @@ def run(
         clock: Clock = WallClock() if realtime else SimClock()
         store = None
         if journal is not None:
-            store = _open_journal(journal, mode, promise, resume=resume, fresh=fresh, out=out)
+            store = _open_journal(journal, mode, promise, resume=resume, fresh=fresh, out=info)
         if table.ship is not None:
             shipping = _start_shipping(table.ship, store, config, err)
         system = System(setups, clock, store, cell)
@@ -331,10 +377,16 @@ def run(
             system.settle_limit = settle_limit
         width = max(len(n) for n in system.subjects)
         if driver is None and config is None:
-            out.write(f"no driver configured: simulated twins for {', '.join(drivers)}\n")
-        system.listen(TraceWriter(out, device_width=width))
+            info.write(f"no driver configured: simulated twins for {', '.join(drivers)}\n")
+        elif not drivers:
+            info.write("no driver (--driver none): the model alone, only the events given\n")
+        steps = None
+        if as_json:
+            steps = StepLog(system, out)
+        else:
+            system.listen(TraceWriter(out, device_width=width))
+            _show_notes(drivers, out, width)
         system.listen(problems.record)
-        _show_notes(drivers, out, width)
         url = None
         if dashboard:
             try:
@@ -359,7 +411,7 @@ def run(
         for name, bound in system.bound.items():
             if resumed.get(name):
                 taken = ", ".join(bound.recovered) or "none"
-                out.write(
+                info.write(
                     f"resumed {name} in {', '.join(sorted(system.subjects[name].configuration))}"
                     f"; recovery: {taken}; {bound.redelivered} accepted event(s) redelivered\n"
                 )
@@ -376,12 +428,14 @@ def run(
                     "terminal; end with Ctrl-D\n"
                 )
             lines = events if events is not None else sys.stdin
-            _feed(system, lines, err, batch=True, problems=problems)
+            if steps is not None:
+                steps.begin()  # what the start did is not a line's
+            _feed(system, lines, err, batch=True, problems=problems, steps=steps)
             system.quiesce()
             problems.unsettled = unsettled_note(system)
             for name, subject in system.subjects.items():
                 final = ", ".join(sorted(subject.configuration))
-                out.write(f"final state {final}\n" if cell is None else f"final {name}: {final}\n")
+                info.write(f"final state {final}\n" if cell is None else f"final {name}: {final}\n")
             return _verdict(problems, err)
         halt = stop or threading.Event()
         if events is None and server is None:

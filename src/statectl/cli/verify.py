@@ -55,6 +55,12 @@ def verify_main(
     if max_states is not None and max_states < 1:
         err.write("statectl verify: --max-states must be at least 1\n")
         return USAGE
+    from statectl.cli.kinds import device_given_to_verify
+
+    other = device_given_to_verify(cell)  # C416: a device file, not a cell
+    if other is not None:
+        err.write(f"{other}\n")
+        return PROBLEMS
     loaded, diags = load_cell(cell)
     for d in diags:
         if d.severity is not Severity.INFO and (loaded is None or d.severity is Severity.WARNING):

@@ -170,7 +170,12 @@ def resolve_driver(name: str) -> Callable[..., DeviceDriver]:
     try:
         module = importlib.import_module(module_name)
     except ImportError as exc:
-        raise StatectlError(f"driver {name!r}: cannot import {module_name!r} ({exc})") from None
+        top = module_name.split(".")[0]
+        raise StatectlError(
+            f"driver {name!r}: cannot import {module_name!r} ({exc}); put {top}.py (or the "
+            f"package {top}/) beside the model file, or add the directory that holds it to "
+            "PYTHONPATH"
+        ) from None
     obj = module
     for part in attr.split("."):
         if not hasattr(obj, part):

@@ -9,7 +9,8 @@ Rules:
 3. ``POST /api/post``: the token (``X-Statectl-Token``, 401), a JSON content type
    (415), a body of at most ``Limits.body`` bytes (413) that arrives within
    ``Limits.body_timeout`` (408) and parses to ``{"event": ...}`` (400, also for
-   nesting too deep to parse). The event is handed to ``post`` on a worker
+   nesting too deep to parse), naming an event the device's chart knows (422,
+   with the events it knows). The event is handed to ``post`` on a worker
    thread, so a journal's wait for durability never blocks the loop.
 4. ``GET /api/events`` beyond ``Limits.streams`` open streams gets 503 with
    ``Retry-After``.
@@ -195,6 +196,9 @@ def make_app(dash: Dashboard, fanout: Fanout, limits: Limits) -> web.Application
             device, event, data = _parse(raw)
         except ValueError as exc:
             return _refuse(HTTPStatus.BAD_REQUEST, str(exc))
+        unknown = dash.unknown_event(device, event)
+        if unknown is not None:
+            return _refuse(HTTPStatus.UNPROCESSABLE_ENTITY, unknown)
         loop = asyncio.get_running_loop()
         try:
             seq, durable = await loop.run_in_executor(

@@ -409,5 +409,22 @@ class Dashboard:
             unlisten()
         self._unlisten = []
 
+    def unknown_event(self, device: str | None, event: str) -> str | None:
+        """Why ``event`` cannot go to ``device``: its chart does not know it; else None.
+
+        A device that is not named (several devices) or not served is left to ``post``,
+        which says so.
+        """
+        if device is None:
+            entry = next(iter(self.devices.values())) if len(self.devices) == 1 else None
+        else:
+            entry = self.devices.get(device)
+        if entry is None:
+            return None
+        names = entry.subject.chart.event_names
+        if event in names:
+            return None
+        return f"{entry.subject.name} has no event {event!r}; its events: {', '.join(names)}"
+
     def authorised(self, given: str | None) -> bool:
         return given is not None and hmac.compare_digest(given.encode(), self.token.encode())

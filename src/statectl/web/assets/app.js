@@ -15,13 +15,20 @@ function card(state) {
   const section = el("section", { class: "device", "data-device": state.name });
   const active = el("span", { class: "active-states", id: "state-" + safe });
   section.append(el("h2", {}, state.name + " ", active));
-  const diagram = el("div", { class: "diagram" });
+  const diagram = el("div", { class: "diagram", title: "click: whole chart / readable size" });
+  diagram.addEventListener("click", () => diagram.classList.toggle("fit"));
   section.append(diagram);
   fetch("/api/diagram/" + encodeURIComponent(state.name) + ".svg")
     .then((r) => r.text())
     .then((svg) => {
       // The SVG is rendered by the server from the model; names in it are escaped there.
       diagram.innerHTML = svg;
+      // Its natural width in CSS pixels (Graphviz writes pt): the CSS scales the diagram to
+      // the card but not below 0.6 of it (style.css, .diagram svg).
+      const drawn = diagram.querySelector("svg");
+      if (drawn && drawn.width.baseVal.value > 0) {
+        drawn.style.setProperty("--natural", drawn.width.baseVal.value + "px");
+      }
       highlight(devices.get(state.name));
     });
   section.append(el("table", { class: "invokes" }));

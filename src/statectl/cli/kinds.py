@@ -1,0 +1,82 @@
+"""A file given to the command for the other kind: ``check`` takes device files, ``verify`` cells.
+
+Rules:
+1. ``statectl check`` on a cell file (``devices:`` and no ``states:``) reports
+   C415, "this is a cell: use statectl verify", instead of the device loader's
+   T102; the other files given are checked as usual.
+2. ``statectl verify`` on a device file (a YAML mapping with ``states:`` or
+   ``events:``, or device tables in CSV, XLSX or Markdown) or an SCXML document
+   reports C416, saying which command takes it, instead of a page of V802s.
+3. Both are errors at the file's line that shows its kind: exit 1, as any
+   problem in an input file.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from statectl.errors import Diagnostic, Location, Severity
+from statectl.runner.cells import is_cell
+from statectl.tables import safeyaml
+
+__all__ = ["cell_given_to_check", "device_given_to_verify"]
+
+_TABLE_FORMATS = (".csv", ".xlsx", ".md", ".markdown")
+
+
+def _line_of(path: str, key: str) -> int:
+    """The line where the top-level ``key:`` starts (1 if it cannot be found)."""
+    try:
+        lines = Path(path).read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError):
+        return 1
+    return next((n for n, text in enumerate(lines, 1) if text.startswith(f"{key}:")), 1)
+
+
+def cell_given_to_check(path: str) -> Diagnostic | None:
+    """Rule 1: C415 when ``path`` is a cell file, else None."""
+    if not is_cell(path):
+        return None
+    return Diagnostic(
+        "C415",
+        Severity.ERROR,
+        Location(path, _line_of(path, "devices")),
+        "this is a cell file (devices:, no states:), not a device file: "
+        f"use statectl verify {path}",
+        "verify checks the cell and loads each device file, reporting its problems as V805",
+    )
+
+
+def device_given_to_verify(path: str) -> Diagnostic | None:
+    """Rule 2: C416 when ``path`` is a device file or an SCXML document, else None."""
+    suffix = Path(path).suffix.lower()
+    if suffix == ".scxml":
+        return Diagnostic(
+            "C416",
+            Severity.ERROR,
+            Location(path, 1),
+            f"this is an SCXML document, not a cell file: use statectl scxml run {path}",
+            "or statectl scxml import it to device tables, and name them in a cell's devices:",
+        )
+    line = 1
+    if suffix in (".yaml", ".yml"):
+        try:
+            data = safeyaml.load_value(Path(path).read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, safeyaml.YamlRefused):
+            return None  # the cell loader says what is wrong (V801)
+        if not isinstance(data, dict) or is_cell(path):
+            return None
+        key = next((k for k in ("states", "events") if k in data), None)
+        if key is None:
+            return None
+        line = _line_of(path, key)
+    elif suffix not in _TABLE_FORMATS:
+        return None
+    return Diagnostic(
+        "C416",
+        Severity.ERROR,
+        Location(path, line),
+        f"this is a device file, not a cell file: use statectl check {path} "
+        f"(or statectl run {path})",
+        "a cell names its device files under devices:, see docs/cells.md",
+    )
