@@ -216,6 +216,7 @@ ALL: tuple[Code, ...] = (
         "fault event leaving a state that is not monitoring required",
         _check("c408--fault-without-a-monitor-warning"),
     ),
+    _c("C412", _E, "verify: a device's assigned data does not stay bounded", _CELLS),
     # -- D5xx: driver and run configs (statectl.devices.config) ---------------------------
     _c("D501", _E, "the driver or run config cannot be read", _DRIVERS),
     _c("D502", _E, "the config is not valid YAML (or an alias or too deep)", _DRIVERS),
