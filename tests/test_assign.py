@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -372,3 +373,36 @@ def _chart_of(text: str) -> Chart:
     chart, more = build(tables)
     assert chart is not None, more
     return chart
+
+
+# --- the journal brings the data back -----------------------------------------------------
+
+
+def _journalled(db: Path, chart: Chart) -> object:
+    from statectl.journal import Journal
+    from statectl.runner import DeviceSetup, System
+
+    return System((DeviceSetup("Indexer", chart),), SimClock(), Journal(db))
+
+
+@pytest.mark.parametrize("cycles", [0, 1, 2])
+def test_resume_brings_back_the_data_the_assignments_changed(tmp_path: Path, cycles: int) -> None:
+    """After a restart the counter is where the run left it, not at its initial value."""
+    db, chart = tmp_path / "j.db", _indexer()
+    first: Any = _journalled(db, chart)
+    try:
+        first.start()
+        for part in "abc"[:cycles]:
+            first.post("Indexer", "Index", {"part": part})
+            first.post("Indexer", "Index completion")
+            first.quiesce()
+        before = dict(first.subjects["Indexer"].data)
+    finally:
+        first.close()
+    assert before["indexed"] == cycles
+    again: Any = _journalled(db, chart)
+    try:
+        again.start(resume=True)
+        assert dict(again.subjects["Indexer"].data) == before
+    finally:
+        again.close()
