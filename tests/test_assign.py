@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -291,3 +292,117 @@ def test_generated_cpp_performs_the_assignments_as_python_does(tmp_path: Path) -
             ({}, ["Swap", *go * 2, "Swap", *go]),  # count = 10 after Swap: Go is refused
         ],
     )
+
+
+# --- verify tracks the data -----------------------------------------------------------------
+
+BATCH = """\
+device: Batch
+data:
+  count: 0
+  limit: 3
+states:
+  - {state: Idle, control: default, ignore: [Done]}
+  - {state: Full, control: event trigger required, ignore: [Add]}
+events:
+  - {event: Add, guard: count < limit, old: Idle, new: Idle, api: Add, assign: "count = count + 1"}
+  - {event: Add, guard: count >= limit, old: Idle, new: Full, api: Add}
+  - {event: Done, old: Full, new: Idle, api: Add, assign: "count = 0"}
+"""
+
+
+def _verify(tmp_path: Path, device: str) -> object:
+    from statectl.cell import load_cell_or_raise
+    from statectl.explore import explore
+
+    (tmp_path / "d.yaml").write_text(device)
+    cell = tmp_path / "cell.yaml"
+    cell.write_text(
+        "cell: C\ndevices:\n  d: d.yaml\n"
+        "environment:\n  - {send: Add, to: d}\n  - {send: Done, to: d}\n"
+    )
+    return explore(load_cell_or_raise(cell))
+
+
+def test_verify_tracks_assigned_data_as_the_runtime_runs_it(tmp_path: Path) -> None:
+    """A counter's values are local states: Full is reached only after three Adds."""
+    from statectl.explore import LocalSpace
+
+    chart = _chart_of(BATCH)
+    space = LocalSpace("d", chart)
+    assert space.tracker.dynamic == ("count",)
+    assert sorted(set(space.valuations)) == [(0,), (1,), (2,), (3,)]
+    full = [i for i, s in enumerate(space.snapshots) if "Full" in s.active]
+    assert [space.valuations[i] for i in full] == [(3,)]
+    report = _verify(tmp_path, BATCH)
+    assert report.free_guards == ()  # type: ignore[attr-defined]
+    assert report.verdict == "holds"  # type: ignore[attr-defined]
+
+
+def test_verify_refuses_data_that_grows_without_bound(tmp_path: Path) -> None:
+    """A counter no guard stops is C412 naming the assignment, not an endless search."""
+    from statectl.errors import DiagnosticError
+
+    endless = BATCH.replace("guard: count < limit, ", "").replace(
+        "  - {event: Add, guard: count >= limit, old: Idle, new: Full, api: Add}\n", ""
+    )
+    with pytest.raises(DiagnosticError) as caught:
+        _verify(tmp_path, endless)
+    (d,) = caught.value.diagnostics
+    assert d.code == "C412"
+    assert "count = count + 1" in d.message
+
+
+def test_data_assigned_from_event_data_is_a_free_choice(tmp_path: Path) -> None:
+    """An item assigned from _event is untracked: guards over it are chosen both ways."""
+    from statectl.explore import LocalSpace
+
+    text = BATCH.replace('assign: "count = count + 1"', 'assign: "count = _event.data.n"')
+    text = text.replace(
+        'api: Add, assign: "count = _event', 'api: Add, data: {n: int}, assign: "count = _event'
+    )
+    space = LocalSpace("d", _chart_of(text))
+    assert "count" in space.tracker.untracked
+    assert space.tracker.dynamic == ()
+    assert {g.guard for g in space.free_guards} == {"count < limit", "count >= limit"}
+
+
+def _chart_of(text: str) -> Chart:
+    tables, diags = read_yaml(text, "d.yaml")
+    assert tables is not None, diags
+    chart, more = build(tables)
+    assert chart is not None, more
+    return chart
+
+
+# --- the journal brings the data back -----------------------------------------------------
+
+
+def _journalled(db: Path, chart: Chart) -> object:
+    from statectl.journal import Journal
+    from statectl.runner import DeviceSetup, System
+
+    return System((DeviceSetup("Indexer", chart),), SimClock(), Journal(db))
+
+
+@pytest.mark.parametrize("cycles", [0, 1, 2])
+def test_resume_brings_back_the_data_the_assignments_changed(tmp_path: Path, cycles: int) -> None:
+    """After a restart the counter is where the run left it, not at its initial value."""
+    db, chart = tmp_path / "j.db", _indexer()
+    first: Any = _journalled(db, chart)
+    try:
+        first.start()
+        for part in "abc"[:cycles]:
+            first.post("Indexer", "Index", {"part": part})
+            first.post("Indexer", "Index completion")
+            first.quiesce()
+        before = dict(first.subjects["Indexer"].data)
+    finally:
+        first.close()
+    assert before["indexed"] == cycles
+    again: Any = _journalled(db, chart)
+    try:
+        again.start(resume=True)
+        assert dict(again.subjects["Indexer"].data) == before
+    finally:
+        again.close()

@@ -122,7 +122,8 @@ def batch(path: Path, lines: str, *, resume: bool) -> tuple[int, str]:
     config.write_text(SLOW_ARM, encoding="utf-8")
     code = run(str(CELL), config=str(config), journal=str(path), resume=resume,
                events=io.StringIO(lines), out=out, err=err)  # fmt: skip
-    assert code == 0, err.getvalue()
+    # the slow arm is cut off by the settle limit: the run says so (exit 1), nothing else
+    assert code == 0 or "--settle-limit" in err.getvalue(), err.getvalue()
     return code, out.getvalue()
 
 

@@ -266,6 +266,7 @@ ALL: tuple[Code, ...] = (
         "a device file given to verify: use check",
         _check("c416--a-device-file-given-to-verify-error"),
     ),
+    _c("C412", _E, "verify: a device's assigned data does not stay bounded", _CELLS),
     # -- D5xx: driver and run configs (statectl.devices.config) ---------------------------
     _c("D501", _E, "the driver or run config cannot be read", _DRIVERS),
     _c("D502", _E, "the config is not valid YAML (or an alias or too deep)", _DRIVERS),

@@ -6,10 +6,12 @@ Rules:
    The reachable snapshots of a device alone (under every event it knows and
    every free choice) are numbered once; the composed search then only looks up
    ``(local id, event) -> outcomes``.
-2. A guard part that reads data the model does not track (``_event``, or a data
-   item declared without a value) is a *free choice*: both outcomes are
-   explored. Parts over tracked data (``previous``, ``In()``, data with a value)
-   are evaluated as the runtime would. The choice is forced through the
+2. A guard part that reads data the model does not track (``_event``, a data
+   item declared without a value, or one assigned from event data) is a *free
+   choice*: both outcomes are explored. Data assigned by event rows is part of
+   the local state (:mod:`statectl.explore.data`), bounded (C412). Parts over
+   tracked data (``previous``, ``In()``, data with a value) are evaluated as the
+   runtime would. The choice is forced through the
    kernel's guard oracle (``step(..., oracle=...)``): the explorer keeps its own
    copy of each such guard with the untracked parts replaced by calls of a
    chooser, evaluates it over the kernel's guard env and hands the kernel the
@@ -30,6 +32,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from statectl.errors import Location
+from statectl.explore.data import MAX_LOCAL_STATES, DataTracker
 from statectl.expr import Expression
 from statectl.model import Chart, ControlKind, EventKind, Notify, Transition
 from statectl.semantics import (
@@ -157,7 +160,10 @@ class LocalSpace:
         self.chart = chart
         self.machine = Machine(chart)
         self.data: dict[str, Any] = {d.name: _literal(d.expr) for d in chart.data}
-        tracked_data = frozenset(k for k, v in self.data.items() if v is not None)
+        self.tracker = DataTracker(chart, self.data)  # data changed by assign (explore.data)
+        tracked_data = frozenset(
+            k for k, v in self.data.items() if v is not None and k not in self.tracker.untracked
+        )
         self.leaves: list[str] = []
         # guards with free parts, each with those parts replaced by the chooser's calls
         self.rewritten: dict[str, Expression] = {}
@@ -189,7 +195,8 @@ class LocalSpace:
             for e in self.events
         }
         self.snapshots: list[Snapshot] = []
-        self.index: dict[Snapshot, int] = {}
+        self.valuations: list[tuple[Any, ...]] = []  # tracked data per local id (explore.data)
+        self.index: dict[tuple[Snapshot, tuple[Any, ...]], int] = {}
         self.table: dict[tuple[int, str], tuple[Outcome, ...]] = {}
         self.initial: tuple[Outcome, ...] = self._close()
         self.monitored: tuple[bool, ...] = tuple(
@@ -211,20 +218,26 @@ class LocalSpace:
             return Snapshot(snap.active, snap.history, None)
         return snap
 
-    def _id(self, snap: Snapshot, queue: deque[int]) -> int:
-        snap = self._canon(snap)
-        found = self.index.get(snap)
+    def _id(self, snap: Snapshot, values: tuple[Any, ...], queue: deque[int]) -> int:
+        key = (self._canon(snap), values)
+        found = self.index.get(key)
         if found is None:
-            found = self.index[snap] = len(self.snapshots)
-            self.snapshots.append(snap)
+            if self.tracker.dynamic and len(self.snapshots) >= MAX_LOCAL_STATES:
+                raise self.tracker.unbounded(self.name, MAX_LOCAL_STATES)
+            found = self.index[key] = len(self.snapshots)
+            self.snapshots.append(key[0])
+            self.valuations.append(values)
             queue.append(found)
         return found
 
-    def _runs(self, event: str | None, snap: Snapshot) -> list[tuple[Step, Choices]]:
+    def _runs(
+        self, event: str | None, snap: Snapshot, values: tuple[Any, ...] = ()
+    ) -> list[tuple[Step, Choices]]:
         """Every step the kernel can take, one per combination of free choices consulted."""
         out: list[tuple[Step, Choices]] = []
         pending: list[tuple[bool, ...]] = [()]
-        m, data = self.machine, self.data
+        m = self.machine
+        data = self.tracker.values(self.data, values) if values else self.data
         while pending:
             prefix = pending.pop()
             chooser = _Chooser(prefix)
@@ -239,8 +252,13 @@ class LocalSpace:
             out.append((result, tuple((self.leaves[k], v) for k, v in asked)))
         return out
 
-    def _outcome(self, result: Step, choices: Choices, queue: deque[int]) -> Outcome:
-        target = self._id(result.target, queue)
+    def _outcome(
+        self, result: Step, choices: Choices, queue: deque[int], values: tuple[Any, ...] = ()
+    ) -> Outcome:
+        after = values
+        if self.tracker.dynamic and result.handled:
+            after = self.tracker.after(result, self.tracker.values(self.data, values))
+        target = self._id(result.target, after, queue)
         events = frozenset(m.event for m in result.microsteps if m.event and m.transitions)
         notifies = tuple(a.method for a in result.actions if isinstance(a, Notify))
         return Outcome(
@@ -257,22 +275,27 @@ class LocalSpace:
     def _close(self) -> tuple[Outcome, ...]:
         """Number every snapshot reachable from the initial ones under every event."""
         queue: deque[int] = deque()
+        first = self.tracker.initial
         starts = tuple(
-            self._outcome(r, c, queue) for r, c in self._runs(None, Snapshot(frozenset()))
+            self._outcome(r, c, queue, first)
+            for r, c in self._runs(None, Snapshot(frozenset()), first)
         )
         while queue:
             lid = queue.popleft()
-            snap = self.snapshots[lid]
+            snap, values = self.snapshots[lid], self.valuations[lid]
             for event in self.events:
-                outs = dict.fromkeys(self._outcome(r, c, queue) for r, c in self._runs(event, snap))
+                outs = dict.fromkeys(
+                    self._outcome(r, c, queue, values) for r, c in self._runs(event, snap, values)
+                )
                 self.table[lid, event] = tuple(outs)
         return starts
 
     # -- reading -----------------------------------------------------------------------------
 
-    def lookup(self, snap: Snapshot) -> int | None:
-        """The local id of a runtime snapshot, or ``None`` if the device alone never reaches it."""
-        return self.index.get(self._canon(snap))
+    def lookup(self, snap: Snapshot, data: Mapping[str, Any] | None = None) -> int | None:
+        """The local id of a runtime snapshot (and data), or ``None`` if never reached."""
+        values = tuple((data or self.data).get(n) for n in self.tracker.dynamic)
+        return self.index.get((self._canon(snap), values))
 
     def outcomes(self, lid: int, event: str) -> tuple[Outcome, ...]:
         return self.table.get((lid, event), ())

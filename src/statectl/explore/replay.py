@@ -119,8 +119,9 @@ class CellLinks:
         """The explorer's packed global state for the subjects' snapshots."""
         g = 0
         for d, space in enumerate(self.model.spaces):
-            snap = self.subjects[self.model.names[d]].snapshot
-            lid = space.lookup(snap) if snap is not None else None
+            subject = self.subjects[self.model.names[d]]
+            snap = subject.snapshot
+            lid = space.lookup(snap, subject.data) if snap is not None else None
             if lid is None:
                 raise StatectlError(f"{self.model.names[d]} is in a state the explorer never saw")
             g = self.model.replace(g, d, lid)

@@ -52,6 +52,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from statectl.errors import StatectlError
+from statectl.journal.assigned import replay_assigned_data
 from statectl.journal.read import REDO, JournalReader, StepRow
 from statectl.journal.recovery import RecoveryRule
 from statectl.journal.store import Guarantee, Journal, Send, StepKind, Ticket
@@ -195,6 +196,7 @@ class JournalledDevice:
             pending = reader.pending(self.name)
         else:
             restore_subject(self.subject, last.snapshot)
+            replay_assigned_data(self.subject, reader, last.id)  # journal/assigned.py
             self._record_now(StepKind.RESTORE)
             # the journal can be written (not full, not read-only) before anything reaches
             # the device again: a recovery event or a redelivered one

@@ -36,6 +36,7 @@ __all__ = [
     "AssignError",
     "EventDataError",
     "apply_assignments",
+    "assignments_of",
     "check_event_data",
     "declared_fields",
     "refuse_failure",
@@ -90,15 +91,19 @@ def _compiled(action: Assign) -> Expression:
     return expression
 
 
-def apply_assignments(
-    subject: Subject, decision: Step, event: str, event_data: Any
+def assignments_of(
+    decision: Step, data: Mapping[str, Any], event: str, event_data: Any, device: str
 ) -> dict[str, Any] | None:
-    """The data after the step's assignments (rule 2); ``None`` when it has none."""
+    """The new values of the data a step assigns (rule 2); ``None`` when it assigns none.
+
+    Pure: a journal replays it to bring the data back on resume. Raises
+    :class:`AssignError` naming the row when an assignment fails.
+    """
     assigns = [a for a in decision.actions if isinstance(a, Assign)]
     if not assigns:
         return None
     before = decision.source
-    env: dict[str, Any] = dict(subject.data)
+    env: dict[str, Any] = dict(data)
     env["previous"] = before.previous
     env["In"] = before.active.__contains__
     env["_event"] = EventView(event, event_data)
@@ -109,11 +114,18 @@ def apply_assignments(
         except Exception as exc:
             where = f"{action.origin}: " if action.origin.file or action.origin.line else ""
             raise AssignError(
-                f"{where}{subject.name}: assignment {action.location} = {action.expr} "
+                f"{where}{device}: assignment {action.location} = {action.expr} "
                 f"of event {event!r} failed: {type(exc).__name__}: {exc}; "
                 "the event was not taken"
             ) from None
     return updates
+
+
+def apply_assignments(
+    subject: Subject, decision: Step, event: str, event_data: Any
+) -> dict[str, Any] | None:
+    """The data after the step's assignments (rule 2); ``None`` when it has none."""
+    return assignments_of(decision, subject.data, event, event_data, subject.name)
 
 
 def refuse_failure(
