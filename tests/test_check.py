@@ -264,9 +264,9 @@ def test_unreachable_compound_is_reported_once() -> None:
 
 
 def test_codes_table_lists_every_code() -> None:
-    """CODES documents exactly the codes the rules (C401-C411, C418) and check's file kinds
-    (C415, C416) produce."""
-    assert sorted(CODES) == [*(f"C4{i:02d}" for i in range(1, 12)), "C415", "C416", "C418"]
+    """CODES documents exactly the C4 codes: the rules' (C401-C411, C418), verify's (C412)
+    and check's file kinds (C415, C416)."""
+    assert sorted(CODES) == [*(f"C4{i:02d}" for i in range(1, 13)), "C415", "C416", "C418"]
 
 
 # -- the exclusive-guard decision procedure ------------------------------------------------
