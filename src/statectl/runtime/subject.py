@@ -455,19 +455,20 @@ class Subject(Wiring):
             return
         self._snapshot = plan.target
         self._table = plan.table
+        calls = self._calls
+        entry = calls.get(plan) if calls is not None else None
+        if entry is None:
+            entry = self._call_for(plan)
         if data is None:
-            calls = self._calls
-            entry = calls.get(plan) if calls is not None else None
-            counts, call, arg = entry if entry is not None else self._call_for(plan)
-            self._counts += counts
+            self._counts += entry[0]
+            call = entry[1]
             if call is not None:
-                call(arg)
+                call(entry[2])
         else:
             self._counts += 1
-            if self._watch:
-                self._perform(plan.step, data, 0.0, False)
-            elif plan.notifies:
-                self._issue(plan, data)
+            run = entry[3]
+            if run is not None:
+                run(data)
         if plan.final and not self._finished:
             self._finish(0.0, False)
         for callback in self._steppers:
