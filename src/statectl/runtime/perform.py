@@ -11,7 +11,7 @@ plan path calls for a plan without data is worked out once here (:meth:`_call_fo
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from functools import partial
 from typing import Any, cast
 
@@ -31,15 +31,23 @@ from statectl.runtime.records import (
     Record,
     StateEntered,
     StateExited,
+    StepRecord,
     TransitionTaken,
+    _Tail,
 )
 from statectl.semantics import Plan, Snapshot, Step, Unhandled
 
 __all__ = ["Performer"]
 
+#: A step's calls for a recorded run (runtime/recording.py): ``(watcher method, or None
+#: for a notification; state or Notify; typed records before it)``, and the count in all.
+Recorded = tuple[tuple[tuple[Callable[[Any], object] | None, Any, int], ...], int]
 #: What the plan path calls for a plan: (counted first, callable or None, argument) without
-#: event data; with data, the callable given the data (it counts its invokes), or None.
-_Call = tuple[int, Callable[[Any], object] | None, Any, Callable[[Any], object] | None]
+#: event data; with data, the callable given the data (it counts its invokes), or None;
+#: and the plan's calls for a step listener (:func:`recorded`).
+_Call = tuple[
+    int, Callable[[Any], object] | None, Any, Callable[[Any], object] | None, Recorded
+]
 #: A plan's watcher calls and notifications in order (see ``Performer._program``).
 _Program = tuple[tuple[Callable[[str], object] | None, Any], ...]
 #: ``Subject._counts`` holds both counters: events in the low bits, invokes above them.
@@ -84,6 +92,7 @@ class Performer:
     _routes: dict[int, tuple[Observer, bool]]
     _calls: dict[Plan, _Call] | None
     _listeners: tuple[Listener, ...]
+    _recorders: tuple[Callable[[StepRecord], None], ...]
     _steppers: tuple[StepListener, ...]
     _watch: dict[str, tuple[StateWatcher, ...]]
     _watchers: tuple[StateWatcher, ...]
@@ -129,13 +138,14 @@ class Performer:
         calls = self._calls
         if calls is None:
             calls = self._calls = {}
-        entry: _Call
         watch = self._watch
+        rec = recorded(plan.step, watch, self._name)
+        entry: _Call
         if watch and any(s in watch for s in (*plan.exited, *plan.entered)):
             run = partial(self._run, self._program(plan))
-            entry = (1, run, None, run)  # watchers hear it between notifications
+            entry = (1, run, None, run, rec)  # watchers hear it between notifications
         elif not plan.notifies:
-            entry = (1, None, None, None)
+            entry = (1, None, None, None, rec)
         elif len(plan.notifies) == 1:
             action = plan.notifies[0][1]
             route = self._routes.get(action.invoke)
@@ -143,10 +153,10 @@ class Performer:
                 self._name, action.invoke, action.name, action.method, action.event, None
             )
             call = route[0].update if route is not None else _nobody
-            entry = (1 + _ONE_INVOKE, call, note, partial(self._issue, plan))
+            entry = (1 + _ONE_INVOKE, call, note, partial(self._issue, plan), rec)
         else:
             issue = partial(self._issue, plan)
-            entry = (1, issue, None, issue)
+            entry = (1, issue, None, issue, rec)
         calls[plan] = entry
         return entry
 
@@ -193,13 +203,16 @@ class Performer:
     ) -> None:
         for callback in self._steppers:
             callback(event, data, reason)
-        if self.policy == "ignore" or reason is Unhandled.DECLARED_IGNORED:
-            if self._listeners:
-                self.emit(EventIgnored(self._name, now, event, reason))
+        ignore = self.policy == "ignore" or reason is Unhandled.DECLARED_IGNORED
+        if self._listeners:
+            kind = EventIgnored if ignore else EventRejected
+            self.emit(kind(self._name, now, event, reason))
+        elif self._recorders:  # only step listeners: one step record (recording.py)
+            tail = _Tail(reason, not ignore)
+            self._hand(StepRecord(self._name, now, event, data, None, (), tail))
+        if ignore:
             return
         active = ", ".join(sorted(snap.active))
-        if self._listeners:
-            self.emit(EventRejected(self._name, now, event, reason))
         raise UnhandledEventError(
             f"{self._name}: event {event!r} is not handled in [{active}] ({reason}); "
             "add a transition or declare it ignored in the state table, or use policy 'ignore'"
@@ -235,6 +248,10 @@ class Performer:
         if decision.final and not self._finished:
             self._finish(now, listening)
 
+    def _hand(self, step: StepRecord) -> None:
+        """Give ``step`` to the step listeners (:mod:`statectl.runtime.recording`)."""
+        raise NotImplementedError
+
     def _finish(self, now: float, listening: bool) -> None:
         self._finished = True
         for w in self._watchers:
@@ -269,3 +286,26 @@ class Performer:
             else:
                 for call in api_calls_since(observer, before):
                     self.emit(ObserverCalled(self._name, now, action.method, str(call)))
+
+
+def recorded(step: Step, watch: Mapping[str, tuple[StateWatcher, ...]], device: str) -> Recorded:
+    """A step's watcher calls and notifications in order, each with the typed records
+    before it (one per state exited, transition and state entered, one per
+    ``InvokeIssued``, itself included), and the count after the last of them. A
+    notification comes as the :class:`Notification` without data ``device`` sends."""
+    items: list[tuple[Callable[[Any], object] | None, Any, int]] = []
+    at = 1  # EventReceived
+    for micro in step.microsteps:
+        for s in micro.exited:
+            at += 1
+            items.extend((w.exited, s, at) for w in watch.get(s, ()))
+        at += len(micro.transitions)
+        for s in micro.entered:
+            at += 1
+            items.extend((w.entered, s, at) for w in watch.get(s, ()))
+        for a in micro.actions:
+            if isinstance(a, Notify):
+                at += 1
+                note = Notification(device, a.invoke, a.name, a.method, a.event, None)
+                items.append((None, note, at))
+    return tuple(items), at

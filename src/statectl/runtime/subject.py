@@ -61,12 +61,15 @@ from statectl.runtime.hooks import (
     StepListener,
 )
 from statectl.runtime.perform import _EVENTS, _INVOKES, _Call
+from statectl.runtime.recording import StepListener as StepRecordListener
 from statectl.runtime.records import (
     EventReceived,
     Finished,
     Record,
     Started,
     StateEntered,
+    StepRecord,
+    _Tail,
 )
 from statectl.runtime.wiring import Wiring
 from statectl.semantics import Plan, Snapshot, Step, Unhandled, compiled, initial, step
@@ -127,6 +130,11 @@ class Subject(Wiring):
         # made as plans are first taken, dropped by attach and rename
         self._calls: dict[Plan, _Call] | None = None
         self._listeners: tuple[Listener, ...] = ()
+        self._recorders: tuple[StepRecordListener, ...] = ()  # listen_steps (recording.py)
+        self._recording: list[tuple[int, Record]] | None = None
+        self._cursor = 0
+        self._handing = False
+        self._later: list[StepRecord] | None = None
         self._steppers: tuple[StepListener, ...] = ()
         self._watch: dict[str, tuple[StateWatcher, ...]] = {}  # state -> its watchers
         self._watchers: tuple[StateWatcher, ...] = ()
@@ -287,7 +295,7 @@ class Subject(Wiring):
         if self._worker is not None:
             self._check_owner()
         machine = self.machine
-        if not self._listeners and not self._watch:
+        if not self._listeners and not self._recorders and not self._watch:
             entry = machine.quiet_start
             if entry is None:
                 first = initial(machine, self._data)
@@ -298,7 +306,7 @@ class Subject(Wiring):
                 return
         first = initial(machine, self._data)
         now = self.clock.now()
-        listening = bool(self._listeners)
+        listening = self.listening
         if listening:
             self.emit(Started(self.name, now))
         self._commit(first.target)
@@ -319,10 +327,11 @@ class Subject(Wiring):
             raise StatectlError(f"{self.name}: states {unknown} are not in {self.chart.name!r}")
         self._commit(self.machine.intern(snapshot))
         now = self.clock.now()
-        if self._listeners:
+        listening = self.listening
+        if listening:
             self.emit(Started(self.name, now))
         for state in sorted(snapshot.active, key=order.__getitem__):
-            if self._listeners:
+            if listening:
                 self.emit(StateEntered(self.name, now, state))
             for w in self._watch.get(state, ()):
                 w.entered(state)
@@ -343,7 +352,7 @@ class Subject(Wiring):
         found = actions.actions if isinstance(actions, Step) else tuple(actions)
         notifies = tuple(a for a in found if isinstance(a, Notify))
         now = self.clock.now()
-        listening = bool(self._listeners)
+        listening = self.listening
         busy = self._busy
         self._busy = True  # an observer must post(), not process, as during a step
         try:
@@ -421,7 +430,7 @@ class Subject(Wiring):
             self._finished = True
             for w in self._watchers:
                 w.finished()
-            if self._listeners:
+            if self.listening:
                 self.emit(Finished(self.name, self.clock.now()))
 
     # -- one event -------------------------------------------------------------------------
@@ -449,6 +458,9 @@ class Subject(Wiring):
                 self._counts += 1
                 for callback in self._steppers:
                     callback(event, data, reason)
+                if self._recorders:
+                    now = self.clock.now()
+                    self._hand(StepRecord(self._name, now, event, data, None, (), _Tail(reason)))
             return
         if self._listeners:
             self._process_slow(event, data, plan)  # the records, from the plan's step
@@ -459,6 +471,12 @@ class Subject(Wiring):
         entry = calls.get(plan) if calls is not None else None
         if entry is None:
             entry = self._call_for(plan)
+        if self._recorders:  # one step record for the step listeners (recording.py)
+            self._counts += 1
+            self._record_step(event, data, plan.step, self.clock.now(), entry[4])
+            for callback in self._steppers:
+                callback(event, data, "handled")
+            return
         if data is None:
             self._counts += entry[0]
             call = entry[1]
@@ -509,6 +527,9 @@ class Subject(Wiring):
             self._unhandled(event, data, decision.unhandled, now, snapshot)
             return
         self._commit(plan.target if plan is not None else decision.target)
-        self._perform(decision, data, now, listening)
+        if listening or not self._recorders:
+            self._perform(decision, data, now, listening)
+        else:  # only step listeners: one step record (recording.py)
+            self._record_step(event, data, decision, now)
         for callback in self._steppers:
             callback(event, data, "handled")
