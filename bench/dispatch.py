@@ -733,7 +733,12 @@ def build(libs: Sequence[str]) -> tuple[list[Contender], list[str]]:
             "statectl bare + step records, all typed records read",
             statectl_paper("steps-read"),
         ),
-        ("motor", "statectl", "statectl bare + listen() record listener", statectl_paper("records")),
+        (
+            "motor",
+            "statectl",
+            "statectl bare + listen() record listener",
+            statectl_paper("records"),
+        ),
         ("motor", "statectl", "statectl + Moving monitor", statectl_paper("monitor")),
         (
             "motor",

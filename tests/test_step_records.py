@@ -25,6 +25,7 @@ from statectl.runtime import (
     Subject,
     attach_monitors,
 )
+from statectl.semantics import Unhandled
 from support import Recorder
 
 PAPER = (
@@ -120,7 +121,11 @@ def test_a_step_record_says_what_happened_without_building_records(motor: Chart)
     assert moved._records is None  # nothing read it yet
     assert any(isinstance(r, MonitorStarted) for r in moved)
     stray = steps[-2]  # the last event; close() made the last record
-    assert (stray.event, stray.outcome, stray.step) == ("Movement completion", "declared ignored", None)
+    assert (stray.event, stray.outcome, stray.step) == (
+        "Movement completion",
+        "declared ignored",
+        None,
+    )
     assert [type(r) for r in stray.records][-1] is EventIgnored
 
 
@@ -169,3 +174,33 @@ def test_stopping_step_records_stops_them(motor: Chart) -> None:
     off()
     subject.dispatch("Movement completion")
     assert [s.event for s in steps] == [None, None, "Movement"]  # Started, Blocked entered
+
+
+@pytest.mark.parametrize("wiring", ["bare", "monitor", "driver"])
+def test_with_a_listen_listener_too_both_get_the_same_records(motor: Chart, wiring: str) -> None:
+    """With listen() attached as well, step listeners still get every record, in order."""
+
+    def both(subject: Subject, typed: list[Record], steps: list[StepRecord]) -> None:
+        subject.listen(typed.append)
+        subject.listen_steps(steps.append)
+
+    typed, steps, _ = _run(motor, wiring, PAPER + STRAYS, both)
+    assert [r for s in steps for r in s.records] == typed
+
+
+def test_a_record_made_by_a_step_listener_comes_after_the_step(motor: Chart) -> None:
+    """A step listener that records something gets it after the step record it is given."""
+    subject = Subject(motor, clock=SimClock())
+    subject.attach(Recorder())
+    heard: list[str | None] = []
+
+    def hear(step: StepRecord) -> None:
+        heard.append(step.event)
+        if step.event == "Movement":
+            subject.emit(EventIgnored(subject.name, 0.0, "note", Unhandled.NO_TRANSITION))
+
+    subject.listen_steps(hear)
+    subject.start()
+    subject.dispatch("Movement", {"amount": 1})
+    subject.dispatch("Movement completion")
+    assert heard == [None, None, "Movement", None, "Movement completion"]

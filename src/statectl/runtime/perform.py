@@ -42,11 +42,20 @@ __all__ = ["Performer"]
 #: A step's calls for a recorded run (runtime/recording.py): ``(watcher method, or None
 #: for a notification; state or Notify; typed records before it)``, and the count in all.
 Recorded = tuple[tuple[tuple[Callable[[Any], object] | None, Any, int], ...], int]
+#: A plan whose step record is known before it runs (no watcher, at most one notification,
+#: to an observer that logs no API calls): what its observer did, and the typed records
+#: before that notification (the cursor while it runs).
+Static = tuple[tuple[object, ...], int]
 #: What the plan path calls for a plan: (counted first, callable or None, argument) without
 #: event data; with data, the callable given the data (it counts its invokes), or None;
 #: and the plan's calls for a step listener (:func:`recorded`).
 _Call = tuple[
-    int, Callable[[Any], object] | None, Any, Callable[[Any], object] | None, Recorded
+    int,
+    Callable[[Any], object] | None,
+    Any,
+    Callable[[Any], object] | None,
+    Recorded,
+    Static | None,
 ]
 #: A plan's watcher calls and notifications in order (see ``Performer._program``).
 _Program = tuple[tuple[Callable[[str], object] | None, Any], ...]
@@ -140,12 +149,13 @@ class Performer:
             calls = self._calls = {}
         watch = self._watch
         rec = recorded(plan.step, watch, self._name)
+        static = self._static(rec)
         entry: _Call
         if watch and any(s in watch for s in (*plan.exited, *plan.entered)):
             run = partial(self._run, self._program(plan))
-            entry = (1, run, None, run, rec)  # watchers hear it between notifications
+            entry = (1, run, None, run, rec, static)  # watchers hear it between notifications
         elif not plan.notifies:
-            entry = (1, None, None, None, rec)
+            entry = (1, None, None, None, rec, static)
         elif len(plan.notifies) == 1:
             action = plan.notifies[0][1]
             route = self._routes.get(action.invoke)
@@ -153,12 +163,25 @@ class Performer:
                 self._name, action.invoke, action.name, action.method, action.event, None
             )
             call = route[0].update if route is not None else _nobody
-            entry = (1 + _ONE_INVOKE, call, note, partial(self._issue, plan), rec)
+            entry = (1 + _ONE_INVOKE, call, note, partial(self._issue, plan), rec, static)
         else:
             issue = partial(self._issue, plan)
-            entry = (1, issue, None, issue, rec)
+            entry = (1, issue, None, issue, rec, static)
         calls[plan] = entry
         return entry
+
+    def _static(self, rec: Recorded) -> Static | None:
+        """The plan's step record without running it (see :data:`Static`), when it can be."""
+        items, end = rec
+        if not items:
+            return (), end
+        if len(items) > 1 or items[0][0] is not None:
+            return None
+        _, note, at = items[0]
+        route = self._routes.get(note.invoke)
+        if route is None:
+            return (None,), at
+        return ((route[0],), at) if not route[1] else None
 
     def _program(self, plan: Plan) -> _Program:
         """The calls of ``plan``'s step in order: ``(watcher method, state)`` for the

@@ -21,12 +21,13 @@ from statectl.runtime.perform import (
     _ONE_INVOKE,
     Performer,
     Recorded,
+    _Call,
     api_calls_since,
     api_count,
     recorded,
 )
 from statectl.runtime.records import Record, StepRecord, _Made, _Tail
-from statectl.semantics import Step
+from statectl.semantics import Plan, Step
 
 __all__ = ["Recording", "StepListener"]
 
@@ -75,6 +76,12 @@ class Recording(Performer):
         if self._listeners:
             Performer.emit(self, record)
 
+    def _hand_later(self) -> None:
+        """Hand the step records that listeners made while one was being handed."""
+        later = self._later
+        while later:
+            self._hand(later.pop(0))
+
     def _hand(self, step: StepRecord) -> None:
         """Give ``step`` to the step listeners, after any being given now."""
         if self._handing:
@@ -98,6 +105,66 @@ class Recording(Performer):
             self._handing = False
             if not done and self._later:
                 self._later.clear()
+
+    def _record_plan(self, event: str, data: Any, plan: Plan, entry: _Call) -> None:
+        """A planned step for step listeners: the plan path's own calls, then one record.
+
+        When the plan's record is known before it runs (:data:`Static`), the step is
+        performed exactly as unheard and the record is made from what was known;
+        otherwise :meth:`_record_step` runs it call by call.
+        """
+        now = self.clock.now()
+        static = entry[5]
+        if static is None:
+            self._counts += 1
+            self._record_step(event, data, plan.step, now, entry[4])
+            return
+        made, at = static
+        self._recording = _NONE_YET  # emit() makes the list if anything is recorded meanwhile
+        self._cursor = at
+        final = failed = False
+        try:
+            if data is None:
+                self._counts += entry[0]
+                call = entry[1]
+                if call is not None:
+                    call(entry[2])
+            else:
+                self._counts += 1
+                run = entry[3]
+                if run is not None:
+                    run(data)
+            if plan.final and not self._finished:
+                final = True
+                self._finished = True
+                self._cursor = entry[4][1] + sum(m is not None for m in made)
+                for w in self._watchers:
+                    w.finished()
+        except BaseException:
+            failed = True
+            raise
+        finally:
+            extras = self._recording
+            self._recording = None
+            tail = None
+            if extras or final or failed:  # a failed step's records end at the cursor
+                tail = _Tail(None, False, final, self._cursor if failed else None, extras or ())
+            record = StepRecord(self._name, now, event, data, plan.step, made, tail)
+            recorders = self._recorders
+            if len(recorders) == 1 and not self._handing:  # _hand(), for the usual one
+                self._handing = True
+                try:
+                    recorders[0](record)
+                except BaseException:
+                    if self._later:
+                        self._later.clear()
+                    raise
+                finally:
+                    self._handing = False
+                if self._later:
+                    self._hand_later()
+            else:
+                self._hand(record)
 
     def _record_step(
         self, event: str, data: Any, decision: Step, now: float, program: Recorded | None = None
@@ -129,7 +196,9 @@ class Recording(Performer):
                     continue
                 observer, logging = route
                 if data is not None:  # arg is the notification without data
-                    arg = Notification(arg.device, arg.invoke, arg.name, arg.method, arg.event, data)
+                    arg = Notification(
+                        arg.device, arg.invoke, arg.name, arg.method, arg.event, data
+                    )
                 if logging:
                     before = api_count(observer)
                     observer.update(arg)
@@ -154,4 +223,3 @@ class Recording(Performer):
             if extras or final or failed:  # a failed step's records end at the cursor
                 tail = _Tail(None, False, final, self._cursor if failed else None, extras or ())
             self._hand(StepRecord(self._name, now, event, data, decision, made, tail))
-

@@ -472,8 +472,7 @@ class Subject(Wiring):
         if entry is None:
             entry = self._call_for(plan)
         if self._recorders:  # one step record for the step listeners (recording.py)
-            self._counts += 1
-            self._record_step(event, data, plan.step, self.clock.now(), entry[4])
+            self._record_plan(event, data, plan, entry)
             for callback in self._steppers:
                 callback(event, data, "handled")
             return
