@@ -8,7 +8,9 @@ Rules:
    states nested two levels deep (a 50-event cycle through every leaf, half by leaf
    transitions and the rest by transitions of the parent), and building a new
    started instance.
-2. statectl is also measured the way users wire it, each a row of its own: with the
+2. statectl is also measured the way users wire it, each a row of its own: with a
+   listener that asked for records (a step-record listener that reads nothing, one
+   that reads every typed record, and a ``listen()`` listener), with the
    Moving monitor, with the simulated motor connected as ``statectl demo`` connects
    it (driver + monitor), with a journal (SQLite, default guarantee), with the trace
    writer, and through ``post()``. The worst row is reported beside the best.
@@ -51,7 +53,7 @@ from statectl.devices import connect, make_driver
 from statectl.journal import Journal
 from statectl.journal.device import JournalledDevice
 from statectl.model import Chart, State, StateKind, Transition
-from statectl.runtime import SimClock, Subject, TraceWriter
+from statectl.runtime import SimClock, StepRecord, Subject, TraceWriter
 from statectl.runtime.monitors import attach_monitors
 from statectl.system import DeviceSetup, System
 
@@ -139,6 +141,43 @@ class QuietDevice:
         return None
 
 
+def _keep_last(subject: Subject) -> None:
+    """A step-record listener that keeps the last record and reads nothing of it."""
+    last: list[object] = [None]
+
+    def hear(step: object) -> None:
+        last[0] = step
+
+    subject.listen_steps(hear)
+
+
+def _read_all(subject: Subject) -> None:
+    """A step-record listener that reads every typed record (builds them all)."""
+    seen = [0]
+
+    def hear(step: StepRecord) -> None:
+        seen[0] += len(step.records)
+
+    subject.listen_steps(hear)
+
+
+def _typed_listener(subject: Subject) -> None:
+    """A listen() listener: every typed record, one call each, as they happen."""
+    seen = [0]
+
+    def hear(record: object) -> None:
+        seen[0] += 1
+
+    subject.listen(hear)
+
+
+#: Bare dispatch with a listener that asked for records, three ways (rule 2).
+RECORD_LISTENERS: dict[str, Callable[[Subject], None]] = {
+    "steps": _keep_last,
+    "steps-read": _read_all,
+    "records": _typed_listener,
+}
+
 #: Where journals and traces of the wired rows go; removed when the run ends.
 SCRATCH = tempfile.TemporaryDirectory(prefix="statectl-bench-")
 
@@ -150,6 +189,9 @@ def _motor_subject(wiring: str) -> tuple[Subject, JournalledDevice | None]:
     journalled = None
     if wiring == "bare":
         subject.attach(Counter())
+    elif wiring in RECORD_LISTENERS:
+        subject.attach(Counter())
+        RECORD_LISTENERS[wiring](subject)
     elif wiring == "monitor":
         subject.attach(Counter())
         attach_monitors(subject, QuietDevice())
@@ -679,6 +721,24 @@ def median(c: Contender) -> float:
 def build(libs: Sequence[str]) -> tuple[list[Contender], list[str]]:
     table: list[tuple[str, str, str, Callable[[], tuple[Fire, int] | None]]] = [
         ("motor", "statectl", "statectl bare dispatch()", statectl_paper("bare")),
+        (
+            "motor",
+            "statectl",
+            "statectl bare + step-record listener",
+            statectl_paper("steps"),
+        ),
+        (
+            "motor",
+            "statectl",
+            "statectl bare + step records, all typed records read",
+            statectl_paper("steps-read"),
+        ),
+        (
+            "motor",
+            "statectl",
+            "statectl bare + listen() record listener",
+            statectl_paper("records"),
+        ),
         ("motor", "statectl", "statectl + Moving monitor", statectl_paper("monitor")),
         (
             "motor",

@@ -282,3 +282,71 @@ def test_swapping_the_driver_config_changes_api_calls_not_states() -> None:
     assert all(a.startswith("SimMotor.") for a in motor_api)
     assert all(a.startswith("SimStepper.") for a in stepper_api)
     assert hashlib.sha256(MOTOR.read_bytes()).hexdigest() == before
+
+
+@pytest.mark.parametrize(
+    ("second_at", "second", "silent_until", "report"),
+    [
+        # the new arrival (1.5 s) is later than the armed timer (1.0 s): it is armed again
+        (0.5, ("Movement", {"amount": 10}), 1.49, ("Movement completion", {"position": 15.0})),
+        # the new arrival (0.8 s) is earlier: a timer for it replaces the armed one
+        (0.4, ("Error", None), 0.79, ("Error completion", {"position": 0.0})),
+        # the same arrival time as the armed timer: that timer completes the new movement
+        (0.0, ("Movement", {"target": 10.0}), 0.99, ("Movement completion", {"position": 10.0})),
+    ],
+    ids=["later-arrival", "earlier-arrival", "same-arrival"],
+)
+def test_a_replaced_movement_never_reports_and_the_new_one_reports_on_arrival(
+    second_at: float, second: tuple[str, Any], silent_until: float, report: tuple[str, Any]
+) -> None:
+    """A command that replaces a movement under way completes once, at its own arrival."""
+    motor, clock, reports = bound(SimMotor(speed=10))
+    motor.update(notify("Movement", {"amount": 10}))
+    clock.run_until(second_at)
+    motor.update(notify(*second))
+    clock.run_until(silent_until)
+    assert reports == []
+    clock.advance(0.02)
+    assert reports == [report]
+    clock.advance(5.0)
+    assert reports == [report] and clock.pending == 0
+
+
+def test_stop_disarms_the_arrival() -> None:
+    """stop() ends the movement: nothing is reported and no timer is left armed."""
+    motor, clock, reports = bound(SimMotor(speed=10))
+    motor.update(notify("Movement", {"amount": 10}))
+    clock.advance(0.3)
+    assert isinstance(motor, SimMotor)
+    motor.stop()
+    clock.advance(5.0)
+    assert (reports, clock.pending, motor.position) == ([], 0, pytest.approx(3.0))
+
+
+@pytest.mark.parametrize("made", [1, 999, 1000, 2001, 5000])
+def test_the_api_log_keeps_the_recent_calls_and_counts_them_all(made: int) -> None:
+    """api_log holds the last 1,000 calls (or more), oldest first; api_calls counts all."""
+    motor, _, _ = bound(SimMotor(speed=10))
+    for i in range(made):
+        motor.log_call("probe", i)
+    log = motor.api_log
+    assert motor.api_calls == made
+    assert min(made, 1000) <= len(log) < 2000
+    assert [c.args[0] for c in log] == list(range(made - len(log), made))
+
+
+def test_the_trace_names_the_api_calls_after_the_log_was_cut() -> None:
+    """ObserverCalled records name the calls a notification made, however long the run."""
+    chart = load_chart(MOTOR)
+    subject = Subject(chart, clock=SimClock())
+    connect(subject, make_driver("sim-motor", {}, chart=chart))
+    subject.start()
+    cycle = ["Movement", "Movement completion", "Initialization", "Initialization completion"]
+    for _ in range(700):  # 2,100 API calls: the log has been cut
+        for e in cycle:
+            subject.dispatch(e, {"amount": 1} if e == "Movement" else None)
+    records: list[Record] = []
+    subject.listen(records.append)
+    subject.dispatch("Movement", {"amount": 1})
+    apis = [r.api for r in records if isinstance(r, ObserverCalled)]
+    assert apis == ["SimMotor.stop()", "SimMotor.move_to(1.0)"]

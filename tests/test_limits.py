@@ -644,3 +644,29 @@ def test_scxml_unknown_target_hint_stays_short() -> None:
     hints = {d.hint for d in diags if d.code == "S605"}
     assert len(hints) == 1
     assert hints.pop().endswith("and 280 more")
+
+
+def test_default_loader_is_libyaml_when_present() -> None:
+    """With PyYAML built on libyaml, files are parsed by the C parser (issue 10)."""
+    from statectl.tables import safeyaml
+
+    want = yaml.CSafeLoader if getattr(yaml, "__with_libyaml__", False) else yaml.SafeLoader
+    assert safeyaml._Loader is want
+
+
+@pytest.mark.parametrize("was_on", [True, False], ids=["collector-on", "collector-off"])
+def test_gc_paused_restores_the_collector(was_on: bool) -> None:
+    """A load pauses the cyclic collector and leaves it as it found it, also on error."""
+    import gc
+
+    from statectl.tables.bulk import gc_paused
+
+    before = gc.isenabled()
+    (gc.enable if was_on else gc.disable)()
+    try:
+        with pytest.raises(ValueError), gc_paused():
+            assert not gc.isenabled()
+            raise ValueError("a load that fails")
+        assert gc.isenabled() is was_on
+    finally:
+        (gc.enable if before else gc.disable)()

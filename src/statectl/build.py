@@ -18,6 +18,7 @@ from statectl.builder.inverse import chart_to_tables
 from statectl.errors import Diagnostic, DiagnosticError, has_errors
 from statectl.model import Chart
 from statectl.tables import load
+from statectl.tables.bulk import gc_paused
 
 __all__ = [
     "CODES",
@@ -38,10 +39,11 @@ def load_and_build(path: str | os.PathLike[str]) -> tuple[Chart | None, list[Dia
     problems of both steps; their chart is not returned, since it is not the
     file's.
     """
-    tables, diags = load(path)
-    if tables is None:
-        return None, diags
-    chart, more = build(tables)
+    with gc_paused():  # a load makes many objects and no garbage (tables/bulk.py)
+        tables, diags = load(path)
+        if tables is None:
+            return None, diags
+        chart, more = build(tables)
     return (None if has_errors(diags) else chart), [*diags, *more]
 
 

@@ -9,7 +9,8 @@ Rules:
    arguments from the notification's data, and calls the function; a method the
    table lacks is a :class:`~statectl.errors.StatectlError` naming the ones it has.
 3. Each API function records itself with :meth:`Driver.log_call`, so the
-   Subject can trace ``ObserverCalled(method, "SimMotor.move_to(10.0)")``.
+   Subject can trace ``ObserverCalled(method, "SimMotor.move_to(10.0)")``. The
+   log keeps the last :data:`API_LOG_KEEP` calls; ``api_calls`` counts them all.
 4. Fault injection is shared: :meth:`Driver.inject_fault` arms a detail that
    :meth:`Driver.poll_fault` returns once, from ``after`` seconds on.
 5. Timer callbacks and ``update`` may run on different threads (WallClock), so
@@ -25,7 +26,7 @@ Rules:
 from __future__ import annotations
 
 import threading
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any, ClassVar
 
 from statectl.devices.protocol import DeviceDriver, Report
@@ -36,15 +37,20 @@ from statectl.runtime.monitors import DEFAULT_PERIOD, Monitor, attach_monitors
 from statectl.runtime.records import ApiCall
 from statectl.runtime.subject import Subject
 
-__all__ = ["Driver", "check_serves", "connect", "requested_target"]
+__all__ = ["API_LOG_KEEP", "Driver", "check_serves", "connect", "requested_target"]
+
+#: The API calls a driver keeps in ``api_log``, the most recent; ``api_calls`` counts them
+#: all. A device that runs for days makes millions of calls: an unbounded log was memory
+#: that only grew, and the appends slowed down as it did.
+API_LOG_KEEP = 1000
 
 
 def requested_target(position: float, data: Any) -> float:
     """The absolute target a Movement asks for: ``{"target": x}`` or ``{"amount": dx}``."""
-    if isinstance(data, Mapping):
-        if "target" in data and isinstance(data["target"], int | float):
+    if type(data) is dict or isinstance(data, Mapping):  # the common case first
+        if "target" in data and isinstance(data["target"], (int, float)):
             return float(data["target"])
-        if "amount" in data and isinstance(data["amount"], int | float):
+        if "amount" in data and isinstance(data["amount"], (int, float)):
             return position + float(data["amount"])
     raise StatectlError(
         f"a movement needs event data {{amount: <number>}} or {{target: <number>}} (got {data!r})"
@@ -69,6 +75,11 @@ class Driver:
                 f"{type(self).__name__}.completions names methods not in .methods: {unknown}"
             )
         self._api_log: list[ApiCall] = []
+        self._api_new: list[tuple[float, str, tuple[Any, ...]]] = []  # logged, not yet ApiCalls
+        self._api_dropped = 0  # calls dropped from the front of the log (rule 3)
+        self._owner = type(self).__name__  # the API's owner in every ApiCall
+        # observer method -> the function update() calls, under the lock it holds
+        self._api = {m: self._locked_form(f) for m, f in self.methods.items()}
         self._report: Report | None = None
         self._clock: Clock | None = None
         self._fault: tuple[str, float] | None = None
@@ -89,20 +100,55 @@ class Driver:
 
     @property
     def api_log(self) -> Sequence[ApiCall]:
+        """The last :data:`API_LOG_KEEP` (or more) API calls, oldest first."""
+        if self._api_new:
+            self._settle_log()
         return self._api_log
 
+    @property
+    def api_calls(self) -> int:
+        """Every API call made so far, also those no longer in :attr:`api_log`."""
+        return self._api_dropped + len(self._api_log) + len(self._api_new)
+
+    def _settle_log(self) -> None:
+        """Turn the calls logged since the last read into :class:`ApiCall` values (rule 3).
+
+        A call is logged as a plain tuple and becomes an ``ApiCall`` only when the log
+        is read (a trace reads it per notification; nobody else may ever read it), and
+        the log is cut back to the last :data:`API_LOG_KEEP`.
+        """
+        with self._lock:
+            owner, new = self._owner, self._api_new
+            log = self._api_log
+            # tuple.__new__: the named tuple without its Python-level __new__
+            log.extend([tuple.__new__(ApiCall, (t, owner, f, a)) for t, f, a in new])
+            new.clear()
+            if len(log) >= 2 * API_LOG_KEEP:
+                self._api_dropped += len(log) - API_LOG_KEEP
+                del log[:-API_LOG_KEEP]
+
     def update(self, notification: Notification) -> None:
-        function = self.methods.get(notification.method)
+        method = notification.method
+        function = self._api.get(method)
         if function is None:
             available = ", ".join(f"{m}()" for m in self.methods) or "none"
             raise StatectlError(
-                f"{type(self).__name__} has no observer method {notification.method}() "
+                f"{type(self).__name__} has no observer method {method}() "
                 f"(invoke #{notification.invoke} {notification.name}); available: {available}"
             )
         with self._lock:
-            self.method = notification.method
-            args = self.arguments(notification.method, notification.data)
-            getattr(self, function)(*args)
+            self.method = method
+            function(*self.arguments(method, notification.data))
+
+    def _locked_form(self, function: str) -> Callable[..., object]:
+        """The callable :meth:`update` uses for API ``function``, called with the lock held.
+
+        By default the public function itself (which takes the lock again); a driver
+        whose public functions only take the lock around a private body returns
+        that body, so a notification takes the lock once.
+        """
+        found: Callable[..., object] = getattr(self, function)
+        return found
 
     def serves(self) -> frozenset[str]:
         """The observer methods :meth:`update` handles (rule 6): the keys of ``methods``."""
@@ -133,7 +179,16 @@ class Driver:
         clock = self._clock
         if clock is None:
             raise StatectlError(f"{type(self).__name__} is not bound; call bind() or connect()")
-        self._api_log.append(ApiCall(clock.now(), type(self).__name__, function, args))
+        self._log(clock.now(), function, args)
+
+    def _log(self, now: float, function: str, args: tuple[Any, ...]) -> None:
+        """:meth:`log_call` for a driver that read the clock already (one read per call)."""
+        new = self._api_new
+        new.append((now, function, args))
+        if len(new) >= 2 * API_LOG_KEEP:  # nobody reads the log: drop, never build, the old
+            self._api_dropped += len(self._api_log) + len(new) - API_LOG_KEEP
+            self._api_log.clear()
+            del new[:-API_LOG_KEEP]
 
     def report(self, event: str, data: Any = None) -> None:
         if self._report is None:

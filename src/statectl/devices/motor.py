@@ -11,30 +11,36 @@ Rules:
    movement in progress: the motor goes back to the position before the failed
    movement and reports ``Error completion``.
 4. ``inject_fault(detail, after)`` makes the Moving monitor see a motor error.
+5. A command that replaces a movement under way completes only the new one, at
+   its own arrival time; the replaced movement never reports.
 """
 
 from __future__ import annotations
 
-from typing import Any, ClassVar, NamedTuple
+from collections.abc import Callable
+from typing import Any, ClassVar
 
 from statectl.devices.base import Driver, requested_target
 from statectl.errors import StatectlError
-from statectl.runtime.clock import Timer
+from statectl.runtime.clock import Clock, Timer
 
 __all__ = ["SimMotor"]
 
-
-class _Motion(NamedTuple):
-    """A movement under way (a named tuple: one is made per API call)."""
-
-    start_time: float
-    start: float
-    target: float
-    timer: Timer
+#: An arrival timer this close to the arrival completes it (clock arithmetic is floating point).
+_EARLY = 1e-9
 
 
 class SimMotor(Driver):
-    """A motor that moves at a constant speed; position is interpolated on the clock."""
+    """A motor that moves at a constant speed; position is interpolated on the clock.
+
+    The movement under way is a few attributes (where and when it started, where it
+    goes, when it arrives) rather than an object per move, and :meth:`update` takes
+    the lock once and calls the private bodies of the API functions. One arrival
+    timer serves the movements in turn (rule 5): a command that replaces a movement
+    under way keeps the armed timer when that fires no later than the new arrival;
+    firing early, the timer is armed again for the rest. A stream of commands, each
+    replacing the last, so arms no timer per command.
+    """
 
     methods: ClassVar[dict[str, str]] = {
         "Movement": "move_to",
@@ -52,73 +58,133 @@ class SimMotor(Driver):
         if not speed > 0:
             raise StatectlError(f"SimMotor speed must be > 0 units/s (got {speed!r})")
         self.speed = float(speed)
-        self._position = float(position)
+        self._position = float(position)  # where the motor is when it is not moving
         self.previous = float(position)  # where the last movement started
         self.target = float(position)
-        self._motion: _Motion | None = None
+        self._moving = False
+        self._since = 0.0  # when the movement under way started
+        self._from = 0.0  # where it started
+        self._to = 0.0  # where it goes
+        self._arrival = 0.0  # when it gets there
+        self._arriving = "Movement"  # the method whose completion it reports then
+        self._timer: Timer | None = None  # the armed arrival timer, if any
+        self._timer_due = 0.0  # when that timer fires
+        self._arms = 0  # timers armed: one fired after it was replaced does nothing
 
     @property
     def moving(self) -> bool:
-        return self._motion is not None
+        return self._moving
 
     @property
     def position(self) -> float:
-        m = self._motion
-        if m is None:
+        if not self._moving:
             return self._position
-        travelled = (self.clock.now() - m.start_time) * self.speed
-        distance = m.target - m.start
+        return self._at(self.clock.now())
+
+    def _at(self, now: float) -> float:
+        """Where the movement under way is at ``now``."""
+        travelled = (now - self._since) * self.speed
+        distance = self._to - self._from
         if travelled >= abs(distance):
-            return m.target
-        return m.start + (travelled if distance > 0 else -travelled)
+            return self._to
+        return self._from + (travelled if distance > 0 else -travelled)
 
     def arguments(self, method: str, data: Any) -> tuple[Any, ...]:
         if method == "Movement":
-            return (requested_target(self.position, data),)
+            where = self._at(self.clock.now()) if self._moving else self._position
+            return (requested_target(where, data),)
         return (self.previous,)
+
+    def _locked_form(self, function: str) -> Callable[..., object]:
+        bodies: dict[str, Callable[..., object]] = {
+            "move_to": self._move_to,
+            "return_to": self._return_to,
+        }
+        return bodies.get(function) or super()._locked_form(function)
 
     # -- the motor's API ---------------------------------------------------------------------
 
     def move_to(self, target: float) -> None:
         with self._lock:
-            if self.moving:
-                self.stop()
-            self.log_call("move_to", float(target))
-            self.previous = self.position
-            self._travel(float(target))
+            self._move_to(target)
 
     def return_to(self, position: float) -> None:
         with self._lock:
-            if self.moving:
-                self.stop()
-            self.log_call("return_to", float(position))
-            self._travel(float(position))
+            self._return_to(position)
 
     def stop(self) -> None:
         with self._lock:
-            self.log_call("stop")
-            m = self._motion
-            if m is not None:
-                self._position = self.position
-                m.timer.cancel()
-                self._motion = None
-            self.target = self._position
+            self._halt(self.clock.now())
+            self._disarm()  # nothing follows: no arrival is due any more
+
+    # -- the bodies, called with the lock held; the clock is read once per call ---------------
+
+    def _move_to(self, target: float) -> None:
+        clock = self.clock
+        now = clock.now()
+        target = float(target)
+        if self._moving:
+            self._halt(now)
+        self._log(now, "move_to", (target,))
+        self.previous = self._position  # not moving now: this is where it is
+        self._travel(clock, now, target)
+
+    def _return_to(self, position: float) -> None:
+        clock = self.clock
+        now = clock.now()
+        position = float(position)
+        if self._moving:
+            self._halt(now)
+        self._log(now, "return_to", (position,))
+        self._travel(clock, now, position)
+
+    def _halt(self, now: float) -> None:
+        """``stop()``: the motor stays where the movement had got to (the timer stays armed
+        for the movement that follows; :meth:`stop` disarms it)."""
+        self._log(now, "stop", ())
+        if self._moving:
+            self._position = self._at(now)
+            self._moving = False
+        self.target = self._position
 
     # -- simulation --------------------------------------------------------------------------
 
-    def _travel(self, target: float) -> None:
-        method = self.method or "Movement"
-        self.target = target
+    def _travel(self, clock: Clock, now: float, target: float) -> None:
         start = self._position
+        self.target = self._to = target
+        self._from = start
+        self._since = now
         duration = abs(target - start) / self.speed
-        timer = self.clock.call_later(duration, lambda: self._arrive(method))
-        self._motion = _Motion(self.clock.now(), start, target, timer)
+        self._arrival = arrival = now + duration
+        self._arriving = self.method or "Movement"
+        self._moving = True
+        if self._timer is None or self._timer_due > arrival:  # none armed, or it fires late
+            self._disarm()
+            self._arm(clock, duration, arrival)
 
-    def _arrive(self, method: str) -> None:
+    def _arm(self, clock: Clock, delay: float, due: float) -> None:
+        self._arms = arms = self._arms + 1
+        self._timer_due = due
+        self._timer = clock.call_later(delay, lambda: self._fired(arms))
+
+    def _disarm(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+
+    def _fired(self, arms: int) -> None:
         with self._lock:
-            m = self._motion
-            if m is None:
+            if arms != self._arms:
+                return  # replaced by a timer armed since
+            self._timer = None
+            if not self._moving:
                 return
-            self._position = m.target
-            self._motion = None
+            clock = self.clock
+            now = clock.now()
+            if self._arrival - now > _EARLY:  # a later movement took over this timer
+                self._arm(clock, self._arrival - now, self._arrival)
+                return
+            self._position = self._to
+            self._moving = False
+            method = self._arriving
         self.complete(method, {"position": self._position})

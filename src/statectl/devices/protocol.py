@@ -8,8 +8,11 @@ Rules:
    thread, and ``clock`` is the only source of time it may use.
 3. ``poll_fault()`` returns a fault detail once, or ``None``; the monitor of a
    monitored state calls it on the Subject's owner.
-4. ``api_log`` lists every API call the driver made, in order, so a trace
-   shows which function of which device actually ran.
+4. ``api_log`` lists the API calls the driver made, in order, so a trace
+   shows which function of which device actually ran. A driver may keep only
+   the recent ones if it also counts them all in ``api_calls`` (the shipped
+   drivers keep the last 1,000): the Subject then takes a notification's calls
+   by that count.
 """
 
 from __future__ import annotations

@@ -18,6 +18,7 @@ from statectl.runtime.records import (
     Started,
     StateEntered,
     StateExited,
+    StepRecord,
     TransitionTaken,
 )
 from statectl.runtime.subject import ApiLogging, Listener, Policy, StateWatcher, Subject
@@ -48,6 +49,7 @@ __all__ = [
     "StateEntered",
     "StateExited",
     "StateWatcher",
+    "StepRecord",
     "Subject",
     "Timer",
     "TraceWriter",

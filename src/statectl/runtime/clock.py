@@ -83,11 +83,14 @@ class SimClock:
     def call_later(
         self, delay: float, fn: Callable[[], object], *, background: bool = False
     ) -> Timer:
-        timer = Timer(self._now + _check_delay(delay), fn, background=background)
+        if type(delay) is not float or not delay >= 0:  # NaN too
+            delay = _check_delay(delay)
+        when = self._now + delay
+        timer = Timer(when, fn, False, background)  # positional: a driver makes one per move
         heap = self._heap
         if len(heap) >= self._compact_at:
             self._compact()
-        heapq.heappush(heap, (timer.when, next(self._seq), timer))
+        heapq.heappush(heap, (when, next(self._seq), timer))
         return timer
 
     def _compact(self) -> None:

@@ -8,8 +8,12 @@ Rules:
    hooks the step, not the record stream, so a monitored device keeps the plan
    path; ``MonitorStarted`` / ``MonitorStopped`` are recorded for listeners.
 2. While running it polls the device every ``period`` seconds on the Subject's
-   clock. The poll itself runs on the Subject's owner (queued with
-   ``call_soon``), so it never races the events the owner processes.
+   clock, the first poll one period after the state was entered. The poll itself
+   runs on the Subject's owner (queued with ``call_soon``), so it never races the
+   events the owner processes. Leaving the state leaves the poll timer armed: a
+   state left and entered again within a period (a command cycle) reuses it, and
+   a timer due before the next poll only arms itself again; :meth:`Monitor.finished`
+   (the end of the run) cancels it.
 3. When ``poll_fault()`` returns a detail string the monitor records
    ``FaultDetected`` and posts the state's first fault event with
    ``{"detail": detail}`` as its data; the transition it drives stops the monitor.
@@ -31,6 +35,8 @@ __all__ = ["DEFAULT_PERIOD", "FaultSource", "Monitor", "attach_monitors"]
 
 #: Seconds between two polls of a device, unless told otherwise.
 DEFAULT_PERIOD = 0.1
+#: A timer this close to the due time polls (clock arithmetic is floating point).
+_EARLY = 1e-9
 
 
 class FaultSource(Protocol):
@@ -55,8 +61,8 @@ class Monitor:
         self.period = period
         self.active = False
         self.polls = 0
-        self._timer: Timer | None = None
-        self._generation = 0  # a poll queued before a stop must not run after it
+        self._timer: Timer | None = None  # armed (or fired, its poll not yet run), or None
+        self._due = 0.0  # when the next poll is due while active
 
     # -- StateWatcher: called by the subject's step, on the owner
 
@@ -64,40 +70,47 @@ class Monitor:
         if self.active:
             return
         self.active = True
-        self._generation += 1
         s = self.subject
+        self._due = s.clock.now() + self.period
         if s.listening:
             s.emit(MonitorStarted(s.name, s.clock.now(), self.spec.state))
-        self._schedule()
+        if self._timer is None:  # else the armed timer comes first and waits the rest
+            self._arm(self.period)
 
     def exited(self, state: str) -> None:
         self._stop(record=True)
 
     def finished(self) -> None:
         self._stop(record=False)
-
-    def _stop(self, *, record: bool) -> None:
-        if not self.active:
-            return
-        self.active = False
-        self._generation += 1
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
+
+    def _stop(self, *, record: bool) -> None:
+        """Stop polling. The timer stays armed: a state left and entered again within a
+        period (a command cycle) reuses it instead of cancelling one and making another;
+        when it comes due for a stopped monitor it does nothing."""
+        if not self.active:
+            return
+        self.active = False
         s = self.subject
         if record and s.listening:
             s.emit(MonitorStopped(s.name, s.clock.now(), self.spec.state))
 
-    def _schedule(self) -> None:
-        generation = self._generation
-        self._timer = self.subject.clock.call_later(
-            self.period,
-            lambda: self.subject.call_soon(lambda: self._poll(generation)),
-            background=True,
-        )
+    def _arm(self, delay: float) -> None:
+        self._timer = self.subject.clock.call_later(delay, self._fired, background=True)
 
-    def _poll(self, generation: int) -> None:
-        if not self.active or generation != self._generation:
+    def _fired(self) -> None:
+        """On the clock's thread: the poll itself runs on the owner (rule 2)."""
+        self.subject.call_soon(self._poll)
+
+    def _poll(self) -> None:
+        self._timer = None
+        if not self.active:  # left since (also: a poll queued before the state was left)
+            return
+        now = self.subject.clock.now()
+        if self._due - now > _EARLY:  # entered again after the timer was armed
+            self._arm(self._due - now)
             return
         self.polls += 1
         detail = self.device.poll_fault()
@@ -105,9 +118,10 @@ class Monitor:
             s = self.subject
             event = self.spec.raises[0]
             if s.listening:
-                s.emit(FaultDetected(s.name, s.clock.now(), self.spec.state, event, detail))
+                s.emit(FaultDetected(s.name, now, self.spec.state, event, detail))
             s.post(event, {"detail": detail})
-        self._schedule()
+        self._due = now + self.period
+        self._arm(self.period)
 
 
 def attach_monitors(

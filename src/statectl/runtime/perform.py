@@ -11,7 +11,8 @@ plan path calls for a plan without data is worked out once here (:meth:`_call_fo
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
+from functools import partial
 from typing import Any, cast
 
 from statectl.errors import UnhandledEventError
@@ -20,6 +21,7 @@ from statectl.observers import Notification, Observer
 from statectl.runtime.clock import Clock
 from statectl.runtime.hooks import ApiLogging, Listener, Policy, StateWatcher, StepListener
 from statectl.runtime.records import (
+    ApiCall,
     EventIgnored,
     EventRejected,
     Finished,
@@ -29,18 +31,58 @@ from statectl.runtime.records import (
     Record,
     StateEntered,
     StateExited,
+    StepRecord,
     TransitionTaken,
+    _Tail,
 )
 from statectl.semantics import Plan, Snapshot, Step, Unhandled
 
 __all__ = ["Performer"]
 
-#: What the plan path calls for a data-less plan: (counted first, callable or None, argument).
-_Call = tuple[int, Callable[[Any], object] | None, Any]
+#: A step's calls for a recorded run (runtime/recording.py): ``(watcher method, or None
+#: for a notification; state or Notify; typed records before it)``, and the count in all.
+Recorded = tuple[tuple[tuple[Callable[[Any], object] | None, Any, int], ...], int]
+#: A plan whose step record is known before it runs (no watcher, at most one notification,
+#: to an observer that logs no API calls): what its observer did, and the typed records
+#: before that notification (the cursor while it runs).
+Static = tuple[tuple[object, ...], int]
+#: What the plan path calls for a plan: (counted first, callable or None, argument) without
+#: event data; with data, the callable given the data (it counts its invokes), or None;
+#: and the plan's calls for a step listener (:func:`recorded`).
+_Call = tuple[
+    int,
+    Callable[[Any], object] | None,
+    Any,
+    Callable[[Any], object] | None,
+    Recorded,
+    Static | None,
+]
+#: A plan's watcher calls and notifications in order (see ``Performer._program``).
+_Program = tuple[tuple[Callable[[str], object] | None, Any], ...]
 #: ``Subject._counts`` holds both counters: events in the low bits, invokes above them.
 _INVOKES = 48
 _EVENTS = (1 << _INVOKES) - 1
 _ONE_INVOKE = 1 << _INVOKES
+
+
+def api_count(observer: object) -> int:
+    """How many API calls ``observer`` (an :class:`ApiLogging`) has made so far."""
+    made = getattr(observer, "api_calls", None)
+    return made if type(made) is int else len(cast(ApiLogging, observer).api_log)
+
+
+def api_calls_since(observer: object, before: int) -> Sequence[ApiCall]:
+    """The API calls made since :func:`api_count` said ``before``.
+
+    A driver that keeps only its recent calls counts them all in ``api_calls``
+    (devices/protocol.py rule 4), so the new ones are the log's last ones.
+    """
+    log = cast(ApiLogging, observer).api_log
+    made = getattr(observer, "api_calls", None)
+    if type(made) is not int:
+        return log[before:]
+    new = made - before
+    return log[max(0, len(log) - new) :] if new > 0 else ()
 
 
 def _nobody(note: Notification) -> None:
@@ -59,6 +101,7 @@ class Performer:
     _routes: dict[int, tuple[Observer, bool]]
     _calls: dict[Plan, _Call] | None
     _listeners: tuple[Listener, ...]
+    _recorders: tuple[Callable[[StepRecord], None], ...]
     _steppers: tuple[StepListener, ...]
     _watch: dict[str, tuple[StateWatcher, ...]]
     _watchers: tuple[StateWatcher, ...]
@@ -92,38 +135,79 @@ class Performer:
             self._emitting = False
 
     def _call_for(self, plan: Plan) -> _Call:
-        """What the plan path calls for ``plan`` without data, worked out once per instance.
+        """What the plan path calls for ``plan``, worked out once per plan and instance.
 
-        A single notification is prebuilt for the observer routed now (attach and
-        rename drop these); several go through :meth:`_issue`, which looks each route
-        up when it is due, as the full path does (an observer may attach another).
+        Without event data: ``counts`` are added and ``call(arg)`` made; a single
+        notification is prebuilt for the observer routed now (attach and rename drop
+        these). With data: ``with_data(data)`` is called, which counts the invokes it
+        issues. A plan that enters or exits a watched state runs a *program*: the
+        watcher calls and notifications of its step in the order :meth:`_perform`
+        makes them, resolved once instead of per event.
         """
         calls = self._calls
         if calls is None:
             calls = self._calls = {}
-        entry: _Call
         watch = self._watch
+        rec = recorded(plan.step, watch, self._name)
+        static = self._static(rec)
+        entry: _Call
         if watch and any(s in watch for s in (*plan.exited, *plan.entered)):
-            entry = (1, self._perform_unheard, plan)  # watchers hear it between notifications
+            run = partial(self._run, self._program(plan))
+            entry = (1, run, None, run, rec, static)  # watchers hear it between notifications
         elif not plan.notifies:
-            entry = (1, None, None)
+            entry = (1, None, None, None, rec, static)
         elif len(plan.notifies) == 1:
             action = plan.notifies[0][1]
             route = self._routes.get(action.invoke)
             note = Notification(
                 self._name, action.invoke, action.name, action.method, action.event, None
             )
-            entry = (1 + _ONE_INVOKE, route[0].update if route is not None else _nobody, note)
+            call = route[0].update if route is not None else _nobody
+            entry = (1 + _ONE_INVOKE, call, note, partial(self._issue, plan), rec, static)
         else:
-            entry = (1, self._issue_all, plan)
+            issue = partial(self._issue, plan)
+            entry = (1, issue, None, issue, rec, static)
         calls[plan] = entry
         return entry
 
-    def _issue_all(self, plan: Plan) -> None:
-        self._issue(plan, None)
+    def _static(self, rec: Recorded) -> Static | None:
+        """The plan's step record without running it (see :data:`Static`), when it can be."""
+        items, end = rec
+        if not items:
+            return (), end
+        if len(items) > 1 or items[0][0] is not None:
+            return None
+        _, note, at = items[0]
+        route = self._routes.get(note.invoke)
+        if route is None:
+            return (None,), at
+        return ((route[0],), at) if not route[1] else None
 
-    def _perform_unheard(self, plan: Plan) -> None:
-        self._perform(plan.step, None, 0.0, False)
+    def _program(self, plan: Plan) -> _Program:
+        """The calls of ``plan``'s step in order: ``(watcher method, state)`` for the
+        watched states exited and entered, ``(None, notify)`` for each notification."""
+        watch = self._watch
+        program: list[tuple[Callable[[str], object] | None, Any]] = []
+        for micro in plan.step.microsteps:
+            for s in micro.exited:
+                program.extend((w.exited, s) for w in watch.get(s, ()))
+            for s in micro.entered:
+                program.extend((w.entered, s) for w in watch.get(s, ()))
+            program.extend((None, a) for a in micro.actions if isinstance(a, Notify))
+        return tuple(program)
+
+    def _run(self, program: _Program, data: Any) -> None:
+        """Run a plan's program: each notification counted, routed when it is due."""
+        for fn, arg in program:
+            if fn is not None:
+                fn(arg)
+                continue
+            self._counts += _ONE_INVOKE
+            route = self._routes.get(arg.invoke)
+            if route is not None:
+                route[0].update(
+                    Notification(self._name, arg.invoke, arg.name, arg.method, arg.event, data)
+                )
 
     def _issue(self, plan: Plan, data: Any) -> None:
         """Issue the notifications of ``plan`` in order, as :meth:`_notify` does unheard."""
@@ -142,13 +226,16 @@ class Performer:
     ) -> None:
         for callback in self._steppers:
             callback(event, data, reason)
-        if self.policy == "ignore" or reason is Unhandled.DECLARED_IGNORED:
-            if self._listeners:
-                self.emit(EventIgnored(self._name, now, event, reason))
+        ignore = self.policy == "ignore" or reason is Unhandled.DECLARED_IGNORED
+        if self._listeners:
+            kind = EventIgnored if ignore else EventRejected
+            self.emit(kind(self._name, now, event, reason))
+        elif self._recorders:  # only step listeners: one step record (recording.py)
+            tail = _Tail(reason, not ignore)
+            self._hand(StepRecord(self._name, now, event, data, None, (), tail))
+        if ignore:
             return
         active = ", ".join(sorted(snap.active))
-        if self._listeners:
-            self.emit(EventRejected(self._name, now, event, reason))
         raise UnhandledEventError(
             f"{self._name}: event {event!r} is not handled in [{active}] ({reason}); "
             "add a transition or declare it ignored in the state table, or use policy 'ignore'"
@@ -184,6 +271,10 @@ class Performer:
         if decision.final and not self._finished:
             self._finish(now, listening)
 
+    def _hand(self, step: StepRecord) -> None:
+        """Give ``step`` to the step listeners (:mod:`statectl.runtime.recording`)."""
+        raise NotImplementedError
+
     def _finish(self, now: float, listening: bool) -> None:
         self._finished = True
         for w in self._watchers:
@@ -207,15 +298,37 @@ class Performer:
                 )
             )
             return
-        log = cast(ApiLogging, observer).api_log if logging else None
-        before = len(log) if log is not None else 0
+        before = api_count(observer) if logging else 0
         observer.update(
             Notification(self._name, action.invoke, action.name, action.method, action.event, data)
         )
         if listening:
-            if log is None:
+            if not logging:
                 api = f"{type(observer).__name__}.update(#{action.invoke})"
                 self.emit(ObserverCalled(self._name, now, action.method, api))
             else:
-                for call in log[before:]:
+                for call in api_calls_since(observer, before):
                     self.emit(ObserverCalled(self._name, now, action.method, str(call)))
+
+
+def recorded(step: Step, watch: Mapping[str, tuple[StateWatcher, ...]], device: str) -> Recorded:
+    """A step's watcher calls and notifications in order, each with the typed records
+    before it (one per state exited, transition and state entered, one per
+    ``InvokeIssued``, itself included), and the count after the last of them. A
+    notification comes as the :class:`Notification` without data ``device`` sends."""
+    items: list[tuple[Callable[[Any], object] | None, Any, int]] = []
+    at = 1  # EventReceived
+    for micro in step.microsteps:
+        for s in micro.exited:
+            at += 1
+            items.extend((w.exited, s, at) for w in watch.get(s, ()))
+        at += len(micro.transitions)
+        for s in micro.entered:
+            at += 1
+            items.extend((w.entered, s, at) for w in watch.get(s, ()))
+        for a in micro.actions:
+            if isinstance(a, Notify):
+                at += 1
+                note = Notification(device, a.invoke, a.name, a.method, a.event, None)
+                items.append((None, note, at))
+    return tuple(items), at

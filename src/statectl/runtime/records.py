@@ -12,13 +12,24 @@ Rules:
    ``StateExited``..., ``TransitionTaken``..., ``StateEntered``..., then that
    microstep's ``InvokeIssued`` + ``ObserverCalled``...; or, when no transition
    was taken, ``EventReceived`` then one ``EventIgnored`` / ``EventRejected``.
+4. A :class:`StepRecord` is what one event did, as one object: the kernel's step
+   (or why nothing happened), the API calls its notifications made and anything
+   recorded meanwhile (a monitor starting). Its typed records are those of rule 3,
+   built the first time they are asked for, so a listener that reads only the
+   outcome, or the states entered, never pays for them.
 """
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
+from statectl.model import Notify
 from statectl.semantics import Unhandled
+
+if TYPE_CHECKING:
+    from collections.abc import Iterator
+
+    from statectl.semantics import Step
 
 __all__ = [
     "ApiCall",
@@ -36,6 +47,7 @@ __all__ = [
     "Started",
     "StateEntered",
     "StateExited",
+    "StepRecord",
     "TransitionTaken",
     "format_args",
 ]
@@ -208,3 +220,149 @@ class ApiCall(NamedTuple):
 
     def __str__(self) -> str:
         return f"{self.device}.{self.function}({format_args(self.args)})"
+
+
+#: What one notification's observer did, as a step record keeps it: ``None`` (no observer),
+#: the API calls it made (a driver that logs them), or the observer itself (one call).
+_Made = tuple[ApiCall, ...] | object
+
+
+class _Tail(NamedTuple):
+    """What most step records do not have, kept apart so the common one is built quickly."""
+
+    reason: Unhandled | None = None  # why the event changed nothing
+    rejected: bool = False  # ... under policy ``error``
+    final: bool = False  # the event finished the run
+    upto: int | None = None  # the step failed after this many typed records
+    extras: tuple[tuple[int, Record], ...] | list[tuple[int, Record]] = ()  # made meanwhile
+
+
+class StepRecord:
+    """What one event did, as one object; its typed :attr:`records` are built on demand.
+
+    A :meth:`~statectl.runtime.subject.Subject.listen_steps` listener gets one per
+    event (rule 4): ``event``, ``data``, the kernel's ``step`` (``None`` when the
+    event changed nothing, then ``reason`` says why), ``entered`` and ``exited``.
+    Records made outside any event (``Started``, a monitor's ``FaultDetected``,
+    ``Finished``) come as a step record of their own, ``event`` ``None``. The
+    typed records are exactly those a :meth:`~statectl.runtime.subject.Subject.listen`
+    listener gets one by one, in the same order.
+    """
+
+    __slots__ = ("_made", "_records", "_tail", "data", "device", "event", "step", "time")
+
+    def __init__(
+        self,
+        device: str,
+        time: float,
+        event: str | None,
+        data: Any,
+        step: Step | None,
+        made: tuple[_Made, ...] | list[_Made] = (),
+        tail: _Tail | None = None,
+        records: tuple[Record, ...] | None = None,
+    ) -> None:
+        self.device = device
+        self.time = time
+        self.event = event
+        self.data = data
+        self.step = step
+        self._made = made  # per notification performed, in order
+        self._tail = tail  # what most steps do not have (_Tail), or None
+        self._records = records
+
+    @property
+    def reason(self) -> Unhandled | None:
+        """Why the event changed nothing (``None`` when it was handled)."""
+        return self._tail.reason if self._tail is not None else None
+
+    @property
+    def rejected(self) -> bool:
+        """Unhandled under policy ``error`` (``EventRejected``, not ``EventIgnored``)."""
+        return self._tail is not None and self._tail.rejected
+
+    @property
+    def final(self) -> bool:
+        """This event finished the run (``Finished`` closes its records)."""
+        return self._tail is not None and self._tail.final
+
+    @classmethod
+    def of(cls, record: Record) -> StepRecord:
+        """A record made outside any event, as a step record of its own."""
+        return cls(record.device, record.time, None, None, None, (), None, (record,))
+
+    @property
+    def outcome(self) -> str:
+        """``handled``, why the event changed nothing, or ``""`` outside an event."""
+        if self.step is not None:
+            return "handled"
+        return self.reason.value if self.reason is not None else ""
+
+    @property
+    def entered(self) -> tuple[str, ...]:
+        return self.step.entered if self.step is not None else ()
+
+    @property
+    def exited(self) -> tuple[str, ...]:
+        return self.step.exited if self.step is not None else ()
+
+    @property
+    def records(self) -> tuple[Record, ...]:
+        """The typed records of rule 3 (and those made meanwhile), built once."""
+        records = self._records
+        if records is None:
+            records = self._records = _typed(self)
+        return records
+
+    def __iter__(self) -> Iterator[Record]:
+        return iter(self.records)
+
+    def __repr__(self) -> str:
+        return f"StepRecord({self.device!r}, {self.time!r}, {self.event!r}, {self.outcome!r})"
+
+
+def _typed(r: StepRecord) -> tuple[Record, ...]:
+    """Rule 3's records of a step record, with those made meanwhile put back in place."""
+    d, t, step = r.device, r.time, r.step
+    out: list[Record] = [EventReceived(d, t, r.event, r.data)] if r.event is not None else []
+    if step is None:
+        reason = r.reason
+        if reason is not None and r.event is not None:
+            kind = EventRejected if r.rejected else EventIgnored
+            out.append(kind(d, t, r.event, reason))
+    else:
+        made = iter(r._made)
+        for micro in step.microsteps:
+            out.extend(StateExited(d, t, s) for s in micro.exited)
+            out.extend(
+                TransitionTaken(d, t, micro.event, (x.source,), x.targets, x.label)
+                for x in micro.transitions
+            )
+            out.extend(StateEntered(d, t, s) for s in micro.entered)
+            for a in micro.actions:
+                if not isinstance(a, Notify):
+                    continue
+                out.append(InvokeIssued(d, t, a.invoke, a.name, a.method, a.event))
+                did = next(made, None)
+                if isinstance(did, tuple):
+                    out.extend(ObserverCalled(d, t, a.method, str(c)) for c in did)
+                elif did is not None:
+                    api = f"{type(did).__name__}.update(#{a.invoke})"
+                    out.append(ObserverCalled(d, t, a.method, api))
+        if r.final:
+            out.append(Finished(d, t))
+        upto = r._tail.upto if r._tail is not None else None
+        if upto is not None:
+            del out[upto:]
+    extras = r._tail.extras if r._tail is not None else ()
+    if not extras:
+        return tuple(out)
+    merged: list[Record] = []
+    at = 0
+    for before, record in extras:
+        if before > at:
+            merged.extend(out[at:before])
+            at = before
+        merged.append(record)
+    merged.extend(out[at:])
+    return tuple(merged)

@@ -67,12 +67,15 @@ from statectl.runtime.hooks import (
     StepListener,
 )
 from statectl.runtime.perform import _EVENTS, _INVOKES, _Call
+from statectl.runtime.recording import StepListener as StepRecordListener
 from statectl.runtime.records import (
     EventReceived,
     Finished,
     Record,
     Started,
     StateEntered,
+    StepRecord,
+    _Tail,
 )
 from statectl.runtime.timers import attach_timers
 from statectl.runtime.wiring import Wiring
@@ -136,6 +139,11 @@ class Subject(Wiring):
         # made as plans are first taken, dropped by attach and rename
         self._calls: dict[Plan, _Call] | None = None
         self._listeners: tuple[Listener, ...] = ()
+        self._recorders: tuple[StepRecordListener, ...] = ()  # listen_steps (recording.py)
+        self._recording: list[tuple[int, Record]] | None = None
+        self._cursor = 0
+        self._handing = False
+        self._later: list[StepRecord] | None = None
         self._steppers: tuple[StepListener, ...] = ()
         self._watch: dict[str, tuple[StateWatcher, ...]] = {}  # state -> its watchers
         self._watchers: tuple[StateWatcher, ...] = ()
@@ -300,7 +308,7 @@ class Subject(Wiring):
         if self._worker is not None:
             self._check_owner()
         machine = self.machine
-        if not self._listeners and not self._watch:
+        if not self._listeners and not self._recorders and not self._watch:
             entry = machine.quiet_start
             if entry is None:
                 first = initial(machine, self._data)
@@ -311,7 +319,7 @@ class Subject(Wiring):
                 return
         first = initial(machine, self._data)
         now = self.clock.now()
-        listening = bool(self._listeners)
+        listening = self.listening
         if listening:
             self.emit(Started(self.name, now))
         self._commit(first.target)
@@ -332,10 +340,11 @@ class Subject(Wiring):
             raise StatectlError(f"{self.name}: states {unknown} are not in {self.chart.name!r}")
         self._commit(self.machine.intern(snapshot))
         now = self.clock.now()
-        if self._listeners:
+        listening = self.listening
+        if listening:
             self.emit(Started(self.name, now))
         for state in sorted(snapshot.active, key=order.__getitem__):
-            if self._listeners:
+            if listening:
                 self.emit(StateEntered(self.name, now, state))
             for w in self._watch.get(state, ()):
                 w.entered(state)
@@ -356,7 +365,7 @@ class Subject(Wiring):
         found = actions.actions if isinstance(actions, Step) else tuple(actions)
         notifies = tuple(a for a in found if isinstance(a, Notify))
         now = self.clock.now()
-        listening = bool(self._listeners)
+        listening = self.listening
         busy = self._busy
         self._busy = True  # an observer must post(), not process, as during a step
         try:
@@ -444,7 +453,7 @@ class Subject(Wiring):
             self._finished = True
             for w in self._watchers:
                 w.finished()
-            if self._listeners:
+            if self.listening:
                 self.emit(Finished(self.name, self.clock.now()))
 
     # -- one event -------------------------------------------------------------------------
@@ -472,25 +481,34 @@ class Subject(Wiring):
                 self._counts += 1
                 for callback in self._steppers:
                     callback(event, data, reason)
+                if self._recorders:
+                    now = self.clock.now()
+                    self._hand(StepRecord(self._name, now, event, data, None, (), _Tail(reason)))
             return
         if self._listeners:
             self._process_slow(event, data, plan)  # the records, from the plan's step
             return
         self._snapshot = plan.target
         self._table = plan.table
+        calls = self._calls
+        entry = calls.get(plan) if calls is not None else None
+        if entry is None:
+            entry = self._call_for(plan)
+        if self._recorders:  # one step record for the step listeners (recording.py)
+            self._record_plan(event, data, plan, entry)
+            for callback in self._steppers:
+                callback(event, data, "handled")
+            return
         if data is None:
-            calls = self._calls
-            entry = calls.get(plan) if calls is not None else None
-            counts, call, arg = entry if entry is not None else self._call_for(plan)
-            self._counts += counts
+            self._counts += entry[0]
+            call = entry[1]
             if call is not None:
-                call(arg)
+                call(entry[2])
         else:
             self._counts += 1
-            if self._watch:
-                self._perform(plan.step, data, 0.0, False)
-            elif plan.notifies:
-                self._issue(plan, data)
+            run = entry[3]
+            if run is not None:
+                run(data)
         if plan.final and not self._finished:
             self._finish(0.0, False)
         for callback in self._steppers:
@@ -536,6 +554,9 @@ class Subject(Wiring):
         if updates:
             self._data.update(updates)
         self._commit(plan.target if plan is not None else decision.target)
-        self._perform(decision, data, now, listening)
+        if listening or not self._recorders:
+            self._perform(decision, data, now, listening)
+        else:  # only step listeners: one step record (recording.py)
+            self._record_step(event, data, decision, now)
         for callback in self._steppers:
             callback(event, data, "handled")

@@ -117,4 +117,4 @@ class Wiring(Worker):
     @property
     def listening(self) -> bool:
         """Whether anyone receives records (build one only then)."""
-        return bool(self._listeners)
+        return bool(self._listeners or self._recorders)

@@ -16,7 +16,7 @@ from typing import Any
 
 from statectl.errors import StatectlError
 from statectl.runtime.hooks import ErrorHandler
-from statectl.runtime.perform import Performer
+from statectl.runtime.recording import Recording
 from statectl.semantics import Snapshot
 
 __all__ = ["Worker"]
@@ -26,7 +26,7 @@ def _print_error(exc: BaseException) -> None:
     traceback.print_exception(exc, file=sys.stderr)
 
 
-class Worker(Performer):
+class Worker(Recording):
     """The Subject's owner-loop half; the slots it writes live here, the rest on the Subject."""
 
     __slots__ = ("_fast", "_serving", "_stopping", "_wake", "_worker")

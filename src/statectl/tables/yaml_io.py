@@ -47,8 +47,28 @@ NULL_TAG = "tag:yaml.org,2002:null"
 TOP_KEYS = ("device", "profile", "states", "events", "data", "recovery")
 
 
+#: The location made last: a row's cells share their line (reused, not rebuilt per cell).
+_last_at = [Location("", None)]
+#: A key as written -> its column name: a file repeats a few keys on every row.
+_columns: dict[str, str] = {}
+
+
 def _at(file: str, node: yaml.Node) -> Location:
-    return Location(file, node.start_mark.line + 1)
+    line = node.start_mark.line + 1
+    last = _last_at[0]
+    if last.line == line and last.file == file:
+        return last
+    made = _last_at[0] = Location(file, line)
+    return made
+
+
+def _column(key: str) -> str:
+    name = _columns.get(key)
+    if name is None:
+        name = normalize_column(key)
+        if len(_columns) < 1024:  # bounded: a file of unknown keys does not grow it
+            _columns[key] = name
+    return name
 
 
 def _cell(node: yaml.Node) -> Cell:
@@ -83,7 +103,7 @@ def _pairs(
         if not isinstance(key, yaml.ScalarNode):
             diags.append(diag("T108", at, "a key must be text (got a " + _kind_of(key) + ")"))
             continue
-        name = normalize_column(str(key.value))
+        name = _column(str(key.value))
         if name in seen:
             diags.append(diag("T101", at, f"key {key.value!r} appears twice in one mapping"))
             continue

@@ -1,0 +1,206 @@
+"""Step records: one object per event, whose typed records equal those listen() gets.
+
+A listen_steps() listener must see exactly what a listen() listener sees, in the same
+order (rule 3 of runtime/records.py), however the device is wired; only the number of
+objects and when they are built differ.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+
+from statectl.devices import connect, make_driver
+from statectl.errors import UnhandledEventError
+from statectl.model import Chart, State, StateKind, Transition
+from statectl.observers import Notification
+from statectl.runtime import (
+    EventIgnored,
+    MonitorStarted,
+    Record,
+    SimClock,
+    StepRecord,
+    Subject,
+    attach_monitors,
+)
+from statectl.semantics import Unhandled
+from support import Recorder
+
+PAPER = (
+    ("Movement", {"amount": 10}),
+    ("Movement completion", None),
+    ("Initialization", None),  # guarded: previous == 'Moving'
+    ("Initialization completion", None),
+    ("Movement", {"amount": 10}),
+    ("Error", None),
+    ("Error completion", None),
+)
+STRAYS = (("Movement completion", None), ("No such event", None), ("Movement", {"amount": 1}))
+
+
+class Quiet:
+    def poll_fault(self) -> str | None:
+        return None
+
+
+class Failing:
+    """An observer whose device call fails."""
+
+    def update(self, notification: Notification) -> None:
+        raise RuntimeError("the device is gone")
+
+
+def _wire(subject: Subject, wiring: str) -> None:
+    chart = subject.chart
+    if wiring == "bare":
+        subject.attach(Recorder())
+    elif wiring == "monitor":
+        subject.attach(Recorder())
+        attach_monitors(subject, Quiet())
+    elif wiring == "driver":
+        connect(subject, make_driver("sim-motor", {}, chart=chart))
+    elif wiring == "nobody":
+        pass
+
+
+def _run(
+    chart: Chart,
+    wiring: str,
+    events: tuple[tuple[str, Any], ...],
+    hear: Callable[[Subject, list[Record], list[StepRecord]], None],
+    policy: str = "ignore",
+) -> tuple[list[Record], list[StepRecord], str]:
+    subject = Subject(chart, clock=SimClock(), policy=policy)  # type: ignore[arg-type]
+    _wire(subject, wiring)
+    typed: list[Record] = []
+    steps: list[StepRecord] = []
+    hear(subject, typed, steps)
+    subject.start()
+    ending = "ok"
+    for event, data in events:
+        try:
+            subject.dispatch(event, data)
+        except (UnhandledEventError, RuntimeError) as exc:
+            ending = type(exc).__name__
+    subject.close()
+    return typed, steps, ending
+
+
+def _typed(subject: Subject, typed: list[Record], steps: list[StepRecord]) -> None:
+    subject.listen(typed.append)
+
+
+def _stepped(subject: Subject, typed: list[Record], steps: list[StepRecord]) -> None:
+    subject.listen_steps(steps.append)
+
+
+@pytest.mark.parametrize("wiring", ["bare", "monitor", "driver", "nobody"])
+@pytest.mark.parametrize("events", [PAPER, PAPER + STRAYS], ids=["paper", "with-strays"])
+@pytest.mark.parametrize("policy", ["ignore", "error"])
+def test_step_records_hold_the_records_listen_gets(
+    motor: Chart, wiring: str, events: tuple[tuple[str, Any], ...], policy: str
+) -> None:
+    """The typed records of the step records are listen()'s, in order, one step record
+    per event (plus one per record made outside an event: Started, Finished)."""
+    want, _, end_typed = _run(motor, wiring, events, _typed, policy)
+    _, steps, end_steps = _run(motor, wiring, events, _stepped, policy)
+    got = [r for s in steps for r in s.records]
+    assert got == want
+    assert end_steps == end_typed
+    per_event = [s for s in steps if s.event is not None]
+    assert [s.event for s in per_event] == [e for e, _ in events]
+
+
+def test_a_step_record_says_what_happened_without_building_records(motor: Chart) -> None:
+    """outcome, entered and exited come from the step; records are built when first read."""
+    _, steps, _ = _run(motor, "monitor", PAPER + STRAYS[:1], _stepped)
+    moved = next(s for s in steps if s.event == "Movement")
+    assert (moved.outcome, moved.entered, moved.exited) == ("handled", ("Moving",), ("Blocked",))
+    assert moved._records is None  # nothing read it yet
+    assert any(isinstance(r, MonitorStarted) for r in moved)
+    stray = steps[-2]  # the last event; close() made the last record
+    assert (stray.event, stray.outcome, stray.step) == (
+        "Movement completion",
+        "declared ignored",
+        None,
+    )
+    assert [type(r) for r in stray.records][-1] is EventIgnored
+
+
+def test_a_failing_observer_ends_the_step_record_where_listen_ends(motor: Chart) -> None:
+    """When the device call raises, the step record holds the records made until then."""
+
+    def failing(subject: Subject) -> None:
+        subject.attach(Failing())
+
+    results = []
+    for hear in (_typed, _stepped):
+        subject = Subject(motor, clock=SimClock())
+        failing(subject)
+        typed: list[Record] = []
+        steps: list[StepRecord] = []
+        hear(subject, typed, steps)
+        subject.start()
+        with pytest.raises(RuntimeError):
+            subject.dispatch("Movement", {"amount": 1})
+        results.append(typed or [r for s in steps for r in s.records])
+    assert results[0] == results[1]
+    assert type(results[0][-1]).__name__ == "InvokeIssued"
+
+
+def test_a_final_state_ends_the_step_record_with_finished() -> None:
+    """A step that reaches a final state closes its records with Finished, once."""
+    chart = Chart(
+        "Once",
+        (State("Idle"), State("Done", StateKind.FINAL)),
+        (Transition("Idle", ("go",), ("Done",)),),
+        ("Idle",),
+    )
+    want, _, _ = _run(chart, "nobody", (("go", None),), _typed)
+    _, steps, _ = _run(chart, "nobody", (("go", None),), _stepped)
+    assert [r for s in steps for r in s.records] == want
+    assert [s.final for s in steps if s.event == "go"] == [True]
+
+
+def test_stopping_step_records_stops_them(motor: Chart) -> None:
+    """The undo listen_steps() returns stops the records."""
+    subject = Subject(motor, clock=SimClock())
+    steps: list[StepRecord] = []
+    off = subject.listen_steps(steps.append)
+    subject.start()
+    subject.dispatch("Movement", {"amount": 1})
+    off()
+    subject.dispatch("Movement completion")
+    assert [s.event for s in steps] == [None, None, "Movement"]  # Started, Blocked entered
+
+
+@pytest.mark.parametrize("wiring", ["bare", "monitor", "driver"])
+def test_with_a_listen_listener_too_both_get_the_same_records(motor: Chart, wiring: str) -> None:
+    """With listen() attached as well, step listeners still get every record, in order."""
+
+    def both(subject: Subject, typed: list[Record], steps: list[StepRecord]) -> None:
+        subject.listen(typed.append)
+        subject.listen_steps(steps.append)
+
+    typed, steps, _ = _run(motor, wiring, PAPER + STRAYS, both)
+    assert [r for s in steps for r in s.records] == typed
+
+
+def test_a_record_made_by_a_step_listener_comes_after_the_step(motor: Chart) -> None:
+    """A step listener that records something gets it after the step record it is given."""
+    subject = Subject(motor, clock=SimClock())
+    subject.attach(Recorder())
+    heard: list[str | None] = []
+
+    def hear(step: StepRecord) -> None:
+        heard.append(step.event)
+        if step.event == "Movement":
+            subject.emit(EventIgnored(subject.name, 0.0, "note", Unhandled.NO_TRANSITION))
+
+    subject.listen_steps(hear)
+    subject.start()
+    subject.dispatch("Movement", {"amount": 1})
+    subject.dispatch("Movement completion")
+    assert heard == [None, None, "Movement", None, "Movement completion"]
