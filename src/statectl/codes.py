@@ -313,6 +313,13 @@ ALL: tuple[Code, ...] = (
     _c("V813", _E, "a link needs exactly one of 'enters' and 'raises'", _CELLS),
     _c("V814", _E, "two invariants or recovery goals share a name", _CELLS),
     _c("V815", _E, "the cell has no devices", _CELLS),
+    _c("V830", _E, "a link's event data does not read, or is given twice", _CELLS),
+    _c(
+        "V831",
+        _E,
+        "a device guard's In('device.State') names no device or state of the cell",
+        _CELLS,
+    ),
 )
 
 #: Code -> record, read-only.

@@ -38,6 +38,10 @@ Rules:
    policy, but then exits 1 with a line saying how many, so a batch run can be
    trusted in CI. A driver that lacks an observer method its chart calls is
    refused before anything runs (devices/base.py rule 6).
+10. A cell's environment command whose ``when`` is false is refused with the
+   reason, and an invariant that turns false is written into the trace as
+   ``VIOLATED`` (and sends its ``on_violation`` events); both make the run exit 1
+   (system.py rule 6), so ``run`` enforces what ``verify`` assumed.
 """
 
 from __future__ import annotations
@@ -67,6 +71,7 @@ from statectl.devices import (
 )
 from statectl.devices.config import ShipConfig
 from statectl.errors import DiagnosticError, Severity, StatectlError
+from statectl.explore.enforce import Refused, Violation
 from statectl.journal import (
     Guarantee,
     Journal,
@@ -149,6 +154,8 @@ class _Problems:
         self._lock = threading.Lock()  # the feeder thread and the owner both count
         self.lines = 0  # event lines reported and skipped
         self.unknown = 0  # events no chart knows, or rejected under the 'error' policy
+        self.refused = 0  # environment commands whose 'when' was false (a cell)
+        self.violated = 0  # invariant violations seen live (a cell)
 
     def record(self, record: object) -> None:
         """A listener: count the events a device refused or did not know."""
@@ -158,6 +165,20 @@ class _Problems:
         if refused:
             with self._lock:
                 self.unknown += 1
+
+    def refuse(self) -> None:
+        with self._lock:
+            self.refused += 1
+
+    def violation(self, out: TextIO, width: int) -> Callable[[Violation], None]:
+        """A System callback: each invariant violation goes into the trace and is counted."""
+
+        def seen(v: Violation) -> None:
+            with self._lock:
+                self.violated += 1
+            out.write(f"t={v.time:7.2f}  {'cell':<{width}}  {'VIOLATED':<8} {v}\n")
+
+        return seen
 
     def bad_line(self) -> None:
         with self._lock:
@@ -170,6 +191,10 @@ class _Problems:
             parts.append(f"{self.lines} event line(s) reported above and skipped")
         if self.unknown:
             parts.append(f"{self.unknown} event(s) unknown to the device or rejected")
+        if self.refused:
+            parts.append(f"{self.refused} environment command(s) refused by the cell's 'when'")
+        if self.violated:
+            parts.append(f"{self.violated} invariant violation(s)")
         return "; ".join(parts) or None
 
 
@@ -202,6 +227,10 @@ def _feed(
                 system.quiesce()
         except JournalError as exc:  # nothing more can be accepted: stop, say where
             raise JournalError(f"line {number}: {exc}") from None
+        except Refused as exc:  # rule 10: as verify assumes, with the reason
+            err.write(f"line {number}: {exc}\n")
+            if problems is not None:
+                problems.refuse()
         except StatectlError as exc:
             err.write(f"line {number}: {exc}\n")
             if problems is not None:
@@ -322,6 +351,7 @@ def run(
             out.write(f"no driver configured: simulated twins for {', '.join(drivers)}\n")
         system.listen(TraceWriter(out, device_width=width))
         system.listen(problems.record)
+        system.on_violation.append(problems.violation(out, width))
         _show_notes(drivers, out, width)
         url = None
         if dashboard:
