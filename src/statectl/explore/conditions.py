@@ -121,6 +121,8 @@ def bind_cross_guards(subjects: Mapping[str, Subject]) -> list[str]:
         for g in cross:
             old = m.guards[g]
             m.guards[g] = _CrossGuard(old.source, old.code, old.names, resolver)
+        # they read more than the snapshot: never memoise a step they decide
+        m.snapshot_guards = m.snapshot_guards - cross
         s.machine = m
         rebound.append(name)
     return rebound

@@ -28,6 +28,11 @@ def _tag(via: str, unhandled: Unhandled | None) -> str:
     return tag
 
 
+def _fate(fate: str) -> str:
+    """A lossy link's event that never arrived, or a delayed one overtaken."""
+    return f" [{fate.upper()}]" if fate else ""
+
+
 def to_mermaid(trace: Trace, title: str = "") -> str:
     """A Mermaid ``sequenceDiagram`` of ``trace``."""
     out = ["sequenceDiagram"]
@@ -40,9 +45,8 @@ def to_mermaid(trace: Trace, title: str = "") -> str:
     for step in trace.steps:
         for d in step.deliveries:
             arrow = "-)" if d.via == "fault" else "->>"
-            out.append(
-                f"    {d.sender}{arrow}{d.receiver}: {_clean(d.event)}{_tag(d.via, d.unhandled)}"
-            )
+            tag = _tag(d.via, d.unhandled) + _fate(d.fate)
+            out.append(f"    {d.sender}{arrow}{d.receiver}: {_clean(d.event)}{tag}")
             if d.before != d.after:
                 out.append(f"    Note over {d.receiver}: {d.before} to {d.after}")
     if title:
@@ -62,7 +66,8 @@ def to_plantuml(trace: Trace, title: str = "") -> str:
     for step in trace.steps:
         for d in step.deliveries:
             arrow = "->>" if d.via == "fault" else "->"
-            out.append(f"{d.sender} {arrow} {d.receiver} : {d.event}{_tag(d.via, d.unhandled)}")
+            tag = _tag(d.via, d.unhandled) + _fate(d.fate)
+            out.append(f"{d.sender} {arrow} {d.receiver} : {d.event}{tag}")
             if d.before != d.after:
                 out.append(f"note over {d.receiver} : {d.before} -> {d.after}")
     if title:
