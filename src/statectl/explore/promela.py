@@ -69,6 +69,21 @@ class _Writer:
         table = self.m.spaces[d].states_in(state)
         return self._in(d, [i for i, v in enumerate(table) if v])
 
+    def happens(self, d: int, event: str, lids: list[int]) -> str:
+        """Where ``event`` happens: the local states, each with the other devices' states
+        its handled outcomes need (explore/conditions.py rule 1)."""
+        free: list[int] = []
+        parts: list[str] = []
+        for lid in lids:
+            conds = [self.condition(o) for o in self.m.outcomes(d, lid, event) if o.handled]
+            if all(conds):
+                parts.append(f"({self.var[d]} == {lid} && ({' || '.join(conds)}))")
+            else:
+                free.append(lid)
+        if free:
+            parts.insert(0, self._in(d, free))
+        return "(" + " || ".join(parts) + ")" if len(parts) > 1 else parts[0]
+
     def _in(self, d: int, lids: list[int]) -> str:
         if not lids:
             return "false"
@@ -127,6 +142,10 @@ class _Writer:
                     )
                 else:
                     lines.append(f"{indent}   :: {when}skip")
+            if any(self.condition(o) for o in outs):
+                lines.append(
+                    f"{indent}   :: else -> skip /* another device's state rules out the rest */"
+                )
             lines.append(f"{indent}   fi")
         lines.append(f"{indent}:: else -> skip")
         lines.append(f"{indent}fi")
@@ -196,7 +215,7 @@ def export_promela(model: Composed, *, invariants: bool = True, unhandled: bool 
         ]
         if not lids:
             continue
-        guard = w._in(d, lids)
+        guard = w.happens(d, s.event, lids)
         if s.when >= 0:
             when = m.cell.environment[s.when].when
             if when is not None:
