@@ -202,6 +202,12 @@ ALL: tuple[Code, ...] = (
         "fault event leaving a state that is not monitoring required",
         _check("c408--fault-without-a-monitor-warning"),
     ),
+    _c(
+        "C419",
+        _W,
+        "the guards of a state's rows for one event may all be false",
+        _check("c419--guards-that-may-leave-an-event-unhandled-warning"),
+    ),
     # -- D5xx: driver and run configs (statectl.devices.config) ---------------------------
     _c("D501", _E, "the driver or run config cannot be read", _DRIVERS),
     _c("D502", _E, "the config is not valid YAML (or an alias or too deep)", _DRIVERS),

@@ -18,6 +18,8 @@ C407 warning  A ``monitoring required`` state has no ``fault`` event leaving it 
               transitions or a superstate's), so its monitor would have nothing to raise.
 C408 warning  A ``fault`` event leaves a state that is not ``monitoring required`` and has
               no monitored substate, so no monitor is running there to raise it.
+C419 warning  Every row of a state for one event is guarded and the guards are not proven
+              to cover every case (statectl.guards.guards_cover): the event may go unhandled.
 
 Undefined guard names and other table errors are the builder's (X3xx, T/B codes);
 :func:`check_paths` reports those too, then checks each chart that built, and its
@@ -32,7 +34,7 @@ from dataclasses import dataclass
 from statectl.build import build
 from statectl.codes import family
 from statectl.errors import Diagnostic, Location, Severity, has_errors
-from statectl.guards import guards_exclusive
+from statectl.guards import guards_cover, guards_exclusive
 from statectl.model import Chart, ControlKind, EventKind, State, StateKind, Transition
 from statectl.recovery import check_recovery
 from statectl.semantics import entry_set, structural
@@ -398,6 +400,35 @@ def _check_monitors(st: _Structure) -> Iterator[Diagnostic]:
                 )
 
 
+def _check_cover(st: _Structure) -> Iterator[Diagnostic]:
+    """C419: a state's rows for one event are all guarded and may all be false."""
+    for s in st.chart.states:
+        rows_of: dict[str, list[Transition]] = {}
+        for a in (s.name, *st.ancestors.get(s.name, ())):
+            for t in st.out(a):
+                for e in t.events:
+                    rows_of.setdefault(e, []).append(t)
+        for event, rows in rows_of.items():
+            own = [t for t in rows if t.source == s.name]
+            if not own or any(t.guard is None for t in rows) or len(rows) > MAX_OVERLAP_ROWS:
+                continue
+            if st.ignores(s.name, event):
+                continue  # when no guard holds the kernel ignores it, as declared
+            guards = [t.guard for t in rows if t.guard is not None]
+            if guards_cover(guards):
+                continue
+            shown = " / ".join(f"[{g}]" for g in guards)
+            yield Diagnostic(
+                "C419",
+                Severity.WARNING,
+                own[0].origin,
+                f"state {s.name!r}: the guards of its rows for {event!r} ({shown}) may all be "
+                "false, and then no row takes the event (unhandled: guard false)",
+                "add a row for the remaining case (e.g. the negation), or make the guards "
+                "cover every case (x > 3 / x <= 3)",
+            )
+
+
 _RULES: tuple[Callable[[_Structure], Iterator[Diagnostic]], ...] = (
     _check_reachable,
     _check_way_out,
@@ -406,6 +437,7 @@ _RULES: tuple[Callable[[_Structure], Iterator[Diagnostic]], ...] = (
     _check_unused_events,
     _check_contradictory_ignores,
     _check_monitors,
+    _check_cover,  # C419
 )
 
 

@@ -32,7 +32,7 @@ from statectl.model import Chart
 from statectl.tables import safeyaml
 
 __all__ = [
-    "LINK_KEYS",
+    "LINK_OPTION_KEYS",
     "check_cross_refs",
     "cross_refs",
     "link_options",
@@ -41,7 +41,7 @@ __all__ = [
 ]
 
 #: Keys a link may have beyond from/enters/raises/to/send/guard.
-LINK_KEYS = ("data", "forward_data", "ignore_if_unhandled", "lossy", "delayed")
+LINK_OPTION_KEYS = ("data", "forward_data", "ignore_if_unhandled", "lossy", "delayed")
 
 
 def send_and_data(node: yaml.Node | None) -> tuple[yaml.Node | None, Any, str]:
