@@ -3,14 +3,17 @@ the cell-level guards (another device's state, link data) the export now carries
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 import subprocess
 from pathlib import Path
+from types import SimpleNamespace
+from typing import cast
 
 import pytest
 
-from statectl.cell import load_cell_or_raise
+from statectl.cell import Cell, InputKind, load_cell_or_raise
 from statectl.explore import Composed, Kind, explore, export_promela, write_traces
 from statectl.explore.promela import STEP_MARK
 from statectl.explore.replay import load_replay, run_cell
@@ -188,3 +191,86 @@ invariants:
     assert failed is fails
     if fails:
         assert steps == len(report.failures[0].trace or ())
+
+
+# -- nodes: peers lost, links dropped (the section cell/nodes.py reads) -----------------------
+
+
+def _on_nodes(
+    cell: Cell,
+    layout: dict[str, tuple[str, ...]],
+    lost: dict[str, tuple[tuple[str, str], ...]],
+    drop: dict[int, str | None],
+) -> Cell:
+    """``cell`` with a nodes section as cell/nodes.py gives it (names, devices, peer_lost,
+    one delivery per link), for verify, which reads it by those names only."""
+    nodes = SimpleNamespace(
+        nodes=tuple(
+            SimpleNamespace(name=n, devices=d, peer_lost=lost.get(n, ())) for n, d in layout.items()
+        ),
+        delivery=tuple(
+            SimpleNamespace(on_peer_down="drop" if i in drop else "queue", dropped=drop.get(i))
+            for i in range(len(cell.links))
+        ),
+    )
+    fields = {f.name: getattr(cell, f.name) for f in dataclasses.fields(cell)}
+    return cast(Cell, SimpleNamespace(**fields, nodes=nodes))
+
+
+def test_a_peer_lost_at_any_point_is_explored(tmp_path: Path) -> None:
+    """The lever's node hears its peer is lost (Up) in any state: verify finds the state
+    the links alone never reach, and the trace replays."""
+    cell = load_cell_or_raise(_lever_cell(tmp_path, ""))
+    assert not explore(cell).failures
+    spread = _on_nodes(cell, {"a": ("button",), "b": ("lever",)}, {"b": (("lever", "Up"),)}, {})
+    report = explore(spread)
+    [failure] = report.failures
+    assert failure.trace is not None and len(failure.trace) == 1
+    step = failure.trace.steps[0]
+    assert (step.kind, step.device, step.event) == (InputKind.PEER_LOST, "lever", "Up")
+    assert "lever: Up (peer lost)" in "\n".join(failure.trace.lines())
+    paths = write_traces(report, tmp_path / "traces")
+    replay = load_replay(next(p for p in paths if p.name.endswith(".trace.json")))
+    result = run_cell(spread, replay=replay)
+    assert not result.divergences and result.violations
+
+
+def test_a_peer_lost_event_reaches_only_devices_linked_across_nodes(tmp_path: Path) -> None:
+    """peer_lost of a device with no link to another node offers nothing."""
+    cell = load_cell_or_raise(_lever_cell(tmp_path, ""))
+    same = _on_nodes(cell, {"a": ("button", "lever")}, {"a": (("lever", "Up"),)}, {})
+    assert not [s for s in Composed(same).stimuli if s.kind is InputKind.PEER_LOST]
+
+
+@pytest.mark.parametrize(("drop", "fails"), [({}, False), ({4: None}, True), ({4: "Slip"}, False)])
+def test_a_dropped_link_event_is_explored_with_its_dropped_event(
+    lossless: Path, drop: dict[int, str | None], fails: bool
+) -> None:
+    """on_peer_down: drop across nodes loses the event (the seeded bug shows); a `dropped`
+    event goes to the link's source in its place (the gripper's Slip: the bug no longer
+    shows, as the gripper lets go)."""
+    cell = load_cell_or_raise(lossless)
+    layout = {"line": ("conveyor", "sensor"), "arm": ("arm",), "gripper": ("gripper",)}
+    spread = _on_nodes(cell, layout, {}, drop)
+    report = explore(spread)
+    assert bool(report.failures) is fails
+    model = Composed(spread)
+    seen, todo, back = set(model.initial), list(model.initial), set()
+    while todo:
+        g = todo.pop()
+        for s in model.enabled(g):
+            for br in model.branches(g, s, detail=True):
+                back |= {
+                    (d.sender, d.receiver, d.event)
+                    for d in br.deliveries
+                    if d.via.endswith(" dropped")
+                }
+                if br.state not in seen:
+                    seen.add(br.state)
+                    todo.append(br.state)
+    assert back == ({("sensor", "gripper", "Slip")} if drop.get(4) else set())
+    if fails:
+        trace = report.failures[0].trace
+        assert trace is not None
+        lost = [d.event for s in trace.steps for d in s.deliveries if d.fate == "lost"]
+        assert lost == ["Part out"]

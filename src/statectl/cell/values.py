@@ -29,6 +29,7 @@ class InputKind(enum.Enum):
     COMMAND = "environment"  # the operator or a sensor sends it
     FAULT = "fault"  # hardware raises it in a monitored state
     COMPLETION = "completion"  # the device reports it back itself
+    PEER_LOST = "peer lost"  # a node the device is linked with was lost (nodes:)
 
 
 @dataclass(frozen=True, slots=True)

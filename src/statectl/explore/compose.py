@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from statectl.cell import Cell, GlobalExpr, InputKind, Link, Trigger
 from statectl.explore.conditions import data_consistent, foreign_leaf
 from statectl.explore.local import LocalSpace, Outcome
+from statectl.explore.nodes import crossing, peer_lost
 from statectl.model import EventKind
 from statectl.semantics import Unhandled
 
@@ -139,7 +140,10 @@ class Composed:
         self._moves: dict[tuple[int, int, str, int], tuple[Move, ...]] = {}
         self._conds: dict[tuple[int, Outcome], Predicate | None] = {}
         self.harmless = tuple(k.ignore_if_unhandled for k in cell.links)
-        self.lossy = tuple(k.lossy for k in cell.links)
+        # nodes: (cell/nodes.py): a link to another node with on_peer_down: drop may lose
+        # its event, and then sends its `dropped` event to the source (explore/nodes.py)
+        self.node_of, self.dropped = crossing(cell, self.position)
+        self.lossy = tuple(k.lossy or i in self.dropped for i, k in enumerate(cell.links))
         self.delayed = tuple(k.delayed for k in cell.links)
         self.distributed = any(self.lossy) or any(self.delayed)
         self.stimuli = self._stimuli()
@@ -184,6 +188,8 @@ class Composed:
         out: list[Stimulus] = []
         for i, e in enumerate(self.cell.environment):
             out.append(Stimulus(e.kind, self.position[e.device], e.event, i if e.when else -1))
+        lost = peer_lost(self.cell, self.position, self.node_of)
+        out.extend(Stimulus(InputKind.PEER_LOST, d, e) for d, e in lost)
         if self.cell.completions:
             for d, space in enumerate(self.spaces):
                 for ev in space.events:
@@ -262,7 +268,7 @@ class Composed:
         """Device ``d``'s outcomes; delivered by ``link``, those its data rules out dropped
         (explore/conditions.py rule 2)."""
         outs = self.spaces[d].outcomes(lid, event)
-        if link < 0 or self.links[link].forward_data:
+        if link < 0 or self.links[link].forward_data or event != self.links[link].event:
             return outs
         data = self.links[link].data
         return tuple(o for o in outs if data_consistent(self.spaces[d], o, event, data))
@@ -281,10 +287,14 @@ class Composed:
         (t, event, link), rest = pending[0], pending[1:]
         out: list[tuple[str, tuple[tuple[int, str, int], ...]]] = []
         real = link if link >= 0 else ~link
+        if event != self.links[real].event:
+            return out  # a `dropped` event: it stays on its own node
         if link >= 0 and self.delayed[real] and rest:
             out.append(("overtaken", (*rest, (t, event, ~link))))
         if self.lossy[real]:
-            out.append(("lost", rest))
+            notify = self.dropped.get(real)
+            # nodes: the link's `dropped` event takes the lost event's place in the queue
+            out.append(("lost", rest if notify is None else ((*notify, link), *rest)))
         return out
 
     def branches(self, g: int, s: Stimulus, detail: bool = False) -> list[Branch]:
@@ -357,13 +367,14 @@ class Composed:
                 log2 = log
                 if detail:
                     k = self.links[link]
+                    back = event != k.event  # the link's `dropped` event, to its source
                     log2 = (
                         *log,
                         Delivery(
-                            k.source,
-                            k.target,
+                            k.target if back else k.source,
+                            self.names[t],
                             event,
-                            k.label,
+                            f"{k.label} dropped" if back else k.label,
                             tspace.state_of(tlid),
                             tspace.state_of(o.target),
                             o.unhandled,

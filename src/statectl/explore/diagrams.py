@@ -23,6 +23,8 @@ def _clean(text: str) -> str:
 
 def _tag(via: str, unhandled: Unhandled | None) -> str:
     tag = "" if via in ("environment",) else f" ({'link' if ' -> ' in via else via})"
+    if via.endswith(" dropped"):
+        tag = " (dropped: the link's peer was down)"
     if unhandled is not None:
         tag += f" [{unhandled}]"
     return tag

@@ -224,6 +224,11 @@ class _Runner:
             if fate == "lost":
                 self.out(f"          link lost: {link.label}\n")
                 count += 1
+                notify = self.model.dropped.get(self.cell.links.index(link))
+                if notify is not None:  # nodes: the link's `dropped` event to its source
+                    self.out(f"          dropped: {link.source} gets {notify[1]}\n")
+                    self._step(link.source, notify[1])
+                    queue.extend((k, d, False) for k, d in self._links(notify[1], None))
                 continue
             self.delivering = (link.target, link.event)
             self.harmless = link.ignore_if_unhandled

@@ -108,8 +108,8 @@ class Trace:
                 via = "" if d.via in ("environment", "completion", "fault") else " (link)"
                 via += " (overtaken)" if d.fate == "overtaken" else ""
                 tail = "" if d.unhandled is None else f" [{d.unhandled}]"
-                if d.via == "fault":
-                    via = " (fault)"
+                if d.via in ("fault", "peer lost"):
+                    via = f" ({d.via})"
                 elif d.via == "completion":
                     via = " (completion)"
                 choice = "".join(f" [free: {p} = {v}]" for p, v in d.choices)
