@@ -214,7 +214,8 @@ def _on_nodes(
         ),
     )
     fields = {f.name: getattr(cell, f.name) for f in dataclasses.fields(cell)}
-    return cast(Cell, SimpleNamespace(**fields, nodes=nodes))
+    fields["nodes"] = nodes  # Cell.nodes once cell/nodes.py is there
+    return cast(Cell, SimpleNamespace(**fields))
 
 
 def test_a_peer_lost_at_any_point_is_explored(tmp_path: Path) -> None:
