@@ -21,9 +21,9 @@ PACKML = ROOT / "examples" / "packml"
 DATA = (ROOT / "tests" / "data" / "cells").as_posix()
 
 
-def _run(cell: Path, lines: str) -> tuple[int, str, str]:
+def _run(cell: Path, lines: str, journal: str | None = None) -> tuple[int, str, str]:
     out, err = io.StringIO(), io.StringIO()
-    code = run(str(cell), events=io.StringIO(lines), out=out, err=err)
+    code = run(str(cell), events=io.StringIO(lines), out=out, err=err, journal=journal)
     return code, out.getvalue(), err.getvalue()
 
 
@@ -69,10 +69,15 @@ def test_the_system_refuses_through_post() -> None:
     assert _states(system)["axis1"] == "Standstill"
 
 
-def test_an_invariant_violation_is_reported_reacted_to_and_fails_the_run() -> None:
-    """Powering an axis off while producing: VIOLATED in the trace, Abort sent, exit 1."""
+@pytest.mark.parametrize("journalled", [False, True])
+def test_an_invariant_violation_is_reported_reacted_to_and_fails_the_run(
+    tmp_path: Path, journalled: bool
+) -> None:
+    """Powering an axis off while producing: VIOLATED in the trace, Abort sent, exit 1
+    (with a journal, the Abort is journalled with the step that broke the invariant)."""
     lines = "axis1: Power On\naxis2: Power On\nunit: Start\n+2\naxis1: Power Off\n+2\n"
-    code, out, err = _run(PACKML / "cell-buggy.yaml", lines)
+    db = str(tmp_path / "j.db") if journalled else None
+    code, out, err = _run(PACKML / "cell-buggy.yaml", lines, db)
     assert code == 1
     assert "VIOLATED invariant axes-powered-while-producing" in out
     assert "sending unit: Abort" in out
@@ -256,3 +261,12 @@ def test_ignore_if_unhandled_tells_a_harmless_event_from_a_missed_one(
     steps = [ReplayStep(InputKind.COMMAND, "button", e) for e in ("Press", "Release", "Press")]
     result = run_cell(cell, replay=steps)
     assert bool(result.unhandled) is reported
+
+
+def test_links_with_data_are_refused_with_a_journal(tmp_path: Path) -> None:
+    """The journal's link rows hold no data yet: such a cell is refused, nothing runs."""
+    path = _latch_cell(tmp_path, 'send: "Reset {status: true}"')
+    code, out, err = _run(path, "button: Press\n", str(tmp_path / "j.db"))
+    assert code == 1
+    assert "links that carry event data" in err and "run without --journal" in err
+    assert "final" not in out
