@@ -34,7 +34,7 @@ events:
     ("argv", "code"),
     [
         (["check", MOTOR], 0),
-        (["check", "--strict", MOTOR], 0),
+        (["check", "--strict", MOTOR], 1),  # C419: Initialization only if previous == Moving
         (["check", "no-such-file.yaml"], 2),
         (["frobnicate"], 2),
         ([], 2),

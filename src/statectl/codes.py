@@ -267,6 +267,12 @@ ALL: tuple[Code, ...] = (
         _check("c416--a-device-file-given-to-verify-error"),
     ),
     _c("C412", _E, "verify: a device's assigned data does not stay bounded", _CELLS),
+    _c(
+        "C419",
+        _W,
+        "the guards of a state's rows for one event may all be false",
+        _check("c419--guards-that-may-leave-an-event-unhandled-warning"),
+    ),
     # -- D5xx: driver and run configs (statectl.devices.config) ---------------------------
     _c("D501", _E, "the driver or run config cannot be read", _DRIVERS),
     _c("D502", _E, "the config is not valid YAML (or an alias or too deep)", _DRIVERS),
@@ -383,6 +389,13 @@ ALL: tuple[Code, ...] = (
     _c("V813", _E, "a link needs exactly one of 'enters' and 'raises'", _CELLS),
     _c("V814", _E, "two invariants or recovery goals share a name", _CELLS),
     _c("V815", _E, "the cell has no devices", _CELLS),
+    _c("V830", _E, "a link's event data does not read, or is given twice", _CELLS),
+    _c(
+        "V831",
+        _E,
+        "a device guard's In('device.State') names no device or state of the cell",
+        _CELLS,
+    ),
 )
 
 #: Code -> record, read-only.

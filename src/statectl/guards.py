@@ -262,3 +262,17 @@ def guards_exclusive(first: str | None, second: str | None) -> bool:
     if left is None or right is None:
         return False
     return all(_contradictory(x + y) for x in left for y in right)
+
+
+def guards_cover(guards: Sequence[str]) -> bool:
+    """Whether at least one of ``guards`` holds whatever the values (C419).
+
+    Sound but incomplete, as :func:`guards_exclusive`: ``True`` is a proof that
+    ``not (g1 or g2 ...)`` is contradictory; ``False`` means "not proven" (``x > 3``
+    and ``x <= 3`` cover; ``previous == 'A'`` alone does not; two opaque calls
+    ``f(x)`` and ``not f(x)`` cover, as one literal and its negation).
+    """
+    if not guards:
+        return False
+    neither = "not (" + " or ".join(f"({g})" for g in guards) + ")"
+    return guards_exclusive(neither, neither)

@@ -24,6 +24,8 @@ C409 error    A state's timeout event is not handled where the timer can run out
 C410 warning  A transition leaves a state that defers an event for one that neither
               handles, defers nor ignores it: the kept event would be lost there.
 C411 warning  An ``event trigger required`` state is entered by no command or fault event.
+C419 warning  Every row of a state for one event is guarded and the guards are not proven
+              to cover every case (statectl.guards.guards_cover): the event may go unhandled.
 
 Undefined guard names and other table errors are the builder's (X3xx, T/B codes);
 :func:`check_paths` reports those too, then checks each chart that built, and its
@@ -38,7 +40,7 @@ from dataclasses import dataclass
 from statectl.build import build
 from statectl.codes import family
 from statectl.errors import Diagnostic, Location, Severity, has_errors
-from statectl.guards import guards_exclusive
+from statectl.guards import guards_cover, guards_exclusive
 from statectl.model import Chart, ControlKind, EventKind, State, StateKind, Transition
 from statectl.profiles import PROFILES, find
 from statectl.recovery import check_recovery
@@ -346,6 +348,14 @@ def _check_unused_events(st: _Structure) -> Iterator[Diagnostic]:
 def _check_contradictory_ignores(st: _Structure) -> Iterator[Diagnostic]:
     for state, event in sorted(st.chart.ignored):
         if state in st.by_name and st.handles(state, event):
+            rows = [
+                t
+                for a in (state, *st.ancestors.get(state, ()))
+                for t in st.out(a)
+                if event in t.events
+            ]
+            if rows and all(t.guard is not None for t in rows):
+                continue  # every row is guarded: the ignore is what happens when none holds
             yield Diagnostic(
                 "C406",
                 Severity.WARNING,
@@ -526,6 +536,35 @@ def _check_triggers(st: _Structure) -> Iterator[Diagnostic]:
             )
 
 
+def _check_cover(st: _Structure) -> Iterator[Diagnostic]:
+    """C419: a state's rows for one event are all guarded and may all be false."""
+    for s in st.chart.states:
+        rows_of: dict[str, list[Transition]] = {}
+        for a in (s.name, *st.ancestors.get(s.name, ())):
+            for t in st.out(a):
+                for e in t.events:
+                    rows_of.setdefault(e, []).append(t)
+        for event, rows in rows_of.items():
+            own = [t for t in rows if t.source == s.name]
+            if not own or any(t.guard is None for t in rows) or len(rows) > MAX_OVERLAP_ROWS:
+                continue
+            if st.ignores(s.name, event):
+                continue  # when no guard holds the kernel ignores it, as declared
+            guards = [t.guard for t in rows if t.guard is not None]
+            if guards_cover(guards):
+                continue
+            shown = " / ".join(f"[{g}]" for g in guards)
+            yield Diagnostic(
+                "C419",
+                Severity.WARNING,
+                own[0].origin,
+                f"state {s.name!r}: the guards of its rows for {event!r} ({shown}) may all be "
+                "false, and then no row takes the event (unhandled: guard false)",
+                "add a row for the remaining case (e.g. the negation), or make the guards "
+                "cover every case (x > 3 / x <= 3)",
+            )
+
+
 _RULES: tuple[Callable[[_Structure], Iterator[Diagnostic]], ...] = (
     _check_reachable,
     _check_way_out,
@@ -538,6 +577,7 @@ _RULES: tuple[Callable[[_Structure], Iterator[Diagnostic]], ...] = (
     _check_timeouts,
     _check_deferred,
     _check_triggers,
+    _check_cover,  # C419
 )
 
 

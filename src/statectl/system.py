@@ -34,6 +34,13 @@ Rules:
    :class:`~statectl.semantics.Unhandled` reason); :meth:`System.records` is an
    async iterator of every device's records. Both hand results to the event
    loop with ``call_soon_threadsafe``: the owner never waits for a coroutine.
+6. A cell's rules hold at run time as verify assumed them (explore/enforce.py):
+   an environment command whose every ``when`` is false is refused by
+   :meth:`System.post` (:class:`~statectl.explore.enforce.Refused`); invariants
+   are checked after every step, each violation goes to the ``on_violation``
+   callbacks and sends the invariant's declared events (journalled with the
+   step); link events carry their data; a device guard's ``In('other.State')``
+   reads the other device's state.
 """
 
 from __future__ import annotations
@@ -49,7 +56,9 @@ from typing import Any
 from statectl.cell import Cell
 from statectl.devices import DeviceDriver, connect
 from statectl.errors import StatectlError
-from statectl.explore.replay import CellLinks
+from statectl.explore.conditions import bind_cross_guards
+from statectl.explore.enforce import CellRules, Violation
+from statectl.explore.replay import CellLinks, link_data
 from statectl.journal import (
     Guarantee,
     Journal,
@@ -98,6 +107,10 @@ class System:
     wake: threading.Event = field(default_factory=threading.Event)
     owner: threading.RLock = field(default_factory=threading.RLock)
     links: CellLinks | None = None
+    #: a cell's environment conditions and invariants, enforced (explore/enforce.py)
+    rules: CellRules | None = None
+    #: called on the owner with each invariant violation a step caused (rule 6)
+    on_violation: list[Callable[[Violation], None]] = field(default_factory=list)
     _live: bool = False  # started and not closing: the writer may drain
     #: devices that had something queued since the owner last looked (rule 1)
     _ready: deque[Subject] = field(default_factory=deque)
@@ -120,8 +133,17 @@ class System:
                 connect(s, d.driver)
             if self.journal is not None:
                 self.bound[d.name] = JournalledDevice(s, self.journal, source=d.source)
+        if self.cell is not None and self.journal is not None:
+            carrying = [k.label for k in self.cell.links if k.data is not None or k.forward_data]
+            if carrying:
+                raise StatectlError(
+                    f"links that carry event data ({'; '.join(carrying)}) do not run with a "
+                    "journal yet: the journal would drop the data; run without --journal"
+                )
         if self.cell is not None:
+            bind_cross_guards(self.subjects)  # guards reading another device (rule 6)
             links = self.links = CellLinks(self.cell, self.subjects)
+            self.rules = CellRules(self.cell, links)
             for name, s in self.subjects.items():
                 s.listen(links.watch)
                 if name in self.bound:
@@ -138,7 +160,9 @@ class System:
             self.links.fired.clear()  # entering the initial states fires nothing
             return
         for link in self.links.due():
-            self.subjects[link.target].post(link.event)
+            self.subjects[link.target].post(link.event, link_data(link, data))
+        for device, ev in self._violations():
+            self.subjects[device].post(ev)
 
     def _link_sends(self) -> list[tuple[JournalledDevice, str]]:
         """Rule 4 with a journal: the links a device's step fired, to journal with the step."""
@@ -146,7 +170,19 @@ class System:
         if not self._live:
             self.links.fired.clear()  # entering the initial states fires nothing
             return []
-        return [(self.bound[k.target], k.event) for k in self.links.due()]
+        sends = [(self.bound[k.target], k.event) for k in self.links.due()]
+        return sends + [(self.bound[d], ev) for d, ev in self._violations()]
+
+    def _violations(self) -> list[tuple[str, str]]:
+        """Rule 6: invariants a step broke, reported; the events they send."""
+        if self.rules is None:
+            return []
+        out: list[tuple[str, str]] = []
+        for v in self.rules.check(self.clock.now()):
+            for callback in self.on_violation:
+                callback(v)
+            out.extend(v.sends)
+        return out
 
     def _committed(self) -> None:
         """On the writer after a commit (rule 2): drain now if nobody owns the devices."""
@@ -223,6 +259,9 @@ class System:
         Never blocks; with ``max_queue`` a full device raises :class:`QueueFull` (rule 4).
         """
         name = self._admit(device)
+        if self.rules is not None:
+            with self.owner:  # the global state is the owner's to read
+                self.rules.admit(name, event)  # rule 6: Refused when 'when' is false
         bound = self.bound.get(name)
         if bound is not None:
             ticket = bound.post(event, data)

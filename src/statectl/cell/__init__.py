@@ -37,6 +37,7 @@ from pathlib import Path
 import yaml
 
 from statectl.cell.expressions import _d, parse_global
+from statectl.cell.options import check_cross_refs, violation_events
 from statectl.cell.reader import _environment, _expr, _links, _load_devices, _named, _Reader
 from statectl.cell.values import (
     CODES,
@@ -119,11 +120,13 @@ def load_cell(path: str | os.PathLike[str]) -> tuple[Cell | None, list[Diagnosti
     invariants: list[Invariant] = []
     names: set[str] = set()
     for inv_name, fields, _ in _named(
-        r, f.get("invariants"), "invariant", ("name", "holds"), ("holds",), names
+        r, f.get("invariants"), "invariant", ("name", "holds", "on_violation"), ("holds",), names
     ):
         expr = _expr(r, fields.get("holds"), f"invariant {inv_name!r}", charts)
+        react, problems = violation_events(fields.get("on_violation"), file, charts)
+        r.diags.extend(problems)
         if expr is not None:
-            invariants.append(Invariant(inv_name, expr))
+            invariants.append(Invariant(inv_name, expr, react))
     recovery: list[Recovery] = []
     for rec_name, fields, _ in _named(
         r, f.get("recovery"), "recovery", ("name", "to", "from"), ("to",), names
@@ -132,6 +135,7 @@ def load_cell(path: str | os.PathLike[str]) -> tuple[Cell | None, list[Diagnosti
         source = _expr(r, fields.get("from"), f"recovery {rec_name!r} from", charts)
         if target is not None and ("from" not in fields or source is not None):
             recovery.append(Recovery(rec_name, target, source))
+    r.diags.extend(check_cross_refs(charts, file))
     if has_errors(r.diags):
         return None, r.diags
     cell = Cell(

@@ -13,6 +13,7 @@ import yaml
 
 from statectl.build import load_and_build
 from statectl.cell.expressions import _d, parse_global
+from statectl.cell.options import LINK_OPTION_KEYS, link_options, send_and_data
 from statectl.cell.values import DeviceRef, EnvInput, GlobalExpr, InputKind, Link, Trigger
 from statectl.errors import Diagnostic, Location, Severity, has_errors
 from statectl.model import Chart, ControlKind, EventKind
@@ -201,7 +202,7 @@ def _event(
 
 def _links(r: _Reader, node: yaml.Node | None, charts: Mapping[str, Chart]) -> list[Link]:
     out: list[Link] = []
-    keys = ("from", "enters", "raises", "to", "send", "guard")
+    keys = ("from", "enters", "raises", "to", "send", "guard", *LINK_OPTION_KEYS)
     for item in r.items(node, "links"):
         f = r.mapping(item, "link", keys, ("from", "to", "send"))
         if f is None:
@@ -209,7 +210,9 @@ def _links(r: _Reader, node: yaml.Node | None, charts: Mapping[str, Chart]) -> l
         at = r.at(item)
         source = _device(r, f.get("from"), "link from", charts)
         target = _device(r, f.get("to"), "link to", charts)
-        event = _event(r, f.get("send"), "link send", target, charts)
+        options, problems = link_options(f, f.get("send"), at)  # cell/options.py
+        r.diags.extend(problems)
+        event = _event(r, send_and_data(f.get("send"))[0], "link send", target, charts)
         guard = _expr(r, f.get("guard"), "link guard", charts) if "guard" in f else None
         if ("enters" in f) == ("raises" in f):
             r.diags.append(
@@ -246,7 +249,7 @@ def _links(r: _Reader, node: yaml.Node | None, charts: Mapping[str, Chart]) -> l
                 )
                 continue
         if source and target and event and what and ("guard" not in f or guard is not None):
-            out.append(Link(source, trigger, what, target, event, guard, at))
+            out.append(Link(source, trigger, what, target, event, guard, at, **options))
     return out
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import enum
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from statectl.codes import family
 from statectl.errors import Location
@@ -28,6 +29,7 @@ class InputKind(enum.Enum):
     COMMAND = "environment"  # the operator or a sensor sends it
     FAULT = "fault"  # hardware raises it in a monitored state
     COMPLETION = "completion"  # the device reports it back itself
+    PEER_LOST = "peer lost"  # a node the device is linked with was lost (nodes:)
 
 
 @dataclass(frozen=True, slots=True)
@@ -58,6 +60,16 @@ class Link:
     event: str
     guard: GlobalExpr | None
     where: Location
+    #: constant event data the link sends (``send: Reset {status: true}``), if any
+    data: Any = None
+    #: send the triggering step's event data on (``forward_data: true``)
+    forward_data: bool = False
+    #: the event is harmless where it lands unhandled: verify does not report it
+    ignore_if_unhandled: bool = False
+    #: ``lossy: true``: verify explores the event lost on the way
+    lossy: bool = False
+    #: ``delayed: true``: verify explores the event overtaken by later link events
+    delayed: bool = False
 
     @property
     def label(self) -> str:
@@ -80,6 +92,8 @@ class EnvInput:
 class Invariant:
     name: str
     expr: GlobalExpr
+    #: ``on_violation``: (device, event) sent when a run sees the invariant turn false
+    on_violation: tuple[tuple[str, str], ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

@@ -47,6 +47,10 @@ Rules:
     imported from the Python path, else from beside the model file or the config
     file (their directories are searched after the path, so they never shadow an
     installed package); a module found in neither is refused with what to do.
+10. A cell's environment command whose ``when`` is false is refused with the
+   reason, and an invariant that turns false is written into the trace as
+   ``VIOLATED`` (and sends its ``on_violation`` events); both make the run exit 1
+   (system.py rule 6), so ``run`` enforces what ``verify`` assumed.
 """
 
 from __future__ import annotations
@@ -78,6 +82,7 @@ from statectl.devices import (
 )
 from statectl.devices.config import ShipConfig
 from statectl.errors import DiagnosticError, Severity, StatectlError
+from statectl.explore.enforce import Refused, Violation
 from statectl.journal import (
     Guarantee,
     Journal,
@@ -175,6 +180,8 @@ class _Problems:
         self.lines = 0  # event lines reported and skipped
         self.unknown = 0  # events no chart knows, or rejected under the 'error' policy
         self.unsettled = ""  # a batch settle stopped at --settle-limit: what to say
+        self.refused = 0  # environment commands whose 'when' was false (a cell)
+        self.violated = 0  # invariant violations seen live (a cell)
 
     def record(self, record: object) -> None:
         """A listener: count the events a device refused or did not know."""
@@ -184,6 +191,20 @@ class _Problems:
         if refused:
             with self._lock:
                 self.unknown += 1
+
+    def refuse(self) -> None:
+        with self._lock:
+            self.refused += 1
+
+    def violation(self, out: TextIO, width: int) -> Callable[[Violation], None]:
+        """A System callback: each invariant violation goes into the trace and is counted."""
+
+        def seen(v: Violation) -> None:
+            with self._lock:
+                self.violated += 1
+            out.write(f"t={v.time:7.2f}  {'cell':<{width}}  {'VIOLATED':<8} {v}\n")
+
+        return seen
 
     def bad_line(self) -> None:
         with self._lock:
@@ -198,6 +219,10 @@ class _Problems:
             parts.append(f"{self.unknown} event(s) unknown to the device or rejected")
         if self.unsettled:
             parts.append(self.unsettled)
+        if self.refused:
+            parts.append(f"{self.refused} environment command(s) refused by the cell's 'when'")
+        if self.violated:
+            parts.append(f"{self.violated} invariant violation(s)")
         return "; ".join(parts) or None
 
 
@@ -238,6 +263,10 @@ def _feed(
                 steps.event(number, device, event, data)
         except JournalError as exc:  # nothing more can be accepted: stop, say where
             raise JournalError(f"line {number}: {exc}") from None
+        except Refused as exc:  # rule 10: as verify assumes, with the reason
+            err.write(f"line {number}: {exc}\n")
+            if problems is not None:
+                problems.refuse()
         except StatectlError as exc:
             err.write(f"line {number}: {exc}\n")
             if problems is not None:
@@ -387,6 +416,7 @@ def run(
             system.listen(TraceWriter(out, device_width=width))
             _show_notes(drivers, out, width)
         system.listen(problems.record)
+        system.on_violation.append(problems.violation(out if steps is None else info, width))
         url = None
         if dashboard:
             try:

@@ -28,7 +28,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from statectl.cell import Cell, GlobalExpr, InputKind, Link, Trigger
+from statectl.explore.conditions import data_consistent, foreign_leaf
 from statectl.explore.local import LocalSpace, Outcome
+from statectl.explore.nodes import crossing, peer_lost
 from statectl.explore.timeouts import timeout_events, timing_out
 from statectl.model import EventKind
 from statectl.semantics import Unhandled
@@ -66,6 +68,9 @@ class Delivery:
     unhandled: Unhandled | None  # None: handled
     notifies: tuple[str, ...] = ()
     choices: tuple[tuple[str, bool], ...] = ()
+    #: "lost": a lossy link's event never arrived; "overtaken": a delayed link's event
+    #: was put behind the events queued after it (docs/cells.md, distribution)
+    fate: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -79,8 +84,10 @@ class Branch:
 
 
 #: One outcome of a device step: target local id, handled, unhandled (a missed
-#: transition), and the links it fires as (target device, event, link, guard).
-Move = tuple[int, bool, bool, tuple[tuple[int, str, int, Predicate | None], ...]]
+#: transition), the links it fires as (target device, event, link, guard), and the
+#: condition on the global state before the step under which the outcome is possible
+#: (another device's state a guard read; None: always).
+Move = tuple[int, bool, bool, tuple[tuple[int, str, int, Predicate | None], ...], Predicate | None]
 
 
 class _InRewriter(ast.NodeTransformer):
@@ -131,7 +138,15 @@ class Composed:
             self.predicate(e.when) if e.when else None for e in cell.environment
         )
         self._fires: dict[tuple[int, Outcome], tuple[int, ...]] = {}
-        self._moves: dict[tuple[int, int, str], tuple[Move, ...]] = {}
+        self._moves: dict[tuple[int, int, str, int], tuple[Move, ...]] = {}
+        self._conds: dict[tuple[int, Outcome], Predicate | None] = {}
+        self.harmless = tuple(k.ignore_if_unhandled for k in cell.links)
+        # nodes: (cell/nodes.py): a link to another node with on_peer_down: drop may lose
+        # its event, and then sends its `dropped` event to the source (explore/nodes.py)
+        self.node_of, self.dropped = crossing(cell, self.position)
+        self.lossy = tuple(k.lossy or i in self.dropped for i, k in enumerate(cell.links))
+        self.delayed = tuple(k.delayed for k in cell.links)
+        self.distributed = any(self.lossy) or any(self.delayed)
         self.stimuli = self._stimuli()
         self.initial = self._initial()
 
@@ -174,6 +189,8 @@ class Composed:
         out: list[Stimulus] = []
         for i, e in enumerate(self.cell.environment):
             out.append(Stimulus(e.kind, self.position[e.device], e.event, i if e.when else -1))
+        lost = peer_lost(self.cell, self.position, self.node_of)
+        out.extend(Stimulus(InputKind.PEER_LOST, d, e) for d, e in lost)
         if self.cell.completions:
             for d, space in enumerate(self.spaces):
                 for ev in space.events:
@@ -229,6 +246,63 @@ class Composed:
                 out.append((self.position[k.target], k.event, i))
         return tuple(out)
 
+    def condition(self, d: int, o: Outcome) -> Predicate | None:
+        """When outcome ``o`` of device ``d`` is possible: the other devices' states its
+        guards read (explore/conditions.py rule 1), as a function of the state before."""
+        key = (d, o)
+        if key in self._conds:
+            return self._conds[key]
+        parts: list[tuple[int, int, tuple[bool, ...], bool]] = []
+        for leaf, value in o.choices:
+            ref = foreign_leaf(leaf)
+            if ref is None or ref[0] not in self.position:
+                continue
+            e = self.position[ref[0]]
+            table = self.padded(e, self.spaces[e].states_in(ref[1]))
+            parts.append((self.shift[e], self.mask[e], table, value))
+        fn: Predicate | None = None
+        if parts:
+            frozen = tuple(parts)
+
+            def fn(g: int) -> bool:
+                return all(table[(g >> sh) & mk] is v for sh, mk, table, v in frozen)
+
+        self._conds[key] = fn
+        return fn
+
+    def outcomes(self, d: int, lid: int, event: str, link: int = -1) -> tuple[Outcome, ...]:
+        """Device ``d``'s outcomes; delivered by ``link``, those its data rules out dropped
+        (explore/conditions.py rule 2)."""
+        outs = self.spaces[d].outcomes(lid, event)
+        if link < 0 or self.links[link].forward_data or event != self.links[link].event:
+            return outs
+        data = self.links[link].data
+        return tuple(o for o in outs if data_consistent(self.spaces[d], o, event, data))
+
+    def _pop(
+        self, pending: tuple[tuple[int, str, int], ...]
+    ) -> tuple[int, str, int, bool, tuple[tuple[int, str, int], ...]]:
+        """The next queued delivery: target, event, link, overtaken, and the rest."""
+        (t, event, link), rest = pending[0], pending[1:]
+        return (t, event, link if link >= 0 else ~link, link < 0, rest)
+
+    def _fates(
+        self, pending: tuple[tuple[int, str, int], ...]
+    ) -> list[tuple[str, tuple[tuple[int, str, int], ...]]]:
+        """What distribution may do to the next delivery instead (lost, overtaken)."""
+        (t, event, link), rest = pending[0], pending[1:]
+        out: list[tuple[str, tuple[tuple[int, str, int], ...]]] = []
+        real = link if link >= 0 else ~link
+        if event != self.links[real].event:
+            return out  # a `dropped` event: it stays on its own node
+        if link >= 0 and self.delayed[real] and rest:
+            out.append(("overtaken", (*rest, (t, event, ~link))))
+        if self.lossy[real]:
+            notify = self.dropped.get(real)
+            # nodes: the link's `dropped` event takes the lost event's place in the queue
+            out.append(("lost", rest if notify is None else ((*notify, link), *rest)))
+        return out
+
     def branches(self, g: int, s: Stimulus, detail: bool = False) -> list[Branch]:
         """Every way stimulus ``s`` plays out from ``g`` (rule 2); empty if it does not happen."""
         d = s.device
@@ -245,6 +319,9 @@ class Composed:
         work: list[Work] = []
         for o in space.outcomes(lid, s.event):
             if not o.handled:
+                continue
+            cond = self.condition(d, o)
+            if cond is not None and not cond(g):
                 continue
             g1 = self.replace(g, d, o.target)
             log: tuple[Delivery, ...] = ()
@@ -272,29 +349,44 @@ class Composed:
             if count > MAX_DELIVERIES:
                 out.append(Branch(g1, log, bad, livelock=True))
                 continue
-            (t, event, link), rest = pending[0], pending[1:]
+            for fate, later in self._fates(pending):
+                t0, ev0, l0 = pending[0]
+                k0 = self.links[l0 if l0 >= 0 else ~l0]
+                lost: tuple[Delivery, ...] = ()
+                if detail and fate == "lost":
+                    here = self.spaces[t0].state_of(self.local(g1, t0))
+                    lost = (
+                        Delivery(k0.source, k0.target, ev0, k0.label, here, here, None, fate=fate),
+                    )
+                work.append((g1, later, log + lost, bad, count + (fate == "lost")))
+            t, event, link, overtaken, rest = self._pop(pending)
             tspace = self.spaces[t]
             tlid = self.local(g1, t)
-            for o in tspace.outcomes(tlid, event):
+            for o in self.outcomes(t, tlid, event, link):
+                cond = self.condition(t, o)
+                if cond is not None and not cond(g1):
+                    continue
                 g2 = self.replace(g1, t, o.target) if o.handled else g1
                 more = self._queue(g2, t, o) if o.handled else ()
-                missed = o.unhandled is Unhandled.NO_TRANSITION
+                missed = o.unhandled is Unhandled.NO_TRANSITION and not self.harmless[link]
                 bad2 = (*bad, (t, tlid, event, link)) if missed else bad
                 log2 = log
                 if detail:
                     k = self.links[link]
+                    back = event != k.event  # the link's `dropped` event, to its source
                     log2 = (
                         *log,
                         Delivery(
-                            k.source,
-                            k.target,
+                            k.target if back else k.source,
+                            self.names[t],
                             event,
-                            k.label,
+                            f"{k.label} dropped" if back else k.label,
                             tspace.state_of(tlid),
                             tspace.state_of(o.target),
                             o.unhandled,
                             o.notifies,
                             o.choices,
+                            "overtaken" if overtaken else "",
                         ),
                     )
                 work.append((g2, rest + more, log2, bad2, count + 1))
@@ -302,9 +394,11 @@ class Composed:
             return out
         return list(dict.fromkeys(out))
 
-    def moves(self, d: int, lid: int, event: str) -> tuple[Move, ...]:
+    def moves(self, d: int, lid: int, event: str, link: int = -1) -> tuple[Move, ...]:
         """Device ``d``'s outcomes for ``event`` in ``lid``, with the links each would fire."""
-        key = (d, lid, event)
+        if link >= 0 and self.links[link].forward_data:
+            link = -1
+        key = (d, lid, event, link)
         found = self._moves.get(key)
         if found is None:
             found = tuple(
@@ -323,8 +417,9 @@ class Composed:
                     )
                     if o.handled
                     else (),
+                    self.condition(d, o),
                 )
-                for o in self.spaces[d].outcomes(lid, event)
+                for o in self.outcomes(d, lid, event, link)
             )
             self._moves[key] = found
         return found
@@ -338,14 +433,15 @@ class Composed:
         every step is a table lookup and integer arithmetic.
         """
         shift, mask = self.shift, self.mask
+        harmless = self.harmless
         d = s.device
         lid = (g >> shift[d]) & mask[d]
         out: list[tuple[int, tuple[tuple[int, int, str, int], ...], bool]] = []
         work: list[
             tuple[int, tuple[tuple[int, str, int], ...], tuple[tuple[int, int, str, int], ...], int]
         ] = []
-        for target, handled, _unhandled, fired in self.moves(d, lid, s.event):
-            if handled:
+        for target, handled, _unhandled, fired, cond in self.moves(d, lid, s.event):
+            if handled and (cond is None or cond(g)):
                 g1 = (g & ~(mask[d] << shift[d])) | (target << shift[d])
                 pending = tuple((t, e, i) for t, e, i, guard in fired if guard is None or guard(g1))
                 work.append((g1, pending, (), 1))
@@ -357,9 +453,16 @@ class Composed:
             if count > MAX_DELIVERIES:
                 out.append((g1, bad, True))
                 continue
+            if self.distributed:
+                for fate, later in self._fates(pending):
+                    work.append((g1, later, bad, count + (fate == "lost")))
             (t, event, link), rest = pending[0], pending[1:]
+            if link < 0:
+                link = ~link
             tlid = (g1 >> shift[t]) & mask[t]
-            for target, handled, unhandled, fired in self.moves(t, tlid, event):
+            for target, handled, unhandled, fired, cond in self.moves(t, tlid, event, link):
+                if cond is not None and not cond(g1):
+                    continue
                 if handled:
                     g2 = (g1 & ~(mask[t] << shift[t])) | (target << shift[t])
                     more = tuple(
@@ -367,7 +470,7 @@ class Composed:
                     )
                 else:
                     g2, more = g1, ()
-                bad2 = (*bad, (t, tlid, event, link)) if unhandled else bad
+                bad2 = (*bad, (t, tlid, event, link)) if unhandled and not harmless[link] else bad
                 work.append((g2, rest + more, bad2, count + 1))
         return out
 

@@ -23,9 +23,16 @@ def _clean(text: str) -> str:
 
 def _tag(via: str, unhandled: Unhandled | None) -> str:
     tag = "" if via in ("environment",) else f" ({'link' if ' -> ' in via else via})"
+    if via.endswith(" dropped"):
+        tag = " (dropped: the link's peer was down)"
     if unhandled is not None:
         tag += f" [{unhandled}]"
     return tag
+
+
+def _fate(fate: str) -> str:
+    """A lossy link's event that never arrived, or a delayed one overtaken."""
+    return f" [{fate.upper()}]" if fate else ""
 
 
 def to_mermaid(trace: Trace, title: str = "") -> str:
@@ -40,9 +47,8 @@ def to_mermaid(trace: Trace, title: str = "") -> str:
     for step in trace.steps:
         for d in step.deliveries:
             arrow = "-)" if d.via == "fault" else "->>"
-            out.append(
-                f"    {d.sender}{arrow}{d.receiver}: {_clean(d.event)}{_tag(d.via, d.unhandled)}"
-            )
+            tag = _tag(d.via, d.unhandled) + _fate(d.fate)
+            out.append(f"    {d.sender}{arrow}{d.receiver}: {_clean(d.event)}{tag}")
             if d.before != d.after:
                 out.append(f"    Note over {d.receiver}: {d.before} to {d.after}")
     if title:
@@ -62,7 +68,8 @@ def to_plantuml(trace: Trace, title: str = "") -> str:
     for step in trace.steps:
         for d in step.deliveries:
             arrow = "->>" if d.via == "fault" else "->"
-            out.append(f"{d.sender} {arrow} {d.receiver} : {d.event}{_tag(d.via, d.unhandled)}")
+            tag = _tag(d.via, d.unhandled) + _fate(d.fate)
+            out.append(f"{d.sender} {arrow} {d.receiver} : {d.event}{tag}")
             if d.before != d.after:
                 out.append(f"note over {d.receiver} : {d.before} -> {d.after}")
     if title:

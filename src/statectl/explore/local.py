@@ -115,9 +115,24 @@ class _Oracle:
             return False
 
 
-def _untracked(node: ast.AST, tracked_data: frozenset[str]) -> bool:
+def _untracked(node: ast.AST, tracked_data: frozenset[str], chart: Chart | None = None) -> bool:
     return any(
         isinstance(n, ast.Name) and n.id not in TRACKED and n.id not in tracked_data
+        for n in ast.walk(node)
+    ) or (chart is not None and _foreign(node, chart))
+
+
+def _foreign(node: ast.AST, chart: Chart) -> bool:
+    """``In('device.State')`` naming no state of ``chart``: another device of a cell reads it."""
+    return any(
+        isinstance(n, ast.Call)
+        and isinstance(n.func, ast.Name)
+        and n.func.id == "In"
+        and len(n.args) == 1
+        and isinstance(n.args[0], ast.Constant)
+        and isinstance(n.args[0].value, str)
+        and "." in n.args[0].value
+        and not chart.has_state(n.args[0].value)
         for n in ast.walk(node)
     )
 
@@ -125,9 +140,12 @@ def _untracked(node: ast.AST, tracked_data: frozenset[str]) -> bool:
 class _Rewriter(ast.NodeTransformer):
     """Replace each untracked boolean part of a guard by ``_statectl_choose(k)``."""
 
-    def __init__(self, leaves: list[str], tracked_data: frozenset[str]) -> None:
+    def __init__(
+        self, leaves: list[str], tracked_data: frozenset[str], chart: Chart | None = None
+    ) -> None:
         self.leaves = leaves
         self.tracked = tracked_data
+        self.chart = chart
 
     def part(self, node: ast.expr) -> ast.expr:
         if isinstance(node, ast.BoolOp):
@@ -136,7 +154,7 @@ class _Rewriter(ast.NodeTransformer):
         if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.Not):
             node.operand = self.part(node.operand)
             return node
-        if not _untracked(node, self.tracked):
+        if not _untracked(node, self.tracked, self.chart):
             return node
         self.leaves.append(ast.unparse(node))
         call = ast.Call(ast.Name(ORACLE, ast.Load()), [ast.Constant(len(self.leaves) - 1)], [])
@@ -176,14 +194,16 @@ class LocalSpace:
             seen.add(t.guard)
             tree = ast.parse(t.guard.strip(), mode="eval")
             first = len(self.leaves)
-            tree.body = _Rewriter(self.leaves, tracked_data).part(tree.body)
+            tree.body = _Rewriter(self.leaves, tracked_data, chart).part(tree.body)
             ast.fix_missing_locations(tree)
             parts = tuple(self.leaves[first:])
             reads_previous |= any(
                 isinstance(n, ast.Name) and n.id == "previous" for n in ast.walk(tree)
             )
+            shown = tuple(p for p in parts if not p.startswith("In("))  # not another device
+            if shown:
+                free.append(FreeGuard(name, t.guard, shown, t.origin))
             if parts:
-                free.append(FreeGuard(name, t.guard, parts, t.origin))
                 old = self.machine.guards[t.guard]
                 code = compile(tree, f"<free guard {t.origin}>", "eval")
                 self.rewritten[t.guard] = Expression(old.source, code, old.names)

@@ -23,6 +23,7 @@ import ast
 
 from statectl.cell import GlobalExpr
 from statectl.explore.compose import Composed
+from statectl.explore.conditions import foreign_leaf
 from statectl.explore.local import Outcome
 from statectl.semantics import Unhandled
 
@@ -39,9 +40,16 @@ class _Writer:
     def __init__(self, model: Composed) -> None:
         self.m = model
         self.var = tuple(f"l_{_ident(n)}" for n in model.names)
-        pairs: dict[tuple[int, str], int] = {}
-        for k in model.links:
-            pairs.setdefault((model.position[k.target], k.event), len(pairs))
+        # one code per target, event and the data the link sends (which may decide guards)
+        pairs: dict[tuple[int, str, str | None, bool], int] = {}
+        self.via: dict[int, int] = {}  # code -> a link sending it (its data filters outcomes)
+        self.link_code: list[int] = []
+        for i, k in enumerate(model.links):
+            data = None if k.forward_data else repr(k.data)
+            key = (model.position[k.target], k.event, data, k.ignore_if_unhandled)
+            code = pairs.setdefault(key, len(pairs))
+            self.via.setdefault(code, i)
+            self.link_code.append(code)
         self.code = pairs
 
     def expr(self, e: GlobalExpr) -> str:
@@ -61,27 +69,57 @@ class _Writer:
         table = self.m.spaces[d].states_in(state)
         return self._in(d, [i for i, v in enumerate(table) if v])
 
+    def happens(self, d: int, event: str, lids: list[int]) -> str:
+        """Where ``event`` happens: the local states, each with the other devices' states
+        its handled outcomes need (explore/conditions.py rule 1)."""
+        free: list[int] = []
+        parts: list[str] = []
+        for lid in lids:
+            conds = [self.condition(o) for o in self.m.outcomes(d, lid, event) if o.handled]
+            if all(conds):
+                parts.append(f"({self.var[d]} == {lid} && ({' || '.join(conds)}))")
+            else:
+                free.append(lid)
+        if free:
+            parts.insert(0, self._in(d, free))
+        return "(" + " || ".join(parts) + ")" if len(parts) > 1 else parts[0]
+
     def _in(self, d: int, lids: list[int]) -> str:
         if not lids:
             return "false"
         return "(" + " || ".join(f"{self.var[d]} == {i}" for i in lids) + ")"
 
+    def condition(self, o: Outcome) -> str:
+        """Another device's state the outcome's guard read (explore/conditions.py rule 1)."""
+        parts = []
+        for leaf, value in o.choices:
+            ref = foreign_leaf(leaf)
+            if ref is None or ref[0] not in self.m.position:
+                continue
+            d = self.m.position[ref[0]]
+            table = self.m.spaces[d].states_in(ref[1])
+            test = self._in(d, [i for i, v in enumerate(table) if v])
+            parts.append(test if value else f"!{test}")
+        return " && ".join(parts)
+
     def outcome(self, d: int, o: Outcome, indent: str) -> list[str]:
         lines = [f"{indent}{self.var[d]} = {o.target};"]
         for i in self.m.fires(d, o):
             k = self.m.links[i]
-            code = self.code[self.m.position[k.target], k.event]
+            code = self.link_code[i]
             guard = self.expr(k.guard) if k.guard else "true"
             lines.append(
                 f"{indent}if :: {guard} -> pend!{code} :: else -> skip fi; /* {k.label} */"
             )
         return lines
 
-    def table(self, d: int, event: str, indent: str, only_handled: bool) -> list[str]:
+    def table(
+        self, d: int, event: str, indent: str, only_handled: bool, link: int = -1
+    ) -> list[str]:
         space = self.m.spaces[d]
         lines = [f"{indent}if"]
         for lid in range(len(space.snapshots)):
-            outs = space.outcomes(lid, event)
+            outs = self.m.outcomes(d, lid, event, link)
             if only_handled:
                 outs = tuple(o for o in outs if o.handled)
             if not outs or all(o.unhandled is Unhandled.DECLARED_IGNORED for o in outs):
@@ -89,17 +127,25 @@ class _Writer:
             lines.append(f"{indent}:: {self.var[d]} == {lid} -> /* {space.state_of(lid)} */")
             lines.append(f"{indent}   if")
             for o in outs:
+                cond = self.condition(o)
+                when = f"{cond} -> " if cond else ""
                 if o.handled:
                     body = self.outcome(d, o, indent + "      ")
-                    body[0] = f"{indent}   :: " + body[0].lstrip()
+                    body[0] = f"{indent}   :: {when}" + body[0].lstrip()
                     lines.extend(body)
-                elif o.unhandled is Unhandled.NO_TRANSITION:
+                elif o.unhandled is Unhandled.NO_TRANSITION and not (
+                    link >= 0 and self.m.harmless[link]
+                ):
                     lines.append(
-                        f'{indent}   :: printf("unhandled: {self.m.names[d]} in '
+                        f'{indent}   :: {when}printf("unhandled: {self.m.names[d]} in '
                         f'{space.state_of(lid)} gets {event}\\n"); assert(false)'
                     )
                 else:
-                    lines.append(f"{indent}   :: skip")
+                    lines.append(f"{indent}   :: {when}skip")
+            if any(self.condition(o) for o in outs):
+                lines.append(
+                    f"{indent}   :: else -> skip /* another device's state rules out the rest */"
+                )
             lines.append(f"{indent}   fi")
         lines.append(f"{indent}:: else -> skip")
         lines.append(f"{indent}fi")
@@ -126,12 +172,10 @@ def export_promela(model: Composed, *, invariants: bool = True, unhandled: bool 
     out.append("  do")
     out.append("  :: nempty(pend) -> pend?code;")
     out.append("     if")
-    for (t, event), c in w.code.items():
+    for (t, event, _data, _harmless), c in w.code.items():
         out.append(f"     :: code == {c} -> /* {m.names[t]}.{event} */")
-        if unhandled:
-            out.extend(w.table(t, event, "        ", only_handled=False))
-        else:
-            out.extend(w.table(t, event, "        ", only_handled=True))
+        link = w.via[c]
+        out.extend(w.table(t, event, "        ", only_handled=not unhandled, link=link))
     out.append("     :: else -> skip")
     out.append("     fi")
     out.append("  :: empty(pend) -> break")
@@ -171,7 +215,7 @@ def export_promela(model: Composed, *, invariants: bool = True, unhandled: bool 
         ]
         if not lids:
             continue
-        guard = w._in(d, lids)
+        guard = w.happens(d, s.event, lids)
         if s.when >= 0:
             when = m.cell.environment[s.when].when
             if when is not None:

@@ -33,6 +33,7 @@ from typing import Any
 from statectl.cell import Cell, InputKind, Link, Trigger
 from statectl.errors import StatectlError
 from statectl.explore.compose import Composed, Stimulus
+from statectl.explore.conditions import bind_cross_guards
 from statectl.runtime import (
     EventIgnored,
     Record,
@@ -44,7 +45,7 @@ from statectl.runtime import (
 )
 from statectl.tables import safeyaml
 
-__all__ = ["CellLinks", "CellRun", "ReplayStep", "load_replay", "run_cell"]
+__all__ = ["CellLinks", "CellRun", "ReplayStep", "link_data", "load_replay", "run_cell"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,6 +54,8 @@ class ReplayStep:
     device: str
     event: str
     expect: tuple[tuple[str, str], ...] = ()  # (device, state label) after the step
+    #: (link label, "lost" | "overtaken"): what distribution did to link deliveries, in order
+    fates: tuple[tuple[str, str], ...] = ()
 
 
 def load_replay(path: str | os.PathLike[str]) -> list[ReplayStep]:
@@ -78,7 +81,12 @@ def load_replay(path: str | os.PathLike[str]) -> list[ReplayStep]:
         state = s.get("state") or {}
         pairs = state.items() if isinstance(state, dict) else ()
         expect = tuple((str(k), str(v)) for k, v in pairs)
-        out.append(ReplayStep(kind, str(s["to"]), str(s["event"]), expect))
+        fates = tuple(
+            (str(d.get("via", "")), str(d["fate"]))
+            for d in s.get("deliveries") or ()
+            if isinstance(d, dict) and d.get("fate")
+        )
+        out.append(ReplayStep(kind, str(s["to"]), str(s["event"]), expect, fates))
     return out
 
 
@@ -142,6 +150,11 @@ class CellLinks:
         return out
 
 
+def link_data(link: Link, data: Any) -> Any:
+    """The event data ``link`` sends when the triggering step had ``data``."""
+    return data if link.forward_data else link.data
+
+
 class _Runner:
     def __init__(self, cell: Cell, write: Callable[[str], object]) -> None:
         self.cell = cell
@@ -154,12 +167,15 @@ class _Runner:
         self.links = CellLinks(cell, self.subjects, self.model)
         self.unhandled: list[str] = []
         self.delivering: tuple[str, str] | None = None
+        self.harmless = False  # the link being delivered says its event may land unhandled
+        self.fates: list[tuple[str, str]] = []  # what the replayed trace says happened to links
         for d in cell.devices:
             s = Subject(d.chart, clock=self.clock, name=d.name)
             s.listen(self._trace)
             s.listen(self.links.watch)
             s.listen(self._watch)
             self.subjects[d.name] = s
+        bind_cross_guards(self.subjects)
         for s in self.subjects.values():
             s.start()
             s.run_until_idle()
@@ -173,36 +189,60 @@ class _Runner:
             isinstance(r, EventIgnored)
             and self.delivering == (r.device, r.event)
             and r.reason in ("no transition", "unknown event")
+            and not self.harmless
         ):
             self.unhandled.append(f"{r.device} gets {r.event} ({r.reason})")
 
     def state(self) -> int:
         return self.links.state()
 
-    def _step(self, device: str, event: str) -> None:
+    def _step(self, device: str, event: str, data: Any = None) -> None:
         self.links.fired.clear()
-        self.subjects[device].post(event)
+        self.subjects[device].post(event, data)
         self.subjects[device].run_until_idle()
 
-    def perform(self, device: str, event: str) -> None:
-        """Rule 1: one stimulus and its cascade of link deliveries."""
-        queue: deque[tuple[str, str]] = deque()
+    def _fate(self, link: Link) -> str:
+        """The trace's fate for this delivery ("" when it arrives in order)."""
+        if self.fates and self.fates[0][0] == link.label:
+            return self.fates.pop(0)[1]
+        return ""
+
+    def perform(self, device: str, event: str, fates: Sequence[tuple[str, str]] = ()) -> None:
+        """Rule 1: one stimulus and its cascade of link deliveries (lost or overtaken as
+        ``fates`` says: a replayed trace of a cell with lossy or delayed links)."""
+        self.fates = list(fates)
+        queue: deque[tuple[Link, Any, bool]] = deque()
         self._step(device, event)
-        queue.extend(self._links())
+        queue.extend((k, d, False) for k, d in self._links(event, None))
         count = 0
         while queue and count < 256:
-            target, ev = queue.popleft()
-            self.delivering = (target, ev)
-            self._step(target, ev)
+            link, data, late = queue.popleft()
+            fate = "" if late else self._fate(link)
+            if fate == "overtaken":
+                self.out(f"          link overtaken: {link.label}\n")
+                queue.append((link, data, True))
+                continue
+            if fate == "lost":
+                self.out(f"          link lost: {link.label}\n")
+                count += 1
+                notify = self.model.dropped.get(self.cell.links.index(link))
+                if notify is not None:  # nodes: the link's `dropped` event to its source
+                    self.out(f"          dropped: {link.source} gets {notify[1]}\n")
+                    self._step(link.source, notify[1])
+                    queue.extend((k, d, False) for k, d in self._links(notify[1], None))
+                continue
+            self.delivering = (link.target, link.event)
+            self.harmless = link.ignore_if_unhandled
+            self._step(link.target, link.event, data)
             self.delivering = None
-            queue.extend(self._links())
+            queue.extend((k, d, False) for k, d in self._links(link.event, data))
             count += 1
 
-    def _links(self) -> list[tuple[str, str]]:
+    def _links(self, event: str, data: Any) -> list[tuple[Link, Any]]:
         out = []
         for k in self.links.due():
             self.out(f"          link: {k.label}\n")
-            out.append((k.target, k.event))
+            out.append((k, link_data(k, data)))
         return out
 
 
@@ -245,7 +285,7 @@ def run_cell(
             stim = rng.choice(choices)
         write(f"--- step {i + 1}: {stim.label(m.names)}\n")
         expected = {h for h, _, _ in m.successors(g, stim)}
-        r.perform(m.names[stim.device], stim.event)
+        r.perform(m.names[stim.device], stim.event, plan[i].fates if plan is not None else ())
         done += 1
         h = r.state()
         if plan is not None and plan[i].expect:

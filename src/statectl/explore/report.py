@@ -65,6 +65,7 @@ class TraceStep:
                     "after": d.after,
                     "reaction": str(d.unhandled) if d.unhandled is not None else "handled",
                     "calls": list(d.notifies),
+                    **({"fate": d.fate} if d.fate else {}),
                 }
                 for d in self.deliveries
             ],
@@ -105,12 +106,15 @@ class Trace:
                 change = f"{d.before} -> {d.after}" if d.before != d.after else d.before
                 what = f"{d.sender} -> {d.receiver}: {d.event}"
                 via = "" if d.via in ("environment", "completion", "fault") else " (link)"
+                via += " (overtaken)" if d.fate == "overtaken" else ""
                 tail = "" if d.unhandled is None else f" [{d.unhandled}]"
-                if d.via == "fault":
-                    via = " (fault)"
+                if d.via in ("fault", "peer lost"):
+                    via = f" ({d.via})"
                 elif d.via == "completion":
                     via = " (completion)"
                 choice = "".join(f" [free: {p} = {v}]" for p, v in d.choices)
+                if d.fate == "lost":
+                    via, change, choice = " (link LOST on the way)", d.before, ""
                 out.append(f"{indent}{head:<3} {what}{via}: {d.receiver} {change}{tail}{choice}")
         return out
 

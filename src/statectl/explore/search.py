@@ -74,7 +74,11 @@ class _Tables:
                             if outs and all(o.unhandled is Unhandled.NO_TRANSITION for o in outs):
                                 uns.append((i, s))
                             continue
-                        if s.when >= 0 or any(model.fires(d, o) for o in handled):
+                        if (
+                            s.when >= 0
+                            or any(model.fires(d, o) for o in handled)
+                            or any(model.condition(d, o) is not None for o in outs)
+                        ):
                             cxs.append((i, s))
                             continue
                         alive = True
