@@ -246,6 +246,9 @@ def build_parser() -> argparse.ArgumentParser:
     from statectl.testgen.commands import register as register_testgen
 
     register_testgen(sub)  # testgen, coverage (src/statectl/testgen/commands.py)
+    from statectl.cli.node import register as register_node
+
+    register_node(sub)  # node, dashboard (src/statectl/cli/node.py; docs/distributed.md)
     return p
 
 
