@@ -125,6 +125,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "cell",
         "explore",
         "system",
+        "web",  # distributed/dashboard.py: the whole cell's page
     ),
     "opcua": (
         "errors",

@@ -439,3 +439,80 @@ def test_drop_link_raises_its_declared_event_while_the_peer_is_down(
     wait_states(view, {"arm": "Blocked"})
     time.sleep(1.0)  # nothing queued may arrive late
     assert states(view)["arm"] == "Blocked"
+
+
+# -- the dashboard from Zenoh -----------------------------------------------------------------
+
+
+def _http(url: str, body: dict[str, object] | None = None, token: str | None = None) -> object:
+    import json
+    import urllib.error
+    import urllib.request
+
+    headers = {"Content-Type": "application/json"}
+    if token is not None:
+        headers["X-Statectl-Token"] = token
+    data = json.dumps(body).encode() if body is not None else None
+    request = urllib.request.Request(url, data=data, headers=headers)
+    try:
+        with urllib.request.urlopen(request, timeout=10) as response:
+            return json.loads(response.read())
+    except urllib.error.HTTPError as exc:
+        return exc.code
+
+
+def _shown(url: str) -> dict[str, str]:
+    snapshot = _http(url + "api/state")
+    assert isinstance(snapshot, dict)
+    return {d["name"]: ",".join(d["active"]) for d in snapshot["devices"]}
+
+
+def test_operator_station_shows_and_drives_the_whole_cell(
+    cluster: Callable[..., Cluster],
+) -> None:
+    """`statectl dashboard CELL` shows every node's devices live; a post needs the token."""
+    pytest.importorskip("aiohttp")
+    import threading
+
+    from statectl.distributed.dashboard import station
+
+    c = cluster()
+    view = start_all(c)
+    cell, _ = load_cell(c.cell)
+    assert cell is not None
+    stop = threading.Event()
+    urls: list[str] = []
+    token = "a-token-of-twenty-chars"
+    thread = threading.Thread(
+        target=station,
+        args=(cell,),
+        kwargs={
+            "connect": None,
+            "settings": ("127.0.0.1", 0, token),
+            "token_from": "test",
+            "out": io.StringIO(),
+            "stop": stop,
+            "ready": urls.append,
+        },
+        daemon=True,
+    )
+    thread.start()
+    try:
+        deadline = time.monotonic() + WAIT
+        while not urls or len(_shown(urls[0])) < 4 or "" in _shown(urls[0]).values():
+            assert time.monotonic() < deadline, urls and _shown(urls[0])
+            time.sleep(0.1)
+        url = urls[0]
+        assert _shown(url) == one_process(ONE_CELL, [])
+        refused = _http(url + "api/post", {"device": "conveyor", "event": "Start"})
+        assert refused == 401
+        accepted = _http(url + "api/post", {"device": "conveyor", "event": "Start"}, token)
+        assert isinstance(accepted, dict) and accepted["accepted"] is True
+        wait_states(view, {"conveyor": "Running"})
+        deadline = time.monotonic() + WAIT
+        while _shown(url)["conveyor"] != "Running":
+            assert time.monotonic() < deadline, _shown(url)
+            time.sleep(0.1)
+    finally:
+        stop.set()
+        thread.join(10)

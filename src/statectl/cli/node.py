@@ -28,7 +28,7 @@ from typing import Any, TextIO
 from statectl.cli.commands import PROBLEMS, USAGE
 from statectl.errors import DiagnosticError, StatectlError
 
-__all__ = ["node_main", "register"]
+__all__ = ["dashboard_main", "node_main", "register"]
 
 
 def register(sub: Any) -> None:
@@ -59,6 +59,94 @@ def register(sub: Any) -> None:
     s.add_argument("--token", help="dashboard token (default: as statectl run)")
     s.add_argument("--quiet", action="store_true", help="do not print every device record")
     s.set_defaults(func=_cmd_node)
+
+    s = sub.add_parser(
+        "dashboard",
+        help="serve the live dashboard of a cell whose nodes run elsewhere (operator station)",
+        description="Connects to the nodes' Zenoh endpoints (the cell file's listen endpoints, "
+        "or --connect) with no devices of its own and serves the whole cell's dashboard: "
+        "states live from Zenoh, events posted with the token go to the device's node.",
+    )
+    s.add_argument("file", metavar="CELL", help="cell file with a nodes: section")
+    s.add_argument(
+        "--connect",
+        action="append",
+        metavar="ENDPOINT",
+        help="Zenoh endpoint to connect to (repeatable; default: every node's listen endpoints)",
+    )
+    s.add_argument("--config", help="run configuration YAML: its dashboard: section")
+    s.add_argument("--host", help="dashboard address (default: loopback)")
+    s.add_argument("--port", type=int, help="dashboard port (default: any free)")
+    s.add_argument("--token", help="dashboard token (default: as statectl run)")
+    s.set_defaults(func=_cmd_dashboard)
+
+
+def _cmd_dashboard(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    return dashboard_main(
+        args.file,
+        connect=args.connect,
+        config=args.config,
+        host=args.host,
+        port=args.port,
+        token=args.token,
+        out=out,
+        err=err,
+    )
+
+
+def dashboard_main(
+    path: str,
+    *,
+    connect: list[str] | None = None,
+    config: str | None = None,
+    host: str | None = None,
+    port: int | None = None,
+    token: str | None = None,
+    out: TextIO = sys.stdout,
+    err: TextIO = sys.stderr,
+    stop: threading.Event | None = None,
+) -> int:
+    """``statectl dashboard CELL``: the operator station (docs/distributed.md)."""
+    from statectl.cell import load_cell
+    from statectl.cli import run as runcli
+    from statectl.devices import DashboardConfig, RunConfig, load_run_config
+    from statectl.distributed.dashboard import station
+
+    if not Path(path).exists():
+        err.write(f"statectl dashboard: {path}: no such file\n")
+        return USAGE
+    cell, diags = load_cell(path)
+    if cell is None:
+        for d in diags:
+            err.write(f"{d}\n")
+        return PROBLEMS
+    if cell.nodes is None and not connect:
+        err.write(f"statectl dashboard: {path}: the cell has no nodes: section\n")
+        return PROBLEMS
+    halt = stop or threading.Event()
+    try:
+        table = RunConfig(None, DashboardConfig())
+        if config is not None:
+            table = load_run_config(config)
+        host, port, token, where = runcli._dashboard_settings(
+            host, port, token, config, table.dashboard
+        )
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGTERM, lambda *_: halt.set())
+        with contextlib.suppress(KeyboardInterrupt):
+            return station(
+                cell,
+                connect=connect,
+                settings=(host, port, token),
+                token_from=where,
+                out=out,
+                stop=halt,
+                streams=table.dashboard.streams,
+            )
+        return 0
+    except (StatectlError, OSError) as exc:
+        err.write(f"statectl dashboard: {exc}\n")
+        return PROBLEMS
 
 
 def _cmd_node(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
@@ -183,7 +271,21 @@ def node_main(
                 )
         wire.listen()
         if dashboard:
-            raise StatectlError("--dashboard on a node is not available yet")
+            from statectl.distributed.dashboard import serve_cell
+
+            host, port, token, where = runcli._dashboard_settings(
+                host, port, token, config, table.dashboard
+            )
+            server, url = serve_cell(
+                cell,
+                system.subjects,
+                wire.on_state,
+                system.post,
+                (host, port, token),
+                table.dashboard.streams,
+            )
+            shown = server.token if token is None else f"(from {where})"
+            out.write(f"dashboard: {url}\ntoken: {shown}\n")
         out.write(f"node {node}: running\n")
         out.flush()
         if threading.current_thread() is threading.main_thread():
