@@ -24,12 +24,12 @@ from collections import deque
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol, cast
 
-from statectl.cell import Cell, Link
+from statectl.cell import Cell, Link, Trigger
 from statectl.cell.nodes import LinkDelivery, PeerDown
 from statectl.errors import StatectlError
 from statectl.explore.replay import CellLinks
 from statectl.journal import JournalledDevice, Ticket
-from statectl.runtime import Subject
+from statectl.runtime import Record, StateEntered, Subject, TransitionTaken
 from statectl.system import System
 
 __all__ = ["NodeLinks", "NodeSystem", "RemoteDevice", "WireSide"]
@@ -49,6 +49,42 @@ class NodeLinks(CellLinks):
     def __init__(self, cell: Cell, subjects: Mapping[str, Subject], mirror: dict[str, int]):
         super().__init__(cell, subjects)
         self.mirror = mirror  # device on another node -> local id of its last published state
+        # per source device: (link index, fires on entering?, state or event); one look-up
+        # per record instead of a walk over every link of the cell
+        self._by_source: dict[str, list[tuple[int, bool, str]]] = {}
+        for i, k in enumerate(cell.links):
+            entry = (i, k.trigger is Trigger.ENTERS, k.what)
+            self._by_source.setdefault(k.source, []).append(entry)
+        self._guarded = tuple(g is not None for g in self.model.link_guard)
+
+    def watch(self, r: Record) -> None:
+        links = self._by_source.get(r.device)
+        if links is None:
+            return
+        entered = r.state if isinstance(r, StateEntered) else None
+        took = r.event if isinstance(r, TransitionTaken) else None
+        if entered is None and took is None:
+            return
+        for i, enters, what in links:
+            if what == (entered if enters else took):
+                self.fired.append(i)
+
+    def due(self) -> list[Link]:
+        """As :meth:`CellLinks.due`; the global state is packed only for a guarded link."""
+        if not self.fired:
+            return []
+        fired = sorted(set(self.fired))
+        self.fired.clear()
+        if not any(self._guarded[i] for i in fired):
+            return [self.cell.links[i] for i in fired]
+        g = self.state()
+        guards = self.model.link_guard
+        out = []
+        for i in fired:
+            guard = guards[i]
+            if guard is None or guard(g):
+                out.append(self.cell.links[i])
+        return out
 
     def state(self) -> int:
         model = self.model

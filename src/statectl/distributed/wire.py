@@ -45,7 +45,7 @@ from statectl.distributed.keys import Keys
 from statectl.distributed.streams import Inbound, Outbound, Verdict
 from statectl.distributed.system import NodeSystem
 from statectl.errors import StatectlError
-from statectl.journal.format import decode_snapshot, encode_snapshot
+from statectl.journal.format import Guarantee, decode_snapshot, encode_snapshot
 from statectl.semantics import Snapshot
 
 __all__ = ["RESEND_AFTER", "Wire", "session_config"]
@@ -53,9 +53,11 @@ __all__ = ["RESEND_AFTER", "Wire", "session_config"]
 #: Seconds without an acknowledgement after which a stream asks again (rule 3).
 RESEND_AFTER = 0.5
 _TICK = 0.05
+_ACK_PAUSE = 0.002  # seconds between two rounds of acknowledgements, at least
 _EPOCH = "link-epoch"
 _IN = "link-in/"
 _ENC = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
+_NAMES: dict[str, str] = {}  # event name -> its JSON string
 
 
 def session_config(node: Node) -> Any:
@@ -121,6 +123,7 @@ class Wire:
         self._ack_due: dict[tuple[str, str], tuple[str, int, bool]] = {}
         self._hello_due: set[str] = set()
         self._resend_due: set[str] = set()
+        self._states: dict[str, Snapshot] = {}  # "state/<device>" -> newest snapshot to put
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._print = threading.Lock()
@@ -220,10 +223,19 @@ class Wire:
             self.system.subjects[name].on_step(self._stepped(name))
         self._decls += [
             s.declare_subscriber(f"{root}/ack/{self.me.name}/*", self._on_ack),
-            s.declare_subscriber(f"{root}/state/*", self._on_state),
+            s.declare_subscriber(
+                f"{root}/state/*", self._on_state, allowed_origin=zenoh.Locality.REMOTE
+            ),
             s.declare_queryable(f"{root}/state/*", self._on_query),
         ]
         self._decls.append(s.liveliness().declare_token(self.keys.node(self.me.name)))
+
+    @property
+    def session(self) -> Any:
+        """The open Zenoh session (after :meth:`open`), for a host's own keys."""
+        if self._session is None:
+            raise StatectlError("the wire is not open")
+        return self._session
 
     def listen(self) -> None:
         """After the System started (resumed): take link events, posts and presence."""
@@ -270,7 +282,12 @@ class Wire:
 
     @staticmethod
     def _link_payload(epoch: str, n: int, event: str, data: Any) -> bytes:
-        return _ENC.encode({"e": epoch, "n": n, "ev": event, "d": data}).encode()
+        """``{e, n, ev, d}``; the event name's JSON is made once per name (the hot path)."""
+        name = _NAMES.get(event)
+        if name is None:
+            name = _NAMES[event] = _ENC.encode(event)
+        d = "null" if data is None else _ENC.encode(data)
+        return f'{{"e":"{epoch}","n":{n},"ev":{name},"d":{d}}}'.encode()
 
     def _stepped(self, name: str) -> Callable[[str, Any, str], None]:
         """Rule 5: put the device's state after a step that changed it."""
@@ -278,14 +295,16 @@ class Wire:
         key = "state/" + name
         last: list[Snapshot | None] = [None]
 
+        states = self._states
+        wake = self._wake
+
         def put(event: str, data: Any, outcome: str) -> None:
             snap = subject.snapshot
             if snap is None or snap == last[0]:
                 return
             last[0] = snap
-            pub = self._pubs.get(key)
-            if pub is not None and self._session is not None:
-                pub.put(snapshot_payload(snap))
+            states[key] = snap  # the wire's thread puts the newest one
+            wake.set()
 
         return put
 
@@ -299,6 +318,7 @@ class Wire:
         except (ValueError, KeyError, TypeError):
             return
         system = self.system
+        run = True
         with self.inbound.lock:
             verdict, last = self.inbound.offer(node, device, e, n)
             if verdict is not Verdict.APPLY:
@@ -307,16 +327,31 @@ class Wire:
                 return
             bound = system.bound.get(device)
             try:
-                if bound is not None:
+                if bound is not None:  # acknowledged once committed (_committed)
                     ticket = bound.post(event, data, note=(f"{_IN}{node}/{device}", f"{e} {n}"))
-                    system.wake.set()
                     self._acks.append((ticket.seq, node, device, e, n))
-                    return
-                system.post(device, event, data)
-            except StatectlError as exc:
+                    run = bound.journal.guarantee is Guarantee.PROMPT
+                else:
+                    system.subjects[device].post(event, data)
+            except (StatectlError, KeyError) as exc:
                 self._say(f"link event {event!r} from {node} to {device}: {exc}")
-        self._ack_due[node, device] = (e, n, False)
-        self._wake.set()
+        if run:
+            self._run_devices()  # before waking the wire's thread: the device first
+        if bound is None:
+            self._ack_due[node, device] = (e, n, False)
+            self._wake.set()
+
+    def _run_devices(self) -> None:
+        """Run the event now on this thread if nobody owns the devices (one thread hop less);
+        else wake the owner."""
+        system = self.system
+        if system.owner.acquire(blocking=False):
+            try:
+                system._drain()
+            finally:
+                system.owner.release()
+        else:
+            system.wake.set()
 
     def _on_ack(self, sample: Any) -> None:
         _, device = Keys.last(sample.key_expr)
@@ -441,16 +476,28 @@ class Wire:
             if session is None:
                 return
             try:
-                self._send_acks(session)
+                self._put_states()
+                acked = self._send_acks(session)
                 self._resend(session)
+                if acked:
+                    time.sleep(_ACK_PAUSE)  # let a burst's acknowledgements gather (rule 4)
             except Exception as exc:  # the session closed under us: stop quietly
                 if not self._stop.is_set():
                     self._say(f"wire: {exc}")
 
-    def _send_acks(self, session: Any) -> None:
+    def _put_states(self) -> None:
+        """Rule 5: put each device's newest snapshot (a burst of steps costs one put)."""
+        states = self._states
+        for key in list(states):
+            snap = states.pop(key, None)
+            if snap is not None:
+                self._pubs[key].put(snapshot_payload(snap))
+
+    def _send_acks(self, session: Any) -> bool:
         due, self._ack_due = self._ack_due, {}
         for (node, device), (e, n, again) in due.items():
             session.put(self.keys.ack(node, device), _ENC.encode({"e": e, "n": n, "r": again}))
+        return bool(due)
 
     def _resend(self, session: Any) -> None:
         now = time.monotonic()
