@@ -112,6 +112,23 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "cell",
         "explore",
     ),
+    "distributed": (
+        "errors",
+        "model",
+        "expr",
+        "semantics",
+        "observers",
+        "tables",
+        "build",
+        "recovery",
+        "runtime",
+        "devices",
+        "journal",
+        "cell",
+        "explore",
+        "system",
+        "web",  # distributed/dashboard.py: the whole cell's page
+    ),
     "opcua": (
         "errors",
         "model",

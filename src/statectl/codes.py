@@ -59,6 +59,7 @@ _CODEGEN = ("docs/codegen.md", "diagnostics")
 _CELLS = ("docs/cells.md", "diagnostics")
 _DRIVERS = ("docs/runtime.md", "drivers-and-their-configuration")
 _BUS = ("docs/drivers.md", "configuration-diagnostics")
+_NODES = ("docs/distributed.md", "diagnostics")
 _BUILDER = ("docs/check.md", "builder-codes-reported-through-check")
 
 
@@ -396,6 +397,14 @@ ALL: tuple[Code, ...] = (
         "a device guard's In('device.State') names no device or state of the cell",
         _CELLS,
     ),
+    # V820-V829: the nodes: section (statectl.cell.nodes), docs/distributed.md
+    _c("V820", _E, "a device runs on no node, or on two", _NODES),
+    _c("V821", _E, "a node name is not an identifier or is used twice", _NODES),
+    _c("V822", _E, "a node endpoint is not PROTOCOL/HOST:PORT", _NODES),
+    _c("V823", _E, "a link's on_peer_down is not queue or drop", _NODES),
+    _c("V824", _E, "a link's dropped event without on_peer_down: drop", _NODES),
+    _c("V825", _E, "a node's peer_lost names a device that does not run on it", _NODES),
+    _c("V826", _W, "on_peer_down or dropped in a cell without nodes:", _NODES),
 )
 
 #: Code -> record, read-only.

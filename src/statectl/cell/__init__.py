@@ -37,6 +37,7 @@ from pathlib import Path
 import yaml
 
 from statectl.cell.expressions import _d, parse_global
+from statectl.cell.nodes import read_nodes
 from statectl.cell.options import check_cross_refs, violation_events
 from statectl.cell.reader import _environment, _expr, _links, _load_devices, _named, _Reader
 from statectl.cell.values import (
@@ -116,6 +117,7 @@ def load_cell(path: str | os.PathLike[str]) -> tuple[Cell | None, list[Diagnosti
             r.diags.append(_d("V804", r.at(f["completions"]), "completions must be auto or off"))
         completions = value != "off"
     links = _links(r, f.get("links"), charts)
+    nodes = read_nodes(r, f.get("nodes"), f.get("links"), charts)  # cell/nodes.py
     environment = _environment(r, f.get("environment"), charts)
     invariants: list[Invariant] = []
     names: set[str] = set()
@@ -147,6 +149,7 @@ def load_cell(path: str | os.PathLike[str]) -> tuple[Cell | None, list[Diagnosti
         tuple(invariants),
         tuple(recovery),
         completions,
+        nodes,
     )
     return cell, r.diags
 

@@ -13,6 +13,7 @@ import yaml
 
 from statectl.build import load_and_build
 from statectl.cell.expressions import _d, parse_global
+from statectl.cell.nodes import LINK_KEYS
 from statectl.cell.options import LINK_OPTION_KEYS, link_options, send_and_data
 from statectl.cell.values import DeviceRef, EnvInput, GlobalExpr, InputKind, Link, Trigger
 from statectl.errors import Diagnostic, Location, Severity, has_errors
@@ -202,7 +203,7 @@ def _event(
 
 def _links(r: _Reader, node: yaml.Node | None, charts: Mapping[str, Chart]) -> list[Link]:
     out: list[Link] = []
-    keys = ("from", "enters", "raises", "to", "send", "guard", *LINK_OPTION_KEYS)
+    keys = ("from", "enters", "raises", "to", "send", "guard", *LINK_OPTION_KEYS, *LINK_KEYS)
     for item in r.items(node, "links"):
         f = r.mapping(item, "link", keys, ("from", "to", "send"))
         if f is None:

@@ -8,16 +8,22 @@ from __future__ import annotations
 import enum
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from statectl.codes import family
 from statectl.errors import Location
 from statectl.model import Chart
 
+if TYPE_CHECKING:
+    from statectl.cell.nodes import Nodes
+
 #: Code -> one-line summary of every V8xx code (a view of statectl.codes.REGISTRY).
 CODES: Mapping[str, str] = family("V8")
 
-TOP_KEYS = ("cell", "devices", "links", "environment", "invariants", "recovery", "completions")
+TOP_KEYS = (
+    *("cell", "devices", "links", "environment", "invariants", "recovery", "completions"),
+    "nodes",  # cell/nodes.py: which device runs in which process
+)
 
 
 class Trigger(enum.Enum):
@@ -115,6 +121,7 @@ class Cell:
     invariants: tuple[Invariant, ...] = ()
     recovery: tuple[Recovery, ...] = ()
     completions: bool = True
+    nodes: Nodes | None = None  # cell/nodes.py; None: one process
 
     def device(self, name: str) -> DeviceRef:
         for d in self.devices:

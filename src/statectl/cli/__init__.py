@@ -262,6 +262,9 @@ def build_parser() -> argparse.ArgumentParser:
     from statectl.cli.profiles import register as register_profiles
 
     register_profiles(sub)  # profiles, new (src/statectl/cli/profiles.py)
+    from statectl.cli.node import register as register_node
+
+    register_node(sub)  # node, dashboard (src/statectl/cli/node.py; docs/distributed.md)
     return p
 
 

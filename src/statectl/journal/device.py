@@ -97,17 +97,20 @@ class JournalledDevice:
 
     # -- in ------------------------------------------------------------------------------
 
-    def post(self, event: str, data: Any = None) -> Ticket:
-        """Accept ``event`` (rule 1); the ticket turns durable once its inbox row is committed."""
+    def post(self, event: str, data: Any = None, *, note: tuple[str, str] | None = None) -> Ticket:
+        """Accept ``event`` (rule 1); the ticket turns durable once its inbox row is committed.
+
+        ``note``: a ``meta`` row committed with the inbox row (``Journal.accept``).
+        """
         if not isinstance(event, str):
             raise StatectlError(f"an event name must be a str (got {event!r})")
         journal = self.journal
         if journal.guarantee is Guarantee.DURABLE_FIRST:
             return journal.accept(
-                self.name, event, data, lambda seq: self._deliver(seq, event, data)
+                self.name, event, data, lambda seq: self._deliver(seq, event, data), note=note
             )
         with self._lock:  # seq order is this device's queue order: resume relies on it
-            ticket = journal.accept(self.name, event, data, hold=True)
+            ticket = journal.accept(self.name, event, data, hold=True, note=note)
             self._expect.append((ticket.seq, event, data))
             self.subject.post(event, data)
         if self.wake is not None:

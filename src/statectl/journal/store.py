@@ -113,6 +113,7 @@ PROMPT_COMMIT_DELAY = 0.0002
 _MAX_VARIABLES = 32_766 if sqlite3.sqlite_version_info >= (3, 32, 0) else 999
 _INSERT_INBOX = "INSERT INTO inbox VALUES (?, ?, ?, ?, ?)"
 _INSERT_STEP = "INSERT INTO steps VALUES (NULL, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)"
+_NOTE = "INSERT OR REPLACE INTO meta VALUES (?, ?)"
 _STOP = None  # put on the queue by close(): the writer commits what came before and ends
 _GROUP = "group"  # the sql of a queue item whose parameters are writes that commit together
 
@@ -212,12 +213,15 @@ class Journal:
         deliver: Callable[[int], object] | None = None,
         *,
         hold: bool = False,
+        note: tuple[str, str] | None = None,
     ) -> Ticket:
         """Queue an inbox row; ``deliver(seq)`` runs on the writer after it is committed.
 
         ``hold``: do not wake the writer for this row; it goes with the next row
         queued (the step that processes the event) or when anyone asks the ticket,
         :meth:`flush` or :meth:`close`. Rows keep their order either way.
+        ``note``: a ``meta`` row (key, value) committed with the inbox row, never
+        without it (a link event from another node and how far that link got).
         """
         text = encode_data(data)
         wall = time.time()
@@ -226,7 +230,10 @@ class Journal:
             self._seq += 1
             seq = self._seq
             self._enqueued += 1
-            write = (_INSERT_INBOX, (seq, device, wall, event, text), seq, deliver)
+            write: _Write = (_INSERT_INBOX, (seq, device, wall, event, text), seq, deliver)
+            if note is not None:  # one queue item: never split between commits (rule 6)
+                self._enqueued += 1
+                write = (_GROUP, (write, (_NOTE, note, 0, None)), 0, None)
             if hold:
                 self._held.append(write)
             else:
@@ -278,6 +285,10 @@ class Journal:
             self._enqueued += len(writes)
             self._queue.put((_GROUP, tuple(writes), 0, None))
             return tuple(w[2] for w in writes[:-1])
+
+    def note(self, key: str, value: str) -> None:
+        """Queue a ``meta`` row (key, value), committed in queue order with the rest."""
+        self._put((_NOTE, (key, value), 0, None))
 
     def register(self, name: str, chart: str, source: str, data: Any) -> None:
         """Note which chart (and file) a device runs, for ``journal replay``."""

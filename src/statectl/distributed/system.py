@@ -1,0 +1,226 @@
+"""One node's System: its own devices, the links to devices on other nodes handed to a wire.
+
+Rules:
+1. A :class:`NodeSystem` is a :class:`~statectl.system.System` of the node's
+   devices only. Links whose target runs here are sent as in one process; links
+   to a device on another node go to the :class:`Wire` (statectl.distributed.wire).
+2. A link's guard is evaluated where its source runs, over the node's own devices
+   and the last state each other node published of its devices (their *mirror*),
+   so a guard over a remote device reads that device as of its last publication.
+3. With a journal a link event to another node is accepted with the step that
+   fired it, in one commit (the journal's rule 6), as an inbox row of the remote
+   device in this node's journal: that row is the event's place in its stream, so
+   a resumed node sends again exactly what its journal holds.
+4. A ``drop`` link whose target's node is down sends nothing; the link's
+   ``dropped`` event, if declared, goes to the source device instead (journalled
+   with the step, like a link event).
+5. An event posted for a device on another node (an operator's line, the
+   dashboard) is forwarded to that node, once, without a journal on this side.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable, Mapping
+from typing import Any, Protocol, cast
+
+from statectl.cell import Cell, Link, Trigger
+from statectl.cell.nodes import LinkDelivery, PeerDown
+from statectl.errors import StatectlError
+from statectl.explore.replay import CellLinks
+from statectl.journal import JournalledDevice, Ticket
+from statectl.runtime import Record, StateEntered, Subject, TransitionTaken
+from statectl.system import System
+
+__all__ = ["NodeLinks", "NodeSystem", "RemoteDevice", "WireSide"]
+
+
+class WireSide(Protocol):
+    """What the System needs from the wire (statectl.distributed.wire.Wire)."""
+
+    def down(self, link: Link) -> bool: ...
+    def send(self, device: str, event: str, data: Any) -> None: ...
+    def forward(self, device: str, event: str, data: Any) -> None: ...
+
+
+class NodeLinks(CellLinks):
+    """A cell's links on one node: the global state reads remote devices from the mirror."""
+
+    def __init__(self, cell: Cell, subjects: Mapping[str, Subject], mirror: dict[str, int]):
+        super().__init__(cell, subjects)
+        self.mirror = mirror  # device on another node -> local id of its last published state
+        # per source device: (link index, fires on entering?, state or event); one look-up
+        # per record instead of a walk over every link of the cell
+        self._by_source: dict[str, list[tuple[int, bool, str]]] = {}
+        for i, k in enumerate(cell.links):
+            entry = (i, k.trigger is Trigger.ENTERS, k.what)
+            self._by_source.setdefault(k.source, []).append(entry)
+        self._guarded = tuple(g is not None for g in self.model.link_guard)
+
+    def watch(self, r: Record) -> None:
+        links = self._by_source.get(r.device)
+        if links is None:
+            return
+        entered = r.state if isinstance(r, StateEntered) else None
+        took = r.event if isinstance(r, TransitionTaken) else None
+        if entered is None and took is None:
+            return
+        for i, enters, what in links:
+            if what == (entered if enters else took):
+                self.fired.append(i)
+
+    def due(self) -> list[Link]:
+        """As :meth:`CellLinks.due`; the global state is packed only for a guarded link."""
+        if not self.fired:
+            return []
+        fired = sorted(set(self.fired))
+        self.fired.clear()
+        if not any(self._guarded[i] for i in fired):
+            return [self.cell.links[i] for i in fired]
+        g = self.state()
+        guards = self.model.link_guard
+        out = []
+        for i in fired:
+            guard = guards[i]
+            if guard is None or guard(g):
+                out.append(self.cell.links[i])
+        return out
+
+    def state(self) -> int:
+        model = self.model
+        g = 0
+        for d, space in enumerate(model.spaces):
+            name = model.names[d]
+            subject = self.subjects.get(name)
+            if subject is None:
+                lid: int | None = self.mirror.get(name)
+                if lid is None:
+                    lid = model.local(model.initial[0], d)
+            else:
+                snap = subject.snapshot
+                lid = space.lookup(snap) if snap is not None else None
+                if lid is None:
+                    raise StatectlError(f"{name} is in a state the explorer never saw")
+            g = model.replace(g, d, lid)
+        return g
+
+
+class _Sink(deque[tuple[int, str, Any]]):
+    """A remote device's expected events: nothing is processed here, so nothing is kept."""
+
+    def append(self, item: tuple[int, str, Any]) -> None:
+        pass
+
+
+class _Post:
+    """A remote device's stand-in Subject: posting sends the event over the wire."""
+
+    def __init__(self, device: str, wire: WireSide) -> None:
+        self.device = device
+        self.wire = wire
+
+    def post(
+        self, event: str, data: Any = None, then: Callable[[str], object] | None = None
+    ) -> None:
+        self.wire.send(self.device, event, data)
+
+
+class RemoteDevice(JournalledDevice):
+    """A device on another node as a target of this node's journalled link sends (rule 3).
+
+    The journal's hand-over (prompt) or delivery after the commit (durable-first)
+    puts the event on the wire, in ``seq`` order, under this stand-in's lock.
+    """
+
+    def __init__(self, name: str, wire: WireSide) -> None:  # no Subject, no journal row
+        import threading
+
+        self.name = name
+        self.wake = None
+        self._lock = threading.Lock()
+        self._expect = _Sink()
+        self.subject = cast(Subject, _Post(name, wire))
+        self._wire = wire
+
+    def _deliver(self, seq: int, event: str, data: Any) -> None:
+        with self._lock:
+            self._wire.send(self.name, event, data)
+
+    def post(self, event: str, data: Any = None, *, note: tuple[str, str] | None = None) -> Ticket:
+        raise StatectlError(f"{self.name} runs on another node")
+
+
+class NodeSystem(System):
+    """A System of one node's devices (rules 1-5); :meth:`attach` wires its links."""
+
+    def __post_init__(self) -> None:
+        cell = self.cell
+        self.cell = None  # the links are wired by attach(), once the wire exists
+        System.__post_init__(self)
+        self.cell = cell
+
+    def attach(self, wire: WireSide, mirror: dict[str, int]) -> None:
+        """Wire the cell's links: local ones as in one process, the others through ``wire``."""
+        cell = self.cell
+        assert cell is not None and cell.nodes is not None
+        self._wire = wire
+        self._policy: dict[Link, LinkDelivery] = dict(
+            zip(cell.links, cell.nodes.delivery, strict=False)
+        )
+        self._remote = {
+            d.name: RemoteDevice(d.name, wire) for d in cell.devices if d.name not in self.subjects
+        }
+        links = self.links = NodeLinks(cell, self.subjects, mirror)
+        for name, s in self.subjects.items():
+            s.listen(links.watch)
+            if name in self.bound:
+                self.bound[name].sends = self._link_sends
+            else:
+                s.on_step(self._link_step)
+
+    def _dropping(self, link: Link) -> bool:
+        policy = self._policy.get(link)
+        return policy is not None and policy.on_peer_down is PeerDown.DROP and self._wire.down(link)
+
+    def _link_step(self, event: str, data: Any, outcome: str) -> None:
+        """Rules 1 and 4 without a journal, on the owner after a device's step."""
+        assert self.links is not None
+        if not self._live:
+            self.links.fired.clear()
+            return
+        for link in self.links.due():
+            target = self.subjects.get(link.target)
+            if target is not None:
+                target.post(link.event)
+            elif self._dropping(link):
+                dropped = self._policy[link].dropped
+                if dropped is not None:
+                    self.subjects[link.source].post(dropped)
+            else:
+                self._wire.send(link.target, link.event, None)
+
+    def _link_sends(self) -> list[tuple[JournalledDevice, str]]:
+        """Rules 1, 3 and 4 with a journal: what the step sends, journalled with it."""
+        assert self.links is not None
+        if not self._live:
+            self.links.fired.clear()
+            return []
+        out: list[tuple[JournalledDevice, str]] = []
+        for link in self.links.due():
+            bound = self.bound.get(link.target)
+            if bound is not None:
+                out.append((bound, link.event))
+            elif self._dropping(link):
+                dropped = self._policy[link].dropped
+                if dropped is not None:
+                    out.append((self.bound[link.source], dropped))
+            else:
+                out.append((self._remote[link.target], link.event))
+        return out
+
+    def post(self, device: str | None, event: str, data: Any = None) -> Ticket | None:
+        """Rule 5: an event for a device on another node is forwarded there."""
+        if device is not None and device in getattr(self, "_remote", {}):
+            self._wire.forward(device, event, data)
+            return None
+        return System.post(self, device, event, data)

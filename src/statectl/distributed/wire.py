@@ -1,0 +1,526 @@
+"""One node on Zenoh: link streams, acknowledgements, presence, published states.
+
+Rules:
+1. A node opens one Zenoh session in peer mode with multicast scouting off: it
+   listens on its ``listen`` endpoints and connects to its ``connect`` ones, and
+   nothing else (no router, no discovery outside the endpoints given). Its lease
+   is the node's ``lease``: how soon the others notice it is cut off.
+2. Presence is a liveliness token ``statectl/<cell>/node/<node>``. A node sees a
+   peer come (its token appears) and go (disappears: the process ended, was
+   killed, or its lease ran out); when a peer goes, each device of this node
+   listed in ``peer_lost`` that a link joins to a device on that peer gets its
+   declared event. Every change is printed: ``peers: a, b``.
+3. Link events go once and in order per stream (statectl.distributed.streams):
+   numbered, kept until acknowledged, resent after the peer comes back (a
+   ``hello`` asks the receiver how far it got) or when nothing was acknowledged
+   for :data:`RESEND_AFTER`. A ``queue`` link keeps its events while the peer is
+   down; a ``drop`` link never sends them (statectl.distributed.system rule 4).
+4. The receiver acknowledges an event once it is applied: with a journal, once
+   its inbox row (and the stream's position, in the same commit) is committed;
+   without one, once it is posted to the device. Acknowledgements are cumulative
+   and sent by one thread, so a burst of events costs few of them.
+5. Each device's state is put on ``statectl/<cell>/state/<device>`` after every
+   step that changed it, and answered to queries on that key, so a node's guards
+   (the mirror), a dashboard and an operator station see the whole cell.
+6. A node resumed from its journal keeps its epoch and stream positions (the
+   journal's ``meta`` rows ``link-epoch`` and ``link-in/<node>/<device>``) and
+   sends again what its journal holds and the receiver has not acknowledged.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import threading
+import time
+import uuid
+from collections import deque
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, TextIO
+
+from statectl.cell import Cell, Link
+from statectl.cell.nodes import Node
+from statectl.distributed.keys import Keys
+from statectl.distributed.streams import Inbound, Outbound, Verdict
+from statectl.distributed.system import NodeSystem
+from statectl.errors import StatectlError
+from statectl.journal.format import Guarantee, decode_snapshot, encode_snapshot
+from statectl.semantics import Snapshot
+
+__all__ = ["RESEND_AFTER", "Wire", "session_config"]
+
+#: Seconds without an acknowledgement after which a stream asks again (rule 3).
+RESEND_AFTER = 0.5
+_TICK = 0.05
+_ACK_PAUSE = 0.002  # seconds between two rounds of acknowledgements, at least
+_EPOCH = "link-epoch"
+_IN = "link-in/"
+_ENC = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
+_NAMES: dict[str, str] = {}  # event name -> its JSON string
+
+
+def session_config(node: Node) -> Any:
+    """Rule 1: the Zenoh configuration of a node (peer, no multicast, its endpoints, lease)."""
+    import zenoh
+
+    c = zenoh.Config()
+    c.insert_json5("mode", '"peer"')
+    c.insert_json5("scouting/multicast/enabled", "false")
+    c.insert_json5("scouting/gossip/enabled", "true")
+    c.insert_json5("listen/endpoints", json.dumps(list(node.listen)))
+    c.insert_json5("connect/endpoints", json.dumps(list(node.connect)))
+    c.insert_json5("transport/link/tx/lease", str(max(50, int(node.lease * 1000))))
+    c.insert_json5("transport/link/tx/keep_alive", "4")
+    return c
+
+
+def snapshot_payload(snapshot: Snapshot) -> bytes:
+    """A device's state message: its snapshot and the wall time it was put (newest wins)."""
+    t = time.time()
+    active, history, previous = encode_snapshot(snapshot)
+    return f'{{"a":{active},"h":{history},"p":{_ENC.encode(previous)},"t":{t}}}'.encode()
+
+
+def parse_snapshot(payload: bytes) -> tuple[Snapshot, float]:
+    """The snapshot and wall time of a state message (:func:`snapshot_payload`)."""
+    msg = json.loads(payload)
+    snap = decode_snapshot(json.dumps(msg["a"]), json.dumps(msg["h"]), msg["p"])
+    return snap, float(msg.get("t", 0.0))
+
+
+class Wire:
+    """One node's side of the cell on Zenoh (rules 1-6)."""
+
+    def __init__(
+        self,
+        cell: Cell,
+        node: str,
+        system: NodeSystem,
+        *,
+        out: TextIO,
+        journal: Path | None = None,
+        resume: bool = False,
+    ) -> None:
+        if cell.nodes is None:
+            raise StatectlError(f"{cell.path}: the cell has no nodes: section")
+        self.cell = cell
+        self.nodes = cell.nodes
+        try:
+            self.me = self.nodes.node(node)
+        except KeyError:
+            names = ", ".join(n.name for n in self.nodes.nodes)
+            raise StatectlError(f"the cell has no node {node!r}; nodes: {names}") from None
+        self.system = system
+        self.out = out
+        self.keys = Keys(cell.name)
+        self.local = set(self.me.devices)
+        self.up: set[str] = set()
+        self.mirror: dict[str, int] = {}
+        self.inbound = Inbound()
+        self.outbound: dict[str, Outbound] = {}
+        self._acks: deque[tuple[int, str, str, str, int]] = deque()  # seq, node, device, e, n
+        self._ack_due: dict[tuple[str, str], tuple[str, int, bool]] = {}
+        self._hello_due: set[str] = set()
+        self._resend_due: set[str] = set()
+        self._states: dict[str, Snapshot] = {}  # "state/<device>" -> newest snapshot to put
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self._print = threading.Lock()
+        self._pubs: dict[str, Any] = {}
+        self._decls: list[Any] = []
+        self._session: Any = None
+        self._thread: threading.Thread | None = None
+        self.lost_at: dict[str, float] = {}  # node -> monotonic time it was noticed gone
+        self.on_state: list[Callable[[str, Snapshot, float], None]] = []
+        epoch, backlog = self._from_journal(journal, resume)
+        self.epoch = epoch
+        for d in cell.devices:
+            if d.name not in self.local:
+                stream = Outbound(d.name, self.nodes.node_of(d.name), epoch)
+                for event, data in backlog.get(d.name, ()):
+                    stream.add(event, data)
+                self.outbound[d.name] = stream
+        system.attach(self, self.mirror)
+        if system.journal is not None:
+            system.journal.after_commit(self._committed)
+
+    # -- the journal (rule 6) -----------------------------------------------------------------
+
+    def _from_journal(
+        self, path: Path | None, resume: bool
+    ) -> tuple[str, dict[str, list[tuple[str, Any]]]]:
+        """The epoch and, on resume, each stream's events the journal holds; the inbound state."""
+        meta: dict[str, str] = {}
+        top = 0
+        if path is not None and path.exists() and path.stat().st_size > 0:
+            db = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+            try:
+                meta = dict(db.execute("SELECT key, value FROM meta WHERE key LIKE 'link-%'"))
+                top = int(db.execute("SELECT coalesce(max(seq), 0) FROM inbox").fetchone()[0])
+                backlog: dict[str, list[tuple[str, Any]]] = {}
+                if resume and _EPOCH in meta:
+                    epoch, _, base = meta[_EPOCH].partition(" ")
+                    remote = [d.name for d in self.cell.devices if d.name not in self.local]
+                    marks = ",".join("?" * len(remote))
+                    rows = db.execute(
+                        f"SELECT device, event, data FROM inbox WHERE seq > ? "
+                        f"AND device IN ({marks}) ORDER BY seq",
+                        (int(base or 0), *remote),
+                    )
+                    for device, event, data in rows:
+                        backlog.setdefault(device, []).append((event, json.loads(data)))
+            finally:
+                db.close()
+        else:
+            backlog = {}
+        for key, value in meta.items():
+            if key.startswith(_IN):
+                node, _, device = key[len(_IN) :].partition("/")
+                e, _, n = value.partition(" ")
+                self.inbound.last[node, device] = (e, int(n))
+        if resume and _EPOCH in meta:
+            return meta[_EPOCH].partition(" ")[0], backlog
+        epoch = uuid.uuid4().hex[:12]
+        journal = self.system.journal
+        if journal is not None:
+            journal.note(_EPOCH, f"{epoch} {top}")
+        return epoch, {}
+
+    def _committed(self) -> None:
+        """On the journal's writer after a commit: acknowledge what is durable now (rule 4)."""
+        journal = self.system.journal
+        acks = self._acks
+        if journal is None or not acks:
+            return
+        durable = journal.durable_seq
+        woke = False
+        while acks and acks[0][0] <= durable:
+            _, node, device, e, n = acks.popleft()
+            self._ack_due[node, device] = (e, n, False)
+            woke = True
+        if woke:
+            self._wake.set()
+
+    # -- opening and closing -----------------------------------------------------------------
+
+    def open(self) -> None:
+        """Rule 1-2, 5: the session, the publishers, the mirror; before the System starts."""
+        import zenoh
+
+        self._session = s = zenoh.open(session_config(self.me))
+        root = self.keys.root
+        block = zenoh.CongestionControl.BLOCK
+        for name, stream in self.outbound.items():
+            self._pubs[name] = s.declare_publisher(
+                self.keys.link(self.me.name, name), congestion_control=block, express=True
+            )
+            del stream
+        for name in self.local:
+            self._pubs["state/" + name] = s.declare_publisher(
+                self.keys.state(name), congestion_control=block
+            )
+            self.system.subjects[name].on_step(self._stepped(name))
+        self._decls += [
+            s.declare_subscriber(f"{root}/ack/{self.me.name}/*", self._on_ack),
+            s.declare_subscriber(
+                f"{root}/state/*", self._on_state, allowed_origin=zenoh.Locality.REMOTE
+            ),
+            s.declare_queryable(f"{root}/state/*", self._on_query),
+        ]
+        self._decls.append(s.liveliness().declare_token(self.keys.node(self.me.name)))
+
+    @property
+    def session(self) -> Any:
+        """The open Zenoh session (after :meth:`open`), for a host's own keys."""
+        if self._session is None:
+            raise StatectlError("the wire is not open")
+        return self._session
+
+    def listen(self) -> None:
+        """After the System started (resumed): take link events, posts and presence."""
+        s = self._session
+        root = self.keys.root
+        for name in sorted(self.local):
+            self._decls += [
+                s.declare_subscriber(f"{root}/link/*/{name}", self._on_link),
+                s.declare_subscriber(f"{root}/hello/*/{name}", self._on_hello),
+                s.declare_subscriber(self.keys.post(name), self._on_post),
+            ]
+        self._decls.append(
+            s.liveliness().declare_subscriber(f"{root}/node/*", self._on_presence, history=True)
+        )
+        s.get(f"{root}/state/*", self._on_reply)
+        self._thread = threading.Thread(target=self._run, name="statectl-wire", daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        self._wake.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join()
+        if self._session is not None:
+            session, self._session = self._session, None
+            session.close()
+
+    # -- the System's side -------------------------------------------------------------------
+
+    def down(self, link: Link) -> bool:
+        return self.nodes.node_of(link.target) not in self.up
+
+    def send(self, device: str, event: str, data: Any) -> None:
+        """Number, keep and (if the peer is up) put a link event (rule 3)."""
+        stream = self.outbound[device]
+        with stream.lock:
+            n = stream.add(event, data)
+            if stream.node in self.up and self._session is not None:
+                self._pubs[device].put(self._link_payload(stream.epoch, n, event, data))
+
+    def forward(self, device: str, event: str, data: Any) -> None:
+        if self._session is not None:
+            self._session.put(self.keys.post(device), _ENC.encode({"ev": event, "d": data}))
+
+    @staticmethod
+    def _link_payload(epoch: str, n: int, event: str, data: Any) -> bytes:
+        """``{e, n, ev, d}``; the event name's JSON is made once per name (the hot path)."""
+        name = _NAMES.get(event)
+        if name is None:
+            name = _NAMES[event] = _ENC.encode(event)
+        d = "null" if data is None else _ENC.encode(data)
+        return f'{{"e":"{epoch}","n":{n},"ev":{name},"d":{d}}}'.encode()
+
+    def _stepped(self, name: str) -> Callable[[str, Any, str], None]:
+        """Rule 5: put the device's state after a step that changed it."""
+        subject = self.system.subjects[name]
+        key = "state/" + name
+        last: list[Snapshot | None] = [None]
+
+        states = self._states
+        wake = self._wake
+
+        def put(event: str, data: Any, outcome: str) -> None:
+            snap = subject.snapshot
+            if snap is None or snap == last[0]:
+                return
+            last[0] = snap
+            states[key] = snap  # the wire's thread puts the newest one
+            wake.set()
+
+        return put
+
+    # -- Zenoh callbacks ---------------------------------------------------------------------
+
+    def _on_link(self, sample: Any) -> None:
+        node, device = Keys.last(sample.key_expr)
+        try:
+            msg = json.loads(sample.payload.to_bytes())
+            e, n, event, data = str(msg["e"]), int(msg["n"]), str(msg["ev"]), msg.get("d")
+        except (ValueError, KeyError, TypeError):
+            return
+        system = self.system
+        run = True
+        with self.inbound.lock:
+            verdict, last = self.inbound.offer(node, device, e, n)
+            if verdict is not Verdict.APPLY:
+                self._ack_due[node, device] = (e, last, verdict is Verdict.GAP)
+                self._wake.set()
+                return
+            bound = system.bound.get(device)
+            try:
+                if bound is not None:  # acknowledged once committed (_committed)
+                    ticket = bound.post(event, data, note=(f"{_IN}{node}/{device}", f"{e} {n}"))
+                    self._acks.append((ticket.seq, node, device, e, n))
+                    run = bound.journal.guarantee is Guarantee.PROMPT
+                else:
+                    system.subjects[device].post(event, data)
+            except (StatectlError, KeyError) as exc:
+                self._say(f"link event {event!r} from {node} to {device}: {exc}")
+        if run:
+            self._run_devices()  # before waking the wire's thread: the device first
+        if bound is None:
+            self._ack_due[node, device] = (e, n, False)
+            self._wake.set()
+
+    def _run_devices(self) -> None:
+        """Run the event now on this thread if nobody owns the devices (one thread hop less);
+        else wake the owner."""
+        system = self.system
+        if system.owner.acquire(blocking=False):
+            try:
+                system._drain()
+            finally:
+                system.owner.release()
+        else:
+            system.wake.set()
+
+    def _on_ack(self, sample: Any) -> None:
+        _, device = Keys.last(sample.key_expr)
+        stream = self.outbound.get(device)
+        try:
+            msg = json.loads(sample.payload.to_bytes())
+            e, n, again = str(msg["e"]), int(msg["n"]), bool(msg.get("r"))
+        except (ValueError, KeyError, TypeError):
+            return
+        if stream is None or e != stream.epoch:
+            return
+        with stream.lock:
+            stream.ack(n)
+        if again:
+            self._resend_due.add(device)
+            self._wake.set()
+
+    def _on_hello(self, sample: Any) -> None:
+        node, device = Keys.last(sample.key_expr)
+        try:
+            e = str(json.loads(sample.payload.to_bytes())["e"])
+        except (ValueError, KeyError, TypeError):
+            return
+        with self.inbound.lock:
+            applied = self.inbound.applied(node, device, e)
+        if applied is not None and self.system.journal is not None:
+            # an event still waiting for its commit is acknowledged by _committed
+            pending = [a[4] for a in self._acks if a[1] == node and a[2] == device]
+            if pending:
+                applied = pending[0] - 1
+        self._ack_due[node, device] = (e, applied or 0, True)
+        self._wake.set()
+
+    def _on_post(self, sample: Any) -> None:
+        _, device = Keys.last(sample.key_expr)
+        try:
+            msg = json.loads(sample.payload.to_bytes())
+            self.system.post(device, str(msg["ev"]), msg.get("d"))
+        except (ValueError, KeyError, TypeError, StatectlError) as exc:
+            self._say(f"event for {device} from another node refused: {exc}")
+
+    def _on_state(self, sample: Any) -> None:
+        _, device = Keys.last(sample.key_expr)
+        try:
+            snap, t = parse_snapshot(sample.payload.to_bytes())
+        except (ValueError, KeyError, TypeError):
+            return
+        if device not in self.local:
+            links = self.system.links
+            if links is not None and device in links.model.position:
+                d = links.model.position[device]
+                lid = links.model.spaces[d].lookup(snap)
+                if lid is not None:
+                    self.mirror[device] = lid
+        for callback in self.on_state:
+            callback(device, snap, t)
+
+    def _on_reply(self, reply: Any) -> None:
+        if reply.ok is not None:
+            self._on_state(reply.ok)
+
+    def _on_query(self, query: Any) -> None:
+        for name in sorted(self.local):
+            if query.key_expr.intersects(self.keys.state(name)):
+                subject = self.system.subjects[name]
+                snap = subject.snapshot
+                if snap is not None:
+                    query.reply(self.keys.state(name), snapshot_payload(snap))
+
+    def _on_presence(self, sample: Any) -> None:
+        import zenoh
+
+        _, node = Keys.last(sample.key_expr)
+        if node == self.me.name or node not in {n.name for n in self.nodes.nodes}:
+            return
+        if sample.kind == zenoh.SampleKind.PUT:
+            if node in self.up:
+                return
+            self.up.add(node)
+            self._say(f"peer {node} up; peers: {', '.join(sorted(self.up))}")
+            for name, stream in self.outbound.items():
+                if stream.node == node:
+                    self._hello_due.add(name)
+            self._wake.set()
+            return
+        if node not in self.up:
+            return
+        self.up.discard(node)
+        self.lost_at[node] = time.monotonic()
+        self._say(f"peer {node} lost; peers: {', '.join(sorted(self.up)) or 'none'}")
+        for device, event in self.peer_lost_events(node):
+            try:
+                self.system.post(device, event)
+            except StatectlError as exc:
+                self._say(f"peer_lost event {event!r} to {device}: {exc}")
+
+    def peer_lost_events(self, node: str) -> list[tuple[str, str]]:
+        """Rule 2: the (device, event) pairs of this node's peer_lost that ``node`` concerns."""
+        there = set(self.nodes.node(node).devices)
+        out = []
+        for device, event in self.me.peer_lost:
+            if any(
+                (k.source == device and k.target in there)
+                or (k.target == device and k.source in there)
+                for k in self.cell.links
+            ):
+                out.append((device, event))
+        return out
+
+    def _say(self, text: str) -> None:
+        with self._print:
+            self.out.write(f"node {self.me.name}: {text}\n")
+            self.out.flush()
+
+    # -- the wire's thread (rules 3-4) -------------------------------------------------------
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self._wake.wait(_TICK)
+            self._wake.clear()
+            session = self._session
+            if session is None:
+                return
+            try:
+                self._put_states()
+                acked = self._send_acks(session)
+                self._resend(session)
+                if acked:
+                    time.sleep(_ACK_PAUSE)  # let a burst's acknowledgements gather (rule 4)
+            except Exception as exc:  # the session closed under us: stop quietly
+                if not self._stop.is_set():
+                    self._say(f"wire: {exc}")
+
+    def _put_states(self) -> None:
+        """Rule 5: put each device's newest snapshot (a burst of steps costs one put)."""
+        states = self._states
+        for key in list(states):
+            snap = states.pop(key, None)
+            if snap is not None:
+                self._pubs[key].put(snapshot_payload(snap))
+
+    def _send_acks(self, session: Any) -> bool:
+        due, self._ack_due = self._ack_due, {}
+        for (node, device), (e, n, again) in due.items():
+            session.put(self.keys.ack(node, device), _ENC.encode({"e": e, "n": n, "r": again}))
+        return bool(due)
+
+    def _resend(self, session: Any) -> None:
+        now = time.monotonic()
+        hello, self._hello_due = self._hello_due, set()
+        again, self._resend_due = self._resend_due, set()
+        for name, stream in self.outbound.items():
+            if stream.node not in self.up:
+                continue
+            with stream.lock:
+                if name in again:
+                    self._put_all(stream)
+                elif stream.unacked and now - stream.last_send > RESEND_AFTER:
+                    hello.add(name)
+                    stream.last_send = now
+            if name in hello:
+                session.put(self.keys.hello(self.me.name, name), _ENC.encode({"e": stream.epoch}))
+
+    def _put_all(self, stream: Outbound) -> None:
+        """Under the stream's lock: put every unacknowledged event again, in order."""
+        pub = self._pubs[stream.device]
+        for n, event, data in list(stream.unacked):
+            pub.put(self._link_payload(stream.epoch, n, event, data))
+        stream.last_send = time.monotonic()
+
+    def peers(self) -> Sequence[str]:
+        return sorted(self.up)
