@@ -235,11 +235,13 @@ TAKES_NO_INPUT = {("profiles",), ("new",)}
 
 
 MOTOR_XLSX = ROOT / "examples" / "motor" / "motor.xlsx"
+RUN_CONFIG = ROOT / "examples" / "motor" / "drivers.yaml"
 
 WRONG_KIND = [
     # (argv, the code, the command it points to)
     (["check", str(CELL)], "C415", f"use statectl verify {CELL}"),
     (["check", str(MOTOR), str(CELL)], "C415", f"use statectl verify {CELL}"),
+    (["check", str(RUN_CONFIG)], "C415", f"use statectl run MODEL --config {RUN_CONFIG}"),
     (["verify", str(MOTOR)], "C416", f"use statectl check {MOTOR}"),
     (["verify", str(MOTOR_XLSX)], "C416", f"use statectl check {MOTOR_XLSX}"),
     (["verify", "{tmp}/m.scxml"], "C416", "use statectl scxml run"),

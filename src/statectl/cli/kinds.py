@@ -3,7 +3,8 @@
 Rules:
 1. ``statectl check`` on a cell file (``devices:`` and no ``states:``) reports
    C415, "this is a cell: use statectl verify", instead of the device loader's
-   T102; the other files given are checked as usual.
+   T102; the other files given are checked as usual. A run config (every device
+   entry names a ``driver``) gets C415 too, pointing at ``run --config``.
 2. ``statectl verify`` on a device file (a YAML mapping with ``states:`` or
    ``events:``, or device tables in CSV, XLSX or Markdown) or an SCXML document
    reports C416, saying which command takes it, instead of a page of V802s.
@@ -37,6 +38,15 @@ def cell_given_to_check(path: str) -> Diagnostic | None:
     """Rule 1: C415 when ``path`` is a cell file, else None."""
     if not is_cell(path):
         return None
+    if _is_run_config(path):
+        return Diagnostic(
+            "C415",
+            Severity.ERROR,
+            Location(path, _line_of(path, "devices")),
+            "this is a run config (devices: naming drivers), not a device file: "
+            f"use statectl run MODEL --config {path}",
+            "a run config binds drivers to the devices of a model or cell; check the model",
+        )
     return Diagnostic(
         "C415",
         Severity.ERROR,
@@ -44,6 +54,20 @@ def cell_given_to_check(path: str) -> Diagnostic | None:
         "this is a cell file (devices:, no states:), not a device file: "
         f"use statectl verify {path}",
         "verify checks the cell and loads each device file, reporting its problems as V805",
+    )
+
+
+def _is_run_config(path: str) -> bool:
+    """A ``devices:`` mapping whose every entry names a ``driver`` and no device ``file``."""
+    try:
+        data = safeyaml.load_value(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, safeyaml.YamlRefused):
+        return False
+    devices = data.get("devices") if isinstance(data, dict) else None
+    return (
+        isinstance(devices, dict)
+        and bool(devices)
+        and all(isinstance(v, dict) and "driver" in v and "file" not in v for v in devices.values())
     )
 
 
