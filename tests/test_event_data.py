@@ -253,3 +253,43 @@ def test_event_data_errors_are_statectl_errors() -> None:
     """Refusals are StatectlErrors, so every host reports them as it reports bad input."""
     assert issubclass(EventDataError, StatectlError)
     assert issubclass(GuardError, StatectlError)
+
+
+@pytest.mark.parametrize(
+    ("data", "word"),
+    [
+        ("{detail: restarted}", None),
+        ("{detial: restarted}", "'detial', which the event does not declare"),
+        ("{detail: 3}", "which is no str"),
+        ("restarted", "not a mapping"),
+    ],
+)
+def test_recovery_data_must_fit_the_events_declared_fields(data: str, word: str | None) -> None:
+    """A Recovery rule whose data its event would refuse on resume is C413."""
+    from statectl.recovery import check_recovery
+
+    text = (
+        "device: M\nstates:\n  - {state: Idle, control: default}\n"
+        "  - {state: Busy, control: monitoring required}\n"
+        "events:\n  - {event: Go, old: Idle, new: Busy}\n"
+        "  - {event: Error, old: Busy, new: Idle, kind: fault, data: {detail: str}}\n"
+        f"recovery:\n  - {{state: Busy, event: Error, data: {data}}}\n"
+    )
+    tables, diags = read_yaml(text, "m.yaml")
+    assert tables is not None and not diags, diags
+    chart, more = build(tables)
+    assert chart is not None, more
+    found = [d for d in check_recovery(chart, tables.recovery) if d.code == "C413"]
+    if word is None:
+        assert found == []
+    else:
+        assert [d.where.line for d in found] == [9]
+        assert word in found[0].message
+
+
+def test_a_guard_over_data_of_an_event_sent_without_data_says_so() -> None:
+    """The guard error of an event sent with no data says that no data was sent."""
+    subject = _started(_press())
+    with pytest.raises(GuardError) as caught:
+        subject.dispatch("Press")
+    assert "sent without data" in str(caught.value)

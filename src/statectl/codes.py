@@ -217,6 +217,12 @@ ALL: tuple[Code, ...] = (
         _check("c408--fault-without-a-monitor-warning"),
     ),
     _c("C412", _E, "verify: a device's assigned data does not stay bounded", _CELLS),
+    _c(
+        "C413",
+        _E,
+        "a recovery rule's data does not fit the fields its event declares",
+        _check("c413--recovery-data-its-event-would-refuse-error"),
+    ),
     # -- D5xx: driver and run configs (statectl.devices.config) ---------------------------
     _c("D501", _E, "the driver or run config cannot be read", _DRIVERS),
     _c("D502", _E, "the config is not valid YAML (or an alias or too deep)", _DRIVERS),

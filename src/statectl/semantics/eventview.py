@@ -140,9 +140,12 @@ class GuardFailure:
 
     def message(self, device: str) -> str:
         where = f"{self.origin}: " if self.origin.file or self.origin.line else ""
+        reason = self.reason
+        if "'NoneType' object" in reason:
+            reason += " (the event was sent without data)"
         return (
             f"{where}{device}: the guard {self.guard!r} of event {self.event!r} failed: "
-            f"{self.reason}; the event was not taken (read event data as _event.data.NAME, "
+            f"{reason}; the event was not taken (read event data as _event.data.NAME, "
             "and send the fields the event declares)"
         )
 
