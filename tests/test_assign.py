@@ -406,3 +406,26 @@ def test_resume_brings_back_the_data_the_assignments_changed(tmp_path: Path, cyc
         assert dict(again.subjects["Indexer"].data) == before
     finally:
         again.close()
+
+
+@pytest.mark.parametrize("guarantee", ["prompt", "durable-first"])
+def test_a_journal_refuses_bad_data_before_it_accepts_the_event(
+    tmp_path: Path, guarantee: str
+) -> None:
+    """Data that does not fit is refused before the journal's inbox holds the event."""
+    from statectl.journal import Guarantee, Journal, JournalReader
+    from statectl.runner import DeviceSetup, System
+    from statectl.runtime.eventdata import EventDataError
+
+    db = tmp_path / "j.db"
+    journal = Journal(db, guarantee=Guarantee(guarantee))
+    system = System((DeviceSetup("Indexer", _indexer()),), SimClock(), journal)
+    try:
+        system.start()
+        with pytest.raises(EventDataError):
+            system.post("Indexer", "Index", {"prt": "a"})
+        system.quiesce()
+    finally:
+        system.close()
+    with JournalReader(db) as reader:
+        assert list(reader.inbox()) == []
