@@ -293,3 +293,19 @@ def test_a_guard_over_data_of_an_event_sent_without_data_says_so() -> None:
     with pytest.raises(GuardError) as caught:
         subject.dispatch("Press")
     assert "sent without data" in str(caught.value)
+
+
+def test_codegen_refuses_a_guard_that_fails_when_evaluated() -> None:
+    """A guard that raises at generation time is G714, not a silent 'guard false' table."""
+    from statectl.codegen.flatten import flatten
+    from statectl.model import ControlKind, State, Transition
+
+    chart = Chart(
+        "D",
+        (State("A", controls=frozenset({ControlKind.DEFAULT})), State("B")),
+        (Transition("A", ("go",), ("B",), guard="previous > 3"),),
+        ("A",),
+    )
+    _, diags = flatten(chart)
+    assert [d.code for d in diags] == ["G714"]
+    assert "TypeError" in diags[0].message

@@ -314,6 +314,7 @@ ALL: tuple[Code, ...] = (
     _c("G708", _W, "a Log action the generated code skips", _CODEGEN),
     _c("G709", _E, "a Notify of an invoke number the chart does not declare", _CODEGEN),
     _c("G713", _E, "an assignment the generated code cannot perform", _CODEGEN),
+    _c("G714", _E, "a guard that fails when the semantics evaluates it", _CODEGEN),
     # -- V8xx: cell files (statectl.cell) -------------------------------------------------
     _c("V801", _E, "the cell file cannot be read or is not a YAML mapping", _CELLS),
     _c("V802", _E, "an unknown key", _CELLS),
