@@ -429,3 +429,20 @@ def test_a_journal_refuses_bad_data_before_it_accepts_the_event(
         system.close()
     with JournalReader(db) as reader:
         assert list(reader.inbox()) == []
+
+
+def test_the_press_example_counts_its_strokes_and_resets() -> None:
+    """examples/press: three strokes, the fourth refused by the count, Reset, one more."""
+    path = Path(__file__).resolve().parents[1] / "examples" / "press" / "press.yaml"
+    lines = "".join(
+        f"Press {{pressure: {p}, part: {part}}}\n"
+        for p, part in (("3.0", "A"), ("1.0", "B"), ("3.0", "C"), ("3.0", "D"), ("3.0", "E"))
+    )
+    out, err = io.StringIO(), io.StringIO()
+    code = run(str(path), events=io.StringIO(lines + "Reset\nPress {pressure: 3, part: F}\n"),
+               out=out, err=err)  # fmt: skip
+    assert code == 0, err.getvalue()
+    text = out.getvalue()
+    assert text.count("Open -> Pressing") == 4
+    assert text.count("ignored  Press (guard false)") == 2
+    assert "final state Open" in text
