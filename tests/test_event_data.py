@@ -80,6 +80,12 @@ def _started(chart: Chart, policy: str = "ignore") -> Subject:
         ("payload['pressure'] > 2.5", "B231", "_event.data.pressure"),
         ("_event.data.presure > 2.5", "B232", "declared: {pressure: float, part: str}"),
         ("_event['data']['weight'] > 2.5", "B232", "add the field"),
+        ("_event.data.pressure > 'high'", "X306", "declared float"),
+        ("_event.data.part == 3", "X306", "declared str"),
+        ("_event.data.part in ('A', 2)", "X306", "with 2"),
+        ("3 < _event.data.pressure < 'x'", "X306", "with 'x'"),
+        ("_event.data.part in ('A', 'B') and _event.data.pressure >= 2", None, ""),
+        ("len(_event.data.part) == 3", None, ""),
     ],
 )
 def test_guard_spelling_of_event_data(guard: str, code: str | None, hint: str) -> None:

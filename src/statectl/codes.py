@@ -176,6 +176,12 @@ ALL: tuple[Code, ...] = (
     _c("X303", _E, "an expression reads an undefined name", _BUILDER),
     _c("X304", _E, "a literal part of an expression would exceed a bound", _BUILDER),
     _c("X305", _E, "an expression is too long or nested too deeply", _BUILDER),
+    _c(
+        "X306",
+        _E,
+        "a declared event data field compared with a literal of another type",
+        _BUILDER,
+    ),
     # -- C4xx: statectl check's rules (statectl.rules) ------------------------------------
     _c("C401", _E, "unreachable state", _check("c401--unreachable-state-error")),
     _c("C402", _W, "state with no way out", _check("c402--state-with-no-way-out-warning")),

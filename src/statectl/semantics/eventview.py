@@ -21,6 +21,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from statectl.errors import Location, UnhandledEventError
+from statectl.model import FIELD_TYPES as FIELD_ACCEPTS
+from statectl.model import field_accepts
 
 __all__ = [
     "FIELD_ACCEPTS",
@@ -31,24 +33,6 @@ __all__ = [
     "event_view",
     "field_accepts",
 ]
-
-#: Declared field type -> the Python types it accepts (an int is a float, a bool no int).
-FIELD_ACCEPTS: Mapping[str, tuple[type, ...]] = {
-    "int": (int,),
-    "float": (int, float),
-    "str": (str,),
-    "bool": (bool,),
-    "list": (list, tuple),
-    "dict": (Mapping,),
-    "any": (object,),
-}
-
-
-def field_accepts(kind: str, value: Any) -> bool:
-    """Whether ``value`` fits a field declared ``kind`` (``bool`` only where declared)."""
-    if isinstance(value, bool) and kind not in ("bool", "any"):
-        return False
-    return isinstance(value, FIELD_ACCEPTS.get(kind, (object,)))
 
 
 class Record:
