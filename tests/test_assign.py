@@ -406,3 +406,43 @@ def test_resume_brings_back_the_data_the_assignments_changed(tmp_path: Path, cyc
         assert dict(again.subjects["Indexer"].data) == before
     finally:
         again.close()
+
+
+@pytest.mark.parametrize("guarantee", ["prompt", "durable-first"])
+def test_a_journal_refuses_bad_data_before_it_accepts_the_event(
+    tmp_path: Path, guarantee: str
+) -> None:
+    """Data that does not fit is refused before the journal's inbox holds the event."""
+    from statectl.journal import Guarantee, Journal, JournalReader
+    from statectl.runner import DeviceSetup, System
+    from statectl.runtime.eventdata import EventDataError
+
+    db = tmp_path / "j.db"
+    journal = Journal(db, guarantee=Guarantee(guarantee))
+    system = System((DeviceSetup("Indexer", _indexer()),), SimClock(), journal)
+    try:
+        system.start()
+        with pytest.raises(EventDataError):
+            system.post("Indexer", "Index", {"prt": "a"})
+        system.quiesce()
+    finally:
+        system.close()
+    with JournalReader(db) as reader:
+        assert list(reader.inbox()) == []
+
+
+def test_the_press_example_counts_its_strokes_and_resets() -> None:
+    """examples/press: three strokes, the fourth refused by the count, Reset, one more."""
+    path = Path(__file__).resolve().parents[1] / "examples" / "press" / "press.yaml"
+    lines = "".join(
+        f"Press {{pressure: {p}, part: {part}}}\n"
+        for p, part in (("3.0", "A"), ("1.0", "B"), ("3.0", "C"), ("3.0", "D"), ("3.0", "E"))
+    )
+    out, err = io.StringIO(), io.StringIO()
+    code = run(str(path), events=io.StringIO(lines + "Reset\nPress {pressure: 3, part: F}\n"),
+               out=out, err=err)  # fmt: skip
+    assert code == 0, err.getvalue()
+    text = out.getvalue()
+    assert text.count("Open -> Pressing") == 4
+    assert text.count("ignored  Press (guard false)") == 2
+    assert "final state Open" in text

@@ -80,6 +80,12 @@ def _started(chart: Chart, policy: str = "ignore") -> Subject:
         ("payload['pressure'] > 2.5", "B231", "_event.data.pressure"),
         ("_event.data.presure > 2.5", "B232", "declared: {pressure: float, part: str}"),
         ("_event['data']['weight'] > 2.5", "B232", "add the field"),
+        ("_event.data.pressure > 'high'", "X306", "declared float"),
+        ("_event.data.part == 3", "X306", "declared str"),
+        ("_event.data.part in ('A', 2)", "X306", "with 2"),
+        ("3 < _event.data.pressure < 'x'", "X306", "with 'x'"),
+        ("_event.data.part in ('A', 'B') and _event.data.pressure >= 2", None, ""),
+        ("len(_event.data.part) == 3", None, ""),
     ],
 )
 def test_guard_spelling_of_event_data(guard: str, code: str | None, hint: str) -> None:
@@ -253,3 +259,59 @@ def test_event_data_errors_are_statectl_errors() -> None:
     """Refusals are StatectlErrors, so every host reports them as it reports bad input."""
     assert issubclass(EventDataError, StatectlError)
     assert issubclass(GuardError, StatectlError)
+
+
+@pytest.mark.parametrize(
+    ("data", "word"),
+    [
+        ("{detail: restarted}", None),
+        ("{detial: restarted}", "'detial', which the event does not declare"),
+        ("{detail: 3}", "which is no str"),
+        ("restarted", "not a mapping"),
+    ],
+)
+def test_recovery_data_must_fit_the_events_declared_fields(data: str, word: str | None) -> None:
+    """A Recovery rule whose data its event would refuse on resume is C413."""
+    from statectl.recovery import check_recovery
+
+    text = (
+        "device: M\nstates:\n  - {state: Idle, control: default}\n"
+        "  - {state: Busy, control: monitoring required}\n"
+        "events:\n  - {event: Go, old: Idle, new: Busy}\n"
+        "  - {event: Error, old: Busy, new: Idle, kind: fault, data: {detail: str}}\n"
+        f"recovery:\n  - {{state: Busy, event: Error, data: {data}}}\n"
+    )
+    tables, diags = read_yaml(text, "m.yaml")
+    assert tables is not None and not diags, diags
+    chart, more = build(tables)
+    assert chart is not None, more
+    found = [d for d in check_recovery(chart, tables.recovery) if d.code == "C413"]
+    if word is None:
+        assert found == []
+    else:
+        assert [d.where.line for d in found] == [9]
+        assert word in found[0].message
+
+
+def test_a_guard_over_data_of_an_event_sent_without_data_says_so() -> None:
+    """The guard error of an event sent with no data says that no data was sent."""
+    subject = _started(_press())
+    with pytest.raises(GuardError) as caught:
+        subject.dispatch("Press")
+    assert "sent without data" in str(caught.value)
+
+
+def test_codegen_refuses_a_guard_that_fails_when_evaluated() -> None:
+    """A guard that raises at generation time is G714, not a silent 'guard false' table."""
+    from statectl.codegen.flatten import flatten
+    from statectl.model import ControlKind, State, Transition
+
+    chart = Chart(
+        "D",
+        (State("A", controls=frozenset({ControlKind.DEFAULT})), State("B")),
+        (Transition("A", ("go",), ("B",), guard="previous > 3"),),
+        ("A",),
+    )
+    _, diags = flatten(chart)
+    assert [d.code for d in diags] == ["G714"]
+    assert "TypeError" in diags[0].message

@@ -190,6 +190,12 @@ ALL: tuple[Code, ...] = (
     _c("X303", _E, "an expression reads an undefined name", _BUILDER),
     _c("X304", _E, "a literal part of an expression would exceed a bound", _BUILDER),
     _c("X305", _E, "an expression is too long or nested too deeply", _BUILDER),
+    _c(
+        "X306",
+        _E,
+        "a declared event data field compared with a literal of another type",
+        _BUILDER,
+    ),
     # -- C4xx: statectl check's rules (statectl.rules) ------------------------------------
     _c("C401", _E, "unreachable state", _check("c401--unreachable-state-error")),
     _c("C402", _W, "state with no way out", _check("c402--state-with-no-way-out-warning")),
@@ -273,6 +279,12 @@ ALL: tuple[Code, ...] = (
         _W,
         "the guards of a state's rows for one event may all be false",
         _check("c419--guards-that-may-leave-an-event-unhandled-warning"),
+    ),
+    _c(
+        "C413",
+        _E,
+        "a recovery rule's data does not fit the fields its event declares",
+        _check("c413--recovery-data-its-event-would-refuse-error"),
     ),
     # -- D5xx: driver and run configs (statectl.devices.config) ---------------------------
     _c("D501", _E, "the driver or run config cannot be read", _DRIVERS),
@@ -368,6 +380,7 @@ ALL: tuple[Code, ...] = (
     _c("G711", _E, "a timeout that is not a whole number of milliseconds (1 to 2^31-1)", _CODEGEN),
     _c("G712", _E, "a timeout on a state past the timeout table's index (32768 states)", _CODEGEN),
     _c("G713", _E, "an assignment the generated code cannot perform", _CODEGEN),
+    _c("G714", _E, "a guard that fails when the semantics evaluates it", _CODEGEN),
     # -- V8xx: cell files (statectl.cell) -------------------------------------------------
     _c("V801", _E, "the cell file cannot be read or is not a YAML mapping", _CELLS),
     _c("V802", _E, "an unknown key", _CELLS),

@@ -14,13 +14,15 @@ Rules:
 from __future__ import annotations
 
 import enum
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any
 
 from statectl.errors import Location
 
 __all__ = [
+    "FIELD_TYPES",
     "Action",
     "Api",
     "Assign",
@@ -47,6 +49,7 @@ __all__ = [
     "StateKind",
     "Timeout",
     "Transition",
+    "field_accepts",
 ]
 
 NOWHERE = Location()
@@ -281,6 +284,29 @@ class Transition:
         if self.guard:
             text += f" [{self.guard}]"
         return text
+
+
+#: The types an event's declared data fields may have, and the Python values each
+#: accepts (an int is a float; a bool is only a bool): the one table the tables, the
+#: build, the runtime and the tools share (docs/tables.md, "Event data").
+FIELD_TYPES: Mapping[str, tuple[type, ...]] = MappingProxyType(
+    {
+        "int": (int,),
+        "float": (int, float),
+        "str": (str,),
+        "bool": (bool,),
+        "list": (list, tuple),
+        "dict": (Mapping,),
+        "any": (object,),
+    }
+)
+
+
+def field_accepts(kind: str, value: Any) -> bool:
+    """Whether ``value`` fits a data field declared ``kind``."""
+    if isinstance(value, bool) and kind not in ("bool", "any"):
+        return False
+    return isinstance(value, FIELD_TYPES.get(kind, (object,)))
 
 
 @dataclass(frozen=True, slots=True)

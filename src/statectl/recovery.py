@@ -32,6 +32,7 @@ from statectl.codes import family
 from statectl.errors import Diagnostic, Severity
 from statectl.model import Action, Block, Chart, ControlKind, EventKind, If, Notify, Transition
 from statectl.semantics import entry_set, structural
+from statectl.semantics.eventview import field_accepts
 from statectl.tables.schema import RecoveryRow
 
 __all__ = ["CODES", "check_recovery", "redo_sources", "waits_for_device"]
@@ -87,6 +88,34 @@ def waits_for_device(chart: Chart, state: str) -> bool:
             d = chart.event(e)
             kinds.add(d.kind if d is not None else None)
     return bool(leaving) and kinds == {EventKind.COMPLETION}
+
+
+def _data_fits(chart: Chart, r: RecoveryRow) -> list[Diagnostic]:
+    """C413: a rule's data that its event, declaring its fields, would refuse on resume."""
+    declared = chart.event(r.event)
+    if declared is None or not declared.fields or r.data is None:
+        return []
+    fields = dict(declared.fields)
+    listed = ", ".join(f"{k}: {v}" for k, v in declared.fields)
+    if not isinstance(r.data, dict):
+        why = f"is a {type(r.data).__name__}, not a mapping"
+    else:
+        bad = [k for k, v in r.data.items() if k not in fields or not field_accepts(fields[k], v)]
+        if not bad:
+            return []
+        k = bad[0]
+        why = f"has field {k!r}, " + (
+            "which the event does not declare" if k not in fields else f"which is no {fields[k]}"
+        )
+    return [
+        Diagnostic(
+            "C413",
+            Severity.ERROR,
+            r.origin,
+            f"recovery data for {r.state!r} {why}: event {r.event!r} would refuse it on resume",
+            f"{r.event!r} declares: {listed}",
+        )
+    ]
 
 
 def check_recovery(
@@ -146,6 +175,7 @@ def check_recovery(
                     f"events leaving {r.state!r}: {', '.join(here) or 'none'}",
                 )
             )
+        diags.extend(_data_fits(chart, r))
     for s in chart.states:
         if ControlKind.MONITORING in s.controls and s.name not in seen:
             diags.append(

@@ -24,12 +24,13 @@ Rules:
 from __future__ import annotations
 
 import ast
+import itertools
 from collections.abc import Iterable, Mapping, Sequence
 
 from statectl.builder.common import _compile, _d, _rows_text
 from statectl.errors import Diagnostic, Location, Severity
 from statectl.expr import Expression, check_names
-from statectl.model import Action, Assign
+from statectl.model import Action, Assign, field_accepts
 from statectl.tables.schema import EventRow
 
 __all__ = [
@@ -173,7 +174,71 @@ def _reads(
                         f"declared: {_shown(declared)}; add the field or fix the name",
                     )
                 )
+    if declared is not None:
+        out.extend(_type_clashes(tree, parents, source, what, event, dict(declared), where))
     return out, words
+
+
+def _field_of(node: ast.AST, parents: Mapping[int, ast.AST]) -> str | None:
+    """The declared field an ``_event.data.NAME`` (or subscript) expression reads, if any."""
+    for leaf in ast.walk(node):
+        if isinstance(leaf, ast.Name) and leaf.id == "_event":
+            path = _path(leaf, parents)
+            if len(path) == 2 and path[0] == "data":
+                # the whole node must be that path: _event.data.x, not len(_event.data.x)
+                top: ast.AST = leaf
+                for _ in path:
+                    top = parents[id(top)]
+                return path[1] if top is node else None
+    return None
+
+
+def _constants(node: ast.AST) -> list[object] | None:
+    if isinstance(node, ast.Constant):
+        return [node.value]
+    if isinstance(node, ast.Tuple | ast.List | ast.Set) and all(
+        isinstance(e, ast.Constant) for e in node.elts
+    ):
+        return [e.value for e in node.elts if isinstance(e, ast.Constant)]
+    return None
+
+
+def _type_clashes(
+    tree: ast.AST,
+    parents: Mapping[int, ast.AST],
+    source: str,
+    what: str,
+    event: str,
+    declared: Mapping[str, str],
+    where: Location,
+) -> list[Diagnostic]:
+    """X306: a declared field compared with a literal its type never equals or orders with."""
+    out: list[Diagnostic] = []
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.Compare):
+            continue
+        operands = [node.left, *node.comparators]
+        for a, b in itertools.pairwise(operands):
+            for side, other in ((a, b), (b, a)):
+                field = _field_of(side, parents)
+                values = _constants(other)
+                if field is None or values is None or field not in declared:
+                    continue
+                kind = declared[field]
+                wrong = [v for v in values if not field_accepts(kind, v)]
+                if wrong:
+                    out.append(
+                        _d(
+                            "X306",
+                            Severity.ERROR,
+                            where,
+                            f"{what} {source.strip()!r} compares field {field!r} of event "
+                            f"{event!r}, declared {kind}, with {wrong[0]!r}",
+                            f"compare it with a {kind}; the runtime refuses data of another "
+                            "type, so this part is never true (or fails)",
+                        )
+                    )
+    return out
 
 
 def check_guard(

@@ -33,7 +33,8 @@ here, at generation time, and the C++ only looks the decision up. Rules:
    an integer, G705 a non-``safe`` datamodel, G706 too many configurations or
    guard paths, G707 a step that does not settle, G708 a ``Log`` the generated code
    skips (warning), G709 a ``Notify`` of an invoke number the chart does not declare,
-   G713 an assignment the generated code cannot perform (:mod:`~statectl.codegen.assign`).
+   G713 an assignment the generated code cannot perform (:mod:`~statectl.codegen.assign`),
+   G714 a guard that fails when the semantics evaluates it.
 
 This module explores; the values it produces are in :mod:`statectl.codegen.flat`, the
 checks before exploring in :mod:`~statectl.codegen.checks`, guard translation in
@@ -258,6 +259,16 @@ class _Flattener:
         return tuple(out)
 
     def outcome_of(self, source: Snapshot | None, result: Step) -> Outcome:
+        failure = result.failure
+        if failure is not None:  # a guard that raises: the runtime refuses the event
+            self._report(
+                "G714",
+                failure.guard,
+                f"guard {failure.guard!r} fails when it is evaluated ({failure.reason})",
+                "the runtime refuses such an event (guard error); make the guard total",
+            )
+            assert source is not None
+            return Outcome(False, self.snapshots[source], (), Unhandled.GUARD_FALSE)
         if source is not None and not result.handled:
             return Outcome(False, self.snapshots[source], (), result.unhandled)
         target = self.index(result.target)

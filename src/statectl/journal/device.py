@@ -58,6 +58,7 @@ from statectl.journal.recovery import RecoveryRule
 from statectl.journal.store import Guarantee, Journal, Send, StepKind, Ticket
 from statectl.journal.subjects import restore_subject
 from statectl.model import Notify
+from statectl.runtime.eventdata import check_posted
 from statectl.runtime.subject import Subject
 from statectl.semantics import Step, step
 
@@ -104,6 +105,7 @@ class JournalledDevice:
         """
         if not isinstance(event, str):
             raise StatectlError(f"an event name must be a str (got {event!r})")
+        check_posted(self.subject, event, data)  # refused before the journal accepts it
         journal = self.journal
         if journal.guarantee is Guarantee.DURABLE_FIRST:
             return journal.accept(

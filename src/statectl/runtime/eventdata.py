@@ -38,6 +38,7 @@ __all__ = [
     "apply_assignments",
     "assignments_of",
     "check_event_data",
+    "check_posted",
     "declared_fields",
     "refuse_failure",
 ]
@@ -81,6 +82,14 @@ def check_event_data(
                 f"{device}: event {event!r} field {key!r} must be {kind} "
                 f"(got {type(value).__name__} {value!r})"
             )
+
+
+def check_posted(subject: Subject, event: str, data: Any) -> None:
+    """Rule 1 for a host that accepts an event before the Subject sees it (a journal):
+    refuse it before it is written anywhere."""
+    declared = subject._declared
+    if data is not None and declared is not None:
+        check_event_data(declared, subject.name, event, data)
 
 
 @functools.lru_cache(maxsize=1024)

@@ -111,6 +111,8 @@ def _text(record: Record) -> str:
         case EventIgnored(event=event, reason=reason):
             return f"{event} ({reason})"
         case EventRejected(event=event, reason=reason):
+            if reason == "guard error":  # refused whatever the policy (runtime/eventdata.py)
+                return f"{event} ({reason})"
             return f"{event} ({reason}; policy error)"
         case MonitorStarted(state=state):
             return f"{state} started"

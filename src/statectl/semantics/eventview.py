@@ -21,6 +21,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from statectl.errors import Location, UnhandledEventError
+from statectl.model import FIELD_TYPES as FIELD_ACCEPTS
+from statectl.model import field_accepts
 
 __all__ = [
     "FIELD_ACCEPTS",
@@ -31,24 +33,6 @@ __all__ = [
     "event_view",
     "field_accepts",
 ]
-
-#: Declared field type -> the Python types it accepts (an int is a float, a bool no int).
-FIELD_ACCEPTS: Mapping[str, tuple[type, ...]] = {
-    "int": (int,),
-    "float": (int, float),
-    "str": (str,),
-    "bool": (bool,),
-    "list": (list, tuple),
-    "dict": (Mapping,),
-    "any": (object,),
-}
-
-
-def field_accepts(kind: str, value: Any) -> bool:
-    """Whether ``value`` fits a field declared ``kind`` (``bool`` only where declared)."""
-    if isinstance(value, bool) and kind not in ("bool", "any"):
-        return False
-    return isinstance(value, FIELD_ACCEPTS.get(kind, (object,)))
 
 
 class Record:
@@ -140,9 +124,12 @@ class GuardFailure:
 
     def message(self, device: str) -> str:
         where = f"{self.origin}: " if self.origin.file or self.origin.line else ""
+        reason = self.reason
+        if "'NoneType' object" in reason:
+            reason += " (the event was sent without data)"
         return (
             f"{where}{device}: the guard {self.guard!r} of event {self.event!r} failed: "
-            f"{self.reason}; the event was not taken (read event data as _event.data.NAME, "
+            f"{reason}; the event was not taken (read event data as _event.data.NAME, "
             "and send the fields the event declares)"
         )
 

@@ -18,12 +18,13 @@ Rules:
 from __future__ import annotations
 
 import ast
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import yaml
 
 from statectl.errors import Diagnostic, Location
+from statectl.model import FIELD_TYPES
 from statectl.tables.literals import parse_payload
 from statectl.tables.rows import Bad, Cell, RawRow, diag
 from statectl.tables.safeyaml import YamlRefused, construct
@@ -42,17 +43,6 @@ __all__ = [
     "parse_fields",
     "yaml_event_cell",
 ]
-
-#: Declared field types and the Python values each accepts (``bool`` is not an int here).
-FIELD_TYPES: Mapping[str, tuple[type, ...]] = {
-    "int": (int,),
-    "float": (int, float),
-    "str": (str,),
-    "bool": (bool,),
-    "list": (list, tuple),
-    "dict": (dict,),
-    "any": (object,),
-}
 
 #: ``((field, type), ...)`` in declaration order.
 Fields = tuple[tuple[str, str], ...]
