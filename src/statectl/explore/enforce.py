@@ -66,7 +66,7 @@ class CellRules:
 
     def guarded(self, device: str, event: str) -> bool:
         """Whether rule 1 may refuse ``event`` to ``device`` (every entry for it has a when)."""
-        entries = self._commands.get((device, event))
+        entries = self._commands.get((device, event), [])
         return bool(entries) and all(when is not None for _, when in entries)
 
     def admit(self, device: str, event: str) -> None:
