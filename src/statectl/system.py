@@ -26,9 +26,11 @@ Rules:
    both are in the journal (the link event is redelivered if its target had not
    run it) or neither is (the step runs again on resume and fires them again).
    Each device's queue is first in, first out.
-4. :meth:`System.post` never blocks. With ``max_queue`` a device whose queue
-   holds that many events refuses more with :class:`QueueFull`, which tells a
-   producer it outruns the device instead of letting memory grow.
+4. :meth:`System.post` never blocks (but for a cell's command with a ``when``,
+   which waits for the owner's current cascade to judge it, rule 6). With
+   ``max_queue`` a device whose queue holds that many events refuses more with
+   :class:`QueueFull`, which tells a producer it outruns the device instead of
+   letting memory grow.
 5. asyncio: :meth:`System.send` posts and resolves once the device has
    processed the event (its outcome: ``handled`` or the
    :class:`~statectl.semantics.Unhandled` reason); :meth:`System.records` is an
@@ -102,6 +104,9 @@ class System:
     journal: Journal | None = None
     cell: Cell | None = None
     max_queue: int | None = None
+    #: a cell's run-time rules (rule 6: refusals, invariants); off for a harness that
+    #: drives the links from any state (statectl.testgen)
+    enforce: bool = True
     subjects: dict[str, Subject] = field(default_factory=dict)
     bound: dict[str, JournalledDevice] = field(default_factory=dict)
     wake: threading.Event = field(default_factory=threading.Event)
@@ -143,7 +148,7 @@ class System:
         if self.cell is not None:
             bind_cross_guards(self.subjects)  # guards reading another device (rule 6)
             links = self.links = CellLinks(self.cell, self.subjects)
-            self.rules = CellRules(self.cell, links)
+            self.rules = CellRules(self.cell, links) if self.enforce else None
             for name, s in self.subjects.items():
                 s.listen(links.watch)
                 if name in self.bound:
@@ -259,9 +264,9 @@ class System:
         Never blocks; with ``max_queue`` a full device raises :class:`QueueFull` (rule 4).
         """
         name = self._admit(device)
-        if self.rules is not None:
-            with self.owner:  # the global state is the owner's to read
-                self.rules.admit(name, event)  # rule 6: Refused when 'when' is false
+        if self.rules is not None and self.rules.guarded(name, event):
+            with self.owner:  # the global state between the owner's cascades (rule 6)
+                self.rules.admit(name, event)  # Refused when every 'when' is false
         bound = self.bound.get(name)
         if bound is not None:
             ticket = bound.post(event, data)

@@ -21,6 +21,11 @@ Rules:
    SPIN) reads them the same way.
 5. Loading never stops at the first problem: every one is a ``V8xx`` diagnostic
    with the cell file's line; a device file's own diagnostics are passed on.
+6. A link may carry event data (``send: "Reset {status: true}"``, ``data:``,
+   ``forward_data: true``) and say ``ignore_if_unhandled``, ``lossy`` or
+   ``delayed``; an invariant may name ``on_violation`` events; a device row's guard
+   may read ``In('other.State')`` of another device, checked here against the
+   cell's devices (:mod:`~statectl.cell.options`, V830, V831).
 
 This module parses the file and puts the sections together (:func:`load_cell`); the
 values are in :mod:`statectl.cell.values`, global expressions in

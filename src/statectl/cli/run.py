@@ -206,6 +206,19 @@ class _Problems:
 
         return seen
 
+    def counting(self, post: Callable[..., Any], err: TextIO) -> Callable[..., Any]:
+        """``post`` for the dashboard: a refused command is reported and counted (rule 10)."""
+
+        def post_counted(device: str | None, event: str, data: Any = None) -> Any:
+            try:
+                return post(device, event, data)
+            except Refused as exc:
+                err.write(f"statectl run: {exc}\n")
+                self.refuse()
+                raise
+
+        return post_counted
+
     def bad_line(self) -> None:
         with self._lock:
             self.lines += 1
@@ -428,7 +441,10 @@ def run(
             streams = table.dashboard.streams
             limits = Limits() if streams is None else Limits(streams=streams)
             server = Dashboard(
-                system.subjects.values(), post=system.post, token=token, limits=limits
+                system.subjects.values(),
+                post=problems.counting(system.post, err),
+                token=token,
+                limits=limits,
             )
             url = server.start(host, port)
         if opcua is not None:

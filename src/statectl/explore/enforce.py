@@ -64,6 +64,11 @@ class CellRules:
         self._broken: set[str] = set()
         self.violations: list[Violation] = []
 
+    def guarded(self, device: str, event: str) -> bool:
+        """Whether rule 1 may refuse ``event`` to ``device`` (every entry for it has a when)."""
+        entries = self._commands.get((device, event), [])
+        return bool(entries) and all(when is not None for _, when in entries)
+
     def admit(self, device: str, event: str) -> None:
         """Rule 1: raise :class:`Refused` if the cell's environment may not send this now."""
         entries = self._commands.get((device, event))

@@ -160,6 +160,11 @@ def export_promela(model: Composed, *, invariants: bool = True, unhandled: bool 
         f"/* cell {m.cell.name}: composed by statectl for SPIN (statectl verify "
         "--export promela) */"
     ]
+    if m.distributed or m.dropped:
+        out.append(
+            "/* not exported: lossy, delayed and dropped link events (statectl verify explores "
+            "them; docs/cells.md) */"
+        )
     for d, space in enumerate(m.spaces):
         states = ", ".join(f"{i}={space.state_of(i)}" for i in range(len(space.snapshots)))
         kind = "byte" if len(space.snapshots) <= 256 else "short"
