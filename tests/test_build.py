@@ -120,8 +120,9 @@ def test_motor_events_and_component() -> None:
 def test_motor_ignored_pairs() -> None:
     """The ignore cells become (state, event) pairs."""
     ignored = motor().ignored
-    assert len(ignored) == 12
+    assert len(ignored) == 13
     assert ("Blocked", "Error") in ignored
+    assert ("Blocked", "Initialization") in ignored  # when its guard is false
     assert ("Moving", "Error") not in ignored
 
 

@@ -218,9 +218,13 @@ def test_link_data_decides_a_data_guard_alike_in_run_and_verify(
     """A link's data satisfies (or not) the target's data guard, in run and in verify."""
     path = _latch_cell(tmp_path, link)
     system = _system(path)
+    failures: list[Exception] = []
+    system.on_failure.append(failures.append)
     system.post("button", "Press")
     system.drain()
     assert (_states(system)["latch"] == "Open") is opens
+    # sent without data, the guard cannot read it: refused as a guard error, said (rule 7)
+    assert [type(f).__name__ for f in failures] == (["GuardError"] if link == "send: Reset" else [])
     model = Composed(load_cell_or_raise(path))
     reached = {
         dict(zip(model.names, model.labels(g), strict=True))["latch"] for g in _reachable(model)

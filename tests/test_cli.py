@@ -13,6 +13,7 @@ from statectl.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 MOTOR = str(ROOT / "examples" / "motor" / "motor.yaml")
+GRIPPER = str(ROOT / "examples" / "pick-and-place" / "gripper.yaml")
 
 
 def cli(*argv: str) -> tuple[int, str, str]:
@@ -34,7 +35,8 @@ events:
     ("argv", "code"),
     [
         (["check", MOTOR], 0),
-        (["check", "--strict", MOTOR], 1),  # C419: Initialization only if previous == Moving
+        (["check", "--strict", MOTOR], 0),  # no warnings either
+        (["check", "--strict", GRIPPER], 1),  # C404: Open neither handles nor ignores Release
         (["check", "no-such-file.yaml"], 2),
         (["frobnicate"], 2),
         ([], 2),

@@ -198,6 +198,8 @@ MISSING = [
     (["testgen", "{gone}", "--out", "{tmp}/out"], "no such file"),
     (["coverage", "{gone}", str(MOTOR)], "no such file"),
     (["coverage", str(MOTOR), "{gone}"], "no such file"),
+    (["node", "{gone}", "--node", "a"], "statectl node: "),
+    (["dashboard", "{gone}"], "statectl dashboard: "),
 ]
 
 

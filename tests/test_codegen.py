@@ -66,7 +66,7 @@ def test_motor_flattens_to_six_configurations() -> None:
 @pytest.mark.parametrize(
     ("config", "event", "expected"),
     [
-        (0, "Initialization", Unhandled.GUARD_FALSE),
+        (0, "Initialization", Unhandled.DECLARED_IGNORED),  # guard false: ignored as listed
         (2, "Initialization", None),
         (0, "Error", Unhandled.DECLARED_IGNORED),
     ],

@@ -43,6 +43,11 @@ Rules:
    callbacks and sends the invariant's declared events (journalled with the
    step); link events carry their data; a device guard's ``In('other.State')``
    reads the other device's state.
+7. A row that fails while the owner drains (a guard or an assignment that raises,
+   e.g. a linked event sent without the data its guard reads) refuses that event
+   only: the device records it (``EventRejected``, guard error), the message goes
+   to the ``on_failure`` callbacks (``statectl run`` prints it and exits 1), and
+   the other devices and the device's later events go on.
 """
 
 from __future__ import annotations
@@ -57,7 +62,7 @@ from typing import Any
 
 from statectl.cell import Cell
 from statectl.devices import DeviceDriver, connect
-from statectl.errors import StatectlError
+from statectl.errors import StatectlError, UnhandledEventError
 from statectl.explore.conditions import bind_cross_guards
 from statectl.explore.enforce import CellRules, Violation
 from statectl.explore.replay import CellLinks, link_data
@@ -72,6 +77,8 @@ from statectl.journal import (
 )
 from statectl.model import Chart
 from statectl.runtime import Clock, Record, SimClock, Subject, WallClock
+from statectl.runtime.eventdata import AssignError
+from statectl.semantics.eventview import GuardError
 
 __all__ = ["SETTLE_LIMIT", "DeviceSetup", "QueueFull", "System"]
 
@@ -116,6 +123,8 @@ class System:
     rules: CellRules | None = None
     #: called on the owner with each invariant violation a step caused (rule 6)
     on_violation: list[Callable[[Violation], None]] = field(default_factory=list)
+    #: called on the owner with each row that failed while draining (rule 7)
+    on_failure: list[Callable[[UnhandledEventError], None]] = field(default_factory=list)
     _live: bool = False  # started and not closing: the writer may drain
     #: devices that had something queued since the owner last looked (rule 1)
     _ready: deque[Subject] = field(default_factory=deque)
@@ -289,7 +298,13 @@ class System:
         while ready:
             s = ready.popleft()
             if s.queued:
-                total += s.run_until_idle()
+                try:
+                    total += s.run_until_idle()
+                except (GuardError, AssignError) as exc:  # rule 7: that event only
+                    for callback in self.on_failure:
+                        callback(exc)
+                    if s.queued:
+                        ready.append(s)
         return total
 
     def advance(self, seconds: float) -> None:

@@ -270,7 +270,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _command(args: argparse.Namespace) -> str:
     name = getattr(args, "func", None)
-    return name.__name__.removeprefix("cmd_").replace("_", " ") if name is not None else ""
+    return (
+        name.__name__.lstrip("_").removeprefix("cmd_").replace("_", " ") if name is not None else ""
+    )
 
 
 def _missing_input(args: argparse.Namespace) -> str | None:

@@ -192,6 +192,15 @@ class _Problems:
             with self._lock:
                 self.unknown += 1
 
+    def failure(self, err: TextIO) -> Callable[[Exception], None]:
+        """A System callback: a row that failed while draining is said where (its
+        EventRejected record is what counts it)."""
+
+        def say(exc: Exception) -> None:
+            err.write(f"{exc}\n")
+
+        return say
+
     def refuse(self) -> None:
         with self._lock:
             self.refused += 1
@@ -430,6 +439,7 @@ def run(
             _show_notes(drivers, out, width)
         system.listen(problems.record)
         system.on_violation.append(problems.violation(out if steps is None else info, width))
+        system.on_failure.append(problems.failure(err))  # system.py rule 7
         url = None
         if dashboard:
             try:
