@@ -267,7 +267,7 @@ def test_a_user_calls_movement_and_subscribers_see_moving_then_blocked(motor: Se
 
     first, refused, heard, number = run(go())
     assert first == [True, ""]
-    assert refused == [False, "guard false"]
+    assert refused == [False, "declared ignored"]  # Initialization's guard is false
     assert heard.values == ["Blocked", "Moving", "Blocked"]
     steps = [(e.Transition.Text, e.FromState.Text, e.ToState.Text) for e in heard.events]
     assert steps == [

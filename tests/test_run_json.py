@@ -40,7 +40,7 @@ SCENARIOS: list[tuple[str, Path, list[str], list[Step]]] = [
         MOTOR,
         ["Initialization", "Movement", "Movement", "Movement completion", "Initialization"],
         [
-            (False, "guard false", ["Blocked"]),
+            (False, "declared ignored", ["Blocked"]),  # guard false: ignored as listed
             (True, None, ["Moving"]),
             (False, "declared ignored", ["Moving"]),
             (True, None, ["Blocked"]),

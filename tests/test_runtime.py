@@ -112,7 +112,8 @@ def _without_ignores(chart: Chart) -> Chart:
     ("strip", "event", "reason"),
     [
         (False, "Error", "declared ignored"),
-        (False, "Initialization", "guard false"),
+        (False, "Initialization", "declared ignored"),  # its guard is false: ignored as listed
+        (True, "Initialization", "guard false"),  # not listed: the guard is the reason
         (True, "Error", "no transition"),
         (False, "Jump", "unknown event"),
     ],
@@ -132,7 +133,7 @@ def test_unhandled_events_are_recorded_with_their_reason(
 @pytest.mark.parametrize(
     ("strip", "event", "reason"),
     [
-        (False, "Initialization", "guard false"),
+        (True, "Initialization", "guard false"),
         (True, "Error", "no transition"),
         (False, "Jump", "unknown event"),
     ],
