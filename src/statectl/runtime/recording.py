@@ -143,8 +143,8 @@ class Recording(Performer):
         except BaseException:  # the records made until then end at the cursor
             extras = self._recording
             self._recording = None
-            tail = _Tail(None, False, final, self._cursor, extras or ())
-            self._hand(StepRecord(self._name, now, event, data, plan.step, made, tail))
+            failed = _Tail(None, False, final, self._cursor, extras or ())
+            self._hand(StepRecord(self._name, now, event, data, plan.step, made, failed))
             raise
         extras = self._recording
         self._recording = None
