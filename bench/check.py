@@ -1,6 +1,6 @@
 """Benchmark loading, building and checking large but legitimate inputs.
 
-Usage: python bench/check.py [--rows 20000] [--states 20000] [--keep DIR]
+Usage: python bench/check.py [--rows 20000] [--states 20000] [--keep DIR] [--flat-only]
 
 Two generated inputs, written to a temporary directory:
 
@@ -122,11 +122,14 @@ def flat_text(states: int) -> str:
     return "\n".join(lines) + "\n"
 
 
-def bench_flat(path: Path) -> tuple[float, float]:
-    """Load (tables + build) and compile (the kernel's Machine, a started Subject)."""
+def bench_flat(path: Path) -> tuple[float, float, float]:
+    """Load (tables + build) and compile (the kernel's Machine, a started Subject), wall
+    seconds; and the CPU seconds of both (on a shared machine, wall time also counts
+    the other processes)."""
     from statectl.build import load_chart
     from statectl.runtime import SimClock, Subject
 
+    cpu = time.process_time()
     t_load, chart = timed(lambda: load_chart(path))
     assert not isinstance(chart, BaseException)
 
@@ -136,7 +139,7 @@ def bench_flat(path: Path) -> tuple[float, float]:
         return subject
 
     t_compile, _ = timed(start)
-    return t_load, t_compile
+    return t_load, t_compile, time.process_time() - cpu
 
 
 def main() -> int:
@@ -144,9 +147,12 @@ def main() -> int:
     parser.add_argument("--rows", type=int, default=20_000)
     parser.add_argument("--states", type=int, default=20_000)
     parser.add_argument("--keep", help="write the generated files here and keep them")
+    parser.add_argument("--flat-only", action="store_true", help="only the flat-chart rows")
     args = parser.parse_args()
     where = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="statectl-bench-"))
     where.mkdir(parents=True, exist_ok=True)
+    if args.flat_only:
+        return flat_rows(where)
     print(f"$ python bench/check.py --rows {args.rows} --states {args.states}")
     print(f"Python {sys.version.split()[0]}; files in {where}")
     print(f"{'input':<28} {'load s':>8} {'build s':>8} {'check s':>8} {'total s':>8} {'diags':>6}")
@@ -181,15 +187,26 @@ def main() -> int:
         f"ratio read+start {args.states:,} / 1,000 states: {reads[1] / reads[0]:.1f} "
         f"(linear would be {args.states / 1000:.0f})"
     )
-    print(f"{'input':<28} {'load s':>8} {'compile s':>9} {'total s':>8}")
+    return flat_rows(where)
+
+
+def flat_rows(where: Path) -> int:
+    """Issue 10's flat chart: 1,000 and 10,000 states, load and compile, target < 2 s."""
+    print(f"load average {os.getloadavg()[0]:.1f}")
+    print(f"{'input':<28} {'load s':>8} {'compile s':>9} {'total s':>8} {'cpu s':>6}")
     for states in (1_000, 10_000):
         path = where / f"flat{states}.yaml"
         path.write_text(flat_text(states), encoding="utf-8")
-        t_load, t_compile = bench_flat(path)
+        t_load, t_compile, cpu = bench_flat(path)
         label = f"flat chart, {states:,} states"
         total = t_load + t_compile
-        verdict = "" if states < 10_000 else f"  (target < 2 s: {'met' if total < 2 else 'MISSED'})"
-        print(f"{label:<28} {t_load:8.2f} {t_compile:9.2f} {total:8.2f}{verdict}")
+        verdict = (
+            ""
+            if states < 10_000
+            else f"  (target < 2 s: cpu {'met' if cpu < 2 else 'MISSED'}, "
+            f"wall {'met' if total < 2 else 'MISSED'})"
+        )
+        print(f"{label:<28} {t_load:8.2f} {t_compile:9.2f} {total:8.2f} {cpu:6.2f}{verdict}")
     return 0
 
 

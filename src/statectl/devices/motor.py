@@ -22,10 +22,13 @@ from typing import Any, ClassVar
 
 from statectl.devices.base import Driver, requested_target
 from statectl.errors import StatectlError
+from statectl.observers import Notification
 from statectl.runtime.clock import Clock, Timer
 
 __all__ = ["SimMotor"]
 
+#: The observer methods update() serves itself: Movement -> move_to, the others -> return_to.
+_CALLS = frozenset({"Movement", "Initialization", "Error"})
 #: An arrival timer this close to the arrival completes it (clock arithmetic is floating point).
 _EARLY = 1e-9
 
@@ -70,6 +73,8 @@ class SimMotor(Driver):
         self._timer: Timer | None = None  # the armed arrival timer, if any
         self._timer_due = 0.0  # when that timer fires
         self._arms = 0  # timers armed: one fired after it was replaced does nothing
+        cls = type(self)  # update() below is the base one unless methods and arguments are ours
+        self._plain = cls.methods == SimMotor.methods and cls.arguments is SimMotor.arguments
 
     @property
     def moving(self) -> bool:
@@ -94,6 +99,24 @@ class SimMotor(Driver):
             where = self._at(self.clock.now()) if self._moving else self._position
             return (requested_target(where, data),)
         return (self.previous,)
+
+    def update(self, notification: Notification) -> None:
+        """The base class's update (rule 2 there), the clock read once for the arguments
+        and the call; a subclass that changes ``methods`` or ``arguments`` gets the
+        base class's."""
+        method = notification.method
+        if not self._plain or method not in _CALLS:
+            super().update(notification)
+            return
+        with self._lock:
+            self.method = method
+            clock = self.clock
+            now = clock.now()
+            if method == "Movement":
+                where = self._at(now) if self._moving else self._position
+                self._go(clock, now, "move_to", requested_target(where, notification.data))
+            else:
+                self._go(clock, now, "return_to", self.previous)
 
     def _locked_form(self, function: str) -> Callable[..., object]:
         bodies: dict[str, Callable[..., object]] = {
@@ -121,22 +144,21 @@ class SimMotor(Driver):
 
     def _move_to(self, target: float) -> None:
         clock = self.clock
-        now = clock.now()
-        target = float(target)
-        if self._moving:
-            self._halt(now)
-        self._log(now, "move_to", (target,))
-        self.previous = self._position  # not moving now: this is where it is
-        self._travel(clock, now, target)
+        self._go(clock, clock.now(), "move_to", target)
 
     def _return_to(self, position: float) -> None:
         clock = self.clock
-        now = clock.now()
-        position = float(position)
+        self._go(clock, clock.now(), "return_to", position)
+
+    def _go(self, clock: Clock, now: float, function: str, target: float) -> None:
+        """``move_to`` or ``return_to``: stop a movement under way, then travel."""
+        target = float(target)
         if self._moving:
             self._halt(now)
-        self._log(now, "return_to", (position,))
-        self._travel(clock, now, position)
+        self._log(now, function, (target,))
+        if function == "move_to":
+            self.previous = self._position  # not moving now: this is where it is
+        self._travel(clock, now, target)
 
     def _halt(self, now: float) -> None:
         """``stop()``: the motor stays where the movement had got to (the timer stays armed

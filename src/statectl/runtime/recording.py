@@ -122,7 +122,7 @@ class Recording(Performer):
         made, at = static
         self._recording = _NONE_YET  # emit() makes the list if anything is recorded meanwhile
         self._cursor = at
-        final = failed = False
+        final = False
         try:
             if data is None:
                 self._counts += entry[0]
@@ -140,31 +140,31 @@ class Recording(Performer):
                 self._cursor = entry[4][1] + sum(m is not None for m in made)
                 for w in self._watchers:
                     w.finished()
-        except BaseException:
-            failed = True
-            raise
-        finally:
+        except BaseException:  # the records made until then end at the cursor
             extras = self._recording
             self._recording = None
-            tail = None
-            if extras or final or failed:  # a failed step's records end at the cursor
-                tail = _Tail(None, False, final, self._cursor if failed else None, extras or ())
-            record = StepRecord(self._name, now, event, data, plan.step, made, tail)
-            recorders = self._recorders
-            if len(recorders) == 1 and not self._handing:  # _hand(), for the usual one
-                self._handing = True
-                try:
-                    recorders[0](record)
-                except BaseException:
-                    if self._later:
-                        self._later.clear()
-                    raise
-                finally:
-                    self._handing = False
-                if self._later:
-                    self._hand_later()
-            else:
-                self._hand(record)
+            failed = _Tail(None, False, final, self._cursor, extras or ())
+            self._hand(StepRecord(self._name, now, event, data, plan.step, made, failed))
+            raise
+        extras = self._recording
+        self._recording = None
+        tail = _Tail(None, False, final, None, extras) if extras or final else None
+        record = StepRecord(self._name, now, event, data, plan.step, made, tail)
+        recorders = self._recorders
+        if len(recorders) != 1 or self._handing:
+            self._hand(record)
+            return
+        self._handing = True  # _hand(), for the usual one listener
+        try:
+            recorders[0](record)
+        except BaseException:
+            if self._later:
+                self._later.clear()
+            raise
+        finally:
+            self._handing = False
+        if self._later:
+            self._hand_later()
 
     def _record_step(
         self, event: str, data: Any, decision: Step, now: float, program: Recorded | None = None

@@ -269,7 +269,8 @@ class StepRecord:
         self.step = step
         self._made = made  # per notification performed, in order
         self._tail = tail  # what most steps do not have (_Tail), or None
-        self._records = records
+        if records is not None:  # else made when first read (``records``)
+            self._records = records
 
     @property
     def reason(self) -> Unhandled | None:
@@ -309,10 +310,11 @@ class StepRecord:
     @property
     def records(self) -> tuple[Record, ...]:
         """The typed records of rule 3 (and those made meanwhile), built once."""
-        records = self._records
-        if records is None:
+        try:
+            return self._records
+        except AttributeError:  # not read yet
             records = self._records = _typed(self)
-        return records
+            return records
 
     def __iter__(self) -> Iterator[Record]:
         return iter(self.records)
