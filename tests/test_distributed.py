@@ -131,6 +131,7 @@ class Cluster:
     def stop(self) -> None:
         for proc in self.procs.values():
             if proc.poll() is None:
+                os.kill(proc.pid, signal.SIGCONT)  # a test may have stopped it
                 os.kill(proc.pid, signal.SIGTERM)
         for proc in self.procs.values():
             try:
@@ -353,6 +354,29 @@ def test_sigkill_gives_linked_devices_their_declared_event(
     assert "peer arm lost" in c.log("gripper")
 
 
+def test_cut_off_node_is_lost_within_its_lease_and_comes_back(
+    cluster: Callable[..., Cluster],
+) -> None:
+    """A node that stops answering (SIGSTOP) is lost within its lease; SIGCONT brings it back."""
+    c = cluster()
+    view = start_all(c)
+    c.send("line", "conveyor: Start")
+    wait_states(view, {"conveyor": "Running"})
+    arm = c.procs["arm"]
+    stopped = time.monotonic()
+    os.kill(arm.pid, signal.SIGSTOP)
+    try:
+        wait_states(view, {"conveyor": "Stopped"})
+        took = time.monotonic() - stopped
+        assert 0.2 < took < 0.5 + 1.5, f"noticed {took:.2f} s after the cut (lease 0.5 s)"
+    finally:
+        os.kill(arm.pid, signal.SIGCONT)
+    deadline = time.monotonic() + WAIT
+    while c.log("line").count("peer arm up") < 2:
+        assert time.monotonic() < deadline, c.log("line")
+        time.sleep(0.05)
+
+
 def _count(db: Path, device: str, event: str) -> tuple[int, int]:
     """(accepted link events, steps that processed one) for ``device`` in ``db``."""
     con = sqlite3.connect(db)
@@ -407,13 +431,14 @@ def test_killed_sender_resumes_and_nothing_is_applied_twice(
     c.send("line", "conveyor: Start")
     c.send("line", "sensor: Part in")
     wait_states(view, one_process(ONE_CELL, SCRIPT[:2]))
-    c.kill("line")
+    c.kill("line")  # maybe before its last steps were committed: they come again
     c.start("line", "--journal", str(dbs["line"]), "--resume")
     deadline = time.monotonic() + WAIT
-    while "peer arm up" not in c.log("line").split("resumed")[-1]:
+    while c.log("line").count("peer arm up") < 2:
         assert time.monotonic() < deadline, c.log("line")
         time.sleep(0.05)
     time.sleep(1.5)  # hello, acknowledgement and any resend: RESEND_AFTER is 0.5 s
+    wait_states(view, one_process(ONE_CELL, SCRIPT[:2]))
     assert _count(dbs["arm"], "arm", "Movement") == (1, 1)
     c.send("line", "conveyor: Stop")
     wait_states(view, one_process(ONE_CELL, SCRIPT))

@@ -213,7 +213,7 @@ class Wire:
         block = zenoh.CongestionControl.BLOCK
         for name, stream in self.outbound.items():
             self._pubs[name] = s.declare_publisher(
-                self.keys.link(self.me.name, name), congestion_control=block, express=True
+                self.keys.link(self.me.name, name), congestion_control=block
             )
             del stream
         for name in self.local:
@@ -251,6 +251,10 @@ class Wire:
             s.liveliness().declare_subscriber(f"{root}/node/*", self._on_presence, history=True)
         )
         s.get(f"{root}/state/*", self._on_reply)
+        for name in self.local:  # started or resumed: say where each device is now
+            snap = self.system.subjects[name].snapshot
+            if snap is not None:
+                self._states["state/" + name] = snap
         self._thread = threading.Thread(target=self._run, name="statectl-wire", daemon=True)
         self._thread.start()
 
