@@ -260,7 +260,7 @@ def node_main(
             f"{', '.join(me.listen) or 'none'}; connect {', '.join(me.connect) or 'none'}; "
             f"lease {me.lease:g} s; key expressions under {wire.keys.root}/\n"
         )
-        wire.open()
+        wire.open(states=dashboard)
         resumed = system.start(resume=resume)
         for name, bound in system.bound.items():
             if resumed.get(name):

@@ -171,8 +171,10 @@ class NodeSystem(System):
             d.name: RemoteDevice(d.name, wire) for d in cell.devices if d.name not in self.subjects
         }
         links = self.links = NodeLinks(cell, self.subjects, mirror)
+        sources = {k.source for k in cell.links}
         for name, s in self.subjects.items():
-            s.listen(links.watch)
+            if name in sources:  # a device no link starts from keeps the record-free path
+                s.listen(links.watch)
             if name in self.bound:
                 self.bound[name].sends = self._link_sends
             else:

@@ -131,6 +131,7 @@ class Wire:
         self._decls: list[Any] = []
         self._session: Any = None
         self._thread: threading.Thread | None = None
+        self._mirrored = False  # whether other nodes' states are taken in (open())
         self.lost_at: dict[str, float] = {}  # node -> monotonic time it was noticed gone
         self.on_state: list[Callable[[str, Snapshot, float], None]] = []
         epoch, backlog = self._from_journal(journal, resume)
@@ -204,8 +205,12 @@ class Wire:
 
     # -- opening and closing -----------------------------------------------------------------
 
-    def open(self) -> None:
-        """Rule 1-2, 5: the session, the publishers, the mirror; before the System starts."""
+    def open(self, *, states: bool = False) -> None:
+        """Rule 1-2, 5: the session, the publishers, the mirror; before the System starts.
+
+        Other nodes' states are taken in when a guard here reads them, or ``states``
+        (a dashboard of the whole cell).
+        """
         import zenoh
 
         self._session = s = zenoh.open(session_config(self.me))
@@ -223,12 +228,24 @@ class Wire:
             self.system.subjects[name].on_step(self._stepped(name))
         self._decls += [
             s.declare_subscriber(f"{root}/ack/{self.me.name}/*", self._on_ack),
-            s.declare_subscriber(
-                f"{root}/state/*", self._on_state, allowed_origin=zenoh.Locality.REMOTE
-            ),
             s.declare_queryable(f"{root}/state/*", self._on_query),
         ]
+        self._mirrored = states or self._guards_read_others()
+        if self._mirrored:
+            self._decls.append(
+                s.declare_subscriber(
+                    f"{root}/state/*", self._on_state, allowed_origin=zenoh.Locality.REMOTE
+                )
+            )
         self._decls.append(s.liveliness().declare_token(self.keys.node(self.me.name)))
+
+    def _guards_read_others(self) -> bool:
+        """Whether a guard of a link that starts here reads a device of another node."""
+        return any(
+            k.guard is not None and any(d not in self.local for d, _ in k.guard.refs)
+            for k in self.cell.links
+            if k.source in self.local
+        )
 
     @property
     def session(self) -> Any:
@@ -250,7 +267,8 @@ class Wire:
         self._decls.append(
             s.liveliness().declare_subscriber(f"{root}/node/*", self._on_presence, history=True)
         )
-        s.get(f"{root}/state/*", self._on_reply)
+        if self._mirrored:
+            s.get(f"{root}/state/*", self._on_reply)
         for name in self.local:  # started or resumed: say where each device is now
             snap = self.system.subjects[name].snapshot
             if snap is not None:
