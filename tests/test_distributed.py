@@ -327,12 +327,16 @@ SCRIPT = ["conveyor: Start", "sensor: Part in", "conveyor: Stop"]
 def test_three_nodes_reach_the_global_states_of_one_process(
     cluster: Callable[..., Cluster],
 ) -> None:
-    """Three node processes reach, after each event line, the states `statectl run` reaches."""
+    """Three node processes reach, after each event line, the states `statectl run` reaches.
+
+    Every line goes to the gripper's node, which forwards it to the device's node.
+    """
     c = cluster()
     view = start_all(c)
     for i, line in enumerate(SCRIPT, 1):
         expected = one_process(ONE_CELL, SCRIPT[:i])
-        c.send(NODE_OF[line.split(":")[0]], line)
+        assert NODE_OF[line.split(":")[0]] != "gripper"
+        c.send("gripper", line)
         wait_states(view, expected)
     assert "peers: arm, gripper" in c.log("line")
 
@@ -393,14 +397,15 @@ def _count(db: Path, device: str, event: str) -> tuple[int, int]:
         con.close()
 
 
+@pytest.mark.parametrize("guarantee", ["prompt", "durable-first"])
 def test_killed_receiver_resumes_and_gets_queued_link_once(
-    cluster: Callable[..., Cluster],
+    cluster: Callable[..., Cluster], guarantee: str
 ) -> None:
     """A queue link's event sent while its target's node is dead arrives once after --resume."""
     c = cluster(peer_lost=False)
     dbs = {n: c.tmp / f"{n}.db" for n in ("line", "arm", "gripper")}
     for node in ("line", "arm", "gripper"):
-        c.start(node, "--journal", str(dbs[node]))
+        c.start(node, "--journal", str(dbs[node]), "--guarantee", guarantee)
     view = open_view(c)
     assert view.wait_for(lambda a: len(a) == 4, WAIT)  # type: ignore[attr-defined]
     c.send("line", "conveyor: Start")
@@ -412,7 +417,7 @@ def test_killed_receiver_resumes_and_gets_queued_link_once(
         time.sleep(0.05)
     c.send("line", "sensor: Part in")  # conveyor Arrived: Movement to the dead arm is queued
     wait_states(view, {"conveyor": "Arrived", "sensor": "Detected"})
-    c.start("arm", "--journal", str(dbs["arm"]), "--resume")
+    c.start("arm", "--journal", str(dbs["arm"]), "--resume", "--guarantee", guarantee)
     wait_states(view, one_process(ONE_CELL, SCRIPT[:2]))
     assert _count(dbs["arm"], "arm", "Movement") == (1, 1)
     assert _count(dbs["gripper"], "gripper", "Release") == (1, 1)
