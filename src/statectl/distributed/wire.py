@@ -123,6 +123,7 @@ class Wire:
         self._ack_due: dict[tuple[str, str], tuple[str, int, bool]] = {}
         self._hello_due: set[str] = set()
         self._resend_due: set[str] = set()
+        self._due = threading.Lock()  # guards the three above: callbacks add, the thread takes
         self._states: dict[str, Snapshot] = {}  # "state/<device>" -> newest snapshot to put
         self._wake = threading.Event()
         self._stop = threading.Event()
@@ -196,10 +197,11 @@ class Wire:
             return
         durable = journal.durable_seq
         woke = False
-        while acks and acks[0][0] <= durable:
-            _, node, device, e, n = acks.popleft()
-            self._ack_due[node, device] = (e, n, False)
-            woke = True
+        with self.inbound.lock:
+            while acks and acks[0][0] <= durable:
+                _, node, device, e, n = acks.popleft()
+                self._ack(node, device, e, n, False)
+                woke = True
         if woke:
             self._wake.set()
 
@@ -344,7 +346,7 @@ class Wire:
         with self.inbound.lock:
             verdict, last = self.inbound.offer(node, device, e, n)
             if verdict is not Verdict.APPLY:
-                self._ack_due[node, device] = (e, last, verdict is Verdict.GAP)
+                self._ack(node, device, e, last, verdict is Verdict.GAP)
                 self._wake.set()
                 return
             bound = system.bound.get(device)
@@ -360,8 +362,13 @@ class Wire:
         if run:
             self._run_devices()  # before waking the wire's thread: the device first
         if bound is None:
-            self._ack_due[node, device] = (e, n, False)
+            self._ack(node, device, e, n, False)
             self._wake.set()
+
+    def _ack(self, node: str, device: str, e: str, n: int, again: bool) -> None:
+        """Note an acknowledgement for the wire's thread to send (rule 4)."""
+        with self._due:
+            self._ack_due[node, device] = (e, n, again)
 
     def _run_devices(self) -> None:
         """Run the event now on this thread if nobody owns the devices (one thread hop less);
@@ -388,7 +395,8 @@ class Wire:
         with stream.lock:
             stream.ack(n)
         if again:
-            self._resend_due.add(device)
+            with self._due:
+                self._resend_due.add(device)
             self._wake.set()
 
     def _on_hello(self, sample: Any) -> None:
@@ -399,12 +407,12 @@ class Wire:
             return
         with self.inbound.lock:
             applied = self.inbound.applied(node, device, e)
-        if applied is not None and self.system.journal is not None:
-            # an event still waiting for its commit is acknowledged by _committed
-            pending = [a[4] for a in self._acks if a[1] == node and a[2] == device]
-            if pending:
-                applied = pending[0] - 1
-        self._ack_due[node, device] = (e, applied or 0, True)
+            if applied is not None and self.system.journal is not None:
+                # an event still waiting for its commit is acknowledged by _committed
+                pending = [a[4] for a in self._acks if a[1] == node and a[2] == device]
+                if pending:
+                    applied = pending[0] - 1
+        self._ack(node, device, e, applied or 0, True)
         self._wake.set()
 
     def _on_post(self, sample: Any) -> None:
@@ -456,7 +464,8 @@ class Wire:
             self._say(f"peer {node} up; peers: {', '.join(sorted(self.up))}")
             for name, stream in self.outbound.items():
                 if stream.node == node:
-                    self._hello_due.add(name)
+                    with self._due:
+                        self._hello_due.add(name)
             self._wake.set()
             return
         if node not in self.up:
@@ -510,21 +519,25 @@ class Wire:
     def _put_states(self) -> None:
         """Rule 5: put each device's newest snapshot (a burst of steps costs one put)."""
         states = self._states
-        for key in list(states):
-            snap = states.pop(key, None)
-            if snap is not None:
-                self._pubs[key].put(snapshot_payload(snap))
+        while states:  # popitem is atomic: the owner may add meanwhile, never iterated
+            try:
+                key, snap = states.popitem()
+            except KeyError:
+                return
+            self._pubs[key].put(snapshot_payload(snap))
 
     def _send_acks(self, session: Any) -> bool:
-        due, self._ack_due = self._ack_due, {}
+        with self._due:
+            due, self._ack_due = self._ack_due, {}
         for (node, device), (e, n, again) in due.items():
             session.put(self.keys.ack(node, device), _ENC.encode({"e": e, "n": n, "r": again}))
         return bool(due)
 
     def _resend(self, session: Any) -> None:
         now = time.monotonic()
-        hello, self._hello_due = self._hello_due, set()
-        again, self._resend_due = self._resend_due, set()
+        with self._due:
+            hello, self._hello_due = self._hello_due, set()
+            again, self._resend_due = self._resend_due, set()
         for name, stream in self.outbound.items():
             if stream.node not in self.up:
                 continue
