@@ -598,3 +598,29 @@ def test_node_whose_port_is_taken_says_so(
         holder.close()
     err = capsys.readouterr().err
     assert code == 1 and "statectl node" in err and "Traceback" not in err
+
+
+def test_node_dashboard_shows_the_devices_of_every_node(
+    cluster: Callable[..., Cluster],
+) -> None:
+    """A node's --dashboard shows its own devices and the other nodes' live, one page."""
+    pytest.importorskip("aiohttp")
+    c = cluster()
+    token = "another-token-of-twenty"
+    c.start("line", "--dashboard", "--token", token)
+    c.start("arm")
+    c.start("gripper")
+    view = open_view(c)
+    assert view.wait_for(lambda a: len(a) == 4, WAIT)  # type: ignore[attr-defined]
+    deadline = time.monotonic() + WAIT
+    while "dashboard: " not in c.log("line"):
+        assert time.monotonic() < deadline, c.log("line")
+        time.sleep(0.05)
+    url = c.log("line").split("dashboard: ")[1].split()[0]
+    while _shown(url) != one_process(ONE_CELL, []):
+        assert time.monotonic() < deadline, _shown(url)
+        time.sleep(0.1)
+    assert _http(url + "api/post", {"device": "gripper", "event": "Grip"}) == 401
+    accepted = _http(url + "api/post", {"device": "conveyor", "event": "Start"}, token)
+    assert isinstance(accepted, dict) and accepted["accepted"] is True
+    wait_states(view, {"conveyor": "Running"})
