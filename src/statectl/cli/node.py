@@ -284,6 +284,7 @@ def node_main(
                 (host, port, token),
                 table.dashboard.streams,
             )
+            wire.refresh()  # states put before the page listened
             shown = server.token if token is None else f"(from {where})"
             out.write(f"dashboard: {url}\ntoken: {shown}\n")
         out.write(f"node {node}: running\n")

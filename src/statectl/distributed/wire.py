@@ -241,6 +241,11 @@ class Wire:
             )
         self._decls.append(s.liveliness().declare_token(self.keys.node(self.me.name)))
 
+    def refresh(self) -> None:
+        """Ask every node for its devices' states now (a dashboard that starts late)."""
+        if self._session is not None:
+            self._session.get(f"{self.keys.root}/state/*", self._on_reply)
+
     def _guards_read_others(self) -> bool:
         """Whether a guard of a link that starts here reads a device of another node."""
         return any(
@@ -462,6 +467,8 @@ class Wire:
                 return
             self.up.add(node)
             self._say(f"peer {node} up; peers: {', '.join(sorted(self.up))}")
+            if self._mirrored:
+                self.refresh()  # where its devices are now
             for name, stream in self.outbound.items():
                 if stream.node == node:
                     with self._due:
