@@ -104,7 +104,7 @@ def child(cell_path: Path) -> None:
         bare.append(time.monotonic_ns())
         pong.put(b"x")
 
-    pong = session.declare_publisher(f"{BARE}/pong", express=True)
+    pong = session.declare_publisher(f"{BARE}/pong")
     sub = session.declare_subscriber(f"{BARE}/ping", on_bare)
     print("ready", flush=True)
     hit_from = bare_from = 0
@@ -188,7 +188,7 @@ def run(events: int, burst: int) -> int:
         session = wire.session
         back = threading.Event()
         sub = session.declare_subscriber(f"{BARE}/pong", lambda s: back.set())
-        pub = session.declare_publisher(f"{BARE}/ping", express=True)  # as the link's
+        pub = session.declare_publisher(f"{BARE}/ping")  # as the link's
         # warm up both paths
         for _ in range(200):
             go()
@@ -227,7 +227,16 @@ def run(events: int, burst: int) -> int:
             time.sleep(0.2)
             hits += report()["hits"]
         rate = burst / ((hits[-1] - start) / 1e9) if len(hits) == burst else 0.0
-        # peer loss
+        # peer loss: cut off (SIGSTOP: the connection stays open, nothing comes), then dead
+        stopped = time.monotonic()
+        os.kill(proc.pid, signal.SIGSTOP)
+        while "b" not in wire.lost_at and time.monotonic() < stopped + 30:
+            time.sleep(0.0005)
+        cut_off = (wire.lost_at.pop("b", float("nan")) - stopped) * 1000
+        os.kill(proc.pid, signal.SIGCONT)
+        while "b" not in wire.up and time.monotonic() < stopped + 60:
+            time.sleep(0.01)
+        time.sleep(0.5)
         killed = time.monotonic()
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(10)
@@ -250,9 +259,11 @@ def run(events: int, burst: int) -> int:
             f"{rate:,.0f} link events/s"
         )
         print(f"peer loss (SIGKILL) noticed after {noticed:.1f} ms")
+        print(f"peer cut off (SIGSTOP, lease 500 ms) noticed after {cut_off:.0f} ms")
         return 0
     finally:
         if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGCONT)
             os.kill(proc.pid, signal.SIGKILL)
             proc.wait(10)
         wire.close()

@@ -260,7 +260,7 @@ def node_main(
             f"{', '.join(me.listen) or 'none'}; connect {', '.join(me.connect) or 'none'}; "
             f"lease {me.lease:g} s; key expressions under {wire.keys.root}/\n"
         )
-        wire.open()
+        wire.open(states=dashboard)
         resumed = system.start(resume=resume)
         for name, bound in system.bound.items():
             if resumed.get(name):
@@ -284,6 +284,7 @@ def node_main(
                 (host, port, token),
                 table.dashboard.streams,
             )
+            wire.refresh()  # states put before the page listened
             shown = server.token if token is None else f"(from {where})"
             out.write(f"dashboard: {url}\ntoken: {shown}\n")
         out.write(f"node {node}: running\n")

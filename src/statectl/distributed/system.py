@@ -150,6 +150,14 @@ class RemoteDevice(JournalledDevice):
         raise StatectlError(f"{self.name} runs on another node")
 
 
+def _link_data(link: Link, data: Any) -> Any:
+    """The event data a link sends: its own, or the triggering step's (``forward_data``).
+
+    Read with defaults so a cell whose links carry no data (no such keys) sends none.
+    """
+    return data if getattr(link, "forward_data", False) else getattr(link, "data", None)
+
+
 class NodeSystem(System):
     """A System of one node's devices (rules 1-5); :meth:`attach` wires its links."""
 
@@ -171,8 +179,10 @@ class NodeSystem(System):
             d.name: RemoteDevice(d.name, wire) for d in cell.devices if d.name not in self.subjects
         }
         links = self.links = NodeLinks(cell, self.subjects, mirror)
+        sources = {k.source for k in cell.links}
         for name, s in self.subjects.items():
-            s.listen(links.watch)
+            if name in sources:  # a device no link starts from keeps the record-free path
+                s.listen(links.watch)
             if name in self.bound:
                 self.bound[name].sends = self._link_sends
             else:
@@ -191,13 +201,13 @@ class NodeSystem(System):
         for link in self.links.due():
             target = self.subjects.get(link.target)
             if target is not None:
-                target.post(link.event)
+                target.post(link.event, _link_data(link, data))
             elif self._dropping(link):
                 dropped = self._policy[link].dropped
                 if dropped is not None:
                     self.subjects[link.source].post(dropped)
             else:
-                self._wire.send(link.target, link.event, None)
+                self._wire.send(link.target, link.event, _link_data(link, data))
 
     def _link_sends(self) -> list[tuple[JournalledDevice, str]]:
         """Rules 1, 3 and 4 with a journal: what the step sends, journalled with it."""

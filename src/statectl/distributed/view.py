@@ -132,3 +132,5 @@ class CellView:
             else:
                 self.nodes.discard(node)
             self._changed.notify_all()
+        if sample.kind == zenoh.SampleKind.PUT:
+            self.refresh()  # a node (re)started: its devices may be elsewhere than last heard

@@ -123,6 +123,7 @@ class Wire:
         self._ack_due: dict[tuple[str, str], tuple[str, int, bool]] = {}
         self._hello_due: set[str] = set()
         self._resend_due: set[str] = set()
+        self._due = threading.Lock()  # guards the three above: callbacks add, the thread takes
         self._states: dict[str, Snapshot] = {}  # "state/<device>" -> newest snapshot to put
         self._wake = threading.Event()
         self._stop = threading.Event()
@@ -131,6 +132,7 @@ class Wire:
         self._decls: list[Any] = []
         self._session: Any = None
         self._thread: threading.Thread | None = None
+        self._mirrored = False  # whether other nodes' states are taken in (open())
         self.lost_at: dict[str, float] = {}  # node -> monotonic time it was noticed gone
         self.on_state: list[Callable[[str, Snapshot, float], None]] = []
         epoch, backlog = self._from_journal(journal, resume)
@@ -195,17 +197,22 @@ class Wire:
             return
         durable = journal.durable_seq
         woke = False
-        while acks and acks[0][0] <= durable:
-            _, node, device, e, n = acks.popleft()
-            self._ack_due[node, device] = (e, n, False)
-            woke = True
+        with self.inbound.lock:
+            while acks and acks[0][0] <= durable:
+                _, node, device, e, n = acks.popleft()
+                self._ack(node, device, e, n, False)
+                woke = True
         if woke:
             self._wake.set()
 
     # -- opening and closing -----------------------------------------------------------------
 
-    def open(self) -> None:
-        """Rule 1-2, 5: the session, the publishers, the mirror; before the System starts."""
+    def open(self, *, states: bool = False) -> None:
+        """Rule 1-2, 5: the session, the publishers, the mirror; before the System starts.
+
+        Other nodes' states are taken in when a guard here reads them, or ``states``
+        (a dashboard of the whole cell).
+        """
         import zenoh
 
         self._session = s = zenoh.open(session_config(self.me))
@@ -213,7 +220,7 @@ class Wire:
         block = zenoh.CongestionControl.BLOCK
         for name, stream in self.outbound.items():
             self._pubs[name] = s.declare_publisher(
-                self.keys.link(self.me.name, name), congestion_control=block, express=True
+                self.keys.link(self.me.name, name), congestion_control=block
             )
             del stream
         for name in self.local:
@@ -223,12 +230,29 @@ class Wire:
             self.system.subjects[name].on_step(self._stepped(name))
         self._decls += [
             s.declare_subscriber(f"{root}/ack/{self.me.name}/*", self._on_ack),
-            s.declare_subscriber(
-                f"{root}/state/*", self._on_state, allowed_origin=zenoh.Locality.REMOTE
-            ),
             s.declare_queryable(f"{root}/state/*", self._on_query),
         ]
+        self._mirrored = states or self._guards_read_others()
+        if self._mirrored:
+            self._decls.append(
+                s.declare_subscriber(
+                    f"{root}/state/*", self._on_state, allowed_origin=zenoh.Locality.REMOTE
+                )
+            )
         self._decls.append(s.liveliness().declare_token(self.keys.node(self.me.name)))
+
+    def refresh(self) -> None:
+        """Ask every node for its devices' states now (a dashboard that starts late)."""
+        if self._session is not None:
+            self._session.get(f"{self.keys.root}/state/*", self._on_reply)
+
+    def _guards_read_others(self) -> bool:
+        """Whether a guard of a link that starts here reads a device of another node."""
+        return any(
+            k.guard is not None and any(d not in self.local for d, _ in k.guard.refs)
+            for k in self.cell.links
+            if k.source in self.local
+        )
 
     @property
     def session(self) -> Any:
@@ -250,7 +274,12 @@ class Wire:
         self._decls.append(
             s.liveliness().declare_subscriber(f"{root}/node/*", self._on_presence, history=True)
         )
-        s.get(f"{root}/state/*", self._on_reply)
+        if self._mirrored:
+            s.get(f"{root}/state/*", self._on_reply)
+        for name in self.local:  # started or resumed: say where each device is now
+            snap = self.system.subjects[name].snapshot
+            if snap is not None:
+                self._states["state/" + name] = snap
         self._thread = threading.Thread(target=self._run, name="statectl-wire", daemon=True)
         self._thread.start()
 
@@ -322,7 +351,7 @@ class Wire:
         with self.inbound.lock:
             verdict, last = self.inbound.offer(node, device, e, n)
             if verdict is not Verdict.APPLY:
-                self._ack_due[node, device] = (e, last, verdict is Verdict.GAP)
+                self._ack(node, device, e, last, verdict is Verdict.GAP)
                 self._wake.set()
                 return
             bound = system.bound.get(device)
@@ -338,8 +367,13 @@ class Wire:
         if run:
             self._run_devices()  # before waking the wire's thread: the device first
         if bound is None:
-            self._ack_due[node, device] = (e, n, False)
+            self._ack(node, device, e, n, False)
             self._wake.set()
+
+    def _ack(self, node: str, device: str, e: str, n: int, again: bool) -> None:
+        """Note an acknowledgement for the wire's thread to send (rule 4)."""
+        with self._due:
+            self._ack_due[node, device] = (e, n, again)
 
     def _run_devices(self) -> None:
         """Run the event now on this thread if nobody owns the devices (one thread hop less);
@@ -366,7 +400,8 @@ class Wire:
         with stream.lock:
             stream.ack(n)
         if again:
-            self._resend_due.add(device)
+            with self._due:
+                self._resend_due.add(device)
             self._wake.set()
 
     def _on_hello(self, sample: Any) -> None:
@@ -377,12 +412,12 @@ class Wire:
             return
         with self.inbound.lock:
             applied = self.inbound.applied(node, device, e)
-        if applied is not None and self.system.journal is not None:
-            # an event still waiting for its commit is acknowledged by _committed
-            pending = [a[4] for a in self._acks if a[1] == node and a[2] == device]
-            if pending:
-                applied = pending[0] - 1
-        self._ack_due[node, device] = (e, applied or 0, True)
+            if applied is not None and self.system.journal is not None:
+                # an event still waiting for its commit is acknowledged by _committed
+                pending = [a[4] for a in self._acks if a[1] == node and a[2] == device]
+                if pending:
+                    applied = pending[0] - 1
+        self._ack(node, device, e, applied or 0, True)
         self._wake.set()
 
     def _on_post(self, sample: Any) -> None:
@@ -432,9 +467,12 @@ class Wire:
                 return
             self.up.add(node)
             self._say(f"peer {node} up; peers: {', '.join(sorted(self.up))}")
+            if self._mirrored:
+                self.refresh()  # where its devices are now
             for name, stream in self.outbound.items():
                 if stream.node == node:
-                    self._hello_due.add(name)
+                    with self._due:
+                        self._hello_due.add(name)
             self._wake.set()
             return
         if node not in self.up:
@@ -488,21 +526,25 @@ class Wire:
     def _put_states(self) -> None:
         """Rule 5: put each device's newest snapshot (a burst of steps costs one put)."""
         states = self._states
-        for key in list(states):
-            snap = states.pop(key, None)
-            if snap is not None:
-                self._pubs[key].put(snapshot_payload(snap))
+        while states:  # popitem is atomic: the owner may add meanwhile, never iterated
+            try:
+                key, snap = states.popitem()
+            except KeyError:
+                return
+            self._pubs[key].put(snapshot_payload(snap))
 
     def _send_acks(self, session: Any) -> bool:
-        due, self._ack_due = self._ack_due, {}
+        with self._due:
+            due, self._ack_due = self._ack_due, {}
         for (node, device), (e, n, again) in due.items():
             session.put(self.keys.ack(node, device), _ENC.encode({"e": e, "n": n, "r": again}))
         return bool(due)
 
     def _resend(self, session: Any) -> None:
         now = time.monotonic()
-        hello, self._hello_due = self._hello_due, set()
-        again, self._resend_due = self._resend_due, set()
+        with self._due:
+            hello, self._hello_due = self._hello_due, set()
+            again, self._resend_due = self._resend_due, set()
         for name, stream in self.outbound.items():
             if stream.node not in self.up:
                 continue
