@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from statectl.errors import Location
+from statectl.explore.deferred import released
 from statectl.expr import Expression
 from statectl.model import Chart, ControlKind, EventKind, Notify, Transition
 from statectl.semantics import (
@@ -265,6 +266,8 @@ class LocalSpace:
             snap = self.snapshots[lid]
             for event in self.events:
                 outs = dict.fromkeys(self._outcome(r, c, queue) for r, c in self._runs(event, snap))
+                if self.chart.deferred:  # a kept event may come back (explore/deferred.py)
+                    outs.update(dict.fromkeys(released(self, snap, tuple(outs), queue)))
                 self.table[lid, event] = tuple(outs)
         return starts
 
