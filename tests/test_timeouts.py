@@ -403,3 +403,22 @@ def test_scxml_round_trip_keeps_timeout_and_defer() -> None:
     assert tables is not None, info
     closing = next(s for s in tables.states if s.state == "Closing")
     assert (closing.timeout, closing.defer) == ("2s -> Close timeout", ("Release",))
+
+
+def test_malformed_timeout_in_a_workbook_names_sheet_and_row(tmp_path: Path) -> None:
+    """In XLSX a malformed timeout is T118 at the States sheet's row of the state."""
+    import openpyxl  # type: ignore[import-untyped, unused-ignore]
+
+    tables, _ = load(CLAMP)
+    assert tables is not None
+    path = tmp_path / "clamp.xlsx"
+    save(tables, path)
+    book = openpyxl.load_workbook(path)
+    sheet = book["States"]
+    header = [c.value for c in sheet[1]]
+    row = next(r for r in range(2, sheet.max_row + 1) if sheet.cell(r, 3).value == "Closing")
+    sheet.cell(row, header.index("timeout") + 1).value = "2 fortnights -> Close timeout"
+    book.save(path)
+    found = [d for d in load(path)[1] if d.code == "T118"]
+    assert len(found) == 1
+    assert (found[0].where.sheet, found[0].where.line) == ("States", row)
