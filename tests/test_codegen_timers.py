@@ -87,7 +87,10 @@ class TimedDevice:
         source = driver_source(chart, [], {})
         anchor = "      device.dispatch(static_cast<"
         assert anchor in source
-        (workdir / "driver.cpp").write_text(source.replace(anchor, _TICK + anchor, 1))
+        tick = _TICK
+        if not any(s.timeout for s in chart.states):  # no tick(): time changes nothing
+            tick = tick.replace("device.tick(static_cast<std::uint32_t>(-e - 1));", "")
+        (workdir / "driver.cpp").write_text(source.replace(anchor, tick + anchor, 1))
         self.binary = workdir / "driver"
         cmd = [GXX or "g++", *FLAGS, "-O0", "-DSTATECTL_TRACE=1", "-I", str(workdir)]
         cmd += [str(workdir / "driver.cpp"), "-o", str(self.binary)]
