@@ -214,3 +214,18 @@ def test_verify_explores_a_kept_event_coming_back(tmp_path: Path) -> None:
     report, diags = verify_cell(cell)
     assert report is not None, diags
     assert [f.name for f in report.failures] == []
+
+
+def test_c410_sees_a_superstate_row_leaving_the_deferring_state(tmp_path: Path) -> None:
+    """A row from Pressing's parent leaves Pressing too: the kept Eject meets Halted (C410)."""
+    text = PRESS.replace(
+        "  - {state: Pressing, defer: [Stop, Eject], ignore: [Go]}",
+        "  - {state: Work, ignore: [all others]}\n"
+        "  - {state: Pressing, parent: Work, defer: [Stop, Eject], ignore: [Go]}\n"
+        "  - {state: Halted, ignore: [Go, Stroke done, Stop, Reset, Abort]}",
+    ).replace(
+        "  - {event: Go, old: Idle, new: Pressing}",
+        "  - {event: Go, old: Idle, new: Pressing}\n  - {event: Abort, old: Work, new: Halted}",
+    )
+    found = [d for d in check_paths([str(press(tmp_path, text))]) if d.code == "C410"]
+    assert [("'Abort'" in d.message, "'Eject'" in d.message) for d in found] == [(True, True)]
