@@ -15,7 +15,9 @@ from statectl.rules import check_paths
 from statectl.runtime import SimClock, Subject
 from statectl.runtime.clock import WallClock
 from statectl.runtime.records import EventReceived, Record
+from statectl.scxml import Scheduler, Session, SimulatedClock
 from statectl.scxml_io import read_scxml, write_scxml
+from statectl.semantics import Event
 from statectl.tables import load, save, strip_locations
 from statectl.tables.timeouts import format_timeout, parse_timeout
 
@@ -422,3 +424,24 @@ def test_malformed_timeout_in_a_workbook_names_sheet_and_row(tmp_path: Path) -> 
     found = [d for d in load(path)[1] if d.code == "T118"]
     assert len(found) == 1
     assert (found[0].where.sheet, found[0].where.line) == ("States", row)
+
+
+@pytest.mark.parametrize(
+    ("closed_at", "expected"),
+    [(None, ["Jammed"]), (1.0, ["Clamped"])],
+)
+def test_the_scxml_session_runs_an_exported_timeout(
+    closed_at: float | None, expected: list[str]
+) -> None:
+    """`statectl scxml run` on the export: Closing times out at 2 s unless Closed came first."""
+    chart, diags = read_scxml(write_scxml(load_chart(CLAMP)))
+    assert chart is not None, diags
+    clock = SimulatedClock()
+    scheduler = Scheduler(clock)
+    session = Session(chart, scheduler)
+    session.post(Event("Close", type="external"))
+    if closed_at is not None:
+        scheduler.run(session, closed_at)
+        session.post(Event("Closed", type="external"))
+    scheduler.run(session, 10.0)
+    assert sorted(session.run.active) == expected
