@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import itertools
 from collections import deque
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from statectl.semantics import Snapshot
 
@@ -33,6 +33,12 @@ MAX_RELEASED = 3
 def _deferring(space: LocalSpace, snap: Snapshot) -> tuple[str, ...]:
     chart = space.chart
     return tuple(dict.fromkeys(e for s in sorted(snap.active) for e in chart.state(s).defer))
+
+
+def _values(space: LocalSpace, lid: int) -> tuple[Any, ...]:
+    """The tracked data of local state ``lid``, for a space that tracks data, else nothing."""
+    valuations = getattr(space, "valuations", None)
+    return (valuations[lid],) if valuations else ()
 
 
 def released(
@@ -57,8 +63,9 @@ def released(
                     nxt: list[Outcome] = []
                     for o in paths:
                         here = space.snapshots[o.target]
-                        for result, choices in space._runs(event, here):
-                            r = space._outcome(result, choices, queue)
+                        values = _values(space, o.target)
+                        for result, choices in space._runs(event, here, *values):
+                            r = space._outcome(result, choices, queue, *values)
                             if not r.handled:
                                 nxt.append(o)
                                 continue
