@@ -445,3 +445,17 @@ def test_the_scxml_session_runs_an_exported_timeout(
         session.post(Event("Closed", type="external"))
     scheduler.run(session, 10.0)
     assert sorted(session.run.active) == expected
+
+
+@pytest.mark.parametrize(("limit", "expected"), [(2.0, {"Closing"}), (60.0, {"Jammed"})])
+def test_a_system_settles_through_a_timeout(
+    tmp_path: Path, limit: float, expected: set[str]
+) -> None:
+    """System.settle() waits for a timeout as for work in flight, within its limit."""
+    from statectl.system import DeviceSetup, System
+
+    system = System((DeviceSetup("D", door_chart(tmp_path)),), SimClock())
+    system.start()
+    system.post("D", "Close")
+    system.settle(limit)
+    assert system.subjects["D"].configuration == expected
