@@ -15,7 +15,9 @@ from statectl.rules import check_paths
 from statectl.runtime import SimClock, Subject
 from statectl.runtime.clock import WallClock
 from statectl.runtime.records import EventReceived, Record
+from statectl.scxml import Scheduler, Session, SimulatedClock
 from statectl.scxml_io import read_scxml, write_scxml
+from statectl.semantics import Event
 from statectl.tables import load, save, strip_locations
 from statectl.tables.timeouts import format_timeout, parse_timeout
 
@@ -403,3 +405,57 @@ def test_scxml_round_trip_keeps_timeout_and_defer() -> None:
     assert tables is not None, info
     closing = next(s for s in tables.states if s.state == "Closing")
     assert (closing.timeout, closing.defer) == ("2s -> Close timeout", ("Release",))
+
+
+def test_malformed_timeout_in_a_workbook_names_sheet_and_row(tmp_path: Path) -> None:
+    """In XLSX a malformed timeout is T118 at the States sheet's row of the state."""
+    import openpyxl  # type: ignore[import-untyped, unused-ignore]
+
+    tables, _ = load(CLAMP)
+    assert tables is not None
+    path = tmp_path / "clamp.xlsx"
+    save(tables, path)
+    book = openpyxl.load_workbook(path)
+    sheet = book["States"]
+    header = [c.value for c in sheet[1]]
+    row = next(r for r in range(2, sheet.max_row + 1) if sheet.cell(r, 3).value == "Closing")
+    sheet.cell(row, header.index("timeout") + 1).value = "2 fortnights -> Close timeout"
+    book.save(path)
+    found = [d for d in load(path)[1] if d.code == "T118"]
+    assert len(found) == 1
+    assert (found[0].where.sheet, found[0].where.line) == ("States", row)
+
+
+@pytest.mark.parametrize(
+    ("closed_at", "expected"),
+    [(None, ["Jammed"]), (1.0, ["Clamped"])],
+)
+def test_the_scxml_session_runs_an_exported_timeout(
+    closed_at: float | None, expected: list[str]
+) -> None:
+    """`statectl scxml run` on the export: Closing times out at 2 s unless Closed came first."""
+    chart, diags = read_scxml(write_scxml(load_chart(CLAMP)))
+    assert chart is not None, diags
+    clock = SimulatedClock()
+    scheduler = Scheduler(clock)
+    session = Session(chart, scheduler)
+    session.post(Event("Close", type="external"))
+    if closed_at is not None:
+        scheduler.run(session, closed_at)
+        session.post(Event("Closed", type="external"))
+    scheduler.run(session, 10.0)
+    assert sorted(session.run.active) == expected
+
+
+@pytest.mark.parametrize(("limit", "expected"), [(2.0, {"Closing"}), (60.0, {"Jammed"})])
+def test_a_system_settles_through_a_timeout(
+    tmp_path: Path, limit: float, expected: set[str]
+) -> None:
+    """System.settle() waits for a timeout as for work in flight, within its limit."""
+    from statectl.system import DeviceSetup, System
+
+    system = System((DeviceSetup("D", door_chart(tmp_path)),), SimClock())
+    system.start()
+    system.post("D", "Close")
+    system.settle(limit)
+    assert system.subjects["D"].configuration == expected

@@ -23,6 +23,7 @@ from statectl.errors import Location
 
 __all__ = [
     "FIELD_TYPES",
+    "MAX_DEFERRED",
     "Action",
     "Api",
     "Assign",
@@ -229,6 +230,10 @@ class InvokeDef:
     origin: Location = NOWHERE
 
 
+#: How many deferred events a running device keeps at most, in Python and in generated C++.
+MAX_DEFERRED = 16
+
+
 @dataclass(frozen=True, slots=True)
 class Timeout:
     """A state's timeout: ``event`` is raised ``seconds`` after the state is entered,
@@ -416,6 +421,12 @@ class Chart:
     def default_states(self) -> tuple[str, ...]:
         """States marked ``default`` in the State Definition table."""
         return tuple(s.name for s in self.states if ControlKind.DEFAULT in s.controls)
+
+    @property
+    def deferred(self) -> frozenset[tuple[str, str]]:
+        """(state, event) pairs of the states' ``defer`` cells: ignored by the kernel, kept
+        by the runtime (statectl.runtime.defer) until the state is left."""
+        return frozenset((s.name, e) for s in self.states for e in s.defer)
 
     @property
     def event_names(self) -> tuple[str, ...]:

@@ -486,8 +486,9 @@ def _check_deferred(st: _Structure) -> Iterator[Diagnostic]:
         if not s.defer:
             continue
         inside = {s.name, *(a for a in st.by_name if s.name in st.ancestors.get(a, ()))}
+        leaving = inside | set(st.ancestors.get(s.name, ()))  # a superstate's row leaves too
         for t in st.chart.transitions:
-            if t.source not in inside or not t.targets or all(x in inside for x in t.targets):
+            if t.source not in leaving or not t.targets or all(x in inside for x in t.targets):
                 continue
             for target in t.targets:
                 lands = _settled(st, target)

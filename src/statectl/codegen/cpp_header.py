@@ -20,7 +20,7 @@ from statectl.codegen.cpp_tables import (
     _Tables,
     _width,
 )
-from statectl.codegen.cpp_timers import device_parts, timer_tables
+from statectl.codegen.cpp_timers import defer_tables, device_parts, timer_tables
 from statectl.codegen.flatten import (
     FlatChart,
     identifiers,
@@ -287,7 +287,7 @@ def _header(flat: FlatChart, cls: str, ns: str) -> str:
         add("    {" + ", ".join(f"0x{b:x}u" for b in bits) + f"}},  // {c.index}")
     add("};")
     add("")
-    w.extend(timer_tables(flat))
+    w.extend(timer_tables(flat) + defer_tables(flat))
     add("}  // namespace detail")
     add("")
     add(_device_class(cls, start, _cases(tables, cases), bool(cells), device_parts(flat)))

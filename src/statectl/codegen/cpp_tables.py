@@ -239,7 +239,7 @@ class Basic@CLS@ : public statectl::Subject<Invoke, kInvokeCount> {
     constexpr detail::Outcome o = detail::kOutcomes[K];
     if constexpr ((o.flags & 1u) == 0) {
       STATECTL_TRACE_CALL(tracer_, ignored(detail::kDevice, detail::kEventNames[event],
-                                           detail::kReasons[o.flags >> 2]));
+                                           detail::kReasons[o.flags >> 2]));@DEFER_KEEP@
     } else {
       // Observers and hooks see the new configuration and the busy bit; with no call
       // between the two stores the compiler drops the first.
@@ -248,7 +248,7 @@ class Basic@CLS@ : public statectl::Subject<Invoke, kInvokeCount> {
       if constexpr ((o.flags & 2u) != 0) {
         finish();
       }
-      state_ = o.target;
+      state_ = o.target;@DEFER_RELEASE@
     }
   }
 

@@ -1,4 +1,7 @@
-"""Per-state timeouts in the generated C++: counted on a millisecond tick the controller supplies.
+"""Per-state timeouts and deferred events in the generated C++.
+
+Timeouts are counted on a millisecond tick the controller supplies; deferred events are
+kept in a small fixed array.
 
 Rules:
 1. Generated code reads no clock. ``tick(now_ms)`` takes a monotonic millisecond count
@@ -11,7 +14,13 @@ Rules:
    ``run_until_idle``: exactly what the Python runtime does when a SimClock advances,
    so the traces are equal (tests/test_codegen_timers.py).
 3. A chart without timeouts gets none of this: no member, no table, not a byte.
-4. G710 a timeout whose event the chart does not know, G711 a duration that is not a
+4. Deferred events (the ``defer`` cell): the flat tables answer "declared ignored" for
+   them, as the kernel does; ``kDeferred[configuration]`` says which events the
+   configuration defers. An event ignored so is kept in an array of
+   :data:`~statectl.runtime.defer.MAX_DEFERRED` events (one more is dropped), and after
+   every handled step the kept events no longer deferred are dispatched again, in the
+   order they arrived, before anything queued: statectl.runtime.defer's rules.
+5. G710 a timeout whose event the chart does not know, G711 a duration that is not a
    whole number of milliseconds from 1 to 2^31-1, G712 a timeout on a state the flat
    tables cannot index (more than 32767 states).
 """
@@ -22,9 +31,9 @@ from collections.abc import Mapping
 
 from statectl.codegen.flat import FlatChart
 from statectl.errors import Diagnostic, Location, Severity
-from statectl.model import Chart
+from statectl.model import MAX_DEFERRED, Chart
 
-__all__ = ["check_timeouts", "device_parts", "timer_tables"]
+__all__ = ["check_timeouts", "defer_tables", "device_parts", "timer_tables"]
 
 _MAX_MS = 2**31 - 1
 
@@ -173,12 +182,108 @@ _FIELDS = """
   std::uint32_t timeout_deadline_[detail::kTimeoutCount] = {};
   std::uint32_t timeout_seq_[detail::kTimeoutCount] = {};"""
 
+
+def defer_tables(flat: FlatChart) -> list[str]:
+    """``kDeferred``: per configuration, the events it defers (nothing without defer cells)."""
+    if not flat.chart.deferred:
+        return []
+    words = max(1, (len(flat.events) + 63) // 64)
+    index = {e: i for i, e in enumerate(flat.events)}
+    lines = [
+        "// Deferred events (the state table's defer cells): bit e of a configuration's row is",
+        "// set when an active state defers event e.",
+        f"inline constexpr std::size_t kDeferCapacity = {MAX_DEFERRED};",
+        f"inline constexpr std::uint64_t kDeferred[kConfigurationCount][{words}] = {{",
+    ]
+    for c in flat.configurations:
+        bits = [0] * words
+        for state in c.active:
+            for e in flat.chart.state(state).defer:
+                if e in index:
+                    bits[index[e] // 64] |= 1 << (index[e] % 64)
+        lines.append("    {" + ", ".join(f"0x{b:x}u" for b in bits) + f"}},  // {c.index}")
+    lines += [
+        "};",
+        "inline constexpr bool deferred(std::size_t configuration, std::size_t event) noexcept {",
+        "  return ((kDeferred[configuration][event / 64] >> (event % 64)) & 1u) != 0;",
+        "}",
+        "",
+    ]
+    return lines
+
+
+_DEFER_PUBLIC = """
+
+  /// How many deferred events the device keeps now (at most detail::kDeferCapacity).
+  std::size_t deferred_count() const noexcept { return defer_count_; }"""
+
+_DEFER_KEEP = """
+      if constexpr ((o.flags >> 2) == 1u) {  // declared ignored: kept if deferred here
+        defer_keep(event);
+      }"""
+
+_DEFER_RELEASE = """
+      defer_release();"""
+
+_DEFER_PRIVATE = """
+  Event defer_[detail::kDeferCapacity] = {};
+  std::size_t defer_count_ = 0;
+  bool defer_releasing_ = false;
+
+  void defer_keep(std::size_t event) noexcept {
+    if (detail::deferred(state_ & kConfigurationMask, event) &&
+        defer_count_ < detail::kDeferCapacity) {
+      defer_[defer_count_++] = static_cast<Event>(event);
+    }
+  }
+
+  /// After a handled step: dispatch, in arrival order, each kept event the configuration
+  /// does not defer any more (a nested call leaves it to this loop).
+  void defer_release() noexcept {
+    if (defer_count_ == 0 || defer_releasing_) {
+      return;
+    }
+    defer_releasing_ = true;
+    for (;;) {
+      std::size_t i = 0;
+      const std::size_t configuration = state_ & kConfigurationMask;
+      while (i < defer_count_ &&
+             detail::deferred(configuration, static_cast<std::size_t>(defer_[i]))) {
+        ++i;
+      }
+      if (i == defer_count_) {
+        break;
+      }
+      const Event event = defer_[i];
+      for (std::size_t j = i + 1; j < defer_count_; ++j) {
+        defer_[j - 1] = defer_[j];
+      }
+      --defer_count_;
+      dispatch(event);
+    }
+    defer_releasing_ = false;
+  }"""
+
 #: The placeholders of the device class template (cpp_tables._DEVICE).
-PLACES = ("@TIMER_PUBLIC@", "@TIMER_ENTER@", "@TIMER_EXIT@", "@TIMER_FINISH@", "@TIMER_FIELDS@")
+PLACES = (
+    "@TIMER_PUBLIC@",
+    "@TIMER_ENTER@",
+    "@TIMER_EXIT@",
+    "@TIMER_FINISH@",
+    "@TIMER_FIELDS@",
+    "@DEFER_KEEP@",
+    "@DEFER_RELEASE@",
+)
 
 
 def device_parts(flat: FlatChart) -> Mapping[str, str]:
-    """The device class's timeout code per placeholder; all empty without timeouts."""
-    if not _timeouts(flat):
-        return dict.fromkeys(PLACES, "")
-    return dict(zip(PLACES, (_PUBLIC, _ENTER, _EXIT, _FINISH, _FIELDS), strict=True))
+    """The device class's timeout and deferral code per placeholder; empty without them."""
+    parts = dict.fromkeys(PLACES, "")
+    if _timeouts(flat):
+        parts.update(zip(PLACES[:5], (_PUBLIC, _ENTER, _EXIT, _FINISH, _FIELDS), strict=True))
+    if flat.chart.deferred:
+        parts["@TIMER_PUBLIC@"] += _DEFER_PUBLIC
+        parts["@TIMER_FIELDS@"] += _DEFER_PRIVATE
+        parts["@DEFER_KEEP@"] = _DEFER_KEEP
+        parts["@DEFER_RELEASE@"] = _DEFER_RELEASE
+    return parts

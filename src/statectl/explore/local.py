@@ -33,6 +33,7 @@ from typing import Any
 
 from statectl.errors import Location
 from statectl.explore.data import MAX_LOCAL_STATES, DataTracker
+from statectl.explore.deferred import released
 from statectl.expr import Expression
 from statectl.model import Chart, ControlKind, EventKind, Notify, Transition
 from statectl.semantics import (
@@ -307,6 +308,8 @@ class LocalSpace:
                 outs = dict.fromkeys(
                     self._outcome(r, c, queue, values) for r, c in self._runs(event, snap, values)
                 )
+                if self.chart.deferred:  # a kept event may come back (explore/deferred.py)
+                    outs.update(dict.fromkeys(released(self, snap, tuple(outs), queue)))
                 self.table[lid, event] = tuple(outs)
         return starts
 

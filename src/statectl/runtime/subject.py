@@ -53,6 +53,7 @@ from statectl.expr import compile_expression
 from statectl.model import Action, Chart, Notify
 from statectl.observers import Observer
 from statectl.runtime.clock import Clock, SimClock
+from statectl.runtime.defer import attach_defer
 from statectl.runtime.eventdata import (
     apply_assignments,
     check_event_data,
@@ -164,6 +165,8 @@ class Subject(Wiring):
         self._counts = 0  # events processed + invokes issued << _INVOKES, one add per event
         if any(s.timeout is not None for s in chart.states):
             attach_timers(self)  # per-state timeouts (runtime/timers.py)
+        if any(s.defer for s in chart.states):
+            attach_defer(self)  # deferred events (runtime/defer.py)
 
     @staticmethod
     def _initial_data(chart: Chart, given: Mapping[str, Any] | None) -> dict[str, Any]:
@@ -433,6 +436,11 @@ class Subject(Wiring):
             self.dispatch(event, data)
             return
         self._process(event, data)
+
+    def call_next(self, fn: Callable[[], object]) -> None:
+        """On the owner: run ``fn`` before anything queued (a deferred event's release)."""
+        self._queue.appendleft((None, None, fn))
+        self._fast = False
 
     def advance(self, seconds: float) -> int:
         """On a :class:`SimClock`: move time on, draining the queue after every timer."""

@@ -82,6 +82,7 @@ from statectl.scxml.sending import (
     SCXML_IO,
     SendError,
 )
+from statectl.scxml.timeouts import cancel_of, send_of
 from statectl.scxml.xmltree import MAX_SRC_BYTES, read_src_text
 from statectl.semantics import (
     Event,
@@ -338,12 +339,18 @@ class Session:
     def state_entered(self, run: Run, state: State) -> None:
         self.scheduler.check_deadline()
         self.to_invoke.append(state.name)
+        armed = send_of(state)  # a table timeout read back from SCXML (scxml/timeouts.py)
+        if armed is not None:
+            self.perform(armed)
         if state.name not in self.bound:
             self.bound.add(state.name)
             for item in state.data:
                 self.bind(item.name, item.expr, item.src, item.body)
 
     def state_exited(self, run: Run, state: State) -> None:
+        disarmed = cancel_of(state)
+        if disarmed is not None:
+            self.perform(disarmed)
         if state.name in self.to_invoke:
             self.to_invoke = [s for s in self.to_invoke if s != state.name]
         for invokeid, (owner, _definition, child) in list(self.invocations.items()):

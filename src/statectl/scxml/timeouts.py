@@ -8,6 +8,8 @@ Rules:
    content; any other SCXML processor runs them as the timer they are. The event is
    written as one SCXML token (spaces as ``_``, as transitions are), its exact name in
    ``statectl:event-name``; the delay in milliseconds (``3000ms``).
+1a. statectl's own session (``statectl scxml run``) runs a chart's timeouts the same
+   way: entering the state performs :func:`send_of`, leaving it :func:`cancel_of`.
 2. SCXML has no deferral: ``defer`` is a ``<statectl:defer event="..."/>`` element per
    event, which other processors ignore (a deferred event is then dropped, as the state
    table's ``ignore`` would drop it).
@@ -18,10 +20,10 @@ from __future__ import annotations
 from collections.abc import Iterator
 from xml.sax.saxutils import quoteattr
 
-from statectl.model import State, Timeout
+from statectl.model import Cancel, Send, State, Timeout
 from statectl.scxml.xmltree import STATECTL_NS, _Node
 
-__all__ = ["read_defer", "read_timeout", "timeout_lines"]
+__all__ = ["cancel_of", "read_defer", "read_timeout", "send_of", "timeout_lines"]
 
 #: The attribute (local name) that marks a handler as a state's timeout.
 MARK = "timeout-of"
@@ -80,3 +82,16 @@ def read_defer(node: _Node) -> tuple[str, ...]:
         for c in node.children
         if c.ns == STATECTL_NS and c.tag == "defer" and c.get("event")
     )
+
+
+def send_of(s: State) -> Send | None:
+    """The delayed ``<send>`` that arms the state's timeout (rule 1a), if it has one."""
+    t = s.timeout
+    if t is None:
+        return None
+    return Send(event=t.event, delay=f"{round(t.seconds * 1000)}ms", id=_id(s.name))
+
+
+def cancel_of(s: State) -> Cancel | None:
+    """The ``<cancel>`` that disarms it on exit."""
+    return Cancel(sendid=_id(s.name)) if s.timeout is not None else None

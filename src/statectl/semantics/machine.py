@@ -97,7 +97,7 @@ class Machine:
         self.snapshot_guards: frozenset[str] = frozenset(
             g for g, e in self.guards.items() if e.names <= {"previous"} and not shadowed
         )
-        self.ignored = chart.ignored
+        self.ignored = chart.ignored | chart.deferred  # a deferred event is kept, not taken
         self._static_domain: dict[int, str | None] = {}
         for t in chart.transitions:
             if t.targets and not any(self.kind[x].is_history for x in t.targets):
