@@ -39,10 +39,12 @@ Rules:
 6. A cell's rules hold at run time as verify assumed them (explore/enforce.py):
    an environment command whose every ``when`` is false is refused by
    :meth:`System.post` (:class:`~statectl.explore.enforce.Refused`); invariants
-   are checked after every step, each violation goes to the ``on_violation``
-   callbacks and sends the invariant's declared events (journalled with the
-   step); link events carry their data; a device guard's ``In('other.State')``
-   reads the other device's state.
+   are checked once a stimulus's cascade has settled (every link event it caused
+   delivered, as verify takes a stimulus and its links as one move), each
+   violation goes to the ``on_violation`` callbacks and sends the invariant's
+   declared events (through the journal when there is one); link events carry
+   their data; a device guard's ``In('other.State')`` reads the other device's
+   state.
 7. A row that fails while the owner drains (a guard or an assignment that raises,
    e.g. a linked event sent without the data its guard reads) refuses that event
    only: the device records it (``EventRejected``, guard error), the message goes
@@ -132,6 +134,8 @@ class System:
     settle_limit: float = SETTLE_LIMIT
     #: settles that stopped at ``settle_limit`` with device work still pending
     settle_cut: int = 0
+    #: a step of a cell ran since the invariants were last checked (rule 6)
+    _unchecked: bool = False
 
     def __post_init__(self) -> None:
         if self.max_queue is not None and self.max_queue < 1:
@@ -175,8 +179,7 @@ class System:
             return
         for link in self.links.due():
             self.subjects[link.target].post(link.event, link_data(link, data))
-        for device, ev in self._violations():
-            self.subjects[device].post(ev)
+        self._unchecked = self.rules is not None  # rule 6: once the cascade settles
 
     def _link_sends(self) -> list[tuple[JournalledDevice, str]]:
         """Rule 4 with a journal: the links a device's step fired, to journal with the step."""
@@ -184,8 +187,24 @@ class System:
         if not self._live:
             self.links.fired.clear()  # entering the initial states fires nothing
             return []
-        sends = [(self.bound[k.target], k.event) for k in self.links.due()]
-        return sends + [(self.bound[d], ev) for d, ev in self._violations()]
+        self._unchecked = self.rules is not None  # rule 6: once the cascade settles
+        return [(self.bound[k.target], k.event) for k in self.links.due()]
+
+    def _settled_check(self) -> bool:
+        """Rule 6 at the end of a cascade: report the invariants it broke and send their
+        events (through the journal when the device is journalled); whether any was sent."""
+        if not self._unchecked or (self.journal is not None and self.journal.queued):
+            return False  # link events still wait in the journal: the cascade goes on
+        self._unchecked = False
+        sent = False
+        for device, ev in self._violations():
+            bound = self.bound.get(device)
+            if bound is not None:
+                bound.post(ev)
+            else:
+                self.subjects[device].post(ev)
+            sent = True
+        return sent
 
     def _violations(self) -> list[tuple[str, str]]:
         """Rule 6: invariants a step broke, reported; the events they send."""
@@ -295,17 +314,19 @@ class System:
         """As the owner: run the devices that have work until none has (rule 1)."""
         total = 0
         ready = self._ready
-        while ready:
-            s = ready.popleft()
-            if s.queued:
-                try:
-                    total += s.run_until_idle()
-                except (GuardError, AssignError) as exc:  # rule 7: that event only
-                    for callback in self.on_failure:
-                        callback(exc)
-                    if s.queued:
-                        ready.append(s)
-        return total
+        while True:
+            while ready:
+                s = ready.popleft()
+                if s.queued:
+                    try:
+                        total += s.run_until_idle()
+                    except (GuardError, AssignError) as exc:  # rule 7: that event only
+                        for callback in self.on_failure:
+                            callback(exc)
+                        if s.queued:
+                            ready.append(s)
+            if not self._settled_check():
+                return total
 
     def advance(self, seconds: float) -> None:
         """On a SimClock: let ``seconds`` pass as the owner, draining after every timer."""
