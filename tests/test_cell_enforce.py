@@ -292,7 +292,9 @@ environment:
   - {{send: Release, to: button}}
 invariants:
   - name: lever-follows-button
-    holds: "not (In('button.Pressed') and In('lever.Low')) and not (In('button.Idle') and In('lever.High'))"
+    holds: >-
+      not (In('button.Pressed') and In('lever.Low'))
+      and not (In('button.Idle') and In('lever.High'))
 """,
         encoding="utf-8",
     )
