@@ -66,3 +66,45 @@ def test_without_re_enabling_after_a_reset_motion_needs_an_enabled_drive_fails(
     (tmp_path / "cell.yaml").write_text(text.replace(link, ""), encoding="utf-8")
     report = verify(tmp_path / "cell.yaml")
     assert "invariant motion-needs-an-enabled-drive" in failed(report)
+
+
+def test_axis_drive_cell_runs_on_twins_through_power_move_fault_and_reset() -> None:
+    """`statectl run` on the cell with simulated twins: MC_Power walks the drive up by
+    Shutdown, Switch on, Enable operation; a drive fault stops the axis; MC_Reset resets
+    the drive and walks it up again, ending in Standstill on an enabled drive."""
+    import os
+    import subprocess
+    import sys
+
+    lines = (
+        "drive: Initialized\naxis: MC_Power\n+2\naxis: MC_MoveAbsolute\n+2\n"
+        "drive: Fault occurred\n+2\naxis: MC_Reset\n+2\n"
+    )
+    env = {
+        **os.environ,
+        "PYTHONPATH": f"{ROOT / 'src'}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
+    }
+    done = subprocess.run(
+        [sys.executable, "-m", "statectl", "run", str(EXAMPLE / "cell.yaml")],
+        input=lines,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=env,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    steps = [
+        line.split(" on ")[-1] for line in done.stdout.splitlines() if "  drive  state " in line
+    ]
+    walk_up = ["Shutdown", "Switch on", "Enable operation"]
+    assert steps == [
+        "Initialized",
+        *walk_up,
+        "Fault occurred",
+        "Fault reaction completed",
+        "Fault reset",
+        *walk_up,
+    ]
+    assert "final axis: Enabled, No error, Standstill" in done.stdout
+    assert "final drive: Fault free, Operation enabled" in done.stdout
