@@ -204,3 +204,19 @@ def test_outcome_to_status_code(outcome: str, code: int | None) -> None:
     """A PackML method answers Good, BadInvalidState (the state does not take the command)
     or BadResourceUnavailable (not accepted)."""
     assert status_of(outcome) == code
+
+
+def test_table_numbers_are_kept_and_the_others_count_on() -> None:
+    """OPC UA state numbers: a state's table number is kept; states without one are
+    numbered after the highest, in chart order (PackML's Cleared and Running)."""
+    chart, _ = build(profile_tables(find("packml")))  # type: ignore[arg-type]
+    assert chart is not None
+    numbers = layout(chart).state_numbers
+    assert {s: numbers[s] for s in ("Clearing", "Execute", "Complete", "Cleared", "Running")} == {
+        "Clearing": 1,
+        "Execute": 6,
+        "Complete": 17,
+        "Cleared": 18,
+        "Running": 19,
+    }
+    assert len(set(numbers.values())) == len(numbers)

@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import replace
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -15,7 +16,7 @@ from statectl.errors import Severity
 from statectl.model import Chart, StateKind
 from statectl.profiles import PROFILES, find, profile_tables
 from statectl.render import render
-from statectl.rules import check_paths
+from statectl.rules import check_chart, check_paths
 from statectl.semantics import Machine, Snapshot, step
 from statectl.tables import load, strip_locations
 
@@ -226,3 +227,37 @@ def test_docs_show_the_current_diagram(name: str) -> None:
     --format mermaid` draws it now."""
     drawn = render(chart_of(name), "mermaid").rstrip("\n")
     assert f"```mermaid\n{drawn}\n```" in DOCS.read_text(encoding="utf-8")
+
+
+def test_docs_show_the_current_listing() -> None:
+    """docs/profiles.md shows `statectl profiles` as it prints now."""
+    import io
+
+    from statectl.cli import main
+
+    out = io.StringIO()
+    assert main(["profiles"], out, io.StringIO()) == 0
+    assert f"$ statectl profiles\n{out.getvalue()}" in DOCS.read_text(encoding="utf-8")
+
+
+def test_a_monitored_child_inherits_its_superstates_fault_row() -> None:
+    """Moving 'monitoring required' from CiA 402's Fault free to one of its children
+    still checks clean: the superstate's fault row leaves the child (no C407), and the
+    child's monitor raises it for the superstate (no C408)."""
+    from statectl.model import ControlKind
+
+    tables = profile_tables(find("cia402"))  # type: ignore[arg-type]
+
+    def controls(row: Any) -> Any:
+        if row.state == "Fault free":
+            return replace(row, controls=(ControlKind.DEFAULT,))
+        if row.state == "Operation enabled":
+            return replace(row, controls=(*row.controls, ControlKind.MONITORING))
+        return row
+
+    chart, _ = build(replace(tables, states=tuple(controls(s) for s in tables.states)))
+    assert chart is not None
+    assert ControlKind.MONITORING in chart.state("Operation enabled").controls
+    assert ControlKind.MONITORING not in chart.state("Fault free").controls
+    codes = [d.code for d in check_chart(chart) if d.severity is not Severity.INFO]
+    assert codes == []

@@ -38,7 +38,7 @@ def test_axis_drive_cell_holds() -> None:
     report = verify(EXAMPLE / "cell.yaml")
     assert report["verdict"] == "holds" and report["complete"] is True
     assert failed(report) == []
-    assert len(report["properties"]) == 7  # type: ignore[arg-type]
+    assert len(report["properties"]) == 6  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize(("device", "profile"), [("axis", "plcopen-axis"), ("drive", "cia402")])
@@ -50,7 +50,7 @@ def test_example_devices_are_the_profiles(device: str, profile: str) -> None:
     assert strip_locations(tables) == strip_locations(shipped)
 
 
-def test_without_re_enabling_after_a_reset_motion_needs_an_enabled_drive_fails(
+def test_without_re_enabling_after_a_reset_motion_needs_a_powered_drive_fails(
     tmp_path: Path,
 ) -> None:
     """Leaving out the link that walks the drive back up after a fault reset lets the axis
@@ -65,4 +65,48 @@ def test_without_re_enabling_after_a_reset_motion_needs_an_enabled_drive_fails(
     assert link in text
     (tmp_path / "cell.yaml").write_text(text.replace(link, ""), encoding="utf-8")
     report = verify(tmp_path / "cell.yaml")
-    assert "invariant motion-needs-an-enabled-drive" in failed(report)
+    assert "invariant motion-needs-a-powered-drive" in failed(report)
+
+
+def test_axis_drive_cell_runs_on_twins_through_power_move_fault_and_reset() -> None:
+    """`statectl run` on the cell with simulated twins: MC_Power walks the drive up by
+    Shutdown, Switch on, Enable operation; a drive fault stops the axis; MC_Reset resets
+    the drive and walks it up again; MC_Power off disables the drive's voltage."""
+    import os
+    import subprocess
+    import sys
+
+    lines = (
+        "drive: Initialized\naxis: MC_Power\n+2\naxis: MC_MoveAbsolute\n+2\n"
+        "drive: Fault occurred\n+2\naxis: MC_Reset\n+2\naxis: MC_MoveVelocity\n+1\n"
+        "axis: MC_Power off\n+1\n"
+    )
+    env = {
+        **os.environ,
+        "PYTHONPATH": f"{ROOT / 'src'}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
+    }
+    done = subprocess.run(
+        [sys.executable, "-m", "statectl", "run", str(EXAMPLE / "cell.yaml")],
+        input=lines,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=env,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    steps = [
+        line.split(" on ")[-1] for line in done.stdout.splitlines() if "  drive  state " in line
+    ]
+    walk_up = ["Shutdown", "Switch on", "Enable operation"]
+    assert steps == [
+        "Initialized",
+        *walk_up,
+        "Fault occurred",
+        "Fault reaction completed",
+        "Fault reset",
+        *walk_up,
+        "Disable voltage",
+    ]
+    assert "final axis: Disabled, No error" in done.stdout
+    assert "final drive: Fault free, Switch on disabled" in done.stdout

@@ -198,3 +198,26 @@ def test_huge_hex_data_is_refused(tmp_path: Path, digits: int, refused: bool) ->
     assert ("T108" in [d.code for d in diags]) == refused
     if not refused:
         assert tables is not None and build(tables)[0] is not None
+
+
+@pytest.mark.parametrize("name", ["packml", "motor"])  # no spaces in state names: SCXML ids
+def test_numbers_and_profile_survive_scxml(tmp_path: Path, name: str) -> None:
+    """Exporting a profile to SCXML and importing it back gives the same tables: state
+    numbers and the profile travel as statectl:number and statectl:profile."""
+    from statectl.scxml_io import export_file, import_file
+
+    source = tmp_path / f"{name}.yaml"
+    assert main(["new", name, "--profile", name, "--out", str(tmp_path)]) == 0
+    scxml = tmp_path / "exported" / f"{name}.scxml"
+    scxml.parent.mkdir()
+    scxml.write_text(export_file(source), encoding="utf-8")
+    assert 'statectl:profile="' + name + '"' in scxml.read_text(encoding="utf-8")
+    written, diags = import_file(scxml)
+    assert [d.code for d in diags if d.severity is not Severity.INFO] == []
+    assert isinstance(written, list) and len(written) == 1
+    back, _ = load(written[0])
+    tables, _ = load(source)
+    assert back is not None and tables is not None
+    assert back.profile == name
+    numbers = {s.state: s.number for s in tables.states}
+    assert {s.state: s.number for s in back.states} == numbers

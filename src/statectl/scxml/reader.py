@@ -117,6 +117,22 @@ class _Reader(ContentReader):
                 )
         return frozenset(found)
 
+    def number(self, node: _Node) -> int | None:
+        """A state's ``statectl:number`` (its table's ``number``): digits up to 2**31 - 1."""
+        text = node.get("number")
+        if text is None:
+            return None
+        if text.isascii() and text.isdigit() and len(text) <= 10 and int(text) < 2**31:
+            return int(text)
+        self.problem(
+            "S603",
+            node,
+            f"state number {text!r} is not a whole number from 0 to {2**31 - 1}",
+            "write the number in digits, or leave statectl:number out",
+            warn=True,
+        )
+        return None
+
     def transition(self, source: str, t: _Node) -> Transition:
         exact = t.get("event-name")
         return Transition(
@@ -194,6 +210,7 @@ class _Reader(ContentReader):
             donedata=donedata,
             timeout=read_timeout(node),
             defer=read_defer(node),
+            number=self.number(node),
         )
         for c in children:
             self.state(c, name)
@@ -321,6 +338,7 @@ class _Reader(ContentReader):
             origin=self.at(root),
             binding=root.get("binding") or "early",
             script=scripts,
+            profile=root.get("profile") or "",
         )
         self.check_targets(chart)
         return chart

@@ -249,6 +249,7 @@ class _Writer:
             statectl__controls=controls,
             statectl__description=s.description or None,
             statectl__component=s.component or None,
+            statectl__number=str(s.number) if s.number is not None else None,
         )
         body = self.sub(self.state_body, depth + 1, s)
         self.element(depth, tag + attrs, body)
@@ -316,6 +317,7 @@ class _Writer:
             datamodel=c.datamodel,
             binding=c.binding if c.binding != "early" else None,
             statectl__component=c.component or None,
+            statectl__profile=c.profile or None,
         )
         self.emit(0, '<?xml version="1.0" encoding="UTF-8"?>')
         self.emit(0, f"<scxml{attrs}>")
