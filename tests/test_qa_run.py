@@ -1,0 +1,54 @@
+"""`statectl run --driver none`: time passes only on +SECONDS lines, and those are checked."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+import statectl
+from support import ROOT
+
+CLAMP = ROOT / "examples" / "clamp" / "clamp.yaml"
+SRC = str(os.path.dirname(os.path.dirname(statectl.__file__)))
+
+
+def _run(lines: str) -> tuple[int, list[dict[str, object]], str]:
+    done = subprocess.run(
+        [sys.executable, "-m", "statectl", "run", str(CLAMP), "--driver", "none", "--json"],
+        input=lines,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "PYTHONPATH": SRC},
+    )
+    rows = [json.loads(line) for line in done.stdout.splitlines()]
+    return done.returncode, rows, done.stderr
+
+
+def test_a_timeout_waits_for_a_plus_line() -> None:
+    """Close alone leaves the Clamp Closing at t=0; the timeout runs out on '+2' only."""
+    code, rows, _ = _run("Close\n+2\n")
+    assert code == 0
+    assert (rows[0]["t"], rows[0]["state"]) == (0.0, ["Closing"])
+    assert [s["event"] for s in rows[1]["steps"]] == ["Close timeout"]  # type: ignore[index]
+
+
+def test_a_deferred_event_can_be_stepped_by_hand() -> None:
+    """Release given while Closing is kept, and released when Closed is given."""
+    code, rows, _ = _run("Close\nRelease\nClosed\n")
+    assert code == 0
+    assert rows[1]["why"] == "declared ignored"
+    assert rows[2]["state"] == ["Released"]
+
+
+@pytest.mark.parametrize("line", ["+1e400", "+inf", "+nan", "+-1"])
+def test_a_plus_line_needs_finite_seconds(line: str) -> None:
+    """A +SECONDS line that is not a finite number of seconds >= 0 is refused (exit 1)."""
+    code, rows, err = _run(f"Close\n{line}\n")
+    assert code == 1
+    assert "finite number of seconds" in str(rows[1]["error"])
+    assert "line 2:" in err and "Traceback" not in err
