@@ -52,3 +52,19 @@ def test_a_plus_line_needs_finite_seconds(line: str) -> None:
     assert code == 1
     assert "finite number of seconds" in str(rows[1]["error"])
     assert "line 2:" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("argv", [["node", str(CLAMP), "--node", "a"], ["dashboard", str(CLAMP)]])
+def test_node_and_dashboard_name_a_device_file_as_such(argv: list[str]) -> None:
+    """A device file given to node or dashboard is one C416 saying to use check or run."""
+    done = subprocess.run(
+        [sys.executable, "-m", "statectl", *argv],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        stdin=subprocess.DEVNULL,
+        env={**os.environ, "PYTHONPATH": SRC},
+    )
+    assert done.returncode == 1
+    assert "C416 error: this is a device file" in done.stderr
+    assert "V802" not in done.stderr and "Traceback" not in done.stderr

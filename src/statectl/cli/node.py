@@ -115,6 +115,8 @@ def dashboard_main(
     if not Path(path).exists():
         err.write(f"statectl dashboard: {path}: no such file\n")
         return USAGE
+    if _not_a_cell(path, err):
+        return PROBLEMS
     cell, diags = load_cell(path)
     if cell is None:
         for d in diags:
@@ -202,6 +204,8 @@ def node_main(
     if not Path(path).exists():
         err.write(f"statectl node: {path}: no such file\n")
         return USAGE
+    if _not_a_cell(path, err):
+        return PROBLEMS
     try:
         promise = Guarantee(guarantee.lower())
     except ValueError:
@@ -319,6 +323,16 @@ def node_main(
         if system is not None:
             runcli._close(system, err, failed)
         out.flush()
+
+
+def _not_a_cell(path: str, err: TextIO) -> bool:
+    """C416 (as verify says it) when ``path`` is a device file or SCXML, not a cell file."""
+    from statectl.cli.kinds import device_given_to_verify
+
+    other = device_given_to_verify(path)
+    if other is not None:
+        err.write(f"{other}\n")
+    return other is not None
 
 
 def _feed(system: Any, lines: TextIO, err: TextIO, problems: Any) -> None:
