@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
@@ -164,8 +165,11 @@ def cmd_tables(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         assert isinstance(text, str)
         out.write(text)
         return OK
-    written = save(tables, args.out, args.to)
-    for p in written or [args.out]:
+    target = args.out
+    if args.to != "csv" and os.path.isdir(target):  # a directory: the device names the file
+        target = os.path.join(target, f"{tables.device}.{args.to}")
+    written = save(tables, target, args.to)
+    for p in written or [target]:
         out.write(f"wrote {p}\n")
     return OK
 

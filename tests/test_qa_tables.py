@@ -1,0 +1,32 @@
+"""`statectl tables --out DIR` names the file after the device in every format."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import pytest
+
+from statectl.cli import main
+from statectl.tables import load
+from support import ROOT
+
+CLAMP = ROOT / "examples" / "clamp" / "clamp.yaml"
+
+WRITTEN = [
+    ("yaml", ["Clamp.yaml"]),
+    ("xlsx", ["Clamp.xlsx"]),
+    ("md", ["Clamp.md"]),
+    ("csv", ["Clamp.events.csv", "Clamp.states.csv"]),
+]
+
+
+@pytest.mark.parametrize(("fmt", "names"), WRITTEN)
+def test_out_directory_gets_the_device_file(tmp_path: Path, fmt: str, names: list[str]) -> None:
+    """--out an existing directory writes DEVICE.<format> there, which loads back whole."""
+    out, err = io.StringIO(), io.StringIO()
+    code = main(["tables", str(CLAMP), "--to", fmt, "--out", str(tmp_path)], out=out, err=err)
+    assert code == 0, err.getvalue()
+    assert sorted(p.name for p in tmp_path.iterdir()) == names
+    tables, diags = load(tmp_path / names[-1])
+    assert tables is not None and tables.device == "Clamp", diags
