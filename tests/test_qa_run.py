@@ -6,6 +6,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -68,3 +69,31 @@ def test_node_and_dashboard_name_a_device_file_as_such(argv: list[str]) -> None:
     assert done.returncode == 1
     assert "C416 error: this is a device file" in done.stderr
     assert "V802" not in done.stderr and "Traceback" not in done.stderr
+
+
+CELL = ROOT / "examples" / "clamp" / "cell.yaml"
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["render", str(CELL), "--format", "mermaid"],
+        ["observers", str(CELL)],
+        ["build", str(CELL)],
+        ["codegen", str(CELL), "--out", "unused"],
+    ],
+)
+def test_device_commands_name_a_cell_file_as_such(argv: list[str], tmp_path: Path) -> None:
+    """A cell file given to a device command is C415 saying to use verify, not T102."""
+    done = subprocess.run(
+        [sys.executable, "-m", "statectl", *argv],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": SRC},
+    )
+    assert done.returncode == 1
+    assert "C415 error: this is a cell file" in done.stderr
+    assert "T102" not in done.stderr and "Traceback" not in done.stderr
+    assert list(tmp_path.iterdir()) == []
