@@ -30,3 +30,15 @@ def test_out_directory_gets_the_device_file(tmp_path: Path, fmt: str, names: lis
     assert sorted(p.name for p in tmp_path.iterdir()) == names
     tables, diags = load(tmp_path / names[-1])
     assert tables is not None and tables.device == "Clamp", diags
+
+
+@pytest.mark.parametrize("extra", [[], ["--hypothesis"], ["--xstate"]])
+def test_testgen_out_a_file_is_a_usage_error(tmp_path: Path, extra: list[str]) -> None:
+    """testgen --out naming an existing file says it is not a directory (exit 2), file kept."""
+    target = tmp_path / "notes.txt"
+    target.write_text("mine\n", encoding="utf-8")
+    out, err = io.StringIO(), io.StringIO()
+    code = main(["testgen", str(CLAMP), "--out", str(target), *extra], out=out, err=err)
+    assert code == 2
+    assert "not a directory" in err.getvalue()
+    assert target.read_text(encoding="utf-8") == "mine\n"
