@@ -97,3 +97,27 @@ def test_device_commands_name_a_cell_file_as_such(argv: list[str], tmp_path: Pat
     assert "C415 error: this is a cell file" in done.stderr
     assert "T102" not in done.stderr and "Traceback" not in done.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+NODES = ROOT / "examples" / "pick-and-place" / "cell-nodes.yaml"
+
+USAGE_CASES = [
+    (["node", str(NODES), "--node", "line", "--dashboard", "--port", "99999"], "--port must be"),
+    (["dashboard", str(NODES), "--port", "99999"], "--port must be"),
+    (["dashboard", str(NODES), "--connect", "bogus"], "is not a Zenoh endpoint"),
+]
+
+
+@pytest.mark.parametrize(("argv", "said"), USAGE_CASES)
+def test_node_and_dashboard_usage_errors_have_no_traceback(argv: list[str], said: str) -> None:
+    """A port out of range or a --connect that is no endpoint is a usage error (exit 2)."""
+    done = subprocess.run(
+        [sys.executable, "-m", "statectl", *argv],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        stdin=subprocess.DEVNULL,
+        env={**os.environ, "PYTHONPATH": SRC},
+    )
+    assert done.returncode == 2, done.stderr
+    assert said in done.stderr and "Traceback" not in done.stderr
