@@ -42,3 +42,21 @@ def test_testgen_out_a_file_is_a_usage_error(tmp_path: Path, extra: list[str]) -
     assert code == 2
     assert "not a directory" in err.getvalue()
     assert target.read_text(encoding="utf-8") == "mine\n"
+
+
+@pytest.mark.parametrize("fmt", ["yaml", "csv", "md", "xlsx"])
+def test_a_device_name_cannot_write_outside_out_dir(tmp_path: Path, fmt: str) -> None:
+    """A device named '../../evil' is written inside --out DIR, never beside or above it."""
+    source = tmp_path / "src.yaml"
+    source.write_text(
+        CLAMP.read_text(encoding="utf-8").replace("device: Clamp", 'device: "../../evil"'),
+        encoding="utf-8",
+    )
+    target = tmp_path / "a" / "b"
+    target.mkdir(parents=True)
+    out, err = io.StringIO(), io.StringIO()
+    code = main(["tables", str(source), "--to", fmt, "--out", str(target)], out=out, err=err)
+    assert code == 0, err.getvalue()
+    outside = [p for p in tmp_path.rglob("*evil*") if target not in p.parents]
+    assert outside == []
+    assert any(target.iterdir())

@@ -172,7 +172,9 @@ def cmd_tables(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         return OK
     target = args.out
     if args.to != "csv" and os.path.isdir(target):  # a directory: the device names the file
-        target = os.path.join(target, f"{tables.device}.{args.to}")
+        from statectl.tables.csv_io import file_stem
+
+        target = os.path.join(target, f"{file_stem(tables.device)}.{args.to}")
     written = save(tables, target, args.to)
     for p in written or [target]:
         out.write(f"wrote {p}\n")
