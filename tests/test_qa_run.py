@@ -121,3 +121,21 @@ def test_node_and_dashboard_usage_errors_have_no_traceback(argv: list[str], said
     )
     assert done.returncode == 2, done.stderr
     assert said in done.stderr and "Traceback" not in done.stderr
+
+
+KEPT_CASES = [
+    ("Close\nRelease\n", 1, True, 0),  # Closing defers Release: kept
+    ("Close\nClose\n", 1, False, 0),  # Closing ignores Close: gone
+    ("Close\n" + "Release\n" * 17, 17, False, 1),  # the 17th is dropped (16 kept at most)
+]
+
+
+@pytest.mark.parametrize(("lines", "index", "kept", "exit_code"), KEPT_CASES)
+def test_json_says_when_an_ignored_event_is_kept(
+    lines: str, index: int, kept: bool, exit_code: int
+) -> None:
+    """--json adds kept: true to a line whose event the active state defers and keeps."""
+    code, rows, _ = _run(lines)
+    assert code == exit_code
+    assert rows[index]["why"] == "declared ignored"
+    assert rows[index].get("kept", False) is kept
