@@ -136,6 +136,9 @@ class System:
     settle_cut: int = 0
     #: a step of a cell ran since the invariants were last checked (rule 6)
     _unchecked: bool = False
+    #: ``statectl run --driver none``: settling never moves time (only ``advance`` does), so
+    #: a timeout runs out only when the user lets time pass
+    hold_time: bool = False
 
     def __post_init__(self) -> None:
         if self.max_queue is not None and self.max_queue < 1:
@@ -352,11 +355,13 @@ class System:
                 self._drain()
                 return
             end = clock.now() + (self.settle_limit if limit is None else limit)
+            if self.hold_time:
+                end = clock.now()
             self._drain()
             while True:
                 self._commit()
                 due = clock.next_deadline(work_only=True)
-                if due is not None and due > end:
+                if due is not None and due > end and not self.hold_time:
                     self.settle_cut += 1  # work pending at the limit: the run says so
                 if due is None or due > end:
                     break

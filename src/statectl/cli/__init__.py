@@ -108,7 +108,7 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("tables", help="convert device tables between YAML, CSV, XLSX, Markdown")
     s.add_argument("file", metavar="FILE")
     s.add_argument("--to", required=True, choices=("yaml", "csv", "xlsx", "md"))
-    s.add_argument("--out", help="output path (a directory or NAME for the CSV pair)")
+    s.add_argument("--out", help="output file or directory (the CSV pair: a directory or NAME)")
     s.set_defaults(func=cmd_tables)
 
     s = sub.add_parser("codegen", help="generate C++17 for a device (no heap, flat tables)")

@@ -26,7 +26,9 @@ def run_codegen(path: str, out_dir: str, target: str, out: TextIO, err: TextIO) 
         err.write(f"statectl codegen: cannot read {path}: {exc.strerror or exc}\n")
         return 2
     if chart is None:
-        for d in diags:
+        from statectl.cli.kinds import cell_instead
+
+        for d in cell_instead(path, diags):  # C415: a cell file given for a device file
             err.write(f"{d}\n")
         return 1
     written, gen_diags = generate(chart, out_dir)

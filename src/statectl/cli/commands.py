@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
@@ -40,9 +41,11 @@ def _summary(diags: Sequence[Diagnostic]) -> str:
 def _load_chart(path: str, err: TextIO) -> Chart | None:
     """Load and build a device file; print every diagnostic on failure."""
     from statectl.build import load_and_build
+    from statectl.cli.kinds import cell_instead
 
     chart, diags = load_and_build(path)
     if chart is None or has_errors(diags):
+        diags = cell_instead(path, diags)  # C415: a cell file given for a device file
         _print_diagnostics([d for d in diags if d.severity is not Severity.INFO], err, False)
         err.write(f"{path}: not loaded: {_summary(diags)}\n")
         return None
@@ -89,8 +92,11 @@ def _without_explain(args: argparse.Namespace) -> argparse.Namespace:
 
 def cmd_build(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     from statectl.build import load_and_build
+    from statectl.cli.kinds import cell_instead
 
     chart, diags = load_and_build(args.file)
+    if chart is None:
+        diags = cell_instead(args.file, diags)  # C415: a cell file given for a device file
     _print_diagnostics(diags, err if chart is None else out, False)
     if chart is None or has_errors(diags):
         err.write(f"{args.file}: not built: {_summary(diags)}\n")
@@ -164,8 +170,13 @@ def cmd_tables(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         assert isinstance(text, str)
         out.write(text)
         return OK
-    written = save(tables, args.out, args.to)
-    for p in written or [args.out]:
+    target = args.out
+    if args.to != "csv" and os.path.isdir(target):  # a directory: the device names the file
+        from statectl.tables.csv_io import file_stem
+
+        target = os.path.join(target, f"{file_stem(tables.device)}.{args.to}")
+    written = save(tables, target, args.to)
+    for p in written or [target]:
         out.write(f"wrote {p}\n")
     return OK
 

@@ -14,6 +14,7 @@ Rules:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 from statectl.errors import Diagnostic, Location, Severity
@@ -104,3 +105,13 @@ def device_given_to_verify(path: str) -> Diagnostic | None:
         f"(or statectl run {path})",
         "a cell names its device files under devices:, see docs/cells.md",
     )
+
+
+def cell_instead(path: str, diags: Sequence[Diagnostic]) -> list[Diagnostic]:
+    """``diags`` of a device file that did not load, or C415 alone when it is a cell file
+    (a command that takes a device file says which command takes a cell, as check does)."""
+    if any(d.severity is Severity.ERROR for d in diags):
+        cell = cell_given_to_check(path)
+        if cell is not None:
+            return [cell]
+    return list(diags)

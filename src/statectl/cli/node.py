@@ -21,6 +21,7 @@ import contextlib
 import signal
 import sys
 import threading
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, TextIO
@@ -115,6 +116,10 @@ def dashboard_main(
     if not Path(path).exists():
         err.write(f"statectl dashboard: {path}: no such file\n")
         return USAGE
+    if _bad_usage("dashboard", port, connect or (), err):
+        return USAGE
+    if _not_a_cell(path, err):
+        return PROBLEMS
     cell, diags = load_cell(path)
     if cell is None:
         for d in diags:
@@ -146,6 +151,11 @@ def dashboard_main(
         return 0
     except (StatectlError, OSError) as exc:
         err.write(f"statectl dashboard: {exc}\n")
+        return PROBLEMS
+    except Exception as exc:  # Zenoh's own errors (an endpoint it cannot use), as node's
+        if type(exc).__name__ != "ZError":
+            raise
+        err.write(f"statectl dashboard: Zenoh: {exc}\n")
         return PROBLEMS
 
 
@@ -202,6 +212,10 @@ def node_main(
     if not Path(path).exists():
         err.write(f"statectl node: {path}: no such file\n")
         return USAGE
+    if _bad_usage("node", port, (), err):
+        return USAGE
+    if _not_a_cell(path, err):
+        return PROBLEMS
     try:
         promise = Guarantee(guarantee.lower())
     except ValueError:
@@ -319,6 +333,36 @@ def node_main(
         if system is not None:
             runcli._close(system, err, failed)
         out.flush()
+
+
+def _bad_usage(command: str, port: int | None, connect: Sequence[str], err: TextIO) -> bool:
+    """--port out of range, or a --connect that is no Zenoh endpoint: said as run says it."""
+    from statectl.cli.run import MAX_PORT
+
+    if port is not None and not 0 <= port <= MAX_PORT:
+        err.write(
+            f"statectl {command}: --port must be 0 (any free port) to {MAX_PORT} (got {port})\n"
+        )
+        return True
+    for endpoint in connect:
+        proto, _, address = endpoint.partition("/")
+        if not proto or ":" not in address:
+            err.write(
+                f"statectl {command}: --connect {endpoint!r} is not a Zenoh endpoint; "
+                "write PROTOCOL/HOST:PORT, e.g. tcp/127.0.0.1:7447\n"
+            )
+            return True
+    return False
+
+
+def _not_a_cell(path: str, err: TextIO) -> bool:
+    """C416 (as verify says it) when ``path`` is a device file or SCXML, not a cell file."""
+    from statectl.cli.kinds import device_given_to_verify
+
+    other = device_given_to_verify(path)
+    if other is not None:
+        err.write(f"{other}\n")
+    return other is not None
 
 
 def _feed(system: Any, lines: TextIO, err: TextIO, problems: Any) -> None:

@@ -426,6 +426,7 @@ def run(
         system = System(setups, clock, store, cell)
         if settle_limit is not None:
             system.settle_limit = settle_limit
+        system.hold_time = driver == NO_DRIVER and config is None  # time moves on +S lines only
         width = max(len(n) for n in system.subjects)
         if driver is None and config is None:
             info.write(f"no driver configured: simulated twins for {', '.join(drivers)}\n")

@@ -13,7 +13,11 @@ Rules:
    a bad line ``{"line", "error"}`` (the message also goes to stderr). Blank
    and comment lines give nothing. A cell's objects add ``states``: every
    device's configuration.
-3. Nothing else is written to standard output, so each output line is one
+4. An event the device's active state defers (its ``defer`` cell) is declared ignored by
+   the kernel and kept by the runtime: its object adds ``"kept": true`` while a state
+   that defers it is still active after the line, so "ignored" is not read as "lost"
+   (not when the device already kept the most it keeps and dropped it).
+5. Nothing else is written to standard output, so each output line is one
    JSON object (``jq``, ``json.loads`` per line).
 """
 
@@ -23,7 +27,8 @@ import json
 from collections.abc import Callable
 from typing import Any, TextIO
 
-from statectl.runtime.records import InvokeIssued
+from statectl.runtime.records import EventRejected, InvokeIssued
+from statectl.semantics import Unhandled
 from statectl.system import System
 
 __all__ = ["StepLog"]
@@ -37,6 +42,7 @@ class StepLog:
         self._out = out
         self._steps: list[dict[str, Any]] = []
         self._invokes: list[dict[str, Any]] = []
+        self._dropped: set[tuple[str, str]] = set()
         system.listen(self._record)
         for name, subject in system.subjects.items():
             subject.on_step(self._stepper(name))
@@ -48,6 +54,8 @@ class StepLog:
         return stepped
 
     def _record(self, record: object) -> None:
+        if isinstance(record, EventRejected) and record.reason is Unhandled.DECLARED_IGNORED:
+            self._dropped.add((record.device, record.event))  # rule 4: the kept queue was full
         if isinstance(record, InvokeIssued):
             self._invokes.append(
                 {
@@ -63,6 +71,7 @@ class StepLog:
         """Forget what happened before this line (the start, a bad line)."""
         self._steps.clear()
         self._invokes.clear()
+        self._dropped.clear()
 
     def event(self, number: int, device: str | None, event: str, data: Any) -> None:
         """Rule 1: the object for an event line, once it settled."""
@@ -83,8 +92,17 @@ class StepLog:
                 "handled": handled,
                 "why": None if handled else outcome,
                 "state": self._configuration(name),
+                **({"kept": True} if not handled and self._kept(name, event) else {}),
             }
         )
+
+    def _kept(self, name: str, event: str) -> bool:
+        """Rule 4: an active state of ``name`` defers ``event`` now, and it was not dropped."""
+        if (name, event) in self._dropped:
+            return False
+        subject = self._system.subjects[name]
+        active = subject.configuration
+        return any(event in s.defer for s in subject.chart.states if s.name in active)
 
     def advance(self, number: int, seconds: float) -> None:
         """Rule 2: the object for a ``+SECONDS`` line."""

@@ -10,7 +10,9 @@ Rules:
 3. The chart's initial states, and each compound state's default children, carry an initial
    marker; a ``monitoring required`` state carries a :class:`Note` naming the fault events
    its monitor raises.
-4. ``active`` names the states to highlight (a live dashboard); an unknown name is misuse.
+4. A state with a timeout or deferred events carries them as ``details``, lines every
+   writer prints under the state's name: ``after 2s / Close timeout``, ``defer: Release``.
+5. ``active`` names the states to highlight (a live dashboard); an unknown name is misuse.
 """
 
 from __future__ import annotations
@@ -21,9 +23,20 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 from statectl.errors import StatectlError
-from statectl.model import Chart, ControlKind, EventKind, StateKind, Transition
+from statectl.model import Chart, ControlKind, EventKind, State, StateKind, Transition
 
-__all__ = ["Diagram", "Edge", "Node", "NodeKind", "Note", "edge_label", "from_chart", "safe_id"]
+__all__ = [
+    "Diagram",
+    "Edge",
+    "Node",
+    "NodeKind",
+    "Note",
+    "duration",
+    "edge_label",
+    "from_chart",
+    "safe_id",
+    "state_details",
+]
 
 
 class NodeKind(enum.Enum):
@@ -72,6 +85,7 @@ class Node:
     active: bool = False
     initial: tuple[str, ...] = ()  # ids of the default children of a container
     monitored: bool = False
+    details: tuple[str, ...] = ()  # timeout and deferred events, one line each (rule 4)
 
 
 @dataclass(frozen=True, slots=True)
@@ -153,6 +167,26 @@ def edge_label(t: Transition) -> str:
     return " ".join(text.split())
 
 
+def duration(seconds: float) -> str:
+    """``2s``, ``1.5s``, ``250ms``, ``2min``: a timeout's duration as the tables write it."""
+    ms = round(seconds * 1000)
+    if ms % 60000 == 0:
+        return f"{ms // 60000}min"
+    if ms % 1000 == 0:
+        return f"{ms // 1000}s"
+    return f"{ms}ms"
+
+
+def state_details(state: State) -> tuple[str, ...]:
+    """The lines shown under a state's name: its timeout, then the events it defers."""
+    out: list[str] = []
+    if state.timeout is not None:
+        out.append(f"after {duration(state.timeout.seconds)} / {state.timeout.event}")
+    if state.defer:
+        out.append("defer: " + ", ".join(state.defer))
+    return tuple(out)
+
+
 def from_chart(chart: Chart, active: frozenset[str] = frozenset()) -> Diagram:
     """Build the diagram of ``chart`` with the ``active`` states highlighted."""
     unknown = sorted(active - {s.name for s in chart.states})
@@ -192,6 +226,7 @@ def from_chart(chart: Chart, active: frozenset[str] = frozenset()) -> Diagram:
                 active=s.name in active,
                 initial=initial,
                 monitored=s.name in monitored_raises,
+                details=state_details(s),
             )
         )
     edges: list[Edge] = []

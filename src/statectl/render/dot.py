@@ -9,6 +9,8 @@ Rules:
 3. Helper nodes have ids starting with ``_``, which safe state ids never do.
 4. Initial markers are small filled points; final states have a double border; history
    states are circles labelled H or H*; monitored states get a note; active states fill.
+5. A state's details (its timeout, its deferred events) are further lines of its label
+   (a node's or a cluster's), under the name.
 """
 
 from __future__ import annotations
@@ -36,8 +38,12 @@ def _attrs(pairs: dict[str, str]) -> str:
     return "[" + ", ".join(f"{k}={v}" for k, v in pairs.items()) + "]"
 
 
+def _label(node: Node) -> str:
+    return "\n".join((node.label, *node.details))
+
+
 def _node_line(node: Node) -> str:
-    attrs: dict[str, str] = {"label": quote(node.label)}
+    attrs: dict[str, str] = {"label": quote(_label(node))}
     if node.kind.is_history:
         attrs["shape"] = "circle"
         attrs["width"] = "0.3"
@@ -68,7 +74,7 @@ def _block(d: Diagram, parent: str | None, depth: int, out: list[str]) -> None:
             fill = _ACTIVE_CLUSTER_FILL if kid.active else "white"
             out.append(f"{inner}fillcolor={quote(fill)};")
             out.append(f"{inner}penwidth={2 if kid.active else 1};")
-            out.append(f"{inner}label={quote(kid.label)};")
+            out.append(f"{inner}label={quote(_label(kid))};")
             out.append(f"{inner}style={quote(style)};")
             out.append(
                 f'{inner}{quote(_anchor(kid.id))} [shape=point, style=invis, width=0, label=""];'

@@ -5,16 +5,18 @@ Rules:
    copied from the source file), so the page shows what statectl understood.
 2. The statechart is the Mermaid writer's output in a fenced ``mermaid`` block, which
    GitHub, GitLab and most documentation tools draw.
-3. Table cells escape ``|`` and fold line breaks, so any name or prose fits one row.
+3. A device with timeouts or deferred events gets ``timeout`` and ``defer`` columns in
+   its State Definition table (others keep the paper's five columns).
+4. Table cells escape ``|`` and fold line breaks, so any name or prose fits one row.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
-from statectl.model import Chart, ControlKind
+from statectl.model import Chart, ControlKind, State
 from statectl.render import mermaid
-from statectl.render.diagram import Diagram
+from statectl.render.diagram import Diagram, duration
 
 __all__ = ["cell", "table", "write"]
 
@@ -35,7 +37,17 @@ def _controls(controls: frozenset[ControlKind]) -> str:
     return ", ".join(k.value for k in ControlKind if k in controls)
 
 
+def _timed(chart: Chart) -> bool:
+    return any(s.timeout is not None or s.defer for s in chart.states)
+
+
+def _timing(s: State) -> list[str]:
+    timeout = "" if s.timeout is None else f"{duration(s.timeout.seconds)} -> {s.timeout.event}"
+    return [timeout, ", ".join(s.defer)]
+
+
 def _state_rows(chart: Chart) -> list[list[str]]:
+    timed = _timed(chart)
     rows = []
     for s in chart.states:
         if s.kind.is_history:
@@ -48,6 +60,7 @@ def _state_rows(chart: Chart) -> list[list[str]]:
                 _controls(s.controls),
                 s.description,
                 ", ".join(ignored),
+                *(_timing(s) if timed else []),
             ]
         )
     return rows
@@ -83,7 +96,8 @@ def write(chart: Chart, d: Diagram) -> str:
     """The Markdown page for ``chart``; ``d`` is its diagram (for the Mermaid block)."""
     out = [f"# {cell(chart.name)}", "", "## State Definition", ""]
     out += table(
-        ["component name/API", "state", "required state control", "description", "ignores"],
+        ["component name/API", "state", "required state control", "description", "ignores"]
+        + (["timeout", "defer"] if _timed(chart) else []),
         _state_rows(chart),
     )
     out += ["", "## Event Definition", ""]

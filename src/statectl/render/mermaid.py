@@ -9,6 +9,8 @@ Rules:
 3. An edge is written inside the innermost compound block holding both ends; a final
    state gets ``id --> [*]``; monitored states get a note; active states get class
    ``active``.
+4. A state's details (its timeout, its deferred events) are state descriptions,
+   ``id : after 2s / Close timeout``, printed after the state is declared.
 """
 
 from __future__ import annotations
@@ -50,6 +52,7 @@ def _block(d: Diagram, parent: str | None, depth: int, out: list[str]) -> None:
             out.append(pad + "}")
         if kid.kind is NodeKind.FINAL:
             out.append(f"{pad}{kid.id} --> [*]")
+        out.extend(f"{pad}{kid.id} : {escape(line)}" for line in kid.details)
     for edge in d.edges:
         if d.home(edge) == parent:
             label = f" : {escape(edge.label)}" if edge.label else ""

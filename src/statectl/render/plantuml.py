@@ -9,6 +9,8 @@ Rules:
 3. An edge is written inside the innermost compound block holding both ends; a final
    state gets ``id --> [*]``; history states use the ``<<history>>`` / ``<<history*>>``
    stereotypes; monitored states get a note; active states get a fill colour.
+4. A state's details (its timeout, its deferred events) are description lines,
+   ``id : after 2s / Close timeout``, printed after the state.
 """
 
 from __future__ import annotations
@@ -53,6 +55,7 @@ def _block(d: Diagram, parent: str | None, depth: int, out: list[str]) -> None:
             out.append(pad + _head(kid))
         if kid.kind is NodeKind.FINAL:
             out.append(f"{pad}{kid.id} --> [*]")
+        out.extend(f"{pad}{kid.id} : {label(line)}" for line in kid.details)
     for edge in d.edges:
         if d.home(edge) == parent:
             text = f" : {label(edge.label)}" if edge.label else ""

@@ -6,6 +6,7 @@ that tests and the dashboard can use without the run's machinery."""
 from __future__ import annotations
 
 import datetime as dt
+import math
 from typing import Any
 
 from statectl.errors import StatectlError
@@ -19,9 +20,14 @@ def parse_event_line(line: str) -> tuple[str | None, str, Any] | float | None:
         return None
     if text.startswith("+"):
         try:
-            return float(text[1:])
+            seconds = float(text[1:])
         except ValueError:
             raise StatectlError(f"'+' needs seconds, e.g. '+1.5' (got {text!r})") from None
+        if not 0 <= seconds < math.inf:
+            raise StatectlError(
+                f"'+' needs a finite number of seconds, 0 or more, e.g. '+1.5' (got {text!r})"
+            )
+        return seconds
     device = None
     head, colon, rest = text.partition(":")
     if colon and "{" not in head and "[" not in head and rest.startswith(" "):

@@ -75,6 +75,13 @@ class CsvFiles:
         return (self.data, self.recovery)
 
 
+def file_stem(device: str) -> str:
+    """A device name as a file name inside a directory: no separator, no leading dot, so a
+    name such as ``../x`` cannot write outside the directory it is saved into."""
+    stem = re.sub(r'[\\/:*?"<>|\x00-\x1f]', "_", device).strip().lstrip(".")
+    return stem or "device"
+
+
 def csv_paths(path: Path, device: str | None = None) -> CsvFiles | None:
     """The pair a path names: either file of it, ``NAME.csv``, or a directory.
 
@@ -83,7 +90,7 @@ def csv_paths(path: Path, device: str | None = None) -> CsvFiles | None:
     """
     if path.is_dir():
         if device is not None:
-            name = device
+            name = file_stem(device)
         else:
             found = sorted(path.glob("*.states.csv"))
             if len(found) != 1:

@@ -53,6 +53,9 @@ class Case:
     skip: str = ""  # why the case cannot run (a row the search never reached)
     given_data: tuple[Any, ...] = ()  # per given event, its data (empty: none at all)
     event_data: Any = None  # the data sent with ``event``
+    wait: float = 0.0  # a timeout case: seconds waited, driver stalled (statectl.testgen.timing)
+    wait_states: tuple[str, ...] = ()  # the states before the wait, or around the kept event
+    kept: str = ""  # a defer case: the event sent first and kept, released by ``event``
 
 
 @dataclass(frozen=True, slots=True)
@@ -359,6 +362,10 @@ def cases_for(g: Graph, criterion: str) -> Suite:
         cases = _pairs(g, names)
     else:
         raise StatectlError(f"unknown criterion {criterion!r}; choose one of {', '.join(CRITERIA)}")
+    from statectl.testgen.timing import timing_cases  # it builds Cases: imported here
+
+    timed, timing_notes = timing_cases(g, names)
+    cases, notes = [*cases, *timed], [*notes, *timing_notes]
     if not g.complete:
         notes.append("the search stopped at its bound on nodes: some paths are missing")
     return Suite(criterion, tuple(cases), tuple(_tables(g, names)), tuple(notes))

@@ -25,6 +25,9 @@ def cmd_testgen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         generate_hypothesis,
     )
 
+    if Path(args.out).exists() and not Path(args.out).is_dir():  # as statectl new says it
+        err.write(f"statectl testgen: --out {args.out}: not a directory; nothing was written\n")
+        return USAGE
     if _is_cell(args.file):
         return _cell_testgen(args, out, err)
     if args.xstate:

@@ -22,6 +22,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 from statectl.devices import SimTwin, connect
+from statectl.devices.base import Driver
 from statectl.model import Chart, Notify, StateKind
 from statectl.observers import Observer
 from statectl.runtime import (
@@ -97,6 +98,7 @@ class DeviceUnderTest:
         else:
             self.subject.attach(self.driver)  # a plain observer: no monitors to poll it
         self.sent: list[str] = []
+        self.dropped: list[str] = []  # what the driver reported after stall()
         self.subject.start()
         if tally is not None:
             self._count(tally, where)
@@ -204,6 +206,22 @@ class DeviceUnderTest:
     def advance(self, seconds: float) -> int:
         """Move the simulated clock on (the driver's completions and monitors run)."""
         return self.subject.advance(seconds)
+
+    def wait(self, seconds: float) -> int:
+        """Move the clock on, and check what happened meanwhile with :meth:`expect`
+        (a timeout's transition: what the device did without being sent anything)."""
+        self.recorder.mark = len(self.recorder.records)
+        self.sent.append(f"(wait {seconds:g} s)")
+        return self.subject.advance(seconds)
+
+    def stall(self) -> None:
+        """From now on the driver's own reports (its completions) are dropped, as from a
+        device that went silent: a state's timeout can then run out in a test."""
+        if isinstance(self.driver, Driver) and self.driver._clock is not None:
+            Driver.bind(self.driver, self._drop, self.driver._clock)
+
+    def _drop(self, event: str, data: Any = None) -> None:
+        self.dropped.append(event)
 
     # -- checking ------------------------------------------------------------------------------
 

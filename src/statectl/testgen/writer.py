@@ -18,6 +18,7 @@ from typing import Any
 from statectl.model import Chart
 from statectl.testgen.cases import Case, Expect, Suite, Table
 from statectl.testgen.paths import sendable_events
+from statectl.testgen.timing import timing_body
 
 __all__ = ["hypothesis_text", "module_text"]
 
@@ -110,6 +111,8 @@ def _case(c: Case) -> str:
     if c.skip:
         return out + "\n\n"
     out += "    d = statectl_device\n" + _given(c.given, c.given_data)
+    if c.wait or c.kept:
+        return out + timing_body(c) + _expect(c.expect) + "\n\n"
     if c.event is not None and c.event_data is not None:
         out += f"    d.send({_lit(c.event)}, {_lit(c.event_data)})\n"
     elif c.event is not None:
