@@ -52,10 +52,11 @@ class _Row(Protocol):
 
 def _lineage(name: str, merged: Mapping[str, _Row]) -> list[str]:
     """The state and its ancestors (a cycle is B210's, so stop at a repeat)."""
-    chain = [name]
+    chain, seen = [name], {name}
     parent = merged[name].parent
-    while parent and parent in merged and parent not in chain:
+    while parent and parent in merged and parent not in seen:
         chain.append(parent)
+        seen.add(parent)
         parent = merged[parent].parent
     return chain
 
@@ -120,7 +121,11 @@ def state_extras(
                 )
             timeout = Timeout(seconds, event, where)
         handled = _handled(name, merged, rows) if m.defer else set()
-        ignored = {i for a in _lineage(name, merged) for i in merged[a].ignore}
+        # only a state that defers needs its lineage: a deep chain walked for every state
+        # would be quadratic (a 10,000-level file is refused as B218, but built first)
+        ignored = (
+            {i for a in _lineage(name, merged) for i in merged[a].ignore} if m.defer else set()
+        )
         for event in m.defer:
             if event not in known:
                 diags.append(
