@@ -202,7 +202,9 @@ def _motor_subject(wiring: str) -> tuple[Subject, JournalledDevice | None]:
         attach_monitors(subject, QuietDevice())
     else:  # as `statectl demo` wires it: the simulated motor's API and its monitors
         connect(subject, make_driver("sim-motor", {}, chart=chart))
-        if wiring == "trace":
+        if wiring == "trace":  # as `statectl demo` and `statectl run` attach it
+            subject.listen_steps(TraceWriter(io.StringIO(), device_width=len(subject.name)).step)
+        elif wiring == "trace-records":  # the trace writer as a listen() listener
             subject.listen(TraceWriter(io.StringIO(), device_width=len(subject.name)))
         elif wiring == "journal":
             path = Path(SCRATCH.name) / f"journal-{id(subject)}.db"
@@ -760,6 +762,12 @@ def build(libs: Sequence[str]) -> tuple[list[Contender], list[str]]:
         ),
         ("motor", "statectl", "statectl demo wiring + journal", statectl_paper("journal")),
         ("motor", "statectl", "statectl demo wiring + trace", statectl_paper("trace")),
+        (
+            "motor",
+            "statectl",
+            "statectl demo wiring + trace as a listen() listener",
+            statectl_paper("trace-records"),
+        ),
         ("motor", "statectl", "statectl bare post()+run_until_idle()", statectl_motor_queued),
         ("motor", "dict", "dict baseline", dict_motor),
         ("motor", "transitions", "transitions", transitions_motor),

@@ -76,7 +76,7 @@ from statectl.journal import (
     Ticket,
 )
 from statectl.model import Chart
-from statectl.runtime import Clock, Record, SimClock, Subject, WallClock
+from statectl.runtime import Clock, Record, SimClock, StepRecord, Subject, WallClock
 from statectl.runtime.eventdata import AssignError
 from statectl.semantics.eventview import GuardError
 
@@ -211,8 +211,15 @@ class System:
             self.wake.set()
 
     def listen(self, callback: Callable[[Any], None]) -> None:
+        """Every device's typed records, one call each (``Subject.listen``)."""
         for s in self.subjects.values():
             s.listen(callback)
+
+    def listen_steps(self, callback: Callable[[StepRecord], None]) -> None:
+        """Every device's steps, one :class:`StepRecord` each (``Subject.listen_steps``):
+        the typed records are built only if the callback reads them."""
+        for s in self.subjects.values():
+            s.listen_steps(callback)
 
     def start(self, *, resume: bool = False) -> dict[str, bool]:
         """Start every device, or resume it from the journal; which ones were resumed."""

@@ -251,7 +251,7 @@ def node_main(
         if system.subjects:
             width = max(len(n) for n in system.subjects)
             if not quiet:
-                system.listen(TraceWriter(out, device_width=width))
+                system.listen_steps(TraceWriter(out, device_width=width).step)
                 runcli._show_notes(drivers, out, width)
         system.listen(problems.record)
         me = cell.nodes.node(node)

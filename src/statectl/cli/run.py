@@ -435,7 +435,7 @@ def run(
         if as_json:
             steps = StepLog(system, out)
         else:
-            system.listen(TraceWriter(out, device_width=width))
+            system.listen_steps(TraceWriter(out, device_width=width).step)
             _show_notes(drivers, out, width)
         system.listen(problems.record)
         system.on_violation.append(problems.violation(out if steps is None else info, width))
