@@ -415,24 +415,27 @@ class System:
     async def records(self, maxsize: int = 10_000) -> AsyncIterator[Record]:
         """Every device's records as they happen, until the consumer stops iterating.
 
-        Records are built only while someone iterates. A consumer that falls
-        ``maxsize`` records behind loses the oldest (a warning, never a stalled owner).
+        The owner hands each step over as one :class:`StepRecord`; its typed records
+        are built here, on the consumer's side, as they are iterated. A consumer that
+        falls ``maxsize`` steps behind loses the oldest (never a stalled owner).
         """
         loop = asyncio.get_running_loop()
-        queue: asyncio.Queue[Record] = asyncio.Queue(maxsize)
+        queue: asyncio.Queue[StepRecord] = asyncio.Queue(maxsize)
 
-        def put(record: Record) -> None:
+        def put(step: StepRecord) -> None:
             if queue.full():
                 queue.get_nowait()
-            queue.put_nowait(record)
+            queue.put_nowait(step)
 
-        def listener(record: Record) -> None:
-            loop.call_soon_threadsafe(put, record)
+        def listener(step: StepRecord) -> None:
+            loop.call_soon_threadsafe(put, step)
 
-        offs = [s.listen(listener) for s in self.subjects.values()]
+        offs = [s.listen_steps(listener) for s in self.subjects.values()]
         try:
             while True:
-                yield await queue.get()
+                step = await queue.get()
+                for record in step.records:
+                    yield record
         finally:
             for off in offs:
                 off()
