@@ -23,7 +23,8 @@ import json
 from collections.abc import Callable
 from typing import Any, TextIO
 
-from statectl.runtime.records import InvokeIssued
+from statectl.model import Notify
+from statectl.runtime.records import InvokeIssued, StepRecord
 from statectl.system import System
 
 __all__ = ["StepLog"]
@@ -37,7 +38,7 @@ class StepLog:
         self._out = out
         self._steps: list[dict[str, Any]] = []
         self._invokes: list[dict[str, Any]] = []
-        system.listen(self._record)
+        system.listen_steps(self._record)
         for name, subject in system.subjects.items():
             subject.on_step(self._stepper(name))
 
@@ -47,8 +48,15 @@ class StepLog:
 
         return stepped
 
-    def _record(self, record: object) -> None:
-        if isinstance(record, InvokeIssued):
+    def _record(self, step: StepRecord) -> None:
+        decided = step.step
+        if step.event is not None and (
+            decided is None or not any(isinstance(a, Notify) for a in decided.actions)
+        ):
+            return  # an event that issued nothing: its records are not built
+        for record in step.records:
+            if not isinstance(record, InvokeIssued):
+                continue
             self._invokes.append(
                 {
                     "device": record.device,

@@ -308,6 +308,22 @@ class StepRecord:
         return self.step.exited if self.step is not None else ()
 
     @property
+    def meanwhile(self) -> tuple[Record, ...]:
+        """The records others made during the step (a monitor starting), in order;
+        read without building the step's own records."""
+        if self.event is None:
+            return ()
+        extras = self._tail.extras if self._tail is not None else ()
+        return tuple(record for _, record in extras)
+
+    @property
+    def api_calls(self) -> int:
+        """How many ``ObserverCalled`` records the step has, without building them."""
+        if self.event is None or (self._tail is not None and self._tail.upto is not None):
+            return sum(type(r) is ObserverCalled for r in self.records)
+        return sum(len(m) if isinstance(m, tuple) else m is not None for m in self._made)
+
+    @property
     def records(self) -> tuple[Record, ...]:
         """The typed records of rule 3 (and those made meanwhile), built once."""
         try:
