@@ -311,17 +311,22 @@ class StepRecord:
     def meanwhile(self) -> tuple[Record, ...]:
         """The records others made during the step (a monitor starting), in order;
         read without building the step's own records."""
-        if self.event is None:
+        tail = self._tail
+        if tail is None or not tail.extras or self.event is None:
             return ()
-        extras = self._tail.extras if self._tail is not None else ()
-        return tuple(record for _, record in extras)
+        return tuple(record for _, record in tail.extras)
 
     @property
     def api_calls(self) -> int:
         """How many ``ObserverCalled`` records the step has, without building them."""
-        if self.event is None or (self._tail is not None and self._tail.upto is not None):
+        tail = self._tail
+        if self.event is None or (tail is not None and tail.upto is not None):
             return sum(type(r) is ObserverCalled for r in self.records)
-        return sum(len(m) if isinstance(m, tuple) else m is not None for m in self._made)
+        n = 0
+        for made in self._made:  # per notification: its API calls, its observer, or None
+            if made is not None:
+                n += len(made) if isinstance(made, tuple) else 1
+        return n
 
     @property
     def records(self) -> tuple[Record, ...]:

@@ -315,7 +315,8 @@ class Dashboard:
             self._pending.append(item)
             loop = self._loop
             if loop is None:  # not serving: only the log for later pages matters
-                del self._pending[:-LOG_SIZE]
+                if len(self._pending) >= 2 * LOG_SIZE:  # cut back now and then, not per step
+                    del self._pending[:-LOG_SIZE]
                 return
             if len(self._pending) > PENDING_MAX:  # rule 4
                 self._pending.clear()
