@@ -9,13 +9,17 @@ from __future__ import annotations
 
 import contextlib
 import io
+from pathlib import Path
 
 import pytest
 
+from statectl.cell import load_cell_or_raise
 from statectl.cli.run import _Problems as ProblemCounter  # statectl run's counter
 from statectl.devices import connect, make_driver
 from statectl.errors import UnhandledEventError
+from statectl.explore.replay import CellLinks
 from statectl.model import Chart
+from statectl.runner.cells import load_setups
 from statectl.runtime import (
     MonitorStarted,
     MonitorStopped,
@@ -124,3 +128,36 @@ def test_the_problem_counter_counts_steps_as_it_counts_records(
         by_step.step(step)
     assert by_step.unknown == by_record.unknown
     assert by_step.unknown == 1  # "No such event"; the rest are handled or declared ignored
+
+
+CELL = Path(__file__).parent.parent / "examples" / "pick-and-place" / "cell.yaml"
+
+
+def _links_fired(steps: bool) -> list[list[int]]:
+    """Every event of every device of the pick-and-place cell, twice over; the links
+    each event fired, heard by record (watch) or by step (watch_step)."""
+    cell = load_cell_or_raise(CELL)
+    setups, _ = load_setups(cell, journalled=False)
+    subjects = {s.name: Subject(s.chart, clock=SimClock(), name=s.name) for s in setups}
+    links = CellLinks(cell, subjects)
+    for subject in subjects.values():
+        if steps:
+            subject.listen_steps(links.watch_step)
+        else:
+            subject.listen(links.watch)
+        subject.start()
+    fired: list[list[int]] = []
+    for _ in range(2):
+        for subject in subjects.values():
+            for event in subject.chart.event_names:
+                links.fired.clear()
+                subject.dispatch(event)
+                fired.append(sorted(links.fired))
+    return fired
+
+
+def test_cell_links_fire_the_same_by_step_as_by_record() -> None:
+    """CellLinks.watch_step fires, per event, the links CellLinks.watch fires."""
+    by_record = _links_fired(steps=False)
+    assert _links_fired(steps=True) == by_record
+    assert any(by_record)  # some event fired a link

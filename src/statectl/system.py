@@ -159,7 +159,7 @@ class System:
             links = self.links = CellLinks(self.cell, self.subjects)
             self.rules = CellRules(self.cell, links) if self.enforce else None
             for name, s in self.subjects.items():
-                s.listen(links.watch)
+                s.listen_steps(links.watch_step)
                 if name in self.bound:
                     self.bound[name].sends = self._link_sends  # journalled with the step
                 else:

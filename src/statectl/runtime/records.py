@@ -308,6 +308,11 @@ class StepRecord:
         return self.step.exited if self.step is not None else ()
 
     @property
+    def failed(self) -> bool:
+        """An observer or watcher raised during the step: its records end there."""
+        return self._tail is not None and self._tail.upto is not None
+
+    @property
     def meanwhile(self) -> tuple[Record, ...]:
         """The records others made during the step (a monitor starting), in order;
         read without building the step's own records."""
