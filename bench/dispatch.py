@@ -12,8 +12,10 @@ Rules:
    listener that asked for records (a step-record listener that reads nothing, one
    that reads every typed record, and a ``listen()`` listener), with the
    Moving monitor, with the simulated motor connected as ``statectl demo`` connects
-   it (driver + monitor), with a journal (SQLite, default guarantee), with the trace
-   writer, and through ``post()``. The worst row is reported beside the best.
+   it (driver + monitor), with a journal (SQLite, default guarantee), with the
+   dashboard (what its owner thread pays; the page's loop is not running), with the
+   trace writer (as a step listener and as a record listener), and through
+   ``post()``. The worst row is reported beside the best.
 3. One process, interleaved: each round runs every contender once, in an order
    that rotates from round to round, after warm-up rounds that are thrown away.
    A figure is the median over the rounds, so a noisy moment hurts one round of
@@ -202,8 +204,14 @@ def _motor_subject(wiring: str) -> tuple[Subject, JournalledDevice | None]:
         attach_monitors(subject, QuietDevice())
     else:  # as `statectl demo` wires it: the simulated motor's API and its monitors
         connect(subject, make_driver("sim-motor", {}, chart=chart))
-        if wiring == "trace":
+        if wiring == "trace":  # as `statectl demo` and `statectl run` attach it
+            subject.listen_steps(TraceWriter(io.StringIO(), device_width=len(subject.name)).step)
+        elif wiring == "trace-records":  # the trace writer as a listen() listener
             subject.listen(TraceWriter(io.StringIO(), device_width=len(subject.name)))
+        elif wiring == "dashboard":  # the owner's side: noted steps wait for a loop
+            from statectl.web.server import Dashboard
+
+            Dashboard([subject])
         elif wiring == "journal":
             path = Path(SCRATCH.name) / f"journal-{id(subject)}.db"
             journalled = JournalledDevice(subject, Journal(path))
@@ -759,7 +767,19 @@ def build(libs: Sequence[str]) -> tuple[list[Contender], list[str]]:
             statectl_paper("demo"),
         ),
         ("motor", "statectl", "statectl demo wiring + journal", statectl_paper("journal")),
+        (
+            "motor",
+            "statectl",
+            "statectl demo wiring + dashboard (the owner's side)",
+            statectl_paper("dashboard"),
+        ),
         ("motor", "statectl", "statectl demo wiring + trace", statectl_paper("trace")),
+        (
+            "motor",
+            "statectl",
+            "statectl demo wiring + trace as a listen() listener",
+            statectl_paper("trace-records"),
+        ),
         ("motor", "statectl", "statectl bare post()+run_until_idle()", statectl_motor_queued),
         ("motor", "dict", "dict baseline", dict_motor),
         ("motor", "transitions", "transitions", transitions_motor),

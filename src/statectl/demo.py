@@ -85,7 +85,7 @@ def run_demo(
     invokes = ", ".join(f"#{i.number} {i.name} -> {i.method}()" for i in chart.invokes)
     out.write(f"statectl demo: {chart.name} on {type(device).__name__} (driver {driver})\n")
     out.write(f"invokes: {invokes}\n\n")
-    subject.listen(TraceWriter(out, device_width=len(subject.name)))
+    subject.listen_steps(TraceWriter(out, device_width=len(subject.name)).step)
     for listener in listeners:
         subject.listen(listener)
     try:

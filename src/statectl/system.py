@@ -78,7 +78,7 @@ from statectl.journal import (
     Ticket,
 )
 from statectl.model import Chart
-from statectl.runtime import Clock, Record, SimClock, Subject, WallClock
+from statectl.runtime import Clock, Record, SimClock, StepRecord, Subject, WallClock
 from statectl.runtime.eventdata import AssignError
 from statectl.semantics.eventview import GuardError
 
@@ -166,7 +166,7 @@ class System:
             links = self.links = CellLinks(self.cell, self.subjects)
             self.rules = CellRules(self.cell, links) if self.enforce else None
             for name, s in self.subjects.items():
-                s.listen(links.watch)
+                s.listen_steps(links.watch_step)
                 if name in self.bound:
                     self.bound[name].sends = self._link_sends  # journalled with the step
                 else:
@@ -233,8 +233,15 @@ class System:
             self.wake.set()
 
     def listen(self, callback: Callable[[Any], None]) -> None:
+        """Every device's typed records, one call each (``Subject.listen``)."""
         for s in self.subjects.values():
             s.listen(callback)
+
+    def listen_steps(self, callback: Callable[[StepRecord], None]) -> None:
+        """Every device's steps, one :class:`StepRecord` each (``Subject.listen_steps``):
+        the typed records are built only if the callback reads them."""
+        for s in self.subjects.values():
+            s.listen_steps(callback)
 
     def start(self, *, resume: bool = False) -> dict[str, bool]:
         """Start every device, or resume it from the journal; which ones were resumed."""
@@ -434,24 +441,27 @@ class System:
     async def records(self, maxsize: int = 10_000) -> AsyncIterator[Record]:
         """Every device's records as they happen, until the consumer stops iterating.
 
-        Records are built only while someone iterates. A consumer that falls
-        ``maxsize`` records behind loses the oldest (a warning, never a stalled owner).
+        The owner hands each step over as one :class:`StepRecord`; its typed records
+        are built here, on the consumer's side, as they are iterated. A consumer that
+        falls ``maxsize`` steps behind loses the oldest (never a stalled owner).
         """
         loop = asyncio.get_running_loop()
-        queue: asyncio.Queue[Record] = asyncio.Queue(maxsize)
+        queue: asyncio.Queue[StepRecord] = asyncio.Queue(maxsize)
 
-        def put(record: Record) -> None:
+        def put(step: StepRecord) -> None:
             if queue.full():
                 queue.get_nowait()
-            queue.put_nowait(record)
+            queue.put_nowait(step)
 
-        def listener(record: Record) -> None:
-            loop.call_soon_threadsafe(put, record)
+        def listener(step: StepRecord) -> None:
+            loop.call_soon_threadsafe(put, step)
 
-        offs = [s.listen(listener) for s in self.subjects.values()]
+        offs = [s.listen_steps(listener) for s in self.subjects.values()]
         try:
             while True:
-                yield await queue.get()
+                step = await queue.get()
+                for record in step.records:
+                    yield record
         finally:
             for off in offs:
                 off()

@@ -265,9 +265,9 @@ def node_main(
         if system.subjects:
             width = max(len(n) for n in system.subjects)
             if not quiet:
-                system.listen(TraceWriter(out, device_width=width))
+                system.listen_steps(TraceWriter(out, device_width=width).step)
                 runcli._show_notes(drivers, out, width)
-        system.listen(problems.record)
+        system.listen_steps(problems.step)
         me = cell.nodes.node(node)
         out.write(
             f"node {node}: devices {', '.join(mine) or 'none'}; listen "

@@ -95,7 +95,7 @@ from statectl.journal import (
 from statectl.runner.cells import is_cell, load_setups, relevant_warnings
 from statectl.runner.events import parse_event_line
 from statectl.runtime import Clock, SimClock, TraceWriter, WallClock
-from statectl.runtime.records import EventIgnored, EventRejected
+from statectl.runtime.records import EventIgnored, EventRejected, StepRecord
 from statectl.semantics import Unhandled
 from statectl.system import DeviceSetup, System
 
@@ -189,6 +189,15 @@ class _Problems:
             isinstance(record, EventIgnored) and record.reason is Unhandled.UNKNOWN_EVENT
         )
         if refused:
+            with self._lock:
+                self.unknown += 1
+
+    def step(self, step: StepRecord) -> None:
+        """A step listener: :meth:`record` without building the records of a step."""
+        if step.event is None:  # a record made outside any event
+            for record in step.records:
+                self.record(record)
+        elif step.step is None and (step.rejected or step.reason is Unhandled.UNKNOWN_EVENT):
             with self._lock:
                 self.unknown += 1
 
@@ -436,9 +445,9 @@ def run(
         if as_json:
             steps = StepLog(system, out)
         else:
-            system.listen(TraceWriter(out, device_width=width))
+            system.listen_steps(TraceWriter(out, device_width=width).step)
             _show_notes(drivers, out, width)
-        system.listen(problems.record)
+        system.listen_steps(problems.step)
         system.on_violation.append(problems.violation(out if steps is None else info, width))
         system.on_failure.append(problems.failure(err))  # system.py rule 7
         url = None

@@ -27,7 +27,8 @@ import json
 from collections.abc import Callable
 from typing import Any, TextIO
 
-from statectl.runtime.records import EventRejected, InvokeIssued
+from statectl.model import Notify
+from statectl.runtime.records import EventRejected, InvokeIssued, StepRecord
 from statectl.semantics import Unhandled
 from statectl.system import System
 
@@ -43,7 +44,8 @@ class StepLog:
         self._steps: list[dict[str, Any]] = []
         self._invokes: list[dict[str, Any]] = []
         self._dropped: set[tuple[str, str]] = set()
-        system.listen(self._record)
+        system.listen_steps(self._record)
+        system.listen(self._rejected)  # a deferral's drop is a record outside any step
         for name, subject in system.subjects.items():
             subject.on_step(self._stepper(name))
 
@@ -53,10 +55,19 @@ class StepLog:
 
         return stepped
 
-    def _record(self, record: object) -> None:
+    def _rejected(self, record: object) -> None:
         if isinstance(record, EventRejected) and record.reason is Unhandled.DECLARED_IGNORED:
             self._dropped.add((record.device, record.event))  # rule 4: the kept queue was full
-        if isinstance(record, InvokeIssued):
+
+    def _record(self, step: StepRecord) -> None:
+        decided = step.step
+        if step.event is not None and (
+            decided is None or not any(isinstance(a, Notify) for a in decided.actions)
+        ):
+            return  # an event that issued nothing: its records are not built
+        for record in step.records:
+            if not isinstance(record, InvokeIssued):
+                continue
             self._invokes.append(
                 {
                     "device": record.device,

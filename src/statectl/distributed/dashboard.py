@@ -21,7 +21,7 @@ from statectl.cell import Cell
 from statectl.errors import StatectlError
 from statectl.model import Chart
 from statectl.runtime import Subject
-from statectl.runtime.records import Record, StateEntered, StateExited
+from statectl.runtime.records import Record, StateEntered, StateExited, StepRecord
 from statectl.semantics import Snapshot
 
 __all__ = ["MirrorSubject", "serve_cell"]
@@ -46,6 +46,15 @@ class MirrorSubject:
     def listen(self, callback: Callable[[Record], object]) -> Callable[[], None]:
         self._listeners.append(callback)
         return lambda: self._listeners.remove(callback)
+
+    def listen_steps(self, callback: Callable[[StepRecord], object]) -> Callable[[], None]:
+        """As :meth:`listen`, each record as a step record of its own (the dashboard
+        hears steps; a mirror has no steps, only the states it was told)."""
+
+        def one(record: Record) -> None:
+            callback(StepRecord.of(record))
+
+        return self.listen(one)
 
     def update(self, snapshot: Snapshot, wall: float) -> None:
         """Move to a published snapshot (newest wins): exits, then entries, as records."""

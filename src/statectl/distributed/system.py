@@ -182,7 +182,7 @@ class NodeSystem(System):
         sources = {k.source for k in cell.links}
         for name, s in self.subjects.items():
             if name in sources:  # a device no link starts from keeps the record-free path
-                s.listen(links.watch)
+                s.listen_steps(links.watch_step)
             if name in self.bound:
                 self.bound[name].sends = self._link_sends
             else:

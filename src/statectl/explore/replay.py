@@ -39,6 +39,7 @@ from statectl.runtime import (
     Record,
     SimClock,
     StateEntered,
+    StepRecord,
     Subject,
     TransitionTaken,
     format_record,
@@ -122,6 +123,24 @@ class CellLinks:
             took = isinstance(r, TransitionTaken) and r.event == k.what
             if (k.trigger is Trigger.ENTERS and entered) or (k.trigger is Trigger.RAISES and took):
                 self.fired.append(i)
+
+    def watch_step(self, step: StepRecord) -> None:
+        """:meth:`watch` as a step listener: only the states a step entered and the
+        transitions it took become records (a failed step's own records are read)."""
+        decided = step.step
+        if decided is None or step.failed:
+            if decided is not None or step.event is None:  # else nothing entered or taken
+                for record in step.records:
+                    self.watch(record)
+            return
+        device, time = step.device, step.time
+        for micro in decided.microsteps:
+            for x in micro.transitions:
+                self.watch(
+                    TransitionTaken(device, time, micro.event, (x.source,), x.targets, x.label)
+                )
+            for state in micro.entered:
+                self.watch(StateEntered(device, time, state))
 
     def state(self) -> int:
         """The explorer's packed global state for the subjects' snapshots."""

@@ -4,7 +4,8 @@ Rules:
 1. The server runs on its own asyncio loop on its own thread. It never makes a
    device wait: the owner only appends to a list while a step runs, and after the
    step hands the list over with one ``call_soon_threadsafe``; the loop writes
-   the variables and fires the events.
+   the variables and fires the events. A step comes as one step record
+   (``listen_steps``): only its transitions and notifications become records.
 2. Address space (namespace ``urn:statectl``): ``Objects/<device>`` per device,
    holding its machines (:mod:`statectl.opcua.space`), each an instance of
    ``StatectlStateMachineType`` (a subtype of ``FiniteStateMachineType``), with
@@ -45,8 +46,8 @@ from urllib.parse import urlparse
 from statectl.errors import StatectlError
 from statectl.opcua.certs import APP_URI, default_directory, ensure_certificate
 from statectl.opcua.packml import PackmlNaming, PackmlSpace, naming, packml_call
-from statectl.opcua.space import Layout, layout
-from statectl.runtime import InvokeIssued, Record, Started, TransitionTaken
+from statectl.opcua.space import Layout, changes, layout
+from statectl.runtime import InvokeIssued, Record, Started, StepRecord, TransitionTaken
 from statectl.system import QueueFull, System
 
 __all__ = ["NAMESPACE", "OpcuaServer", "OpcuaSettings"]
@@ -126,13 +127,18 @@ class OpcuaServer:
         for name, subject in self.system.subjects.items():
             device = self._devices[name]
 
-            def keep(record: Record, device: _Device = device) -> None:
+            def keep(step: StepRecord, device: _Device = device) -> None:
                 buffer = device.pending
                 assert buffer is not None
-                if type(record) is Started:
-                    buffer.clear()
-                elif type(record) in (TransitionTaken, InvokeIssued):
-                    buffer.append(record)
+                decided = step.step
+                if decided is not None:  # an event's step: what it took, no typed records
+                    buffer.extend(changes(step.device, step.time, decided))
+                    return
+                for record in step.records:  # one made outside an event (start, a monitor)
+                    if type(record) is Started:
+                        buffer.clear()
+                    elif type(record) in (TransitionTaken, InvokeIssued):
+                        buffer.append(record)
 
             def stepped(
                 _event: str, _data: Any, _outcome: str, device: _Device = device, s: Any = subject
@@ -147,7 +153,7 @@ class OpcuaServer:
                     with contextlib.suppress(RuntimeError):  # the loop closed: stopping
                         loop.call_soon_threadsafe(self._publish, device, s.configuration, records)
 
-            self._offs.append(subject.listen(keep))
+            self._offs.append(subject.listen_steps(keep))
             self._offs.append(subject.on_step(stepped))
 
     # -- life ------------------------------------------------------------------------------

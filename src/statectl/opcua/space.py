@@ -26,9 +26,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from statectl.model import Chart, EventKind, StateKind
+from statectl.model import Chart, EventKind, Notify, StateKind
+from statectl.runtime.records import InvokeIssued, Record, TransitionTaken
+from statectl.semantics import Step
 
-__all__ = ["Layout", "MachineSpec", "layout"]
+__all__ = ["Layout", "MachineSpec", "changes", "layout"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -134,3 +136,19 @@ def layout(chart: Chart) -> Layout:
         e for e in chart.event_names if declared.get(e, EventKind.COMMAND) is EventKind.COMMAND
     )
     return Layout(tuple(machines), numbers, names, ends, by_record, commands)
+
+
+def changes(device: str, time: float, step: Step) -> list[Record]:
+    """The transitions a step took and the notifications it issued, in the step's order."""
+    out: list[Record] = []
+    for micro in step.microsteps:
+        out.extend(
+            TransitionTaken(device, time, micro.event, (x.source,), x.targets, x.label)
+            for x in micro.transitions
+        )
+        out.extend(
+            InvokeIssued(device, time, a.invoke, a.name, a.method, a.event)
+            for a in micro.actions
+            if isinstance(a, Notify)
+        )
+    return out

@@ -308,6 +308,32 @@ class StepRecord:
         return self.step.exited if self.step is not None else ()
 
     @property
+    def failed(self) -> bool:
+        """An observer or watcher raised during the step: its records end there."""
+        return self._tail is not None and self._tail.upto is not None
+
+    @property
+    def meanwhile(self) -> tuple[Record, ...]:
+        """The records others made during the step (a monitor starting), in order;
+        read without building the step's own records."""
+        tail = self._tail
+        if tail is None or not tail.extras or self.event is None:
+            return ()
+        return tuple(record for _, record in tail.extras)
+
+    @property
+    def api_calls(self) -> int:
+        """How many ``ObserverCalled`` records the step has, without building them."""
+        tail = self._tail
+        if self.event is None or (tail is not None and tail.upto is not None):
+            return sum(type(r) is ObserverCalled for r in self.records)
+        n = 0
+        for made in self._made:  # per notification: its API calls, its observer, or None
+            if made is not None:
+                n += len(made) if isinstance(made, tuple) else 1
+        return n
+
+    @property
     def records(self) -> tuple[Record, ...]:
         """The typed records of rule 3 (and those made meanwhile), built once."""
         try:
@@ -323,6 +349,49 @@ class StepRecord:
         return f"StepRecord({self.device!r}, {self.time!r}, {self.event!r}, {self.outcome!r})"
 
 
+#: A run of a step's typed records: their kinds, their fields after device and time,
+#: and the notification whose ``InvokeIssued`` ends the run (its observer's calls follow).
+_Run = tuple[tuple[Any, ...], tuple[tuple[Any, ...], ...], Notify | None]
+#: Per step (by identity): its runs. Plans keep their steps, so a memoised step is
+#: worked out once; bounded for the steps that are not memoised.
+_TEMPLATES: dict[int, tuple[Step, tuple[_Run, ...]]] = {}
+_TEMPLATES_MAX = 4096
+_new = tuple.__new__
+
+
+def _template(step: Step) -> tuple[_Run, ...]:
+    """Rule 3's records of ``step`` without the observers' calls, as runs built in one go."""
+    hit = _TEMPLATES.get(id(step))
+    if hit is not None and hit[0] is step:
+        return hit[1]
+    runs: list[_Run] = []
+    kinds: list[Any] = []
+    fields: list[tuple[Any, ...]] = []
+    for micro in step.microsteps:
+        for s in micro.exited:
+            kinds.append(StateExited)
+            fields.append((s,))
+        for x in micro.transitions:
+            kinds.append(TransitionTaken)
+            fields.append((micro.event, (x.source,), x.targets, x.label))
+        for s in micro.entered:
+            kinds.append(StateEntered)
+            fields.append((s,))
+        for a in micro.actions:
+            if isinstance(a, Notify):
+                kinds.append(InvokeIssued)
+                fields.append((a.invoke, a.name, a.method, a.event))
+                runs.append((tuple(kinds), tuple(fields), a))
+                kinds, fields = [], []
+    if kinds:
+        runs.append((tuple(kinds), tuple(fields), None))
+    if len(_TEMPLATES) >= _TEMPLATES_MAX:
+        _TEMPLATES.clear()
+    made = tuple(runs)
+    _TEMPLATES[id(step)] = (step, made)
+    return made
+
+
 def _typed(r: StepRecord) -> tuple[Record, ...]:
     """Rule 3's records of a step record, with those made meanwhile put back in place."""
     d, t, step = r.device, r.time, r.step
@@ -334,23 +403,17 @@ def _typed(r: StepRecord) -> tuple[Record, ...]:
             out.append(kind(d, t, r.event, reason))
     else:
         made = iter(r._made)
-        for micro in step.microsteps:
-            out.extend(StateExited(d, t, s) for s in micro.exited)
-            out.extend(
-                TransitionTaken(d, t, micro.event, (x.source,), x.targets, x.label)
-                for x in micro.transitions
-            )
-            out.extend(StateEntered(d, t, s) for s in micro.entered)
-            for a in micro.actions:
-                if not isinstance(a, Notify):
-                    continue
-                out.append(InvokeIssued(d, t, a.invoke, a.name, a.method, a.event))
-                did = next(made, None)
-                if isinstance(did, tuple):
-                    out.extend(ObserverCalled(d, t, a.method, str(c)) for c in did)
-                elif did is not None:
-                    api = f"{type(did).__name__}.update(#{a.invoke})"
-                    out.append(ObserverCalled(d, t, a.method, api))
+        dt = (d, t)
+        for kinds, fields, a in _template(step):  # each run built by map(), no loop here
+            out.extend(map(_new, kinds, map(dt.__add__, fields)))
+            if a is None:
+                continue
+            did = next(made, None)
+            if isinstance(did, tuple):
+                out.extend(_new(ObserverCalled, (d, t, a.method, str(c))) for c in did)
+            elif did is not None:
+                api = f"{type(did).__name__}.update(#{a.invoke})"
+                out.append(ObserverCalled(d, t, a.method, api))
         if r.final:
             out.append(Finished(d, t))
         upto = r._tail.upto if r._tail is not None else None

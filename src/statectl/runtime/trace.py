@@ -11,7 +11,7 @@ Rules:
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, TextIO
 
 from statectl.runtime.records import (
@@ -28,10 +28,11 @@ from statectl.runtime.records import (
     Started,
     StateEntered,
     StateExited,
+    StepRecord,
     TransitionTaken,
 )
 
-__all__ = ["TraceWriter", "format_data", "format_record", "kind_of"]
+__all__ = ["KINDS", "TraceWriter", "format_data", "format_record", "kind_of"]
 
 KIND_WIDTH = 8
 _COLOURS: Mapping[str, str] = {
@@ -65,83 +66,123 @@ def _states(names: tuple[str, ...]) -> str:
     return ", ".join(names) if names else "(targetless)"
 
 
+#: The kind column of each record type (rule 1).
+KINDS: Mapping[type, str] = {
+    Started: "run",
+    Finished: "run",
+    EventReceived: "event",
+    TransitionTaken: "state",
+    StateExited: "exit",
+    StateEntered: "enter",
+    InvokeIssued: "invoke",
+    ObserverCalled: "api",
+    EventIgnored: "ignored",
+    EventRejected: "rejected",
+    MonitorStarted: "monitor",
+    MonitorStopped: "monitor",
+    FaultDetected: "fault",
+}
+
+
 def kind_of(record: Record) -> str:
     """The short kind column of a record."""
-    match record:
-        case Started() | Finished():
-            return "run"
-        case EventReceived():
-            return "event"
-        case TransitionTaken():
-            return "state"
-        case StateExited():
-            return "exit"
-        case StateEntered():
-            return "enter"
-        case InvokeIssued():
-            return "invoke"
-        case ObserverCalled():
-            return "api"
-        case EventIgnored():
-            return "ignored"
-        case EventRejected():
-            return "rejected"
-        case MonitorStarted() | MonitorStopped():
-            return "monitor"
-        case FaultDetected():
-            return "fault"
+    return KINDS[type(record)]
+
+
+def _event_text(r: Any) -> str:
+    return r.event if r.data is None else f"{r.event} {format_data(r.data)}"
+
+
+def _transition_text(r: Any) -> str:
+    return f"{_states(r.source)} -> {_states(r.targets)}  on {r.label or '(eventless)'}"
+
+
+def _rejected_text(r: Any) -> str:
+    if r.reason == "guard error":  # refused whatever the policy (runtime/eventdata.py)
+        return f"{r.event} ({r.reason})"
+    return f"{r.event} ({r.reason}; policy error)"
+
+
+#: The text column of each record type, one function per type (no match per record).
+_TEXTS: Mapping[type, Callable[[Any], str]] = {
+    Started: lambda r: "started",
+    Finished: lambda r: "finished",
+    EventReceived: _event_text,
+    TransitionTaken: _transition_text,
+    StateExited: lambda r: r.state,
+    StateEntered: lambda r: r.state,
+    InvokeIssued: lambda r: f"#{r.invoke} {r.name} -> observer {r.method}()",
+    ObserverCalled: lambda r: f"{r.method}() -> {r.api}",
+    EventIgnored: lambda r: f"{r.event} ({r.reason})",
+    EventRejected: _rejected_text,
+    MonitorStarted: lambda r: f"{r.state} started",
+    MonitorStopped: lambda r: f"{r.state} stopped",
+    FaultDetected: lambda r: f"{r.detail!r} while {r.state} -> raises {r.event}",
+}
 
 
 def _text(record: Record) -> str:
-    match record:
-        case Started():
-            return "started"
-        case Finished():
-            return "finished"
-        case EventReceived(event=event, data=data):
-            return event if data is None else f"{event} {format_data(data)}"
-        case TransitionTaken(source=source, targets=targets, label=label):
-            return f"{_states(source)} -> {_states(targets)}  on {label or '(eventless)'}"
-        case StateExited(state=state) | StateEntered(state=state):
-            return state
-        case InvokeIssued(invoke=invoke, name=name, method=method):
-            return f"#{invoke} {name} -> observer {method}()"
-        case ObserverCalled(method=method, api=api):
-            return f"{method}() -> {api}"
-        case EventIgnored(event=event, reason=reason):
-            return f"{event} ({reason})"
-        case EventRejected(event=event, reason=reason):
-            if reason == "guard error":  # refused whatever the policy (runtime/eventdata.py)
-                return f"{event} ({reason})"
-            return f"{event} ({reason}; policy error)"
-        case MonitorStarted(state=state):
-            return f"{state} started"
-        case MonitorStopped(state=state):
-            return f"{state} stopped"
-        case FaultDetected(state=state, event=event, detail=detail):
-            return f"{detail!r} while {state} -> raises {event}"
+    return _TEXTS[type(record)](record)
+
+
+def _padded(kind: str, colour: bool) -> str:
+    padded = f"{kind:<{KIND_WIDTH}}"
+    return f"{_COLOURS.get(kind, '')}{padded}{_RESET}" if colour else padded
 
 
 def format_record(record: Record, *, device_width: int = 0, colour: bool = False) -> str:
     """One aligned line: ``t=   0.00  Motor  event    Movement {amount: 10}``."""
-    kind = kind_of(record)
-    padded = f"{kind:<{KIND_WIDTH}}"
-    if colour:
-        padded = f"{_COLOURS.get(kind, '')}{padded}{_RESET}"
+    padded = _padded(KINDS[type(record)], colour)
     return f"t={record.time:7.2f}  {record.device:<{device_width}}  {padded} {_text(record)}"
 
 
+#: Distinct record lines a writer keeps the text of (then it starts again).
+_REST_MAX = 4096
+
+
 class TraceWriter:
-    """A listener that writes each record as a line to ``out``."""
+    """Writes each record as a line to ``out``: a record listener, or a step listener.
+
+    As a step listener (``subject.listen_steps(writer.step)``) it writes one step's
+    lines with one ``write`` (no flush: ``out``'s own buffering applies). The time
+    and device column is made once per time and device, the rest of a line once per
+    distinct record (a device's records repeat: the same states, transitions and
+    notifications), so a line costs a lookup and a concatenation.
+    """
 
     def __init__(self, out: TextIO, *, device_width: int = 0, colour: bool = False) -> None:
         self.out = out
         self.device_width = device_width
         self.colour = colour
         self.lines = 0
+        self._kinds = {t: " " + _padded(k, colour) + " " for t, k in KINDS.items()}
+        self._at: tuple[float, str] | None = None  # (time, device) of ``_prefix``
+        self._prefix = ""
+        self._rest: dict[tuple[type, tuple[Any, ...]], str] = {}  # the line after the prefix
+
+    def _line(self, record: Record) -> str:
+        at = (record.time, record.device)
+        if at != self._at:
+            self._at = at
+            self._prefix = f"t={record.time:7.2f}  {record.device:<{self.device_width}} "
+        kind = type(record)
+        if type(record) is EventReceived and record.data is not None:  # may be unhashable
+            return self._prefix + self._kinds[kind] + _event_text(record) + "\n"
+        key = (kind, record[2:])
+        rest = self._rest.get(key)
+        if rest is None:  # kind and text once per distinct record (time and device aside)
+            if len(self._rest) >= _REST_MAX:
+                self._rest.clear()
+            rest = self._rest[key] = self._kinds[kind] + _TEXTS[kind](record) + "\n"
+        return self._prefix + rest
 
     def __call__(self, record: Record) -> None:
-        self.out.write(
-            format_record(record, device_width=self.device_width, colour=self.colour) + "\n"
-        )
+        self.out.write(self._line(record))
         self.lines += 1
+
+    def step(self, step: StepRecord) -> None:
+        """A step listener: every line of ``step``'s typed records, in one write."""
+        records = step.records
+        line = self._line
+        self.out.write("".join([line(r) for r in records]))
+        self.lines += len(records)

@@ -9,9 +9,10 @@ Rules:
    device first, then the recent log, then one message per trace record with what
    the step may have changed of the device's state (active states, monitors, counts;
    the chart's events and invokes are in the snapshot only).
-3. A device never waits for a web client: on the device's owner thread a record is
-   only noted, with the device's active states, counts and monitors after it, in a
-   list under a lock held for the append only (the JSON is made on the loop);
+3. A device never waits for a web client: on the device's owner thread a step is
+   only noted (one step record, ``listen_steps``), with the device's active states,
+   counts and monitors after it, in a list under a lock held for the append only
+   (its typed records and their JSON are made on the loop);
    the first append since the last hand-over wakes the loop with one
    ``call_soon_threadsafe``. The loop waits ``Limits.gather`` (2 ms) so the records
    of one step travel together, then numbers the messages and writes them to every
@@ -52,6 +53,7 @@ from statectl.runtime.records import (
     MonitorStopped,
     ObserverCalled,
     Record,
+    StepRecord,
 )
 from statectl.runtime.subject import Subject
 from statectl.runtime.trace import format_record, kind_of
@@ -99,6 +101,27 @@ class _Noted(NamedTuple):
                 ),
             }
         )
+
+
+class _Stepped(NamedTuple):
+    """One event's step and the device's state after it, taken on the owner thread; its
+    typed records are built and turned into messages on the loop (rule 3)."""
+
+    device: _Device
+    step: StepRecord
+    configuration: frozenset[str]
+    events: int
+    invokes: int
+    calls: int
+    monitors: tuple[tuple[str, str], ...]
+
+    def messages(self) -> list[str]:
+        """A message per record of the step, each with the state after the step."""
+        c = self
+        return [
+            _Noted(c.device, r, c.configuration, c.events, c.invokes, c.calls, c.monitors).message()
+            for r in self.step.records
+        ]
 
 
 class _Device:
@@ -209,7 +232,7 @@ class Dashboard:
         self.origins: frozenset[str] = frozenset()
         self.hosts: frozenset[str] = frozenset()
         self._lock = threading.Lock()
-        self._pending: list[str | _Noted] = []
+        self._pending: list[str | _Noted | _Stepped] = []
         self._overrun = False
         self._loop: asyncio.AbstractEventLoop | None = None
         self._wake_sent = False
@@ -219,22 +242,41 @@ class Dashboard:
         self.fanout = Fanout(
             streams=self.limits.streams, buffer=self.limits.stream_buffer, log_size=LOG_SIZE
         )
-        self._unlisten = [d.subject.listen(self._on_record) for d in self.devices.values()]
+        self._unlisten = [d.subject.listen_steps(self._on_step) for d in self.devices.values()]
 
     def devices_subjects(self) -> tuple[Subject, ...]:
         return tuple(d.subject for d in self.devices.values())
 
     # -- records -> messages (owner threads) ---------------------------------------------
 
-    def _on_record(self, record: Record) -> None:
-        """On the owner thread: note the record and what the device is after it (rule 3).
+    def _on_step(self, step: StepRecord) -> None:
+        """On the owner thread: note the step and what the device is after it (rule 3).
 
-        Only values are taken here (the record, the active states, the counts); turning
-        them into JSON is the loop's work, so a step costs the device a few microseconds.
+        Only values are taken here (the step record, the active states, the counts):
+        its typed records are built and turned into JSON on the loop, so a step costs
+        the device one step record and one tuple.
         """
-        device = self.devices.get(record.device)
+        device = self.devices.get(step.device)
         if device is None:
             return
+        if step.event is None:  # a record made outside any event: noted as it is
+            for record in step.records:
+                self._on_record(device, record)
+            return
+        for record in step.meanwhile:
+            self._watch(device, record)
+        device.calls += step.api_calls
+        s = device.subject
+        self._hand(
+            _Stepped(
+                device, step, s.configuration, s.events_processed, s.invokes_issued,
+                device.calls, device.monitor_items,
+            )
+        )  # fmt: skip
+
+    @staticmethod
+    def _watch(device: _Device, record: Record) -> None:
+        """Keep the device's monitors and API call count up to date with ``record``."""
         match record:
             case MonitorStarted(state=state):
                 device.monitors[state] = "running"
@@ -249,6 +291,10 @@ class Dashboard:
                 device.calls += 1
             case _:
                 pass
+
+    def _on_record(self, device: _Device, record: Record) -> None:
+        """On the owner thread: note one record and what the device is after it."""
+        self._watch(device, record)
         s = device.subject
         self._hand(
             _Noted(
@@ -264,12 +310,13 @@ class Dashboard:
         """
         self._hand(text)
 
-    def _hand(self, item: str | _Noted) -> None:
+    def _hand(self, item: str | _Noted | _Stepped) -> None:
         with self._lock:
             self._pending.append(item)
             loop = self._loop
             if loop is None:  # not serving: only the log for later pages matters
-                del self._pending[:-LOG_SIZE]
+                if len(self._pending) >= 2 * LOG_SIZE:  # cut back now and then, not per step
+                    del self._pending[:-LOG_SIZE]
                 return
             if len(self._pending) > PENDING_MAX:  # rule 4
                 self._pending.clear()
@@ -292,7 +339,15 @@ class Dashboard:
             self._wake_sent = False
         if overrun:
             self.fanout.drop_all("overrun")
-        self.fanout.publish([i if isinstance(i, str) else i.message() for i in items])
+        messages: list[str] = []
+        for i in items:
+            if isinstance(i, str):
+                messages.append(i)
+            elif isinstance(i, _Noted):
+                messages.append(i.message())
+            else:
+                messages.extend(i.messages())
+        self.fanout.publish(messages)
 
     def snapshot(self) -> dict[str, Any]:
         return {

@@ -1,0 +1,163 @@
+"""Consumers that hear steps (listen_steps) say what they said hearing every record.
+
+The trace writer, ``statectl run``'s problem counter and the dashboard's counts read a
+step record instead of the typed records one by one; what they write or count must
+not change, however the device is wired and whatever the events do.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+from pathlib import Path
+
+import pytest
+
+from statectl.cell import load_cell_or_raise
+from statectl.cli.run import _Problems as ProblemCounter  # statectl run's counter
+from statectl.devices import connect, make_driver
+from statectl.errors import UnhandledEventError
+from statectl.explore.replay import CellLinks
+from statectl.model import Chart
+from statectl.runner.cells import load_setups
+from statectl.runtime import (
+    MonitorStarted,
+    MonitorStopped,
+    ObserverCalled,
+    Record,
+    SimClock,
+    StepRecord,
+    Subject,
+    TraceWriter,
+    attach_monitors,
+)
+from support import Recorder
+
+EVENTS = (
+    ("Movement", {"amount": 10}),
+    ("Movement completion", None),
+    ("Initialization", None),  # guarded: previous == 'Moving'
+    ("Initialization completion", None),
+    ("Movement", {"amount": 10}),
+    ("Error", None),
+    ("Error completion", None),
+    ("Movement completion", None),  # declared ignored in Blocked
+    ("No such event", None),
+    ("Initialization", None),  # declared ignored in Blocked when its guard is false
+)
+WIRINGS = ("bare", "monitor", "driver", "nobody")
+
+
+class Quiet:
+    def poll_fault(self) -> str | None:
+        return None
+
+
+def _run(
+    chart: Chart, wiring: str, policy: str, steps: bool
+) -> tuple[list[Record], list[StepRecord]]:
+    """The events through a Motor wired so: every typed record, or every step record."""
+    subject = Subject(chart, clock=SimClock(), policy=policy)  # type: ignore[arg-type]
+    if wiring in ("bare", "monitor"):
+        subject.attach(Recorder())
+    if wiring == "monitor":
+        attach_monitors(subject, Quiet())
+    if wiring == "driver":
+        connect(subject, make_driver("sim-motor", {}, chart=chart))
+    typed: list[Record] = []
+    heard: list[StepRecord] = []
+    if steps:
+        subject.listen_steps(heard.append)
+    else:
+        subject.listen(typed.append)
+    subject.start()
+    for event, data in EVENTS:
+        with contextlib.suppress(UnhandledEventError):  # policy error: the run goes on
+            subject.dispatch(event, data)
+    subject.close()
+    return typed, heard
+
+
+@pytest.mark.parametrize("colour", [False, True])
+@pytest.mark.parametrize("policy", ["ignore", "error"])
+@pytest.mark.parametrize("wiring", WIRINGS)
+def test_the_trace_of_steps_is_the_trace_of_records(
+    motor: Chart, wiring: str, policy: str, colour: bool
+) -> None:
+    """TraceWriter.step writes the lines, and counts them, as the writer does per record."""
+    typed, _ = _run(motor, wiring, policy, steps=False)
+    _, steps = _run(motor, wiring, policy, steps=True)
+    outs = (io.StringIO(), io.StringIO())
+    per_record = TraceWriter(outs[0], device_width=7, colour=colour)
+    per_step = TraceWriter(outs[1], device_width=7, colour=colour)
+    for record in typed:
+        per_record(record)
+    for step in steps:
+        per_step.step(step)
+    assert outs[1].getvalue() == outs[0].getvalue()
+    assert per_step.lines == per_record.lines == len(typed)
+
+
+@pytest.mark.parametrize("policy", ["ignore", "error"])
+@pytest.mark.parametrize("wiring", WIRINGS)
+def test_a_step_counts_its_calls_and_monitor_records_as_its_records_do(
+    motor: Chart, wiring: str, policy: str
+) -> None:
+    """api_calls and meanwhile agree with the step's typed records."""
+    _, steps = _run(motor, wiring, policy, steps=True)
+    for step in (s for s in steps if s.event is not None):
+        calls = sum(type(r) is ObserverCalled for r in step.records)
+        monitors = [r for r in step.records if type(r) in (MonitorStarted, MonitorStopped)]
+        assert (step.api_calls, list(step.meanwhile)) == (calls, monitors), step
+    if wiring == "monitor":
+        assert any(s.meanwhile for s in steps)
+
+
+@pytest.mark.parametrize("policy", ["ignore", "error"])
+@pytest.mark.parametrize("wiring", WIRINGS)
+def test_the_problem_counter_counts_steps_as_it_counts_records(
+    motor: Chart, wiring: str, policy: str
+) -> None:
+    """ProblemCounter.step counts the refused and unknown events ProblemCounter.record does."""
+    typed, _ = _run(motor, wiring, policy, steps=False)
+    _, steps = _run(motor, wiring, policy, steps=True)
+    by_record, by_step = ProblemCounter(), ProblemCounter()
+    for record in typed:
+        by_record.record(record)
+    for step in steps:
+        by_step.step(step)
+    assert by_step.unknown == by_record.unknown
+    assert by_step.unknown == 1  # "No such event"; the rest are handled or declared ignored
+
+
+CELL = Path(__file__).parent.parent / "examples" / "pick-and-place" / "cell.yaml"
+
+
+def _links_fired(steps: bool) -> list[list[int]]:
+    """Every event of every device of the pick-and-place cell, twice over; the links
+    each event fired, heard by record (watch) or by step (watch_step)."""
+    cell = load_cell_or_raise(CELL)
+    setups, _ = load_setups(cell, journalled=False)
+    subjects = {s.name: Subject(s.chart, clock=SimClock(), name=s.name) for s in setups}
+    links = CellLinks(cell, subjects)
+    for subject in subjects.values():
+        if steps:
+            subject.listen_steps(links.watch_step)
+        else:
+            subject.listen(links.watch)
+        subject.start()
+    fired: list[list[int]] = []
+    for _ in range(2):
+        for subject in subjects.values():
+            for event in subject.chart.event_names:
+                links.fired.clear()
+                subject.dispatch(event)
+                fired.append(sorted(links.fired))
+    return fired
+
+
+def test_cell_links_fire_the_same_by_step_as_by_record() -> None:
+    """CellLinks.watch_step fires, per event, the links CellLinks.watch fires."""
+    by_record = _links_fired(steps=False)
+    assert _links_fired(steps=True) == by_record
+    assert any(by_record)  # some event fired a link
