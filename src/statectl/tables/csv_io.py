@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from statectl.errors import Diagnostic, Location
-from statectl.tables.eventdata import event_columns, event_extra_cells
+from statectl.tables.eventdata import event_cells, event_columns
 from statectl.tables.schema import (
     DATA_COLUMNS,
     FLAT_EVENT_COLUMNS,
@@ -243,20 +243,7 @@ def dump_csv(tables: DeviceTables) -> tuple[str, str, str | None, str | None]:
     ecols = event_columns(tables.events, FLAT_EVENT_COLUMNS)
     events = _write(
         ecols,
-        [
-            [
-                e.event,
-                e.condition,
-                e.guard,
-                e.old,
-                e.new,
-                e.kind.value,
-                e.api,
-                e.invoke,
-                *event_extra_cells(e, ecols),
-            ]
-            for e in tables.events
-        ],
+        [event_cells(e, ecols) for e in tables.events],
         tables.device,
     )
     data = None

@@ -217,6 +217,21 @@ def event_columns(events: Sequence[Any], flat: Sequence[str]) -> tuple[str, ...]
     return (*flat, *extra)
 
 
+def event_cells(e: Any, columns: Sequence[str]) -> list[str]:
+    """One event row's cells for the columns a writer emits (the flat ones, then extras)."""
+    return [
+        e.event,
+        e.condition,
+        e.guard,
+        e.old,
+        e.new,
+        e.kind.value,
+        e.api,
+        e.invoke,
+        *event_extra_cells(e, columns),
+    ]
+
+
 def event_extra_cells(e: Any, columns: Sequence[str]) -> list[str]:
     """The ``data``/``assign`` cells of one event row, for the columns a writer emits."""
     out: list[str] = []

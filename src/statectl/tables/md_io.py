@@ -16,7 +16,7 @@ from __future__ import annotations
 import re
 
 from statectl.errors import Diagnostic, Location
-from statectl.tables.eventdata import event_columns, event_extra_cells
+from statectl.tables.eventdata import event_cells, event_columns
 from statectl.tables.schema import (
     DATA_COLUMNS,
     FLAT_EVENT_COLUMNS,
@@ -215,20 +215,7 @@ def dump_md(tables: DeviceTables) -> str:
     ecols = event_columns(tables.events, FLAT_EVENT_COLUMNS)
     lines += _table(
         ecols,
-        [
-            [
-                e.event,
-                e.condition,
-                e.guard,
-                e.old,
-                e.new,
-                e.kind.value,
-                e.api,
-                e.invoke,
-                *event_extra_cells(e, ecols),
-            ]
-            for e in tables.events
-        ],
+        [event_cells(e, ecols) for e in tables.events],
     )
     if tables.data:
         lines += ["", "## Data", ""]

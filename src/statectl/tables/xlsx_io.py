@@ -30,7 +30,7 @@ from openpyxl.worksheet.worksheet import (  # type: ignore[import-untyped, unuse
 )
 
 from statectl.errors import Diagnostic, Location
-from statectl.tables.eventdata import event_columns, event_extra_cells
+from statectl.tables.eventdata import event_cells, event_columns
 from statectl.tables.schema import (
     DATA_COLUMNS,
     FLAT_EVENT_COLUMNS,
@@ -226,20 +226,7 @@ def dump_xlsx(tables: DeviceTables) -> bytes:
     _fill(
         wb.create_sheet(SHEETS["events"]),
         ecols,
-        (
-            [
-                e.event,
-                e.condition,
-                e.guard,
-                e.old,
-                e.new,
-                e.kind.value,
-                e.api,
-                e.invoke,
-                *event_extra_cells(e, ecols),
-            ]
-            for e in tables.events
-        ),
+        (event_cells(e, ecols) for e in tables.events),
     )
     if tables.data:
         _fill(
