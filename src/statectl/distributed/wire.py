@@ -45,6 +45,7 @@ from statectl.distributed.keys import Keys
 from statectl.distributed.streams import Inbound, Outbound, Verdict
 from statectl.distributed.system import NodeSystem
 from statectl.errors import StatectlError
+from statectl.explore.enforce import Refused
 from statectl.journal.format import Guarantee, decode_snapshot, encode_snapshot
 from statectl.semantics import Snapshot
 
@@ -135,6 +136,8 @@ class Wire:
         self._mirrored = False  # whether other nodes' states are taken in (open())
         self.lost_at: dict[str, float] = {}  # node -> monotonic time it was noticed gone
         self.on_state: list[Callable[[str, Snapshot, float], None]] = []
+        #: called with each forwarded environment command this node refused (its 'when')
+        self.on_refused: list[Callable[[Exception], None]] = []
         epoch, backlog = self._from_journal(journal, resume)
         self.epoch = epoch
         for d in cell.devices:
@@ -232,7 +235,7 @@ class Wire:
             s.declare_subscriber(f"{root}/ack/{self.me.name}/*", self._on_ack),
             s.declare_queryable(f"{root}/state/*", self._on_query),
         ]
-        self._mirrored = states or self._guards_read_others()
+        self._mirrored = states or self._guards_read_others() or self.system.reads_remote()
         if self._mirrored:
             self._decls.append(
                 s.declare_subscriber(
@@ -427,6 +430,9 @@ class Wire:
             self.system.post(device, str(msg["ev"]), msg.get("d"))
         except (ValueError, KeyError, TypeError, StatectlError) as exc:
             self._say(f"event for {device} from another node refused: {exc}")
+            if isinstance(exc, Refused):
+                for callback in self.on_refused:
+                    callback(exc)
 
     def _on_state(self, sample: Any) -> None:
         _, device = Keys.last(sample.key_expr)
@@ -439,8 +445,9 @@ class Wire:
             if links is not None and device in links.model.position:
                 d = links.model.position[device]
                 lid = links.model.spaces[d].lookup(snap)
-                if lid is not None:
+                if lid is not None and self.mirror.get(device) != lid:
                     self.mirror[device] = lid
+                    self.system.recheck()  # invariants over what this node sees
         for callback in self.on_state:
             callback(device, snap, t)
 
