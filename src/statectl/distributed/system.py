@@ -71,6 +71,28 @@ class NodeLinks(CellLinks):
             self._by_source.setdefault(k.source, []).append(entry)
         self._guarded = tuple(g is not None for g in self.model.link_guard)
 
+    def hook(self, name: str, subject: Subject) -> None:
+        """Hear ``subject``'s steps that fire a link, without records: a watcher for the
+        states ``enters`` links name, a step listener for ``raises`` links (register it
+        before the step listener that sends the links)."""
+        entries = self._by_source.get(name, [])
+        enters: dict[str, list[int]] = {}
+        raises: dict[str, list[int]] = {}
+        for i, on_entry, what in entries:
+            (enters if on_entry else raises).setdefault(what, []).append(i)
+        fired = self.fired
+        if enters:
+            subject.watch(enters, _Entered(enters, fired))
+        if raises:
+
+            def took(event: str, data: Any, outcome: str) -> None:
+                if outcome == "handled":
+                    links = raises.get(event)
+                    if links is not None:
+                        fired.extend(links)
+
+            subject.on_step(took)
+
     def watch(self, r: Record) -> None:
         links = self._by_source.get(r.device)
         if links is None:
@@ -85,10 +107,11 @@ class NodeLinks(CellLinks):
 
     def due(self) -> list[Link]:
         """As :meth:`CellLinks.due`; the global state is packed only for a guarded link."""
-        if not self.fired:
+        pending = self.fired
+        if not pending:
             return []
-        fired = sorted(set(self.fired))
-        self.fired.clear()
+        fired = (pending[0],) if len(pending) == 1 else sorted(set(pending))
+        pending.clear()
         if not any(self._guarded[i] for i in fired):
             return [self.cell.links[i] for i in fired]
         g = self.state()
@@ -123,6 +146,23 @@ class NodeLinks(CellLinks):
                     raise StatectlError(f"{name} is in a state the explorer never saw")
             g = model.replace(g, d, lid)
         return g
+
+
+class _Entered:
+    """A state watcher that notes the ``enters`` links a state's entry fires (no records)."""
+
+    def __init__(self, links: dict[str, list[int]], fired: list[int]) -> None:
+        self._links = links
+        self._fired = fired
+
+    def entered(self, state: str) -> None:
+        self._fired.extend(self._links[state])
+
+    def exited(self, state: str) -> None:
+        pass
+
+    def finished(self) -> None:
+        pass
 
 
 class _Mirrored:
@@ -220,8 +260,10 @@ class NodeSystem(System):
             self.rules = CellRules(replace(cell, invariants=watched), links)
         sources = {k.source for k in cell.links}
         for name, s in self.subjects.items():
-            if name in sources:  # a device no link starts from keeps the record-free path
+            if name in self.bound and name in sources:  # the journal's step hook came first
                 s.listen(links.watch)
+            elif name in sources:  # heard without records (NodeLinks.hook)
+                links.hook(name, s)
             if name in self.bound:
                 self.bound[name].sends = self._link_sends
             else:

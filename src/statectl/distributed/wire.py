@@ -59,6 +59,8 @@ _EPOCH = "link-epoch"
 _IN = "link-in/"
 _ENC = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
 _NAMES: dict[str, str] = {}  # event name -> its JSON string
+#: one JSON value at an index of a text: json.loads without its per-call checks (hot path)
+_scan: Callable[[str, int], tuple[Any, int]] = getattr(json.JSONDecoder(), "scan_once")  # noqa: B009
 
 
 def session_config(node: Node) -> Any:
@@ -126,6 +128,7 @@ class Wire:
         self._resend_due: set[str] = set()
         self._due = threading.Lock()  # guards the three above: callbacks add, the thread takes
         self._states: dict[str, Snapshot] = {}  # "state/<device>" -> newest snapshot to put
+        self._watched: dict[str, bool] = {}  # "state/<device>" -> does anyone subscribe?
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._print = threading.Lock()
@@ -227,10 +230,11 @@ class Wire:
             )
             del stream
         for name in self.local:
-            self._pubs["state/" + name] = s.declare_publisher(
+            pub = self._pubs["state/" + name] = s.declare_publisher(
                 self.keys.state(name), congestion_control=block
             )
             self.system.subjects[name].on_step(self._stepped(name))
+            self._watch_matching(pub, "state/" + name)
         self._decls += [
             s.declare_subscriber(f"{root}/ack/{self.me.name}/*", self._on_ack),
             s.declare_queryable(f"{root}/state/*", self._on_query),
@@ -243,6 +247,27 @@ class Wire:
                 )
             )
         self._decls.append(s.liveliness().declare_token(self.keys.node(self.me.name)))
+
+    def _watch_matching(self, pub: Any, key: str) -> None:
+        """Rule 5: put a device's states only while a subscriber somewhere takes them in
+        (Zenoh's matching status); when one appears, put the current state at once."""
+        try:
+            self._watched[key] = bool(pub.matching_status.matching)
+            listener = pub.declare_matching_listener(
+                lambda status, key=key: self._matching(key, bool(status.matching))
+            )
+        except (AttributeError, TypeError):  # a Zenoh without matching status: always put
+            self._watched.pop(key, None)
+            return
+        self._decls.append(listener)
+
+    def _matching(self, key: str, matching: bool) -> None:
+        self._watched[key] = matching
+        if matching:
+            snap = self.system.subjects[key.removeprefix("state/")].snapshot
+            if snap is not None:
+                self._states[key] = snap
+                self._wake.set()
 
     def refresh(self) -> None:
         """Ask every node for its devices' states now (a dashboard that starts late)."""
@@ -330,13 +355,16 @@ class Wire:
         states = self._states
         wake = self._wake
 
+        watched = self._watched
+
         def put(event: str, data: Any, outcome: str) -> None:
             snap = subject.snapshot
-            if snap is None or snap == last[0]:
+            if snap is None or snap == last[0] or not watched.get(key, True):
                 return
             last[0] = snap
             states[key] = snap  # the wire's thread puts the newest one
-            wake.set()
+            if not wake.is_set():
+                wake.set()
 
         return put
 
@@ -345,9 +373,9 @@ class Wire:
     def _on_link(self, sample: Any) -> None:
         node, device = Keys.last(sample.key_expr)
         try:
-            msg = json.loads(sample.payload.to_bytes())
+            msg = _scan(sample.payload.to_string(), 0)[0]
             e, n, event, data = str(msg["e"]), int(msg["n"]), str(msg["ev"]), msg.get("d")
-        except (ValueError, KeyError, TypeError):
+        except (ValueError, KeyError, TypeError, StopIteration, AttributeError):
             return
         system = self.system
         run = True
@@ -371,7 +399,8 @@ class Wire:
             self._run_devices()  # before waking the wire's thread: the device first
         if bound is None:
             self._ack(node, device, e, n, False)
-            self._wake.set()
+            if not self._wake.is_set():
+                self._wake.set()
 
     def _ack(self, node: str, device: str, e: str, n: int, again: bool) -> None:
         """Note an acknowledgement for the wire's thread to send (rule 4)."""
@@ -394,9 +423,9 @@ class Wire:
         _, device = Keys.last(sample.key_expr)
         stream = self.outbound.get(device)
         try:
-            msg = json.loads(sample.payload.to_bytes())
+            msg = _scan(sample.payload.to_string(), 0)[0]
             e, n, again = str(msg["e"]), int(msg["n"]), bool(msg.get("r"))
-        except (ValueError, KeyError, TypeError):
+        except (ValueError, KeyError, TypeError, StopIteration, AttributeError):
             return
         if stream is None or e != stream.epoch:
             return
