@@ -245,9 +245,10 @@ class NodeSystem(System):
         cell = self.cell
         assert cell is not None and cell.nodes is not None
         self._wire = wire
-        self._policy: dict[Link, LinkDelivery] = dict(
-            zip(cell.links, cell.nodes.delivery, strict=False)
-        )
+        # by the link's id: a Link's own hash walks all its fields (the hot path asks per event)
+        self._policy: dict[int, LinkDelivery] = {
+            id(k): p for k, p in zip(cell.links, cell.nodes.delivery, strict=False)
+        }
         self._remote = {
             d.name: RemoteDevice(d.name, wire) for d in cell.devices if d.name not in self.subjects
         }
@@ -316,7 +317,7 @@ class NodeSystem(System):
             self.wake.set()
 
     def _dropping(self, link: Link) -> bool:
-        policy = self._policy.get(link)
+        policy = self._policy.get(id(link))
         return policy is not None and policy.on_peer_down is PeerDown.DROP and self._wire.down(link)
 
     def _link_step(self, event: str, data: Any, outcome: str) -> None:
@@ -330,7 +331,7 @@ class NodeSystem(System):
             if target is not None:
                 target.post(link.event, _link_data(link, data))
             elif self._dropping(link):
-                dropped = self._policy[link].dropped
+                dropped = self._policy[id(link)].dropped
                 if dropped is not None:
                     self.subjects[link.source].post(dropped)
             else:
@@ -351,7 +352,7 @@ class NodeSystem(System):
             if bound is not None:
                 out.append((bound, link.event))
             elif self._dropping(link):
-                dropped = self._policy[link].dropped
+                dropped = self._policy[id(link)].dropped
                 if dropped is not None:
                     out.append((self.bound[link.source], dropped))
             else:

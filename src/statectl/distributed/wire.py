@@ -323,7 +323,9 @@ class Wire:
     # -- the System's side -------------------------------------------------------------------
 
     def down(self, link: Link) -> bool:
-        return self.nodes.node_of(link.target) not in self.up
+        stream = self.outbound.get(link.target)
+        node = stream.node if stream is not None else self.nodes.node_of(link.target)
+        return node not in self.up
 
     def send(self, device: str, event: str, data: Any) -> None:
         """Number, keep and (if the peer is up) put a link event (rule 3)."""
@@ -358,8 +360,10 @@ class Wire:
         watched = self._watched
 
         def put(event: str, data: Any, outcome: str) -> None:
+            if not watched.get(key, True):  # nobody takes this device's states in
+                return
             snap = subject.snapshot
-            if snap is None or snap == last[0] or not watched.get(key, True):
+            if snap is None or snap == last[0]:
                 return
             last[0] = snap
             states[key] = snap  # the wire's thread puts the newest one
