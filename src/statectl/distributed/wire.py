@@ -20,8 +20,10 @@ Rules:
    without one, once it is posted to the device. Acknowledgements are cumulative
    and sent by one thread, so a burst of events costs few of them.
 5. Each device's state is put on ``statectl/<cell>/state/<device>`` after every
-   step that changed it, and answered to queries on that key, so a node's guards
-   (the mirror), a dashboard and an operator station see the whole cell.
+   step that changed it while a subscriber somewhere takes it in (Zenoh's matching
+   status; the current state is put when one appears), and answered to queries on
+   that key, so a node's rules (the mirror), a dashboard and an operator station see
+   the whole cell.
 6. A node resumed from its journal keeps its epoch and stream positions (the
    journal's ``meta`` rows ``link-epoch`` and ``link-in/<node>/<device>``) and
    sends again what its journal holds and the receiver has not acknowledged.
