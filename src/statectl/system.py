@@ -312,7 +312,9 @@ class System:
                 self.wake.set()  # the device has it now; durable-first: the writer wakes
             return ticket
         self.subjects[name].post(event, data)
-        self.wake.set()
+        wake = self.wake
+        if not wake.is_set():  # set already: the owner clears it before it drains
+            wake.set()
         return None
 
     def drain(self) -> int:

@@ -12,6 +12,10 @@ Rules:
    Ctrl-C stop it: it prints each device's final state and exits 0 (1 if an
    event line was bad or an event unknown, as ``statectl run``).
 4. It prints which peers it sees as they come and go.
+5. It holds the cell to what verify assumes, as ``statectl run CELL`` does, over
+   what it sees (statectl.distributed.system rule 6): a refused environment
+   command (from stdin or forwarded) and an invariant it sees violated are
+   reported and make it exit 1.
 """
 
 from __future__ import annotations
@@ -268,6 +272,10 @@ def node_main(
                 system.listen_steps(TraceWriter(out, device_width=width).step)
                 runcli._show_notes(drivers, out, width)
         system.listen_steps(problems.step)
+        width = max((len(n) for n in system.subjects), default=4)
+        system.on_violation.append(problems.violation(out, width))  # rule 5
+        system.on_failure.append(problems.failure(err))
+        wire.on_refused.append(lambda exc: problems.refuse())
         me = cell.nodes.node(node)
         out.write(
             f"node {node}: devices {', '.join(mine) or 'none'}; listen "

@@ -16,20 +16,34 @@ Rules:
    with the step, like a link event).
 5. An event posted for a device on another node (an operator's line, the
    dashboard) is forwarded to that node, once, without a journal on this side.
+6. A node holds the cell to what verify assumes, as ``statectl run CELL`` does
+   (statectl.system rule 6), over what it sees: its own devices and the last
+   published state of the others (a device never published reads as its initial
+   state). An environment command for a device of this node whose every ``when``
+   is false is refused; a device guard ``In('other.State')`` reads the other
+   device, here or mirrored; each invariant is watched by one node, the node of
+   the first device (in the cell's ``devices:`` order) it reads, after every step
+   of its devices and whenever a mirrored state changes, and its ``on_violation``
+   events go to their devices, here or over the wire.
 """
 
 from __future__ import annotations
 
 from collections import deque
 from collections.abc import Callable, Mapping
+from dataclasses import replace
 from typing import Any, Protocol, cast
 
 from statectl.cell import Cell, Link, Trigger
 from statectl.cell.nodes import LinkDelivery, PeerDown
+from statectl.cell.options import cross_refs
 from statectl.errors import StatectlError
+from statectl.explore.conditions import bind_cross_guards
+from statectl.explore.enforce import CellRules
 from statectl.explore.replay import CellLinks
 from statectl.journal import JournalledDevice, Ticket
 from statectl.runtime import Record, StateEntered, Subject, TransitionTaken
+from statectl.semantics import Snapshot
 from statectl.system import System
 
 __all__ = ["NodeLinks", "NodeSystem", "RemoteDevice", "WireSide"]
@@ -57,6 +71,28 @@ class NodeLinks(CellLinks):
             self._by_source.setdefault(k.source, []).append(entry)
         self._guarded = tuple(g is not None for g in self.model.link_guard)
 
+    def hook(self, name: str, subject: Subject) -> None:
+        """Hear ``subject``'s steps that fire a link, without records: a watcher for the
+        states ``enters`` links name, a step listener for ``raises`` links (register it
+        before the step listener that sends the links)."""
+        entries = self._by_source.get(name, [])
+        enters: dict[str, list[int]] = {}
+        raises: dict[str, list[int]] = {}
+        for i, on_entry, what in entries:
+            (enters if on_entry else raises).setdefault(what, []).append(i)
+        fired = self.fired
+        if enters:
+            subject.watch(enters, _Entered(enters, fired))
+        if raises:
+
+            def took(event: str, data: Any, outcome: str) -> None:
+                if outcome == "handled":
+                    links = raises.get(event)
+                    if links is not None:
+                        fired.extend(links)
+
+            subject.on_step(took)
+
     def watch(self, r: Record) -> None:
         links = self._by_source.get(r.device)
         if links is None:
@@ -71,10 +107,11 @@ class NodeLinks(CellLinks):
 
     def due(self) -> list[Link]:
         """As :meth:`CellLinks.due`; the global state is packed only for a guarded link."""
-        if not self.fired:
+        pending = self.fired
+        if not pending:
             return []
-        fired = sorted(set(self.fired))
-        self.fired.clear()
+        fired = (pending[0],) if len(pending) == 1 else sorted(set(pending))
+        pending.clear()
         if not any(self._guarded[i] for i in fired):
             return [self.cell.links[i] for i in fired]
         g = self.state()
@@ -86,23 +123,59 @@ class NodeLinks(CellLinks):
                 out.append(self.cell.links[i])
         return out
 
+    def seen(self, name: str) -> int:
+        """The local id of a device on another node: its last published state, else initial."""
+        lid = self.mirror.get(name)
+        if lid is None:
+            lid = self.model.local(self.model.initial[0], self.model.position[name])
+        return lid
+
     def state(self) -> int:
         model = self.model
         g = 0
         for d, space in enumerate(model.spaces):
             name = model.names[d]
             subject = self.subjects.get(name)
+            lid: int | None
             if subject is None:
-                lid: int | None = self.mirror.get(name)
-                if lid is None:
-                    lid = model.local(model.initial[0], d)
+                lid = self.seen(name)
             else:
                 snap = subject.snapshot
-                lid = space.lookup(snap) if snap is not None else None
+                lid = space.lookup(snap, subject.data) if snap is not None else None
                 if lid is None:
                     raise StatectlError(f"{name} is in a state the explorer never saw")
             g = model.replace(g, d, lid)
         return g
+
+
+class _Entered:
+    """A state watcher that notes the ``enters`` links a state's entry fires (no records)."""
+
+    def __init__(self, links: dict[str, list[int]], fired: list[int]) -> None:
+        self._links = links
+        self._fired = fired
+
+    def entered(self, state: str) -> None:
+        self._fired.extend(self._links[state])
+
+    def exited(self, state: str) -> None:
+        pass
+
+    def finished(self) -> None:
+        pass
+
+
+class _Mirrored:
+    """A device on another node as a guard here reads it (rule 6): its last published state."""
+
+    def __init__(self, links: NodeLinks, name: str) -> None:
+        self._links = links
+        self._name = name
+        self._space = links.model.spaces[links.model.position[name]]
+
+    @property
+    def snapshot(self) -> Snapshot | None:
+        return self._space.snapshots[self._links.seen(self._name)]
 
 
 class _Sink(deque[tuple[int, str, Any]]):
@@ -172,24 +245,79 @@ class NodeSystem(System):
         cell = self.cell
         assert cell is not None and cell.nodes is not None
         self._wire = wire
-        self._policy: dict[Link, LinkDelivery] = dict(
-            zip(cell.links, cell.nodes.delivery, strict=False)
-        )
+        # by the link's id: a Link's own hash walks all its fields (the hot path asks per event)
+        self._policy: dict[int, LinkDelivery] = {
+            id(k): p for k, p in zip(cell.links, cell.nodes.delivery, strict=False)
+        }
         self._remote = {
             d.name: RemoteDevice(d.name, wire) for d in cell.devices if d.name not in self.subjects
         }
         links = self.links = NodeLinks(cell, self.subjects, mirror)
+        seen: dict[str, Any] = {n: _Mirrored(links, n) for n in self._remote}
+        seen.update(self.subjects)
+        bind_cross_guards(self.subjects, seen)  # rule 6: guards reading another device
+        if self.enforce:
+            watched = tuple(i for i in cell.invariants if self._watches(i.expr.refs))
+            self.rules = CellRules(replace(cell, invariants=watched), links)
         sources = {k.source for k in cell.links}
         for name, s in self.subjects.items():
-            if name in sources:  # a device no link starts from keeps the record-free path
-                s.listen_steps(links.watch_step)
+            if name in self.bound and name in sources:  # the journal's step hook came first
+                s.listen(links.watch)
+            elif name in sources:  # heard without records (NodeLinks.hook)
+                links.hook(name, s)
             if name in self.bound:
                 self.bound[name].sends = self._link_sends
             else:
                 s.on_step(self._link_step)
 
+    def _watches(self, refs: tuple[tuple[str, str], ...]) -> bool:
+        """Rule 6: whether this node watches an invariant reading ``refs``."""
+        assert self.cell is not None
+        read = {d for d, _ in refs}
+        first = next((d.name for d in self.cell.devices if d.name in read), None)
+        return first is not None and first in self.subjects
+
+    def reads_remote(self) -> bool:
+        """Whether rule 6 here reads a device on another node (the wire mirrors them then)."""
+        cell = self.cell
+        assert cell is not None
+        here = self.subjects
+        refs: list[tuple[str, str]] = []
+        for e in cell.environment:
+            if e.device in here and e.when is not None:
+                refs.extend(e.when.refs)
+        if self.rules is not None:
+            for inv in self.rules.cell.invariants:
+                refs.extend(inv.expr.refs)
+        for s in here.values():
+            refs.extend((d, st) for _, d, st, _ in cross_refs(s.chart))
+        return any(d not in here for d, _ in refs)
+
+    def _send(self, device: str, event: str, data: Any = None) -> None:
+        """An event to a device here (its queue) or on another node (the wire)."""
+        target = self.subjects.get(device)
+        if target is not None:
+            target.post(event, data)
+        else:
+            self._wire.send(device, event, data)
+
+    def recheck(self) -> None:
+        """Rule 6 when a mirrored state changed: the invariants this node watches, as owner."""
+        if self.rules is None or not self._live or not self.rules.watching:
+            return
+        with self.owner:
+            sends = self._violations()
+            for device, event in sends:
+                bound = self.bound.get(device)
+                if bound is not None:
+                    bound.post(event)
+                else:
+                    self._send(device, event)
+        if sends:
+            self.wake.set()
+
     def _dropping(self, link: Link) -> bool:
-        policy = self._policy.get(link)
+        policy = self._policy.get(id(link))
         return policy is not None and policy.on_peer_down is PeerDown.DROP and self._wire.down(link)
 
     def _link_step(self, event: str, data: Any, outcome: str) -> None:
@@ -203,11 +331,14 @@ class NodeSystem(System):
             if target is not None:
                 target.post(link.event, _link_data(link, data))
             elif self._dropping(link):
-                dropped = self._policy[link].dropped
+                dropped = self._policy[id(link)].dropped
                 if dropped is not None:
                     self.subjects[link.source].post(dropped)
             else:
                 self._wire.send(link.target, link.event, _link_data(link, data))
+        if self.rules is not None and self.rules.watching:
+            for device, event in self._violations():
+                self._send(device, event)
 
     def _link_sends(self) -> list[tuple[JournalledDevice, str]]:
         """Rules 1, 3 and 4 with a journal: what the step sends, journalled with it."""
@@ -221,11 +352,14 @@ class NodeSystem(System):
             if bound is not None:
                 out.append((bound, link.event))
             elif self._dropping(link):
-                dropped = self._policy[link].dropped
+                dropped = self._policy[id(link)].dropped
                 if dropped is not None:
                     out.append((self.bound[link.source], dropped))
             else:
                 out.append((self._remote[link.target], link.event))
+        if self.rules is not None and self.rules.watching:
+            for device, event in self._violations():
+                out.append((self.bound.get(device) or self._remote[device], event))
         return out
 
     def post(self, device: str | None, event: str, data: Any = None) -> Ticket | None:

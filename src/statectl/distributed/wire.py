@@ -20,8 +20,10 @@ Rules:
    without one, once it is posted to the device. Acknowledgements are cumulative
    and sent by one thread, so a burst of events costs few of them.
 5. Each device's state is put on ``statectl/<cell>/state/<device>`` after every
-   step that changed it, and answered to queries on that key, so a node's guards
-   (the mirror), a dashboard and an operator station see the whole cell.
+   step that changed it while a subscriber somewhere takes it in (Zenoh's matching
+   status; the current state is put when one appears), and answered to queries on
+   that key, so a node's rules (the mirror), a dashboard and an operator station see
+   the whole cell.
 6. A node resumed from its journal keeps its epoch and stream positions (the
    journal's ``meta`` rows ``link-epoch`` and ``link-in/<node>/<device>``) and
    sends again what its journal holds and the receiver has not acknowledged.
@@ -45,6 +47,7 @@ from statectl.distributed.keys import Keys
 from statectl.distributed.streams import Inbound, Outbound, Verdict
 from statectl.distributed.system import NodeSystem
 from statectl.errors import StatectlError
+from statectl.explore.enforce import Refused
 from statectl.journal.format import Guarantee, decode_snapshot, encode_snapshot
 from statectl.semantics import Snapshot
 
@@ -58,6 +61,8 @@ _EPOCH = "link-epoch"
 _IN = "link-in/"
 _ENC = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
 _NAMES: dict[str, str] = {}  # event name -> its JSON string
+#: one JSON value at an index of a text: json.loads without its per-call checks (hot path)
+_scan: Callable[[str, int], tuple[Any, int]] = getattr(json.JSONDecoder(), "scan_once")  # noqa: B009
 
 
 def session_config(node: Node) -> Any:
@@ -125,6 +130,7 @@ class Wire:
         self._resend_due: set[str] = set()
         self._due = threading.Lock()  # guards the three above: callbacks add, the thread takes
         self._states: dict[str, Snapshot] = {}  # "state/<device>" -> newest snapshot to put
+        self._watched: dict[str, bool] = {}  # "state/<device>" -> does anyone subscribe?
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._print = threading.Lock()
@@ -135,6 +141,8 @@ class Wire:
         self._mirrored = False  # whether other nodes' states are taken in (open())
         self.lost_at: dict[str, float] = {}  # node -> monotonic time it was noticed gone
         self.on_state: list[Callable[[str, Snapshot, float], None]] = []
+        #: called with each forwarded environment command this node refused (its 'when')
+        self.on_refused: list[Callable[[Exception], None]] = []
         epoch, backlog = self._from_journal(journal, resume)
         self.epoch = epoch
         for d in cell.devices:
@@ -224,15 +232,16 @@ class Wire:
             )
             del stream
         for name in self.local:
-            self._pubs["state/" + name] = s.declare_publisher(
+            pub = self._pubs["state/" + name] = s.declare_publisher(
                 self.keys.state(name), congestion_control=block
             )
             self.system.subjects[name].on_step(self._stepped(name))
+            self._watch_matching(pub, "state/" + name)
         self._decls += [
             s.declare_subscriber(f"{root}/ack/{self.me.name}/*", self._on_ack),
             s.declare_queryable(f"{root}/state/*", self._on_query),
         ]
-        self._mirrored = states or self._guards_read_others()
+        self._mirrored = states or self._guards_read_others() or self.system.reads_remote()
         if self._mirrored:
             self._decls.append(
                 s.declare_subscriber(
@@ -240,6 +249,27 @@ class Wire:
                 )
             )
         self._decls.append(s.liveliness().declare_token(self.keys.node(self.me.name)))
+
+    def _watch_matching(self, pub: Any, key: str) -> None:
+        """Rule 5: put a device's states only while a subscriber somewhere takes them in
+        (Zenoh's matching status); when one appears, put the current state at once."""
+        try:
+            self._watched[key] = bool(pub.matching_status.matching)
+            listener = pub.declare_matching_listener(
+                lambda status, key=key: self._matching(key, bool(status.matching))
+            )
+        except (AttributeError, TypeError):  # a Zenoh without matching status: always put
+            self._watched.pop(key, None)
+            return
+        self._decls.append(listener)
+
+    def _matching(self, key: str, matching: bool) -> None:
+        self._watched[key] = matching
+        if matching:
+            snap = self.system.subjects[key.removeprefix("state/")].snapshot
+            if snap is not None:
+                self._states[key] = snap
+                self._wake.set()
 
     def refresh(self) -> None:
         """Ask every node for its devices' states now (a dashboard that starts late)."""
@@ -295,7 +325,9 @@ class Wire:
     # -- the System's side -------------------------------------------------------------------
 
     def down(self, link: Link) -> bool:
-        return self.nodes.node_of(link.target) not in self.up
+        stream = self.outbound.get(link.target)
+        node = stream.node if stream is not None else self.nodes.node_of(link.target)
+        return node not in self.up
 
     def send(self, device: str, event: str, data: Any) -> None:
         """Number, keep and (if the peer is up) put a link event (rule 3)."""
@@ -327,13 +359,18 @@ class Wire:
         states = self._states
         wake = self._wake
 
+        watched = self._watched
+
         def put(event: str, data: Any, outcome: str) -> None:
+            if not watched.get(key, True):  # nobody takes this device's states in
+                return
             snap = subject.snapshot
             if snap is None or snap == last[0]:
                 return
             last[0] = snap
             states[key] = snap  # the wire's thread puts the newest one
-            wake.set()
+            if not wake.is_set():
+                wake.set()
 
         return put
 
@@ -342,9 +379,9 @@ class Wire:
     def _on_link(self, sample: Any) -> None:
         node, device = Keys.last(sample.key_expr)
         try:
-            msg = json.loads(sample.payload.to_bytes())
+            msg = _scan(sample.payload.to_string(), 0)[0]
             e, n, event, data = str(msg["e"]), int(msg["n"]), str(msg["ev"]), msg.get("d")
-        except (ValueError, KeyError, TypeError):
+        except (ValueError, KeyError, TypeError, StopIteration, AttributeError):
             return
         system = self.system
         run = True
@@ -368,7 +405,8 @@ class Wire:
             self._run_devices()  # before waking the wire's thread: the device first
         if bound is None:
             self._ack(node, device, e, n, False)
-            self._wake.set()
+            if not self._wake.is_set():
+                self._wake.set()
 
     def _ack(self, node: str, device: str, e: str, n: int, again: bool) -> None:
         """Note an acknowledgement for the wire's thread to send (rule 4)."""
@@ -391,9 +429,9 @@ class Wire:
         _, device = Keys.last(sample.key_expr)
         stream = self.outbound.get(device)
         try:
-            msg = json.loads(sample.payload.to_bytes())
+            msg = _scan(sample.payload.to_string(), 0)[0]
             e, n, again = str(msg["e"]), int(msg["n"]), bool(msg.get("r"))
-        except (ValueError, KeyError, TypeError):
+        except (ValueError, KeyError, TypeError, StopIteration, AttributeError):
             return
         if stream is None or e != stream.epoch:
             return
@@ -427,6 +465,9 @@ class Wire:
             self.system.post(device, str(msg["ev"]), msg.get("d"))
         except (ValueError, KeyError, TypeError, StatectlError) as exc:
             self._say(f"event for {device} from another node refused: {exc}")
+            if isinstance(exc, Refused):
+                for callback in self.on_refused:
+                    callback(exc)
 
     def _on_state(self, sample: Any) -> None:
         _, device = Keys.last(sample.key_expr)
@@ -439,8 +480,9 @@ class Wire:
             if links is not None and device in links.model.position:
                 d = links.model.position[device]
                 lid = links.model.spaces[d].lookup(snap)
-                if lid is not None:
+                if lid is not None and self.mirror.get(device) != lid:
                     self.mirror[device] = lid
+                    self.system.recheck()  # invariants over what this node sees
         for callback in self.on_state:
             callback(device, snap, t)
 

@@ -88,18 +88,23 @@ class _CrossGuard(Expression):
         return Expression.evaluate(self, local)
 
 
-def bind_cross_guards(subjects: Mapping[str, Subject]) -> list[str]:
+def bind_cross_guards(
+    subjects: Mapping[str, Subject], read: Mapping[str, Any] | None = None
+) -> list[str]:
     """Rule 3: give each Subject whose guards read another device a machine that can.
 
     Call before the Subjects start. Returns the names of the Subjects rebound.
+    ``read`` (default ``subjects``) is where a guard looks another device up: anything
+    with a ``snapshot`` (a node's stand-in for a device on another node).
     """
+    seen = subjects if read is None else read
 
     def resolver(own: Callable[[str], bool]) -> Callable[[str], bool]:
         def is_in(name: str) -> bool:
             if own(name):
                 return True
             device, dot, state = name.partition(".")
-            other = subjects.get(device) if dot else None
+            other = seen.get(device) if dot else None
             if other is None:
                 return False
             snap = other.snapshot

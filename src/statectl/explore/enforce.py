@@ -63,6 +63,8 @@ class CellRules:
         self._invariants = [(inv, model.predicate(inv.expr)) for inv in cell.invariants]
         self._broken: set[str] = set()
         self.violations: list[Violation] = []
+        #: whether there is any invariant to watch (a step need not pack the state)
+        self.watching = bool(self._invariants)
 
     def guarded(self, device: str, event: str) -> bool:
         """Whether rule 1 may refuse ``event`` to ``device`` (every entry for it has a when)."""
