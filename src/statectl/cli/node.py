@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from statectl.cli.commands import PROBLEMS, USAGE
+from statectl.cli.problems import Problems, verdict
 from statectl.errors import DiagnosticError, StatectlError
 
 __all__ = ["dashboard_main", "node_main", "register"]
@@ -240,7 +241,7 @@ def node_main(
         return USAGE
     mine = cell.nodes.node(node).devices
     devices = tuple(d for d in devices if d.name in mine)
-    problems = runcli._Problems()
+    problems = Problems()
     system: Any = None
     wire: Any = None
     server: Any = None
@@ -322,7 +323,7 @@ def node_main(
             system.serve(halt)
         for name, subject in system.subjects.items():
             out.write(f"final {name}: {', '.join(sorted(subject.configuration))}\n")
-        return runcli._verdict(problems, err)
+        return verdict(problems, err, "node")
     except (StatectlError, OSError) as exc:
         failed = str(exc)
         err.write(f"statectl node: {exc}\n")

@@ -66,7 +66,8 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from statectl.cell import Cell, load_cell
-from statectl.cli.commands import OK, PROBLEMS, USAGE
+from statectl.cli.commands import PROBLEMS, USAGE
+from statectl.cli.problems import Problems, verdict
 from statectl.cli.settle import unsettled_note
 from statectl.cli.steps import StepLog
 from statectl.devices import (
@@ -82,7 +83,7 @@ from statectl.devices import (
 )
 from statectl.devices.config import ShipConfig
 from statectl.errors import DiagnosticError, Severity, StatectlError
-from statectl.explore.enforce import Refused, Violation
+from statectl.explore.enforce import Refused
 from statectl.journal import (
     Guarantee,
     Journal,
@@ -95,8 +96,6 @@ from statectl.journal import (
 from statectl.runner.cells import is_cell, load_setups, relevant_warnings
 from statectl.runner.events import parse_event_line
 from statectl.runtime import Clock, SimClock, TraceWriter, WallClock
-from statectl.runtime.records import EventIgnored, EventRejected, StepRecord
-from statectl.semantics import Unhandled
 from statectl.system import DeviceSetup, System
 
 
@@ -172,98 +171,13 @@ def _show_notes(drivers: Mapping[str, DeviceDriver], out: TextIO, width: int) ->
             d.on_note = writer(name)
 
 
-class _Problems:
-    """Rule 9: what went wrong during a run that went on (bad lines, unknown events)."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()  # the feeder thread and the owner both count
-        self.lines = 0  # event lines reported and skipped
-        self.unknown = 0  # events no chart knows, or rejected under the 'error' policy
-        self.unsettled = ""  # a batch settle stopped at --settle-limit: what to say
-        self.refused = 0  # environment commands whose 'when' was false (a cell)
-        self.violated = 0  # invariant violations seen live (a cell)
-
-    def record(self, record: object) -> None:
-        """A listener: count the events a device refused or did not know."""
-        refused = isinstance(record, EventRejected) or (
-            isinstance(record, EventIgnored) and record.reason is Unhandled.UNKNOWN_EVENT
-        )
-        if refused:
-            with self._lock:
-                self.unknown += 1
-
-    def step(self, step: StepRecord) -> None:
-        """A step listener: :meth:`record` without building the records of a step."""
-        if step.event is None:  # a record made outside any event
-            for record in step.records:
-                self.record(record)
-        elif step.step is None and (step.rejected or step.reason is Unhandled.UNKNOWN_EVENT):
-            with self._lock:
-                self.unknown += 1
-
-    def failure(self, err: TextIO) -> Callable[[Exception], None]:
-        """A System callback: a row that failed while draining is said where (its
-        EventRejected record is what counts it)."""
-
-        def say(exc: Exception) -> None:
-            err.write(f"{exc}\n")
-
-        return say
-
-    def refuse(self) -> None:
-        with self._lock:
-            self.refused += 1
-
-    def violation(self, out: TextIO, width: int) -> Callable[[Violation], None]:
-        """A System callback: each invariant violation goes into the trace and is counted."""
-
-        def seen(v: Violation) -> None:
-            with self._lock:
-                self.violated += 1
-            out.write(f"t={v.time:7.2f}  {'cell':<{width}}  {'VIOLATED':<8} {v}\n")
-
-        return seen
-
-    def counting(self, post: Callable[..., Any], err: TextIO) -> Callable[..., Any]:
-        """``post`` for the dashboard: a refused command is reported and counted (rule 10)."""
-
-        def post_counted(device: str | None, event: str, data: Any = None) -> Any:
-            try:
-                return post(device, event, data)
-            except Refused as exc:
-                err.write(f"statectl run: {exc}\n")
-                self.refuse()
-                raise
-
-        return post_counted
-
-    def bad_line(self) -> None:
-        with self._lock:
-            self.lines += 1
-
-    def summary(self) -> str | None:
-        """One line for the end of the run, or None when nothing went wrong."""
-        parts = []
-        if self.lines:
-            parts.append(f"{self.lines} event line(s) reported above and skipped")
-        if self.unknown:
-            parts.append(f"{self.unknown} event(s) unknown to the device or rejected")
-        if self.unsettled:
-            parts.append(self.unsettled)
-        if self.refused:
-            parts.append(f"{self.refused} environment command(s) refused by the cell's 'when'")
-        if self.violated:
-            parts.append(f"{self.violated} invariant violation(s)")
-        return "; ".join(parts) or None
-
-
 def _feed(
     system: System,
     lines: Iterable[str],
     err: TextIO,
     *,
     batch: bool,
-    problems: _Problems | None = None,
+    problems: Problems | None = None,
     steps: StepLog | None = None,
 ) -> None:
     """Post each event line; a batch run settles after each (rule 3); count bad lines (rule 9).
@@ -405,7 +319,7 @@ def run(
             err.write(f"{d}\n")
         return PROBLEMS
     live = dashboard or realtime or opcua is not None
-    problems = _Problems()
+    problems = Problems()
     failed = ""  # what the run reported as its failure, if anything
     system: System | None = None
     server: Any = None
@@ -502,7 +416,7 @@ def run(
             for name, subject in system.subjects.items():
                 final = ", ".join(sorted(subject.configuration))
                 info.write(f"final state {final}\n" if cell is None else f"final {name}: {final}\n")
-            return _verdict(problems, err)
+            return verdict(problems, err)
         halt = stop or threading.Event()
         if events is None and server is None:
             events = sys.stdin  # rule 5: without a dashboard, stdin is the operator
@@ -517,7 +431,7 @@ def run(
             system.serve(halt)
         if system.journal is not None:
             system.journal.flush()  # a write that failed meanwhile fails the run
-        return _verdict(problems, err)
+        return verdict(problems, err)
     except BrokenPipeError:
         raise  # the reader of the trace went away: the command line ends quietly
     except (StatectlError, OSError) as exc:
@@ -535,22 +449,13 @@ def run(
             shipping.stop()  # what the journal committed goes too, for a few seconds at most
 
 
-def _verdict(problems: _Problems, err: TextIO) -> int:
-    """Rule 9: exit 1 when anything went wrong on the way, with one line saying what."""
-    summary = problems.summary()
-    if summary is None:
-        return OK
-    err.write(f"statectl run: {summary}: exit 1\n")
-    return PROBLEMS
-
-
 def _feed_then_stop(
     system: System,
     lines: TextIO,
     err: TextIO,
     halt: threading.Event,
     stop_at_end: bool,
-    problems: _Problems,
+    problems: Problems,
 ) -> None:
     try:
         _feed(system, lines, err, batch=False, problems=problems)
