@@ -17,7 +17,7 @@ from typing import Any
 
 from statectl.cell import Cell
 from statectl.distributed.keys import Keys
-from statectl.distributed.wire import parse_snapshot
+from statectl.distributed.messages import parse_snapshot
 from statectl.errors import StatectlError
 from statectl.semantics import Snapshot
 

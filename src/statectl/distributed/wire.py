@@ -42,16 +42,16 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from statectl.cell import Cell, Link
-from statectl.cell.nodes import Node
 from statectl.distributed.keys import Keys
+from statectl.distributed.messages import parse_snapshot, session_config, snapshot_payload
 from statectl.distributed.streams import Inbound, Outbound, Verdict
 from statectl.distributed.system import NodeSystem
 from statectl.errors import StatectlError
 from statectl.explore.enforce import Refused
-from statectl.journal.format import Guarantee, decode_snapshot, encode_snapshot
+from statectl.journal.format import Guarantee
 from statectl.semantics import Snapshot
 
-__all__ = ["RESEND_AFTER", "Wire", "session_config"]
+__all__ = ["RESEND_AFTER", "Wire"]
 
 #: Seconds without an acknowledgement after which a stream asks again (rule 3).
 RESEND_AFTER = 0.5
@@ -63,35 +63,6 @@ _ENC = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
 _NAMES: dict[str, str] = {}  # event name -> its JSON string
 #: one JSON value at an index of a text: json.loads without its per-call checks (hot path)
 _scan: Callable[[str, int], tuple[Any, int]] = getattr(json.JSONDecoder(), "scan_once")  # noqa: B009
-
-
-def session_config(node: Node) -> Any:
-    """Rule 1: the Zenoh configuration of a node (peer, no multicast, its endpoints, lease)."""
-    import zenoh
-
-    c = zenoh.Config()
-    c.insert_json5("mode", '"peer"')
-    c.insert_json5("scouting/multicast/enabled", "false")
-    c.insert_json5("scouting/gossip/enabled", "true")
-    c.insert_json5("listen/endpoints", json.dumps(list(node.listen)))
-    c.insert_json5("connect/endpoints", json.dumps(list(node.connect)))
-    c.insert_json5("transport/link/tx/lease", str(max(50, int(node.lease * 1000))))
-    c.insert_json5("transport/link/tx/keep_alive", "4")
-    return c
-
-
-def snapshot_payload(snapshot: Snapshot) -> bytes:
-    """A device's state message: its snapshot and the wall time it was put (newest wins)."""
-    t = time.time()
-    active, history, previous = encode_snapshot(snapshot)
-    return f'{{"a":{active},"h":{history},"p":{_ENC.encode(previous)},"t":{t}}}'.encode()
-
-
-def parse_snapshot(payload: bytes) -> tuple[Snapshot, float]:
-    """The snapshot and wall time of a state message (:func:`snapshot_payload`)."""
-    msg = json.loads(payload)
-    snap = decode_snapshot(json.dumps(msg["a"]), json.dumps(msg["h"]), msg["p"])
-    return snap, float(msg.get("t", 0.0))
 
 
 class Wire:

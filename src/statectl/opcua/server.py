@@ -33,7 +33,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import functools
-import hmac
 import threading
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -44,6 +43,9 @@ from typing import Any
 from urllib.parse import urlparse
 
 from statectl.errors import StatectlError
+from statectl.opcua.access import Users as _Users
+from statectl.opcua.access import rules as _Rules
+from statectl.opcua.access import ua_module as _ua
 from statectl.opcua.certs import APP_URI, default_directory, ensure_certificate
 from statectl.opcua.packml import PackmlNaming, PackmlSpace, naming, packml_call
 from statectl.opcua.space import Layout, changes, layout
@@ -542,60 +544,3 @@ async def _optional(node: Any, idx: int, name: str, variant: Any, empty: Any) ->
     except ua.UaError:  # BadNoMatch: the type left it out
         where = ua.NodeId(0, idx)  # a new numeric id in statectl's namespace
         return await node.add_property(where, ua.QualifiedName(name, 0), ua.Variant(empty, variant))
-
-
-class _Users:
-    """Rule 4: anonymous is anonymous; the one configured user may call methods."""
-
-    def __init__(self, user: str | None, password: str | None) -> None:
-        self._user, self._password = user, password
-
-    def get_user(
-        self, iserver: Any, username: str | None = None, password: str | None = None,
-        certificate: Any = None,
-    ) -> Any:  # fmt: skip
-        from asyncua.crypto.permission_rules import User, UserRole
-
-        if username is None and password is None:  # an anonymous token (maybe a channel cert)
-            return User(role=UserRole.Anonymous)
-        if (
-            self._user is not None
-            and self._password is not None
-            and username is not None
-            and password is not None
-            and hmac.compare_digest(username.encode(), self._user.encode())
-            and hmac.compare_digest(_bytes(password), self._password.encode())
-        ):
-            return User(role=UserRole.User, name=username)
-        return None  # wrong credentials: the session is refused
-
-
-def _ua() -> Any:
-    """asyncua's ``ua`` module, untyped here: asyncua is optional and its stubs are partial."""
-    from asyncua import ua
-
-    return ua
-
-
-def _bytes(text: str | bytes) -> bytes:
-    return text if isinstance(text, bytes) else text.encode()
-
-
-def _Rules() -> Any:  # a ruleset class built on first use (asyncua is optional)
-    ua = _ua()
-    from asyncua.crypto.permission_rules import USER_TYPES, PermissionRuleset, UserRole
-
-    call = ua.NodeId(ua.ObjectIds.CallRequest_Encoding_DefaultBinary)
-    write = ua.NodeId(ua.ObjectIds.WriteRequest_Encoding_DefaultBinary)
-    everyone = {ua.NodeId(t) for t in USER_TYPES} - {call, write}
-
-    class Rules(PermissionRuleset):
-        """Anonymous: browse, read, subscribe. The user: that and call. Nobody writes."""
-
-        def check_validity(self, user: Any, action_type_id: Any, body: Any) -> bool:
-            role = getattr(user, "role", None)
-            if role is UserRole.User:
-                return action_type_id in everyone or action_type_id == call
-            return role is UserRole.Anonymous and action_type_id in everyone
-
-    return Rules()
