@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from statectl.cell import load_cell_or_raise
-from statectl.cli.run import _Problems as ProblemCounter  # statectl run's counter
+from statectl.cli.problems import Problems as ProblemCounter  # statectl run's counter
 from statectl.devices import connect, make_driver
 from statectl.errors import UnhandledEventError
 from statectl.explore.replay import CellLinks
