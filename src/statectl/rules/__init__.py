@@ -110,6 +110,16 @@ class _Structure:
         mine = self.descriptors.get(state, frozenset())
         return bool(mine) and any(d in mine for d in _matching(event))
 
+    def rows(self, state: str, event: str) -> list[Transition]:
+        """The transitions of ``state`` and its ancestors that ``event`` matches."""
+        names = set(_matching(event))
+        return [
+            t
+            for a in (state, *self.ancestors.get(state, ()))
+            for t in self.out(a)
+            if any(e in names for e in t.events)
+        ]
+
     def ignores(self, state: str, event: str) -> bool:
         return any(
             (s, event) in self.chart.ignored for s in (state, *self.ancestors.get(state, ()))
@@ -349,12 +359,7 @@ def _check_unused_events(st: _Structure) -> Iterator[Diagnostic]:
 def _check_contradictory_ignores(st: _Structure) -> Iterator[Diagnostic]:
     for state, event in sorted(st.chart.ignored):
         if state in st.by_name and st.handles(state, event):
-            rows = [
-                t
-                for a in (state, *st.ancestors.get(state, ()))
-                for t in st.out(a)
-                if event in t.events
-            ]
+            rows = st.rows(state, event)
             if rows and all(t.guard is not None for t in rows):
                 continue  # every row is guarded: the ignore is what happens when none holds
             yield Diagnostic(
