@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from statectl.observers import Notification
+from statectl.runtime.records import fields_of
 
 ROOT = Path(__file__).resolve().parents[1]
 MOTOR = ROOT / "examples" / "motor" / "motor.yaml"
@@ -36,10 +37,7 @@ class Recorder:
 
 def record_keys(records: Any) -> list[tuple[Any, ...]]:
     """Each record as (kind, its fields but device and time): what a trace compares."""
-    return [
-        (type(r).__name__, *(getattr(r, f) for f in r._fields if f not in ("device", "time")))
-        for r in records
-    ]
+    return [(type(r).__name__, *fields_of(r)) for r in records]
 
 
 #: A press whose Work is parallel: the ram presses while the clamp holds. Work is

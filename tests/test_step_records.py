@@ -7,6 +7,7 @@ objects and when they are built differ.
 
 from __future__ import annotations
 
+import io
 from collections.abc import Callable
 from typing import Any
 
@@ -14,11 +15,13 @@ import pytest
 
 from statectl.devices import connect, make_driver
 from statectl.errors import UnhandledEventError
-from statectl.model import Chart, State, StateKind, Transition
+from statectl.model import Chart, Invoke, Notify, State, StateKind, Transition
 from statectl.observers import Notification
 from statectl.runtime import (
+    ApiCall,
     EventIgnored,
     MonitorStarted,
+    ObserverCalled,
     Record,
     SimClock,
     StepRecord,
@@ -118,7 +121,7 @@ def test_a_step_record_says_what_happened_without_building_records(motor: Chart)
     _, steps, _ = _run(motor, "monitor", PAPER + STRAYS[:1], _stepped)
     moved = next(s for s in steps if s.event == "Movement")
     assert (moved.outcome, moved.entered, moved.exited) == ("handled", ("Moving",), ("Blocked",))
-    assert not hasattr(moved, "_records")  # nothing read it yet
+    assert moved._records is None  # nothing read it yet
     assert any(isinstance(r, MonitorStarted) for r in moved)
     stray = steps[-2]  # the last event; close() made the last record
     assert (stray.event, stray.outcome, stray.step) == (
@@ -204,3 +207,72 @@ def test_a_record_made_by_a_step_listener_comes_after_the_step(motor: Chart) -> 
     subject.dispatch("Movement", {"amount": 1})
     subject.dispatch("Movement completion")
     assert heard == [None, None, "Movement", None, "Movement completion"]
+
+
+class TwoCalls:
+    """An observer that logs two API calls per notification (as a driver logs them)."""
+
+    def __init__(self) -> None:
+        self.api_log: list[ApiCall] = []
+
+    def update(self, notification: Notification) -> None:
+        for n in (1, 2):
+            self.api_log.append(ApiCall(0.0, "Rig", notification.method, (n,)))
+
+
+def _rig() -> Chart:
+    """Going On notifies two observers, in order, one of them again on the way back."""
+    reach, run = Notify(0, "Reach", "Reach", "go"), Notify(1, "Run", "Run", "go")
+    return Chart(
+        "Rig",
+        (State("Off"), State("On")),
+        (
+            Transition("Off", ("go",), ("On",), actions=(reach, run)),
+            Transition("On", ("stop",), ("Off",), actions=(Notify(1, "Run", "Run", "stop"),)),
+        ),
+        ("Off",),
+        invokes=(Invoke(0, "Reach", "Reach"), Invoke(1, "Run", "Run")),
+    )
+
+
+@pytest.mark.parametrize(
+    "observers", [("plain", "plain"), ("calls", "plain"), ("calls", "calls"), ("none", "calls")]
+)
+def test_records_of_repeated_steps_are_listens_however_observers_log(
+    observers: tuple[str, str],
+) -> None:
+    """A step seen again builds its records from compiled code: still listen()'s records,
+    with every notification's observer calls in place (none, one, or each logged call)."""
+    from statectl.runtime import TraceWriter
+
+    chart = _rig()
+    events = (("go", None), ("stop", None)) * 4 + (("go", {"speed": 2}),)
+    runs: list[list[Record]] = []
+    texts: list[str] = []
+    for hear in ("typed", "steps"):
+        subject = Subject(chart, clock=SimClock())
+        for invoke, kind in enumerate(observers):
+            if kind != "none":
+                subject.attach(Recorder() if kind == "plain" else TwoCalls(), (invoke,))
+        out = io.StringIO()
+        writer = TraceWriter(out, device_width=3)
+        got: list[Record] = []
+        if hear == "typed":
+            subject.listen(got.append)
+            subject.listen(writer)
+        else:
+            steps: list[StepRecord] = []
+            subject.listen_steps(steps.append)
+            subject.listen_steps(writer.step)
+        subject.start()
+        for event, data in events:
+            subject.dispatch(event, data)
+        if hear == "steps":
+            got = [r for s in steps for r in s.records]
+        runs.append(got)
+        texts.append(out.getvalue())
+    assert runs[0] == runs[1]
+    assert texts[0] == texts[1]
+    calls = sum(isinstance(r, ObserverCalled) for r in runs[0])
+    each = [{"plain": 1, "calls": 2, "none": 0}[k] for k in observers]
+    assert calls == 5 * sum(each) + 4 * each[1]  # five go, four stop

@@ -121,7 +121,7 @@ class Driver:
             owner, new = self._owner, self._api_new
             log = self._api_log
             # tuple.__new__: the named tuple without its Python-level __new__
-            log.extend([tuple.__new__(ApiCall, (t, owner, f, a)) for t, f, a in new])
+            log.extend([ApiCall(t, owner, f, a) for t, f, a in new])
             new.clear()
             if len(log) >= 2 * API_LOG_KEEP:
                 self._api_dropped += len(log) - API_LOG_KEEP

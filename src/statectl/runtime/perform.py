@@ -22,6 +22,7 @@ from statectl.runtime.clock import Clock
 from statectl.runtime.hooks import ApiLogging, Listener, Policy, StateWatcher, StepListener
 from statectl.runtime.records import (
     ApiCall,
+    Builder,
     EventIgnored,
     EventRejected,
     Finished,
@@ -33,7 +34,9 @@ from statectl.runtime.records import (
     StateExited,
     StepRecord,
     TransitionTaken,
+    _Made,
     _Tail,
+    update_api,
 )
 from statectl.semantics import Plan, Snapshot, Step, Unhandled
 
@@ -45,10 +48,11 @@ Recorded = tuple[tuple[tuple[Callable[[Any], object] | None, Any, int], ...], in
 #: A plan whose step record is known before it runs (no watcher, at most one notification,
 #: to an observer that logs no API calls): what its observer did, and the typed records
 #: before that notification (the cursor while it runs).
-Static = tuple[tuple[object, ...], int]
+Static = tuple[tuple[_Made, ...], int]
 #: What the plan path calls for a plan: (counted first, callable or None, argument) without
 #: event data; with data, the callable given the data (it counts its invokes), or None;
-#: and the plan's calls for a step listener (:func:`recorded`).
+#: the plan's calls for a step listener (:func:`recorded`), and the plan's record
+#: builder once a step listener has read its typed records (see :class:`Builder`).
 _Call = tuple[
     int,
     Callable[[Any], object] | None,
@@ -56,6 +60,7 @@ _Call = tuple[
     Callable[[Any], object] | None,
     Recorded,
     Static | None,
+    Builder,
 ]
 #: A plan's watcher calls and notifications in order (see ``Performer._program``).
 _Program = tuple[tuple[Callable[[str], object] | None, Any], ...]
@@ -153,9 +158,17 @@ class Performer:
         entry: _Call
         if watch and any(s in watch for s in (*plan.exited, *plan.entered)):
             run = partial(self._run, self._program(plan))
-            entry = (1, run, None, run, rec, static)  # watchers hear it between notifications
+            entry = (
+                1,
+                run,
+                None,
+                run,
+                rec,
+                static,
+                Builder(),
+            )  # watchers hear it between notifications
         elif not plan.notifies:
-            entry = (1, None, None, None, rec, static)
+            entry = (1, None, None, None, rec, static, Builder())
         elif len(plan.notifies) == 1:
             action = plan.notifies[0][1]
             route = self._routes.get(action.invoke)
@@ -163,10 +176,18 @@ class Performer:
                 self._name, action.invoke, action.name, action.method, action.event, None
             )
             call = route[0].update if route is not None else _nobody
-            entry = (1 + _ONE_INVOKE, call, note, partial(self._issue, plan), rec, static)
+            entry = (
+                1 + _ONE_INVOKE,
+                call,
+                note,
+                partial(self._issue, plan),
+                rec,
+                static,
+                Builder(),
+            )
         else:
             issue = partial(self._issue, plan)
-            entry = (1, issue, None, issue, rec, static)
+            entry = (1, issue, None, issue, rec, static, Builder())
         calls[plan] = entry
         return entry
 
@@ -181,7 +202,7 @@ class Performer:
         route = self._routes.get(note.invoke)
         if route is None:
             return (None,), at
-        return ((route[0],), at) if not route[1] else None
+        return ((update_api(route[0], note.invoke),), at) if not route[1] else None
 
     def _program(self, plan: Plan) -> _Program:
         """The calls of ``plan``'s step in order: ``(watcher method, state)`` for the

@@ -26,7 +26,7 @@ from statectl.runtime.perform import (
     api_count,
     recorded,
 )
-from statectl.runtime.records import Record, StepRecord, _Made, _Tail
+from statectl.runtime.records import Builder, Record, StepRecord, _Made, _Tail, update_api
 from statectl.semantics import Plan, Step
 
 __all__ = ["Recording", "StepListener"]
@@ -117,7 +117,7 @@ class Recording(Performer):
         static = entry[5]
         if static is None:
             self._counts += 1
-            self._record_step(event, data, plan.step, now, entry[4])
+            self._record_step(event, data, plan.step, now, entry[4], entry[6])
             return
         made, at = static
         self._recording = _NONE_YET  # emit() makes the list if anything is recorded meanwhile
@@ -144,12 +144,14 @@ class Recording(Performer):
             extras = self._recording
             self._recording = None
             failed = _Tail(None, False, final, self._cursor, extras or ())
-            self._hand(StepRecord(self._name, now, event, data, plan.step, made, failed))
+            self._hand(
+                StepRecord(self._name, now, event, data, plan.step, made, failed, None, entry[6])
+            )
             raise
         extras = self._recording
         self._recording = None
         tail = _Tail(None, False, final, None, extras) if extras or final else None
-        record = StepRecord(self._name, now, event, data, plan.step, made, tail)
+        record = StepRecord(self._name, now, event, data, plan.step, made, tail, None, entry[6])
         recorders = self._recorders
         if len(recorders) != 1 or self._handing:
             self._hand(record)
@@ -167,7 +169,13 @@ class Recording(Performer):
             self._hand_later()
 
     def _record_step(
-        self, event: str, data: Any, decision: Step, now: float, program: Recorded | None = None
+        self,
+        event: str,
+        data: Any,
+        decision: Step,
+        now: float,
+        program: Recorded | None = None,
+        builder: Builder | None = None,
     ) -> None:
         """Perform a committed step as unheard, and hand step listeners one record of it.
 
@@ -207,7 +215,7 @@ class Recording(Performer):
                     shift += len(calls)
                 else:
                     observer.update(arg)
-                    made.append(observer)
+                    made.append(update_api(observer, arg.invoke))
                     shift += 1
             if decision.final and not self._finished:
                 final = True
@@ -222,4 +230,6 @@ class Recording(Performer):
             tail = None
             if extras or final or failed:  # a failed step's records end at the cursor
                 tail = _Tail(None, False, final, self._cursor if failed else None, extras or ())
-            self._hand(StepRecord(self._name, now, event, data, decision, made, tail))
+            self._hand(
+                StepRecord(self._name, now, event, data, decision, made, tail, None, builder)
+            )

@@ -12,7 +12,12 @@ Rules:
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
+
+from statectl.model import Notify
+
+if TYPE_CHECKING:
+    from statectl.semantics import Step
 
 from statectl.runtime.records import (
     EventIgnored,
@@ -30,6 +35,8 @@ from statectl.runtime.records import (
     StateExited,
     StepRecord,
     TransitionTaken,
+    fields_of,
+    records_plan,
 )
 
 __all__ = ["KINDS", "TraceWriter", "format_data", "format_record", "kind_of"]
@@ -159,6 +166,9 @@ class TraceWriter:
         self._at: tuple[float, str] | None = None  # (time, device) of ``_prefix``
         self._prefix = ""
         self._rest: dict[tuple[type, tuple[Any, ...]], str] = {}  # the line after the prefix
+        self._steps: dict[int, tuple[Step, list[str | tuple[str]]]] = {}  # per kernel step
+        self._received: dict[str | None, str] = {}  # EventReceived without data, per event
+        self._calls: dict[tuple[str, str], str] = {}  # ObserverCalled, per method and api
 
     def _line(self, record: Record) -> str:
         at = (record.time, record.device)
@@ -168,7 +178,7 @@ class TraceWriter:
         kind = type(record)
         if type(record) is EventReceived and record.data is not None:  # may be unhashable
             return self._prefix + self._kinds[kind] + _event_text(record) + "\n"
-        key = (kind, record[2:])
+        key = (kind, fields_of(record))
         rest = self._rest.get(key)
         if rest is None:  # kind and text once per distinct record (time and device aside)
             if len(self._rest) >= _REST_MAX:
@@ -181,8 +191,71 @@ class TraceWriter:
         self.lines += 1
 
     def step(self, step: StepRecord) -> None:
-        """A step listener: every line of ``step``'s typed records, in one write."""
-        records = step.records
-        line = self._line
-        self.out.write("".join([line(r) for r in records]))
-        self.lines += len(records)
+        """A step listener: every line of ``step``'s records, in one write.
+
+        A plan's usual step is written from its kernel step without building its typed
+        records: the text after the time and device column is kept per step (the same
+        states, transitions and notifications repeat), so the step's lines are one
+        ``join`` with that column.
+        """
+        kernel = step.step
+        if kernel is None or step._tail is not None:  # unhandled, or records made meanwhile
+            records = step.records
+            line = self._line
+            self.out.write("".join([line(r) for r in records]))
+            self.lines += len(records)
+            return
+        hit = self._steps.get(id(kernel))
+        if hit is None or hit[0] is not kernel:
+            if len(self._steps) >= _REST_MAX:
+                self._steps.clear()
+            hit = self._steps[id(kernel)] = (kernel, self._step_lines(kernel))
+        at = (step.time, step.device)
+        if at != self._at:
+            self._at = at
+            self._prefix = f"t={step.time:7.2f}  {step.device:<{self.device_width}} "
+        event = step.event
+        rest = self._received.get(event) if step.data is None else None
+        if rest is None:
+            rest = self._kinds[EventReceived] + _event_text(step) + "\n"
+            if step.data is None:
+                self._received[event] = rest
+        rests = [rest]
+        made = step._made
+        k = 0
+        for item in hit[1]:
+            if type(item) is str:
+                rests.append(item)
+                continue
+            did = made[k] if k < len(made) else None
+            k += 1
+            if type(did) is str:
+                rests.append(self._called(item[0], did))
+            elif did is not None:
+                rests.extend([self._called(item[0], str(c)) for c in did])
+        prefix = self._prefix
+        self.out.write(prefix + prefix.join(rests))
+        self.lines += len(rests)
+
+    def _step_lines(self, kernel: Step) -> list[str | tuple[str]]:
+        """The text of each line of ``kernel``'s records after ``EventReceived``, with
+        each notification's observer calls as ``(method,)`` (they vary per event)."""
+        lines: list[str | tuple[str]] = []
+        for item in records_plan(kernel):
+            if isinstance(item, Notify):
+                lines.append((item.method,))
+                continue
+            kind, fields = item
+            record = kind("", 0.0, *fields)  # only to render its text, once per step
+            lines.append(self._kinds[kind] + _TEXTS[kind](record) + "\n")
+        return lines
+
+    def _called(self, method: str, api: str) -> str:
+        """The text of an ``ObserverCalled`` line, kept per method and call."""
+        key = (method, api)
+        rest = self._calls.get(key)
+        if rest is None:
+            if len(self._calls) >= _REST_MAX:
+                self._calls.clear()
+            rest = self._calls[key] = f"{self._kinds[ObserverCalled]}{method}() -> {api}\n"
+        return rest
