@@ -20,6 +20,7 @@ if TYPE_CHECKING:
     from statectl.semantics import Step
 
 from statectl.runtime.records import (
+    ApiCall,
     EventIgnored,
     EventReceived,
     EventRejected,
@@ -169,6 +170,7 @@ class TraceWriter:
         self._steps: dict[int, tuple[Step, list[str | tuple[str]]]] = {}  # per kernel step
         self._received: dict[str | None, str] = {}  # EventReceived without data, per event
         self._calls: dict[tuple[str, str], str] = {}  # ObserverCalled, per method and api
+        self._apis: dict[tuple[Any, ...], str] = {}  # ObserverCalled, per logged call
 
     def _line(self, record: Record) -> str:
         at = (record.time, record.device)
@@ -198,9 +200,9 @@ class TraceWriter:
         states, transitions and notifications repeat), so the step's lines are one
         ``join`` with that column.
         """
-        kernel = step.step
-        if kernel is None or step._tail is not None:  # unhandled, or records made meanwhile
-            records = step.records
+        kernel, tail = step.step, step._tail
+        if kernel is None or (tail is not None and (tail.final or tail.upto is not None)):
+            records = step.records  # unhandled, finished or failed: from its typed records
             line = self._line
             self.out.write("".join([line(r) for r in records]))
             self.lines += len(records)
@@ -214,6 +216,7 @@ class TraceWriter:
         if at != self._at:
             self._at = at
             self._prefix = f"t={step.time:7.2f}  {step.device:<{self.device_width}} "
+        prefix = self._prefix
         event = step.event
         rest = self._received.get(event) if step.data is None else None
         if rest is None:
@@ -229,13 +232,19 @@ class TraceWriter:
                 continue
             did = made[k] if k < len(made) else None
             k += 1
-            if type(did) is str:
+            if isinstance(did, str):
                 rests.append(self._called(item[0], did))
             elif did is not None:
-                rests.extend([self._called(item[0], str(c)) for c in did])
-        prefix = self._prefix
-        self.out.write(prefix + prefix.join(rests))
-        self.lines += len(rests)
+                rests.extend([self._logged(item[0], c) for c in did])
+        if tail is None or not tail.extras:
+            self.out.write(prefix + prefix.join(rests))
+            self.lines += len(rests)
+            return
+        lines = [prefix + r for r in rests]  # and what others recorded meanwhile, in place
+        for shift, (before, record) in enumerate(tail.extras):
+            lines.insert(before + shift, self._line(record))  # its own time
+        self.out.write("".join(lines))
+        self.lines += len(lines)
 
     def _step_lines(self, kernel: Step) -> list[str | tuple[str]]:
         """The text of each line of ``kernel``'s records after ``EventReceived``, with
@@ -249,6 +258,20 @@ class TraceWriter:
             record = kind("", 0.0, *fields)  # only to render its text, once per step
             lines.append(self._kinds[kind] + _TEXTS[kind](record) + "\n")
         return lines
+
+    def _logged(self, method: str, call: ApiCall) -> str:
+        """The text of an ``ObserverCalled`` line for a logged API call, kept per call
+        (the same calls with the same arguments repeat; ``str()`` of a call is not cheap)."""
+        try:
+            key = (method, call.device, call.function, call.args)
+            rest = self._apis.get(key)
+        except TypeError:  # an argument that cannot be a key (a list)
+            return self._called(method, str(call))
+        if rest is None:
+            if len(self._apis) >= _REST_MAX:
+                self._apis.clear()
+            rest = self._apis[key] = self._called(method, str(call))
+        return rest
 
     def _called(self, method: str, api: str) -> str:
         """The text of an ``ObserverCalled`` line, kept per method and call."""
