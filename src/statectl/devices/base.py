@@ -120,7 +120,6 @@ class Driver:
         with self._lock:
             owner, new = self._owner, self._api_new
             log = self._api_log
-            # tuple.__new__: the named tuple without its Python-level __new__
             log.extend([ApiCall(t, owner, f, a) for t, f, a in new])
             new.clear()
             if len(log) >= 2 * API_LOG_KEEP:
