@@ -142,7 +142,12 @@ def stamp_a(system: NodeSystem, wire: Wire) -> Stamps:
 def stamp_b(system: NodeSystem, wire: Wire) -> Stamps:
     """--breakdown on node b: the link callback (before listen()), the devices' run."""
     stamps = Stamps()
-    wire._on_link = stamps.wrap("on_link", wire._on_link)  # type: ignore[method-assign]
+    receiver = wire._receiver  # each stream's link callback, made in listen()
+
+    def stamped(node: str, device: str) -> Any:
+        return stamps.wrap("on_link", receiver(node, device))
+
+    wire._receiver = stamped  # type: ignore[method-assign]
     wire._run_devices = stamps.wrap("run", wire._run_devices)  # type: ignore[method-assign]
     return stamps
 

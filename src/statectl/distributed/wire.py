@@ -41,6 +41,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
+import msgspec
+
 from statectl.cell import Cell, Link
 from statectl.distributed.keys import Keys
 from statectl.distributed.messages import parse_snapshot, session_config, snapshot_payload
@@ -60,9 +62,21 @@ _ACK_PAUSE = 0.002  # seconds between two rounds of acknowledgements, at least
 _EPOCH = "link-epoch"
 _IN = "link-in/"
 _ENC = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
-_NAMES: dict[str, str] = {}  # event name -> its JSON string
-#: one JSON value at an index of a text: json.loads without its per-call checks (hot path)
+#: one JSON value at an index of a text: json.loads without its per-call checks (acks)
 _scan: Callable[[str, int], tuple[Any, int]] = getattr(json.JSONDecoder(), "scan_once")  # noqa: B009
+
+
+class _LinkEvent(msgspec.Struct, array_like=True, frozen=True):
+    """A link event on the wire: ``[e, n, ev, d]`` (epoch, number, event, data), JSON."""
+
+    e: str
+    n: int
+    ev: str
+    d: Any = None
+
+
+_LINK = msgspec.json.Decoder(_LinkEvent)
+_LINK_OUT = msgspec.json.Encoder()
 
 
 class Wire:
@@ -266,9 +280,13 @@ class Wire:
         """After the System started (resumed): take link events, posts and presence."""
         s = self._session
         root = self.keys.root
+        others = [n.name for n in self.nodes.nodes if n.name != self.me.name]
         for name in sorted(self.local):
             self._decls += [
-                s.declare_subscriber(f"{root}/link/*/{name}", self._on_link),
+                s.declare_subscriber(self.keys.link(node, name), self._receiver(node, name))
+                for node in others
+            ]
+            self._decls += [
                 s.declare_subscriber(f"{root}/hello/*/{name}", self._on_hello),
                 s.declare_subscriber(self.keys.post(name), self._on_post),
             ]
@@ -314,12 +332,8 @@ class Wire:
 
     @staticmethod
     def _link_payload(epoch: str, n: int, event: str, data: Any) -> bytes:
-        """``{e, n, ev, d}``; the event name's JSON is made once per name (the hot path)."""
-        name = _NAMES.get(event)
-        if name is None:
-            name = _NAMES[event] = _ENC.encode(event)
-        d = "null" if data is None else _ENC.encode(data)
-        return f'{{"e":"{epoch}","n":{n},"ev":{name},"d":{d}}}'.encode()
+        """``[e, n, ev, d]`` as JSON (msgspec: one call on the hot path)."""
+        return _LINK_OUT.encode((epoch, n, event, data))
 
     def _stepped(self, name: str) -> Callable[[str, Any, str], None]:
         """Rule 5: put the device's state after a step that changed it."""
@@ -347,13 +361,23 @@ class Wire:
 
     # -- Zenoh callbacks ---------------------------------------------------------------------
 
-    def _on_link(self, sample: Any) -> None:
-        node, device = Keys.last(sample.key_expr)
-        try:
-            msg = _scan(sample.payload.to_string(), 0)[0]
-            e, n, event, data = str(msg["e"]), int(msg["n"]), str(msg["ev"]), msg.get("d")
-        except (ValueError, KeyError, TypeError, StopIteration, AttributeError):
-            return
+    def _receiver(self, node: str, device: str) -> Callable[[Any], None]:
+        """The subscriber of one stream (``node`` -> ``device``, rules 3-4): the key is known,
+        so the callback parses only the payload (the hot path of a link event)."""
+        decode = _LINK.decode
+        apply = self._apply
+
+        def on_link(sample: Any) -> None:
+            try:
+                msg = decode(sample.payload.to_bytes())
+            except (msgspec.DecodeError, AttributeError):
+                return
+            apply(node, device, msg.e, msg.n, msg.ev, msg.d)
+
+        return on_link
+
+    def _apply(self, node: str, device: str, e: str, n: int, event: str, data: Any) -> None:
+        """Rules 3-4: take link event ``n`` of a stream once, in order; run it and acknowledge."""
         system = self.system
         run = True
         with self.inbound.lock:
