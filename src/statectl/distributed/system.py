@@ -30,7 +30,7 @@ Rules:
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from typing import Any, Protocol, cast
 
@@ -110,10 +110,16 @@ class NodeLinks(CellLinks):
         pending = self.fired
         if not pending:
             return []
-        fired = (pending[0],) if len(pending) == 1 else sorted(set(pending))
-        pending.clear()
-        if not any(self._guarded[i] for i in fired):
-            return [self.cell.links[i] for i in fired]
+        if len(pending) == 1:  # the hot path: one link fired
+            i = pending.pop()
+            if not self._guarded[i]:
+                return [self.cell.links[i]]
+            fired: Sequence[int] = (i,)
+        else:
+            fired = sorted(set(pending))
+            pending.clear()
+            if not any(self._guarded[i] for i in fired):
+                return [self.cell.links[i] for i in fired]
         g = self.state()
         guards = self.model.link_guard
         out = []
@@ -223,12 +229,7 @@ class RemoteDevice(JournalledDevice):
         raise StatectlError(f"{self.name} runs on another node")
 
 
-def _link_data(link: Link, data: Any) -> Any:
-    """The event data a link sends: its own, or the triggering step's (``forward_data``).
-
-    Read with defaults so a cell whose links carry no data (no such keys) sends none.
-    """
-    return data if getattr(link, "forward_data", False) else getattr(link, "data", None)
+_QUEUE = LinkDelivery()  # a link without a delivery policy of its own
 
 
 class NodeSystem(System):
@@ -251,6 +252,16 @@ class NodeSystem(System):
         }
         self._remote = {
             d.name: RemoteDevice(d.name, wire) for d in cell.devices if d.name not in self.subjects
+        }
+        #: by the link's id: (its target here or None, forwards the step's data?, may drop?),
+        #: worked out once (the hot path of a link event, _link_step)
+        self._routes: dict[int, tuple[Subject | None, bool, bool]] = {
+            id(k): (
+                self.subjects.get(k.target),
+                k.forward_data,
+                self._policy.get(id(k), _QUEUE).on_peer_down is PeerDown.DROP,
+            )
+            for k in cell.links
         }
         links = self.links = NodeLinks(cell, self.subjects, mirror)
         seen: dict[str, Any] = {n: _Mirrored(links, n) for n in self._remote}
@@ -326,16 +337,18 @@ class NodeSystem(System):
         if not self._live:
             self.links.fired.clear()
             return
+        routes = self._routes
         for link in self.links.due():
-            target = self.subjects.get(link.target)
+            target, forward, drops = routes[id(link)]
+            sent = data if forward else link.data
             if target is not None:
-                target.post(link.event, _link_data(link, data))
-            elif self._dropping(link):
+                target.post(link.event, sent)
+            elif drops and self._wire.down(link):
                 dropped = self._policy[id(link)].dropped
                 if dropped is not None:
                     self.subjects[link.source].post(dropped)
             else:
-                self._wire.send(link.target, link.event, _link_data(link, data))
+                self._wire.send(link.target, link.event, sent)
         if self.rules is not None and self.rules.watching:
             for device, event in self._violations():
                 self._send(device, event)

@@ -324,7 +324,7 @@ class Wire:
         with stream.lock:
             n = stream.add(event, data)
             if stream.node in self.up and self._session is not None:
-                self._pubs[device].put(self._link_payload(stream.epoch, n, event, data))
+                self._pubs[device].put(_LINK_OUT.encode((stream.epoch, n, event, data)))
 
     def forward(self, device: str, event: str, data: Any) -> None:
         if self._session is not None:
@@ -362,46 +362,54 @@ class Wire:
     # -- Zenoh callbacks ---------------------------------------------------------------------
 
     def _receiver(self, node: str, device: str) -> Callable[[Any], None]:
-        """The subscriber of one stream (``node`` -> ``device``, rules 3-4): the key is known,
-        so the callback parses only the payload (the hot path of a link event)."""
+        """The subscriber of one stream (``node`` -> ``device``, rules 3-4).
+
+        The hot path of a link event, so everything per stream is looked up once
+        here: the key is known (only the payload is parsed), the device, its
+        journal binding, the stream's inbound position key.
+        """
         decode = _LINK.decode
-        apply = self._apply
+        inbound = self.inbound
+        lock = inbound.lock
+        offer = inbound.offer
+        system = self.system
+        subject = system.subjects[device]
+        bound = system.bound.get(device)
+        note = f"{_IN}{node}/{device}"
+        ack = self._ack
+        wake = self._wake
+        run_devices = self._run_devices
 
         def on_link(sample: Any) -> None:
             try:
                 msg = decode(sample.payload.to_bytes())
             except (msgspec.DecodeError, AttributeError):
                 return
-            apply(node, device, msg.e, msg.n, msg.ev, msg.d)
+            e, n, event = msg.e, msg.n, msg.ev
+            run = True
+            with lock:
+                verdict, last = offer(node, device, e, n)
+                if verdict is not Verdict.APPLY:
+                    ack(node, device, e, last, verdict is Verdict.GAP)
+                    wake.set()
+                    return
+                try:
+                    if bound is not None:  # acknowledged once committed (_committed)
+                        ticket = bound.post(event, msg.d, note=(note, f"{e} {n}"))
+                        self._acks.append((ticket.seq, node, device, e, n))
+                        run = bound.journal.guarantee is Guarantee.PROMPT
+                    else:
+                        subject.post(event, msg.d)
+                except StatectlError as exc:
+                    self._say(f"link event {event!r} from {node} to {device}: {exc}")
+            if run:
+                run_devices()  # before waking the wire's thread: the device first
+            if bound is None:
+                ack(node, device, e, n, False)
+                if not wake.is_set():
+                    wake.set()
 
         return on_link
-
-    def _apply(self, node: str, device: str, e: str, n: int, event: str, data: Any) -> None:
-        """Rules 3-4: take link event ``n`` of a stream once, in order; run it and acknowledge."""
-        system = self.system
-        run = True
-        with self.inbound.lock:
-            verdict, last = self.inbound.offer(node, device, e, n)
-            if verdict is not Verdict.APPLY:
-                self._ack(node, device, e, last, verdict is Verdict.GAP)
-                self._wake.set()
-                return
-            bound = system.bound.get(device)
-            try:
-                if bound is not None:  # acknowledged once committed (_committed)
-                    ticket = bound.post(event, data, note=(f"{_IN}{node}/{device}", f"{e} {n}"))
-                    self._acks.append((ticket.seq, node, device, e, n))
-                    run = bound.journal.guarantee is Guarantee.PROMPT
-                else:
-                    system.subjects[device].post(event, data)
-            except (StatectlError, KeyError) as exc:
-                self._say(f"link event {event!r} from {node} to {device}: {exc}")
-        if run:
-            self._run_devices()  # before waking the wire's thread: the device first
-        if bound is None:
-            self._ack(node, device, e, n, False)
-            if not self._wake.is_set():
-                self._wake.set()
 
     def _ack(self, node: str, device: str, e: str, n: int, again: bool) -> None:
         """Note an acknowledgement for the wire's thread to send (rule 4)."""
