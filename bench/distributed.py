@@ -14,9 +14,9 @@ node ``b`` (device ``pong``). Measured, all in the same run:
 
 ``--breakdown`` also stamps each hop of the paced link events (CLOCK_MONOTONIC on
 both sides) and prints the median of each hop: post -> the wire's ``send`` ->
-Zenoh ``put`` (entry, return) -> node b's link callback -> the devices' run ->
-the observer call. The stamps wrap the calls, so they add a little to the link's
-figures; leave it off for the targets.
+Zenoh ``put`` (entry, return) -> node b's link callback -> the device's step on
+that thread (``run_now``) -> the observer call. The stamps wrap the calls, so
+they add a little to the link's figures; leave it off for the targets.
 
 Targets (issue 16): link p50 <= 1.5x bare Zenoh, p99 <= 2 ms, >= 20,000 link
 events/s with nothing lost, peer loss noticed within 50 ms.
@@ -140,7 +140,7 @@ def stamp_a(system: NodeSystem, wire: Wire) -> Stamps:
 
 
 def stamp_b(system: NodeSystem, wire: Wire) -> Stamps:
-    """--breakdown on node b: the link callback (before listen()), the devices' run."""
+    """--breakdown on node b: the link callback, the device's step (before listen())."""
     stamps = Stamps()
     receiver = wire._receiver  # each stream's link callback, made in listen()
 
@@ -148,7 +148,7 @@ def stamp_b(system: NodeSystem, wire: Wire) -> Stamps:
         return stamps.wrap("on_link", receiver(node, device))
 
     wire._receiver = stamped  # type: ignore[method-assign]
-    wire._run_devices = stamps.wrap("run", wire._run_devices)  # type: ignore[method-assign]
+    system.run_now = stamps.wrap("run_now", system.run_now)  # type: ignore[method-assign]
     return stamps
 
 
@@ -226,7 +226,7 @@ def hop_medians(sent: list[int], a: Stamps, b: dict[str, list[int]], hits: list[
     at = {k: v[-n:] for k, v in a.at.items()}  # the warm-up's stamps come first
     path = [("post", sent), ("send", at["send"]), ("put", at["put"])]
     path += [("put-return", at["put-return"]), ("on_link", b["on_link"][-n:])]
-    path += [("run", b["run"][-n:]), ("observer", hits)]
+    path += [("run_now", b["run_now"][-n:]), ("observer", hits)]
     lines = []
     for (x, xs), (y, ys) in itertools.pairwise(path):
         gaps = [(t - s) / 1000 for s, t in zip(xs, ys, strict=True)]

@@ -379,6 +379,7 @@ class Wire:
         ack = self._ack
         wake = self._wake
         run_devices = self._run_devices
+        run_now = system.run_now
 
         def on_link(sample: Any) -> None:
             try:
@@ -393,12 +394,14 @@ class Wire:
                     ack(node, device, e, last, verdict is Verdict.GAP)
                     wake.set()
                     return
-                try:
+                try:  # under the lock: the stream's next event waits until this one ran
                     if bound is not None:  # acknowledged once committed (_committed)
                         ticket = bound.post(event, msg.d, note=(note, f"{e} {n}"))
                         self._acks.append((ticket.seq, node, device, e, n))
                         run = bound.journal.guarantee is Guarantee.PROMPT
-                    else:
+                    elif run_now(device, event, msg.d):  # nobody owned the devices: ran here
+                        run = False
+                    else:  # the owner's thread runs it
                         subject.post(event, msg.d)
                 except StatectlError as exc:
                     self._say(f"link event {event!r} from {node} to {device}: {exc}")
