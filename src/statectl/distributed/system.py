@@ -247,6 +247,7 @@ class NodeSystem(System):
         self.cell = None  # the links are wired by attach(), once the wire exists
         System.__post_init__(self)
         self.cell = cell
+        self._remote: dict[str, RemoteDevice] = {}  # attach() fills it
 
     def attach(self, wire: WireSide, mirror: dict[str, int]) -> None:
         """Wire the cell's links: local ones as in one process, the others through ``wire``."""
@@ -406,7 +407,7 @@ class NodeSystem(System):
 
     def post(self, device: str | None, event: str, data: Any = None) -> Ticket | None:
         """Rule 5: an event for a device on another node is forwarded there."""
-        if device is not None and device in getattr(self, "_remote", {}):
+        if device in self._remote:
             self._wire.forward(device, event, data)
             return None
         return System.post(self, device, event, data)
