@@ -10,15 +10,20 @@ Rules:
    killed, or its lease ran out); when a peer goes, each device of this node
    listed in ``peer_lost`` that a link joins to a device on that peer gets its
    declared event. Every change is printed: ``peers: a, b``.
-3. Link events go once and in order per stream (statectl.distributed.streams):
+3. Link events go once and in order per stream (statectl.distributed.streams),
+   as a JSON array ``[e, n, ev, d]`` (epoch, number, event, data); a node has one
+   subscriber per stream it may receive (each other node, each device of its
+   own), so a link event's callback reads only its payload. Link events are
    numbered, kept until acknowledged, resent after the peer comes back (a
    ``hello`` asks the receiver how far it got) or when nothing was acknowledged
    for :data:`RESEND_AFTER`. A ``queue`` link keeps its events while the peer is
    down; a ``drop`` link never sends them (statectl.distributed.system rule 4).
 4. The receiver acknowledges an event once it is applied: with a journal, once
    its inbox row (and the stream's position, in the same commit) is committed;
-   without one, once it is posted to the device. Acknowledgements are cumulative
-   and sent by one thread, so a burst of events costs few of them.
+   without one, once the device ran it on the receiving thread (nobody owned the
+   devices: statectl.distributed.system rule 7) or it was queued for the owner.
+   Acknowledgements are cumulative and sent by one thread, so a burst of events
+   costs few of them.
 5. Each device's state is put on ``statectl/<cell>/state/<device>`` after every
    step that changed it while a subscriber somewhere takes it in (Zenoh's matching
    status; the current state is put when one appears), and answered to queries on
