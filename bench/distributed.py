@@ -288,6 +288,7 @@ def run(events: int, burst: int, breakdown: bool = False) -> int:
         report()
         link_sent: list[int] = []
         bare_sent: list[int] = []
+        bare_put: list[float] = []
         round_trip: list[float] = []
         for _ in range(events):
             link_sent.append(time.monotonic_ns())
@@ -297,6 +298,8 @@ def run(events: int, burst: int, breakdown: bool = False) -> int:
             t = time.monotonic_ns()
             bare_sent.append(t)
             pub.put(b"x")
+            if breakdown:  # how long the bare put itself takes, against the link's
+                bare_put.append((time.monotonic_ns() - t) / 1000)
             back.wait(1)
             round_trip.append((time.monotonic_ns() - t) / 1000)
             time.sleep(0.001)
@@ -346,6 +349,7 @@ def run(events: int, burst: int, breakdown: bool = False) -> int:
         print(f"p50 ratio link / bare (one way): {p50_link / p50_bare:.2f}x")
         if hops:
             print("link hops (median, --breakdown):\n" + hops)
+            print(f"  (the bare put itself: {statistics.median(bare_put):.1f} us)")
         print(
             f"sustained: {len(hits)} of {burst} link events, each once and in order: "
             f"{rate:,.0f} link events/s"
