@@ -253,3 +253,34 @@ def test_a_link_event_sent_is_read_by_the_receiver(tmp_path: Path) -> None:
     assert len(hits.threads) == 2
     assert wire_b._ack_due["a", "pong"] == (wire_a.epoch, 2, False)
     wire_a._session = None
+
+
+def test_a_stream_on_two_threads_never_lets_a_later_number_overtake(tmp_path: Path) -> None:
+    """Event 2 of a stream, arriving on another thread while event 1 is between its
+    order check and its step, waits for event 1 (the device steps 1, then 2)."""
+    system, wire, _hits = _receiver_b(tmp_path)
+    order: list[Any] = []
+    system.subjects["pong"].on_step(lambda event, data, outcome: order.append(data))
+    paused = threading.Event()
+    go_on = threading.Event()
+    run_now = system.run_now
+
+    def slow_first(device: str, event: str, data: Any) -> bool:
+        if data == 1:  # event 1 has passed its order check: hold it before its step
+            paused.set()
+            go_on.wait(10)
+        return run_now(device, event, data)
+
+    system.run_now = slow_first  # type: ignore[method-assign]
+    on_link = wire._receiver("a", "pong")
+    first = threading.Thread(target=on_link, args=(_Sample(b'["ep1",1,"Hit",1]'),))
+    first.start()
+    assert paused.wait(10)
+    second = threading.Thread(target=on_link, args=(_Sample(b'["ep1",2,"Hit",2]'),))
+    second.start()
+    second.join(0.2)  # time for event 2 to overtake, if it could
+    go_on.set()
+    first.join(10)
+    second.join(10)
+    system.drain()
+    assert order == [1, 2]
