@@ -1,8 +1,8 @@
 """Distributed cell benchmark (not a test): a link event across two processes on Zenoh.
 
-Run: ``python bench/distributed.py [--events N] [--burst N]``. Two processes on
-loopback: this one runs node ``a`` (device ``ping``), a child runs node ``b``
-(device ``pong``). Measured, all in the same run:
+Run: ``python bench/distributed.py [--events N] [--burst N] [--breakdown]``. Two
+processes on loopback: this one runs node ``a`` (device ``ping``), a child runs
+node ``b`` (device ``pong``). Measured, all in the same run:
 
 - latency: ``post(ping, Go)`` on node a -> the link event ``Hit`` -> pong's observer
   call ``Hit()`` on node b (one way; both processes read CLOCK_MONOTONIC, which Linux
@@ -12,6 +12,12 @@ loopback: this one runs node ``a`` (device ``ping``), a child runs node ``b``
   observer has been called for every one, exactly once and in order;
 - peer loss: SIGKILL of node b -> node a's liveliness subscriber says it is gone.
 
+``--breakdown`` also stamps each hop of the paced link events (CLOCK_MONOTONIC on
+both sides) and prints the median of each hop: post -> the wire's ``send`` ->
+Zenoh ``put`` (entry, return) -> node b's link callback -> the device's step on
+that thread (``run_now``) -> the observer call. The stamps wrap the calls, so
+they add a little to the link's figures; leave it off for the targets.
+
 Targets (issue 16): link p50 <= 1.5x bare Zenoh, p99 <= 2 ms, >= 20,000 link
 events/s with nothing lost, peer loss noticed within 50 ms.
 """
@@ -20,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import io
+import itertools
 import json
 import os
 import signal
@@ -68,6 +75,42 @@ links:
 BARE = "bench/bare"
 
 
+class Stamps:
+    """Per-hop stamps of the link path (``--breakdown``): wrappers around the calls."""
+
+    def __init__(self) -> None:
+        self.at: dict[str, list[int]] = {}
+
+    def wrap(self, name: str, fn: Any) -> Any:
+        times = self.at.setdefault(name, [])
+        clock = time.monotonic_ns
+
+        def stamped(*args: Any, **kwargs: Any) -> Any:
+            times.append(clock())
+            return fn(*args, **kwargs)
+
+        return stamped
+
+    def after(self, name: str, fn: Any) -> Any:
+        times = self.at.setdefault(name, [])
+        clock = time.monotonic_ns
+
+        def stamped(*args: Any, **kwargs: Any) -> Any:
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                times.append(clock())
+
+        return stamped
+
+
+class _Pub:
+    """A publisher whose puts are stamped on entry and return."""
+
+    def __init__(self, pub: Any, stamps: Stamps) -> None:
+        self.put = stamps.after("put-return", stamps.wrap("put", pub.put))
+
+
 class Calls:
     """An observer that notes when it is called (CLOCK_MONOTONIC, nanoseconds)."""
 
@@ -88,13 +131,35 @@ def node(cell_path: Path, name: str) -> tuple[NodeSystem, Wire]:
     return system, wire
 
 
-def child(cell_path: Path) -> None:
+def stamp_a(system: NodeSystem, wire: Wire) -> Stamps:
+    """--breakdown on node a: the wire's send, the link publisher's put (after open())."""
+    stamps = Stamps()
+    wire.send = stamps.wrap("send", wire.send)  # type: ignore[method-assign]
+    wire._pubs["pong"] = _Pub(wire._pubs["pong"], stamps)
+    return stamps
+
+
+def stamp_b(system: NodeSystem, wire: Wire) -> Stamps:
+    """--breakdown on node b: the link callback, the device's step (before listen())."""
+    stamps = Stamps()
+    receiver = wire._receiver  # each stream's link callback, made in listen()
+
+    def stamped(node: str, device: str) -> Any:
+        return stamps.wrap("on_link", receiver(node, device))
+
+    wire._receiver = stamped  # type: ignore[method-assign]
+    system.run_now = stamps.wrap("run_now", system.run_now)  # type: ignore[method-assign]
+    return stamps
+
+
+def child(cell_path: Path, breakdown: bool) -> None:
     """Node b: pong's observer calls, a bare subscriber; reports on 'report' lines."""
     system, wire = node(cell_path, "b")
     calls = Calls()
     system.subjects["pong"].attach(calls)
     wire.open()
     system.start()
+    stamps = stamp_b(system, wire) if breakdown else Stamps()
     wire.listen()
     halt = system.start_owner(paced=False)
     session = wire.session
@@ -108,13 +173,18 @@ def child(cell_path: Path) -> None:
     sub = session.declare_subscriber(f"{BARE}/ping", on_bare)
     print("ready", flush=True)
     hit_from = bare_from = 0
+    stamp_from = dict.fromkeys(stamps.at, 0)
     for line in sys.stdin:
         if line.strip() == "report":  # what is new since the last report (appends race on)
             hits = calls.times[hit_from:]
             hit_from += len(hits)
             news = bare[bare_from:]
             bare_from += len(news)
-            print(json.dumps({"hits": hits, "bare": news}), flush=True)
+            hops = {}
+            for name, times in stamps.at.items():
+                hops[name] = times[stamp_from[name] :]
+                stamp_from[name] += len(hops[name])
+            print(json.dumps({"hits": hits, "bare": news, "hops": hops}), flush=True)
     del sub
     halt()
 
@@ -128,13 +198,14 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--events", type=int, default=2000, help="paced events for the latency")
     ap.add_argument("--burst", type=int, default=50_000, help="events posted at once")
+    ap.add_argument("--breakdown", action="store_true", help="print each hop's median too")
     ap.add_argument("--role", default="a", help=argparse.SUPPRESS)
     ap.add_argument("--cell", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.role == "b":
-        child(Path(args.cell))
+        child(Path(args.cell), args.breakdown)
         return 0
-    return run(args.events, args.burst)
+    return run(args.events, args.burst, args.breakdown)
 
 
 def free_ports(n: int) -> list[int]:
@@ -149,7 +220,23 @@ def free_ports(n: int) -> list[int]:
             s.close()
 
 
-def run(events: int, burst: int) -> int:
+def hop_medians(sent: list[int], a: Stamps, b: dict[str, list[int]], hits: list[int]) -> str:
+    """--breakdown: the median of each hop of the paced link events, in microseconds."""
+    n = len(sent)
+    at = {k: v[-n:] for k, v in a.at.items()}  # the warm-up's stamps come first
+    path = [("post", sent), ("send", at["send"]), ("put", at["put"])]
+    path += [("put-return", at["put-return"]), ("on_link", b["on_link"][-n:])]
+    path += [("run_now", b["run_now"][-n:]), ("observer", hits)]
+    lines = []
+    for (x, xs), (y, ys) in itertools.pairwise(path):
+        gaps = [(t - s) / 1000 for s, t in zip(xs, ys, strict=True)]
+        lines.append(f"  {x} -> {y}: {statistics.median(gaps):.1f} us")
+    wire = [(t - s) / 1000 for s, t in zip(at["put"], b["on_link"][-n:], strict=True)]
+    lines.append(f"  (put -> on_link, Zenoh's part: {statistics.median(wire):.1f} us)")
+    return "\n".join(lines)
+
+
+def run(events: int, burst: int, breakdown: bool = False) -> int:
     tmp = Path(tempfile.mkdtemp(prefix="statectl-bench-"))
     (tmp / "ping.yaml").write_text(PING)
     (tmp / "pong.yaml").write_text(PONG)
@@ -158,10 +245,12 @@ def run(events: int, burst: int) -> int:
     cell_path.write_text(CELL % {"a": a, "b": b})
     system, wire = node(cell_path, "a")
     wire.open()
+    stamps = stamp_a(system, wire) if breakdown else Stamps()
     system.start()
     wire.listen()
+    role = ["--role", "b", "--cell", str(cell_path)] + (["--breakdown"] if breakdown else [])
     proc = subprocess.Popen(
-        [sys.executable, __file__, "--role", "b", "--cell", str(cell_path)],
+        [sys.executable, __file__, *role],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         text=True,
@@ -173,11 +262,11 @@ def run(events: int, burst: int) -> int:
             time.sleep(0.01)
         time.sleep(0.5)
 
-        def report() -> dict[str, list[int]]:
+        def report() -> dict[str, Any]:
             assert proc.stdin is not None and proc.stdout is not None
             proc.stdin.write("report\n")
             proc.stdin.flush()
-            result: dict[str, list[int]] = json.loads(proc.stdout.readline())
+            result: dict[str, Any] = json.loads(proc.stdout.readline())
             return result
 
         def go() -> None:
@@ -199,6 +288,7 @@ def run(events: int, burst: int) -> int:
         report()
         link_sent: list[int] = []
         bare_sent: list[int] = []
+        bare_put: list[float] = []
         round_trip: list[float] = []
         for _ in range(events):
             link_sent.append(time.monotonic_ns())
@@ -208,6 +298,8 @@ def run(events: int, burst: int) -> int:
             t = time.monotonic_ns()
             bare_sent.append(t)
             pub.put(b"x")
+            if breakdown:  # how long the bare put itself takes, against the link's
+                bare_put.append((time.monotonic_ns() - t) / 1000)
             back.wait(1)
             round_trip.append((time.monotonic_ns() - t) / 1000)
             time.sleep(0.001)
@@ -215,6 +307,7 @@ def run(events: int, burst: int) -> int:
         got = report()
         assert len(got["hits"]) == events, (len(got["hits"]), events)
         link = [(h - s) / 1000 for h, s in zip(got["hits"], link_sent, strict=True)]
+        hops = hop_medians(link_sent, stamps, got["hops"], got["hits"]) if breakdown else ""
         bare = [(h - s) / 1000 for h, s in zip(got["bare"], bare_sent, strict=True)]
         del sub
         # sustained
@@ -254,6 +347,9 @@ def run(events: int, burst: int) -> int:
             f"p99 {pct(link, 0.99):.0f} us"
         )
         print(f"p50 ratio link / bare (one way): {p50_link / p50_bare:.2f}x")
+        if hops:
+            print("link hops (median, --breakdown):\n" + hops)
+            print(f"  (the bare put itself: {statistics.median(bare_put):.1f} us)")
         print(
             f"sustained: {len(hits)} of {burst} link events, each once and in order: "
             f"{rate:,.0f} link events/s"

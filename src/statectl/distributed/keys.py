@@ -5,7 +5,7 @@ One function per kind of message, so the keys are written in one place:
 | key | payload | who puts it |
 |---|---|---|
 | ``statectl/<cell>/node/<node>`` | liveliness token | each node while it runs |
-| ``statectl/<cell>/link/<from-node>/<device>`` | ``{e, n, ev, d}`` link event | sending node |
+| ``statectl/<cell>/link/<from-node>/<device>`` | ``[e, n, ev, d]`` link event | sending node |
 | ``statectl/<cell>/ack/<from-node>/<device>`` | ``{e, n, r}`` how far it got | the receiving node |
 | ``statectl/<cell>/hello/<from-node>/<device>`` | ``{e}`` asks for an ack | the sending node |
 | ``statectl/<cell>/state/<device>`` | the device's snapshot | its node, after a change |

@@ -10,15 +10,20 @@ Rules:
    killed, or its lease ran out); when a peer goes, each device of this node
    listed in ``peer_lost`` that a link joins to a device on that peer gets its
    declared event. Every change is printed: ``peers: a, b``.
-3. Link events go once and in order per stream (statectl.distributed.streams):
+3. Link events go once and in order per stream (statectl.distributed.streams),
+   as a JSON array ``[e, n, ev, d]`` (epoch, number, event, data); a node has one
+   subscriber per stream it may receive (each other node, each device of its
+   own), so a link event's callback reads only its payload. Link events are
    numbered, kept until acknowledged, resent after the peer comes back (a
    ``hello`` asks the receiver how far it got) or when nothing was acknowledged
    for :data:`RESEND_AFTER`. A ``queue`` link keeps its events while the peer is
    down; a ``drop`` link never sends them (statectl.distributed.system rule 4).
 4. The receiver acknowledges an event once it is applied: with a journal, once
    its inbox row (and the stream's position, in the same commit) is committed;
-   without one, once it is posted to the device. Acknowledgements are cumulative
-   and sent by one thread, so a burst of events costs few of them.
+   without one, once the device ran it on the receiving thread (nobody owned the
+   devices: statectl.distributed.system rule 7) or it was queued for the owner.
+   Acknowledgements are cumulative and sent by one thread, so a burst of events
+   costs few of them.
 5. Each device's state is put on ``statectl/<cell>/state/<device>`` after every
    step that changed it while a subscriber somewhere takes it in (Zenoh's matching
    status; the current state is put when one appears), and answered to queries on
@@ -41,6 +46,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
+import msgspec
+
 from statectl.cell import Cell, Link
 from statectl.distributed.keys import Keys
 from statectl.distributed.messages import parse_snapshot, session_config, snapshot_payload
@@ -60,9 +67,21 @@ _ACK_PAUSE = 0.002  # seconds between two rounds of acknowledgements, at least
 _EPOCH = "link-epoch"
 _IN = "link-in/"
 _ENC = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
-_NAMES: dict[str, str] = {}  # event name -> its JSON string
-#: one JSON value at an index of a text: json.loads without its per-call checks (hot path)
+#: one JSON value at an index of a text: json.loads without its per-call checks (acks)
 _scan: Callable[[str, int], tuple[Any, int]] = getattr(json.JSONDecoder(), "scan_once")  # noqa: B009
+
+
+class _LinkEvent(msgspec.Struct, array_like=True, frozen=True):
+    """A link event on the wire: ``[e, n, ev, d]`` (epoch, number, event, data), JSON."""
+
+    e: str
+    n: int
+    ev: str
+    d: Any = None
+
+
+_LINK = msgspec.json.Decoder(_LinkEvent)
+_LINK_OUT = msgspec.json.Encoder()
 
 
 class Wire:
@@ -266,9 +285,13 @@ class Wire:
         """After the System started (resumed): take link events, posts and presence."""
         s = self._session
         root = self.keys.root
+        others = [n.name for n in self.nodes.nodes if n.name != self.me.name]
         for name in sorted(self.local):
             self._decls += [
-                s.declare_subscriber(f"{root}/link/*/{name}", self._on_link),
+                s.declare_subscriber(self.keys.link(node, name), self._receiver(node, name))
+                for node in others
+            ]
+            self._decls += [
                 s.declare_subscriber(f"{root}/hello/*/{name}", self._on_hello),
                 s.declare_subscriber(self.keys.post(name), self._on_post),
             ]
@@ -306,7 +329,7 @@ class Wire:
         with stream.lock:
             n = stream.add(event, data)
             if stream.node in self.up and self._session is not None:
-                self._pubs[device].put(self._link_payload(stream.epoch, n, event, data))
+                self._pubs[device].put(_LINK_OUT.encode((stream.epoch, n, event, data)))
 
     def forward(self, device: str, event: str, data: Any) -> None:
         if self._session is not None:
@@ -314,12 +337,8 @@ class Wire:
 
     @staticmethod
     def _link_payload(epoch: str, n: int, event: str, data: Any) -> bytes:
-        """``{e, n, ev, d}``; the event name's JSON is made once per name (the hot path)."""
-        name = _NAMES.get(event)
-        if name is None:
-            name = _NAMES[event] = _ENC.encode(event)
-        d = "null" if data is None else _ENC.encode(data)
-        return f'{{"e":"{epoch}","n":{n},"ev":{name},"d":{d}}}'.encode()
+        """``[e, n, ev, d]`` as JSON (msgspec: one call on the hot path)."""
+        return _LINK_OUT.encode((epoch, n, event, data))
 
     def _stepped(self, name: str) -> Callable[[str, Any, str], None]:
         """Rule 5: put the device's state after a step that changed it."""
@@ -347,37 +366,64 @@ class Wire:
 
     # -- Zenoh callbacks ---------------------------------------------------------------------
 
-    def _on_link(self, sample: Any) -> None:
-        node, device = Keys.last(sample.key_expr)
-        try:
-            msg = _scan(sample.payload.to_string(), 0)[0]
-            e, n, event, data = str(msg["e"]), int(msg["n"]), str(msg["ev"]), msg.get("d")
-        except (ValueError, KeyError, TypeError, StopIteration, AttributeError):
-            return
+    def _receiver(self, node: str, device: str) -> Callable[[Any], None]:
+        """The subscriber of one stream (``node`` -> ``device``, rules 3-4).
+
+        The hot path of a link event, so everything per stream is looked up once
+        here: the key is known (only the payload is parsed), the device, its
+        journal binding, the stream's inbound position key.
+        """
+        decode = _LINK.decode
+        inbound = self.inbound
+        lock = inbound.lock
+        offer = inbound.offer
+        position = inbound.last
+        key = (node, device)
         system = self.system
-        run = True
-        with self.inbound.lock:
-            verdict, last = self.inbound.offer(node, device, e, n)
-            if verdict is not Verdict.APPLY:
-                self._ack(node, device, e, last, verdict is Verdict.GAP)
-                self._wake.set()
-                return
-            bound = system.bound.get(device)
+        subject = system.subjects[device]
+        bound = system.bound.get(device)
+        note = f"{_IN}{node}/{device}"
+        ack = self._ack
+        wake = self._wake
+        run_devices = self._run_devices
+        run_now = system.run_now
+
+        def on_link(sample: Any) -> None:
             try:
-                if bound is not None:  # acknowledged once committed (_committed)
-                    ticket = bound.post(event, data, note=(f"{_IN}{node}/{device}", f"{e} {n}"))
-                    self._acks.append((ticket.seq, node, device, e, n))
-                    run = bound.journal.guarantee is Guarantee.PROMPT
+                msg = decode(sample.payload.to_bytes())
+            except (msgspec.DecodeError, AttributeError):
+                return
+            e, n, event = msg.e, msg.n, msg.ev
+            run = True
+            with lock:
+                seen = position.get(key)
+                if seen is not None and seen[1] + 1 == n and seen[0] == e:
+                    position[key] = (e, n)  # the next one: Inbound.offer's common case, inline
                 else:
-                    system.subjects[device].post(event, data)
-            except (StatectlError, KeyError) as exc:
-                self._say(f"link event {event!r} from {node} to {device}: {exc}")
-        if run:
-            self._run_devices()  # before waking the wire's thread: the device first
-        if bound is None:
-            self._ack(node, device, e, n, False)
-            if not self._wake.is_set():
-                self._wake.set()
+                    verdict, last = offer(node, device, e, n)
+                    if verdict is not Verdict.APPLY:
+                        ack(node, device, e, last, verdict is Verdict.GAP)
+                        wake.set()
+                        return
+                try:  # under the lock: the stream's next event waits until this one ran
+                    if bound is not None:  # acknowledged once committed (_committed)
+                        ticket = bound.post(event, msg.d, note=(note, f"{e} {n}"))
+                        self._acks.append((ticket.seq, node, device, e, n))
+                        run = bound.journal.guarantee is Guarantee.PROMPT
+                    elif run_now(device, event, msg.d):  # nobody owned the devices: ran here
+                        run = False
+                    else:  # the owner's thread runs it
+                        subject.post(event, msg.d)
+                except StatectlError as exc:
+                    self._say(f"link event {event!r} from {node} to {device}: {exc}")
+            if run:
+                run_devices()  # before waking the wire's thread: the device first
+            if bound is None:
+                ack(node, device, e, n, False)
+                if not wake.is_set():
+                    wake.set()
+
+        return on_link
 
     def _ack(self, node: str, device: str, e: str, n: int, again: bool) -> None:
         """Note an acknowledgement for the wire's thread to send (rule 4)."""

@@ -1,0 +1,286 @@
+"""A node's receiving side of link streams, in one process, without a Zenoh session.
+
+The wire's per-stream receiver (statectl.distributed.wire) is fed samples as Zenoh
+would hand them: it must apply each link event once and in order, run the device
+on the calling thread only when nobody owns the devices (else leave it to the
+owner), and drop a payload it cannot read.
+"""
+
+from __future__ import annotations
+
+import io
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from statectl.cell import load_cell
+from statectl.distributed import NodeSystem, Wire
+from statectl.runner.cells import cell_setups
+from statectl.runtime import SimClock
+
+PING = """device: Ping
+states:
+  - {component: Ping, api: Go(), state: Idle, control: default, description: waits}
+  - {component: Ping, api: Go(), state: Busy, control: event trigger required,
+     description: toggles}
+events:
+  - {event: Go, condition: go, old: Idle, new: Busy, kind: command, api: Go}
+  - {event: Go, condition: go, old: Busy, new: Idle, kind: command, api: Go}
+"""
+PONG = """device: Pong
+states:
+  - {component: Pong, api: Hit(), state: Up, control: default, description: waits}
+  - {component: Pong, api: Hit(), state: Down, control: event trigger required,
+     description: toggles}
+events:
+  - {event: Hit, condition: hit, old: Up, new: Down, kind: command, api: Hit}
+  - {event: Hit, condition: hit, old: Down, new: Up, kind: command, api: Hit}
+"""
+CELL = """cell: Receive
+devices: {ping: ping.yaml, pong: pong.yaml, ping2: ping.yaml}
+nodes:
+  a: {devices: [ping], listen: [tcp/127.0.0.1:1]}
+  b: {devices: [pong], listen: [tcp/127.0.0.1:2]}
+  c: {devices: [ping2], listen: [tcp/127.0.0.1:3]}
+links:
+  - {from: ping, raises: Go, to: pong, send: Hit}
+  - {from: ping2, raises: Go, to: pong, send: Hit}
+"""
+
+
+class _Payload:
+    def __init__(self, data: bytes) -> None:
+        self._data = data
+
+    def to_bytes(self) -> bytes:
+        return self._data
+
+
+class _Sample:
+    """What a Zenoh subscriber callback reads of a sample: its payload."""
+
+    def __init__(self, data: bytes) -> None:
+        self.payload = _Payload(data)
+
+
+class _Pub:
+    """A link publisher that keeps what is put."""
+
+    def __init__(self) -> None:
+        self.puts: list[bytes] = []
+
+    def put(self, data: bytes) -> None:
+        self.puts.append(data)
+
+
+class _Hits:
+    """pong's observer: each call's thread, and whether two calls ever overlapped."""
+
+    def __init__(self, pause: float = 0.0) -> None:
+        self.threads: list[threading.Thread] = []
+        self.inside = 0
+        self.overlapped = False
+        self.pause = pause
+
+    def update(self, notification: Any) -> None:
+        self.inside += 1
+        if self.inside > 1:
+            self.overlapped = True
+        self.threads.append(threading.current_thread())
+        if self.pause:
+            time.sleep(self.pause)
+        self.inside -= 1
+
+
+def _node(tmp_path: Path, name: str) -> tuple[NodeSystem, Wire]:
+    (tmp_path / "ping.yaml").write_text(PING)
+    (tmp_path / "pong.yaml").write_text(PONG)
+    (tmp_path / "cell.yaml").write_text(CELL)
+    cell, diags = load_cell(tmp_path / "cell.yaml")
+    assert cell is not None and cell.nodes is not None, diags
+    mine = cell.nodes.node(name).devices
+    setups = tuple(s for s in cell_setups(cell, journalled=False) if s.name in mine)
+    system = NodeSystem(setups, SimClock(), None, cell)
+    wire = Wire(cell, name, system, out=io.StringIO())
+    system.start()
+    return system, wire
+
+
+def _receiver_b(tmp_path: Path, pause: float = 0.0) -> tuple[NodeSystem, Wire, _Hits]:
+    system, wire = _node(tmp_path, "b")
+    hits = _Hits(pause)
+    system.subjects["pong"].attach(hits)
+    return system, wire, hits
+
+
+def _event(e: str, n: int, event: str = "Hit") -> _Sample:
+    return _Sample(f'["{e}",{n},"{event}",null]'.encode())
+
+
+@pytest.mark.parametrize(
+    ("numbers", "applied", "ack"),
+    [
+        ([1, 2, 3], 3, (3, False)),  # in order: each applied
+        ([1, 2, 2, 1, 3], 3, (3, False)),  # duplicates (a resend after a reconnect) dropped
+        ([1, 3], 1, (1, True)),  # a gap: not applied, the sender is asked to resend after 1
+        ([5, 6], 2, (6, False)),  # a new epoch starts wherever its first event is
+    ],
+)
+def test_receiver_applies_each_number_once_in_order(
+    tmp_path: Path, numbers: list[int], applied: int, ack: tuple[int, bool]
+) -> None:
+    """A stream's receiver runs the next number only, and acknowledges how far it got."""
+    _system, wire, hits = _receiver_b(tmp_path)
+    on_link = wire._receiver("a", "pong")
+    for n in numbers:
+        on_link(_event("ep1", n))
+    assert len(hits.threads) == applied
+    assert wire._ack_due["a", "pong"] == ("ep1", *ack)
+
+
+@pytest.mark.parametrize(
+    "payload",
+    [
+        b"not json",
+        b'{"e":"ep1","n":1,"ev":"Hit","d":null}',  # an object, not the array
+        b'["ep1","one","Hit",null]',  # a number that is not one
+        b'["ep1",1]',  # too short
+        b"",
+    ],
+)
+def test_receiver_drops_a_payload_it_cannot_read(tmp_path: Path, payload: bytes) -> None:
+    """A link payload that is not [e, n, ev, d] is dropped: nothing runs, nothing is acked."""
+    _system, wire, hits = _receiver_b(tmp_path)
+    wire._receiver("a", "pong")(_Sample(payload))
+    assert hits.threads == []
+    assert wire._ack_due == {}
+
+
+def test_receiver_runs_the_device_on_its_thread_when_nobody_owns_it(tmp_path: Path) -> None:
+    """With the owner lock free, the event runs on the callback's thread (no handoff)."""
+    _system, wire, hits = _receiver_b(tmp_path)
+    wire._receiver("a", "pong")(_event("ep1", 1))
+    assert hits.threads == [threading.current_thread()]
+
+
+def test_receiver_leaves_the_event_to_a_busy_owner(tmp_path: Path) -> None:
+    """While another thread owns the devices, the receiver only queues and wakes the owner;
+    the owner then runs the stream's events in their order."""
+    system, wire, hits = _receiver_b(tmp_path)
+    on_link = wire._receiver("a", "pong")
+    owned = threading.Event()
+    release = threading.Event()
+
+    def owner() -> None:
+        with system.owner:
+            owned.set()
+            release.wait(10)
+            system._drain()
+
+    thread = threading.Thread(target=owner)
+    thread.start()
+    owned.wait(10)
+    system.wake.clear()
+    for n in (1, 2, 3):
+        on_link(_event("ep1", n))
+    assert hits.threads == []  # queued, not run by the callback's thread
+    assert system.wake.is_set()
+    assert system.subjects["pong"].queued == 3
+    release.set()
+    thread.join(10)
+    assert hits.threads == [thread] * 3
+    assert system.subjects["pong"].snapshot is not None
+    assert system.subjects["pong"].configuration == frozenset({"Down"})  # three toggles
+
+
+def test_receivers_on_two_threads_never_step_the_device_at_once(tmp_path: Path) -> None:
+    """Two streams' callbacks on two threads at once: one thread steps the device at a
+    time, and each stream's events run once and in order."""
+    system, wire, hits = _receiver_b(tmp_path, pause=0.0005)
+    order: list[tuple[str, int]] = []
+    pong = system.subjects["pong"]
+    pong.on_step(lambda event, data, outcome: order.append(("step", 0)))
+    count = 60
+    errors: list[BaseException] = []
+
+    def feed(node: str) -> Callable[[], None]:
+        on_link = wire._receiver(node, "pong")
+
+        def run() -> None:
+            try:
+                for n in range(1, count + 1):
+                    on_link(_event(f"ep-{node}", n))
+            except BaseException as exc:
+                errors.append(exc)
+
+        return run
+
+    threads = [threading.Thread(target=feed(node)) for node in ("a", "c")]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(30)
+    system.drain()  # whatever a callback queued while the other owned the devices
+    assert errors == []
+    assert not hits.overlapped
+    assert len(hits.threads) == 2 * count
+    assert wire._ack_due["a", "pong"][:2] == ("ep-a", count)
+    assert wire._ack_due["c", "pong"][:2] == ("ep-c", count)
+
+
+def test_a_link_event_sent_is_read_by_the_receiver(tmp_path: Path) -> None:
+    """What node a's wire puts for a link event is what node b's receiver applies."""
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    system_a, wire_a = _node(tmp_path / "a", "a")
+    pub = _Pub()
+    wire_a._pubs["pong"] = pub
+    wire_a.up.add("b")
+    wire_a._session = object()  # open, as far as send() asks
+    system_a.post("ping", "Go")
+    system_a.drain()
+    system_a.post("ping", "Go")
+    system_a.drain()
+    assert len(pub.puts) == 2
+    _system_b, wire_b, hits = _receiver_b(tmp_path / "b")
+    on_link = wire_b._receiver("a", "pong")
+    for data in pub.puts:
+        on_link(_Sample(data))
+    assert len(hits.threads) == 2
+    assert wire_b._ack_due["a", "pong"] == (wire_a.epoch, 2, False)
+    wire_a._session = None
+
+
+def test_a_stream_on_two_threads_never_lets_a_later_number_overtake(tmp_path: Path) -> None:
+    """Event 2 of a stream, arriving on another thread while event 1 is between its
+    order check and its step, waits for event 1 (the device steps 1, then 2)."""
+    system, wire, _hits = _receiver_b(tmp_path)
+    order: list[Any] = []
+    system.subjects["pong"].on_step(lambda event, data, outcome: order.append(data))
+    paused = threading.Event()
+    go_on = threading.Event()
+    run_now = system.run_now
+
+    def slow_first(device: str, event: str, data: Any) -> bool:
+        if data == 1:  # event 1 has passed its order check: hold it before its step
+            paused.set()
+            go_on.wait(10)
+        return run_now(device, event, data)
+
+    system.run_now = slow_first  # type: ignore[method-assign]
+    on_link = wire._receiver("a", "pong")
+    first = threading.Thread(target=on_link, args=(_Sample(b'["ep1",1,"Hit",1]'),))
+    first.start()
+    assert paused.wait(10)
+    second = threading.Thread(target=on_link, args=(_Sample(b'["ep1",2,"Hit",2]'),))
+    second.start()
+    second.join(0.2)  # time for event 2 to overtake, if it could
+    go_on.set()
+    first.join(10)
+    second.join(10)
+    system.drain()
+    assert order == [1, 2]
