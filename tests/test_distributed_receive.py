@@ -284,3 +284,25 @@ def test_a_stream_on_two_threads_never_lets_a_later_number_overtake(tmp_path: Pa
     second.join(10)
     system.drain()
     assert order == [1, 2]
+
+
+@pytest.mark.parametrize(
+    ("data", "refused"),
+    [
+        ({"x": 1.5, "y": [1, "a"]}, False),
+        ({"x": float("nan")}, True),
+        ({"x": {"y": [float("inf")]}}, True),
+        ([1.0, -float("inf")], True),
+        ("nan", False),
+    ],
+)
+def test_link_data_json_cannot_carry_is_refused_not_sent_as_null(data: Any, refused: bool) -> None:
+    """A NaN or infinity in link data is refused with the event named (msgspec would send
+    null); finite numbers and strings pass."""
+    from statectl.distributed.wire import _refuse_non_finite
+
+    if refused:
+        with pytest.raises(ValueError, match=r"'Hit' to 'pong'.*cannot carry"):
+            _refuse_non_finite(data, "pong", "Hit")
+    else:
+        _refuse_non_finite(data, "pong", "Hit")

@@ -37,6 +37,7 @@ Rules:
 from __future__ import annotations
 
 import json
+import math
 import sqlite3
 import threading
 import time
@@ -82,6 +83,23 @@ class _LinkEvent(msgspec.Struct, array_like=True, frozen=True):
 
 _LINK = msgspec.json.Decoder(_LinkEvent)
 _LINK_OUT = msgspec.json.Encoder()
+
+
+def _refuse_non_finite(data: Any, device: str, event: str) -> None:
+    """JSON has no NaN or infinity, and msgspec would send ``null``: refuse, as
+    ``json`` with ``allow_nan=False`` does, before the event is numbered or kept."""
+    values = [data]
+    while values:
+        value = values.pop()
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ValueError(
+                f"link event {event!r} to {device!r}: its data holds {value!r}, which JSON "
+                "cannot carry; send a finite number or a string"
+            )
+        if isinstance(value, dict):
+            values.extend(value.values())
+        elif isinstance(value, list | tuple):
+            values.extend(value)
 
 
 class Wire:
@@ -326,6 +344,8 @@ class Wire:
     def send(self, device: str, event: str, data: Any) -> None:
         """Number, keep and (if the peer is up) put a link event (rule 3)."""
         stream = self.outbound[device]
+        if data is not None:
+            _refuse_non_finite(data, device, event)
         with stream.lock:
             n = stream.add(event, data)
             if stream.node in self.up and self._session is not None:
