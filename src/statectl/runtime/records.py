@@ -166,7 +166,7 @@ def fields_of(record: Record) -> tuple[Any, ...]:
 
 
 def format_args(args: tuple[Any, ...]) -> str:
-    return ", ".join(repr(a) for a in args)
+    return ", ".join(map(repr, args))
 
 
 class ApiCall(msgspec.Struct, frozen=True, gc=False):
