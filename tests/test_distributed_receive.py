@@ -299,7 +299,7 @@ def test_a_stream_on_two_threads_never_lets_a_later_number_overtake(tmp_path: Pa
 def test_link_data_json_cannot_carry_is_refused_not_sent_as_null(data: Any, refused: bool) -> None:
     """A NaN or infinity in link data is refused with the event named (msgspec would send
     null); finite numbers and strings pass."""
-    from statectl.distributed.wire import _refuse_non_finite
+    from statectl.distributed.messages import refuse_non_finite as _refuse_non_finite
 
     if refused:
         with pytest.raises(ValueError, match=r"'Hit' to 'pong'.*cannot carry"):

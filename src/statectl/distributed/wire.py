@@ -37,8 +37,6 @@ Rules:
 from __future__ import annotations
 
 import json
-import math
-import sqlite3
 import threading
 import time
 import uuid
@@ -51,7 +49,15 @@ import msgspec
 
 from statectl.cell import Cell, Link
 from statectl.distributed.keys import Keys
-from statectl.distributed.messages import parse_snapshot, session_config, snapshot_payload
+from statectl.distributed.messages import (
+    decode_link,
+    encode_link,
+    parse_snapshot,
+    refuse_non_finite,
+    session_config,
+    snapshot_payload,
+)
+from statectl.distributed.resume import EPOCH_KEY, INBOUND_KEY, read_links
 from statectl.distributed.streams import Inbound, Outbound, Verdict
 from statectl.distributed.system import NodeSystem
 from statectl.errors import StatectlError
@@ -65,41 +71,9 @@ __all__ = ["RESEND_AFTER", "Wire"]
 RESEND_AFTER = 0.5
 _TICK = 0.05
 _ACK_PAUSE = 0.002  # seconds between two rounds of acknowledgements, at least
-_EPOCH = "link-epoch"
-_IN = "link-in/"
 _ENC = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
 #: one JSON value at an index of a text: json.loads without its per-call checks (acks)
 _scan: Callable[[str, int], tuple[Any, int]] = getattr(json.JSONDecoder(), "scan_once")  # noqa: B009
-
-
-class _LinkEvent(msgspec.Struct, array_like=True, frozen=True):
-    """A link event on the wire: ``[e, n, ev, d]`` (epoch, number, event, data), JSON."""
-
-    e: str
-    n: int
-    ev: str
-    d: Any = None
-
-
-_LINK = msgspec.json.Decoder(_LinkEvent)
-_LINK_OUT = msgspec.json.Encoder()
-
-
-def _refuse_non_finite(data: Any, device: str, event: str) -> None:
-    """JSON has no NaN or infinity, and msgspec would send ``null``: refuse, as
-    ``json`` with ``allow_nan=False`` does, before the event is numbered or kept."""
-    values = [data]
-    while values:
-        value = values.pop()
-        if isinstance(value, float) and not math.isfinite(value):
-            raise ValueError(
-                f"link event {event!r} to {device!r}: its data holds {value!r}, which JSON "
-                "cannot carry; send a finite number or a string"
-            )
-        if isinstance(value, dict):
-            values.extend(value.values())
-        elif isinstance(value, list | tuple):
-            values.extend(value)
 
 
 class Wire:
@@ -169,40 +143,15 @@ class Wire:
         self, path: Path | None, resume: bool
     ) -> tuple[str, dict[str, list[tuple[str, Any]]]]:
         """The epoch and, on resume, each stream's events the journal holds; the inbound state."""
-        meta: dict[str, str] = {}
-        top = 0
-        if path is not None and path.exists() and path.stat().st_size > 0:
-            db = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
-            try:
-                meta = dict(db.execute("SELECT key, value FROM meta WHERE key LIKE 'link-%'"))
-                top = int(db.execute("SELECT coalesce(max(seq), 0) FROM inbox").fetchone()[0])
-                backlog: dict[str, list[tuple[str, Any]]] = {}
-                if resume and _EPOCH in meta:
-                    epoch, _, base = meta[_EPOCH].partition(" ")
-                    remote = [d.name for d in self.cell.devices if d.name not in self.local]
-                    marks = ",".join("?" * len(remote))
-                    rows = db.execute(
-                        f"SELECT device, event, data FROM inbox WHERE seq > ? "
-                        f"AND device IN ({marks}) ORDER BY seq",
-                        (int(base or 0), *remote),
-                    )
-                    for device, event, data in rows:
-                        backlog.setdefault(device, []).append((event, json.loads(data)))
-            finally:
-                db.close()
-        else:
-            backlog = {}
-        for key, value in meta.items():
-            if key.startswith(_IN):
-                node, _, device = key[len(_IN) :].partition("/")
-                e, _, n = value.partition(" ")
-                self.inbound.last[node, device] = (e, int(n))
-        if resume and _EPOCH in meta:
-            return meta[_EPOCH].partition(" ")[0], backlog
+        remote = [d.name for d in self.cell.devices if d.name not in self.local]
+        found = read_links(path, resume, remote)
+        self.inbound.last.update(found.last)
+        if found.epoch is not None:
+            return found.epoch, found.backlog
         epoch = uuid.uuid4().hex[:12]
         journal = self.system.journal
         if journal is not None:
-            journal.note(_EPOCH, f"{epoch} {top}")
+            journal.note(EPOCH_KEY, f"{epoch} {found.top}")
         return epoch, {}
 
     def _committed(self) -> None:
@@ -345,20 +294,15 @@ class Wire:
         """Number, keep and (if the peer is up) put a link event (rule 3)."""
         stream = self.outbound[device]
         if data is not None:
-            _refuse_non_finite(data, device, event)
+            refuse_non_finite(data, device, event)
         with stream.lock:
             n = stream.add(event, data)
             if stream.node in self.up and self._session is not None:
-                self._pubs[device].put(_LINK_OUT.encode((stream.epoch, n, event, data)))
+                self._pubs[device].put(encode_link(stream.epoch, n, event, data))
 
     def forward(self, device: str, event: str, data: Any) -> None:
         if self._session is not None:
             self._session.put(self.keys.post(device), _ENC.encode({"ev": event, "d": data}))
-
-    @staticmethod
-    def _link_payload(epoch: str, n: int, event: str, data: Any) -> bytes:
-        """``[e, n, ev, d]`` as JSON (msgspec: one call on the hot path)."""
-        return _LINK_OUT.encode((epoch, n, event, data))
 
     def _stepped(self, name: str) -> Callable[[str, Any, str], None]:
         """Rule 5: put the device's state after a step that changed it."""
@@ -393,7 +337,7 @@ class Wire:
         here: the key is known (only the payload is parsed), the device, its
         journal binding, the stream's inbound position key.
         """
-        decode = _LINK.decode
+        decode = decode_link
         inbound = self.inbound
         lock = inbound.lock
         offer = inbound.offer
@@ -402,7 +346,7 @@ class Wire:
         system = self.system
         subject = system.subjects[device]
         bound = system.bound.get(device)
-        note = f"{_IN}{node}/{device}"
+        note = f"{INBOUND_KEY}{node}/{device}"
         ack = self._ack
         wake = self._wake
         run_devices = self._run_devices
@@ -640,7 +584,7 @@ class Wire:
         """Under the stream's lock: put every unacknowledged event again, in order."""
         pub = self._pubs[stream.device]
         for n, event, data in list(stream.unacked):
-            pub.put(self._link_payload(stream.epoch, n, event, data))
+            pub.put(encode_link(stream.epoch, n, event, data))
         stream.last_send = time.monotonic()
 
     def peers(self) -> Sequence[str]:
