@@ -231,3 +231,17 @@ def test_public_names_exist() -> None:
     """The curated ``__all__`` of the package names only things that exist."""
     for name in statectl.__all__:
         assert hasattr(statectl, name), name
+
+
+#: Modules are split along their seams before they grow past this (issue 10).
+MAX_MODULE_LINES = 600
+
+
+def test_no_module_is_over_the_line_limit() -> None:
+    """Every module under src/ has at most MAX_MODULE_LINES lines."""
+    over = {
+        str(p.relative_to(SRC)): n
+        for p in sorted(SRC.rglob("*.py"))
+        if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES
+    }
+    assert over == {}, f"split these along their seams: {over}"
