@@ -445,7 +445,7 @@ def _builder(step: Step) -> _Build:
     if hit is not None and hit[0] is step:
         build = _compile(hit[1])
         _BUILT[id(step)] = (step, build)
-        del _TEMPLATES[id(step)]
+        _TEMPLATES.pop(id(step), None)  # another thread may have taken it
         return build
     if len(_TEMPLATES) >= _TEMPLATES_MAX:
         _TEMPLATES.clear()
