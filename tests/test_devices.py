@@ -335,8 +335,10 @@ def test_the_api_log_keeps_the_recent_calls_and_counts_them_all(made: int) -> No
     assert [c.args[0] for c in log] == list(range(made - len(log), made))
 
 
-def test_the_trace_names_the_api_calls_after_the_log_was_cut() -> None:
-    """ObserverCalled records name the calls a notification made, however long the run."""
+@pytest.mark.parametrize("heard", ["records", "steps"])
+def test_the_trace_names_the_api_calls_after_the_log_was_cut(heard: str) -> None:
+    """ObserverCalled records name the calls a notification made, however long the run,
+    whether heard one by one or read from a step record."""
     chart = load_chart(MOTOR)
     subject = Subject(chart, clock=SimClock())
     connect(subject, make_driver("sim-motor", {}, chart=chart))
@@ -346,7 +348,10 @@ def test_the_trace_names_the_api_calls_after_the_log_was_cut() -> None:
         for e in cycle:
             subject.dispatch(e, {"amount": 1} if e == "Movement" else None)
     records: list[Record] = []
-    subject.listen(records.append)
+    if heard == "records":
+        subject.listen(records.append)
+    else:
+        subject.listen_steps(lambda step: records.extend(step.records))
     subject.dispatch("Movement", {"amount": 1})
     apis = [r.api for r in records if isinstance(r, ObserverCalled)]
     assert apis == ["SimMotor.stop()", "SimMotor.move_to(1.0)"]
