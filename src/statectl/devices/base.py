@@ -76,7 +76,7 @@ class Driver:
             )
         self._api_log: list[ApiCall] = []
         self._api_new: list[tuple[float, str, tuple[Any, ...]]] = []  # logged, not yet ApiCalls
-        self._api_total = 0  # every call logged (``api_calls``)
+        self._api_dropped = 0  # calls dropped from the front of the log (rule 3)
         self._owner = type(self).__name__  # the API's owner in every ApiCall
         # observer method -> the function update() calls, under the lock it holds
         self._api = {m: self._locked_form(f) for m, f in self.methods.items()}
@@ -108,17 +108,7 @@ class Driver:
     @property
     def api_calls(self) -> int:
         """Every API call made so far, also those no longer in :attr:`api_log`."""
-        return self._api_total
-
-    def api_calls_after(self, before: int) -> Sequence[ApiCall]:
-        """The calls made since :attr:`api_calls` was ``before``, oldest first (those the
-        log still keeps): what a step record names, read in one call per notification."""
-        new = self._api_total - before
-        if new <= 0:
-            return ()
-        if self._api_new:
-            self._settle_log()
-        return self._api_log[-new:]
+        return self._api_dropped + len(self._api_log) + len(self._api_new)
 
     def _settle_log(self) -> None:
         """Turn the calls logged since the last read into :class:`ApiCall` values (rule 3).
@@ -133,6 +123,7 @@ class Driver:
             log.extend([ApiCall(t, owner, f, a) for t, f, a in new])
             new.clear()
             if len(log) >= 2 * API_LOG_KEEP:
+                self._api_dropped += len(log) - API_LOG_KEEP
                 del log[:-API_LOG_KEEP]
 
     def update(self, notification: Notification) -> None:
@@ -193,8 +184,8 @@ class Driver:
         """:meth:`log_call` for a driver that read the clock already (one read per call)."""
         new = self._api_new
         new.append((now, function, args))
-        self._api_total += 1
         if len(new) >= 2 * API_LOG_KEEP:  # nobody reads the log: drop, never build, the old
+            self._api_dropped += len(self._api_log) + len(new) - API_LOG_KEEP
             self._api_log.clear()
             del new[:-API_LOG_KEEP]
 

@@ -12,9 +12,7 @@ Rules:
    shows which function of which device actually ran. A driver may keep only
    the recent ones if it also counts them all in ``api_calls`` (the shipped
    drivers keep the last 1,000): the Subject then takes a notification's calls
-   by that count. A driver may also have ``api_calls_after(before)``, the calls
-   made since ``api_calls`` was ``before``: the Subject then asks it instead of
-   reading the log (the shipped drivers have it; it saves reading the log twice).
+   by that count.
 """
 
 from __future__ import annotations

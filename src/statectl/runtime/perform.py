@@ -80,13 +80,8 @@ def api_calls_since(observer: object, before: int) -> Sequence[ApiCall]:
     """The API calls made since :func:`api_count` said ``before``.
 
     A driver that keeps only its recent calls counts them all in ``api_calls``
-    (devices/protocol.py rule 4), so the new ones are the log's last ones; one that
-    has ``api_calls_after(before)`` (every shipped driver) answers in one call.
+    (devices/protocol.py rule 4), so the new ones are the log's last ones.
     """
-    after = getattr(observer, "api_calls_after", None)
-    if after is not None:
-        calls: Sequence[ApiCall] = after(before)
-        return calls
     log = cast(ApiLogging, observer).api_log
     made = getattr(observer, "api_calls", None)
     if type(made) is not int:
