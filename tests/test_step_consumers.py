@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import io
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -161,3 +162,30 @@ def test_cell_links_fire_the_same_by_step_as_by_record() -> None:
     by_record = _links_fired(steps=False)
     assert _links_fired(steps=True) == by_record
     assert any(by_record)  # some event fired a link
+
+
+def test_the_trace_writes_each_event_with_its_own_data_however_often_it_repeats() -> None:
+    """Event lines are kept per event and data: data that compares equal but prints
+    differently (1 and True, 1 and 1.5) or cannot be a key still prints as format_record."""
+    from statectl.runtime import EventReceived
+    from statectl.runtime.trace import format_record
+
+    datas: list[Any] = [
+        None,
+        {"amount": 1},
+        {"amount": True},
+        {"amount": 1.5},
+        {"amount": 1},
+        {"amount": [1, {"a": "b"}]},
+        {"amount": {1, 2}},
+        {"amount": {1, 2}},
+        [1, 2],
+        None,
+    ]
+    out = io.StringIO()
+    writer = TraceWriter(out, device_width=5)
+    records = [EventReceived("Motor", float(i), "Movement", d) for i, d in enumerate(datas)]
+    for record in records:
+        writer(record)
+    want = "".join(format_record(r, device_width=5) + "\n" for r in records)
+    assert out.getvalue() == want
