@@ -12,7 +12,8 @@ Rules:
    listener that asked for records (a step-record listener that reads nothing, one
    that reads every typed record, and a ``listen()`` listener), with the
    Moving monitor, with the simulated motor connected as ``statectl demo`` connects
-   it (driver + monitor), with a journal (SQLite, default guarantee), with the
+   it (driver + monitor), the same with a step-record listener that reads nothing (what
+   ``statectl run``'s problem count adds), with a journal (SQLite, default guarantee), with the
    dashboard (what its owner thread pays; the page's loop is not running), with the
    trace writer (as a step listener and as a record listener), and through
    ``post()``. The worst row is reported beside the best.
@@ -204,7 +205,9 @@ def _motor_subject(wiring: str) -> tuple[Subject, JournalledDevice | None]:
         attach_monitors(subject, QuietDevice())
     else:  # as `statectl demo` wires it: the simulated motor's API and its monitors
         connect(subject, make_driver("sim-motor", {}, chart=chart))
-        if wiring == "trace":  # as `statectl demo` and `statectl run` attach it
+        if wiring == "demo-steps":  # a step listener that reads nothing: run's problem count
+            _keep_last(subject)
+        elif wiring == "trace":  # as `statectl demo` and `statectl run` attach it
             subject.listen_steps(TraceWriter(io.StringIO(), device_width=len(subject.name)).step)
         elif wiring == "trace-records":  # the trace writer as a listen() listener
             subject.listen(TraceWriter(io.StringIO(), device_width=len(subject.name)))
@@ -765,6 +768,12 @@ def build(libs: Sequence[str]) -> tuple[list[Contender], list[str]]:
             "statectl",
             "statectl wired as the demo (driver + monitor)",
             statectl_paper("demo"),
+        ),
+        (
+            "motor",
+            "statectl",
+            "statectl demo wiring + step-record listener",
+            statectl_paper("demo-steps"),
         ),
         ("motor", "statectl", "statectl demo wiring + journal", statectl_paper("journal")),
         (
