@@ -311,7 +311,7 @@ class StepRecord(msgspec.Struct, eq=False):
 _Build = Callable[["StepRecord"], "tuple[Record, ...]"]
 #: Per step seen once (by identity): the step and its records' kinds and fields
 #: (notifications as ``Notify``); bounded, for the steps that are not memoised.
-_TEMPLATES: dict[int, list[Any]] = {}
+_TEMPLATES: dict[int, tuple[Step, list[tuple[Any, tuple[Any, ...]] | Notify]]] = {}
 _TEMPLATES_MAX = 4096
 #: Per step seen twice: the step and its compiled builder. Plans keep their steps, so a
 #: memoised step is compiled once; bounded as well.
@@ -427,30 +427,35 @@ class Builder:
         self.build: _Build | None = None
 
 
+def _keep(step: Step, build: _Build) -> _Build:
+    """Keep ``step``'s compiled builder (bounded: the table starts again when full)."""
+    if len(_BUILT) >= _TEMPLATES_MAX:
+        _BUILT.clear()
+    _BUILT[id(step)] = (step, build)
+    return build
+
+
 def _compiled(step: Step) -> _Build:
     """``step``'s compiled builder, shared by every plan (and Subject) with that step."""
     hit = _BUILT.get(id(step))
     if hit is not None and hit[0] is step:
         return hit[1]
-    if len(_BUILT) >= _TEMPLATES_MAX:
-        _BUILT.clear()
-    build = _compile(records_plan(step))
-    _BUILT[id(step)] = (step, build)
-    return build
+    return _keep(step, _compile(records_plan(step)))
 
 
 def _builder(step: Step) -> _Build:
-    """The builder of ``step``'s records: read from its plan the first time, compiled after."""
-    hit = _TEMPLATES.get(id(step))
+    """The builder of any step's records: compiled once it is seen twice, read from
+    its plan the first time (a step that is not memoised is seen once)."""
+    hit = _BUILT.get(id(step))
     if hit is not None and hit[0] is step:
-        build = _compile(hit[1])
-        _BUILT[id(step)] = (step, build)
-        _TEMPLATES.pop(id(step), None)  # another thread may have taken it
-        return build
+        return hit[1]
+    seen = _TEMPLATES.pop(id(step), None)  # pop: another thread may take it too
+    if seen is not None and seen[0] is step:
+        return _keep(step, _compile(seen[1]))
     if len(_TEMPLATES) >= _TEMPLATES_MAX:
         _TEMPLATES.clear()
     plan = records_plan(step)
-    _TEMPLATES[id(step)] = [step, plan]
+    _TEMPLATES[id(step)] = (step, plan)
     return _interpret(plan)
 
 
@@ -459,13 +464,7 @@ def _typed(r: StepRecord) -> tuple[Record, ...]:
     step, tail = r.step, r._tail
     out: list[Record]
     if step is not None:
-        hit = _BUILT.get(id(step))
-        if hit is not None and hit[0] is step:
-            built = hit[1](r)
-        else:
-            if len(_BUILT) >= _TEMPLATES_MAX:
-                _BUILT.clear()
-            built = _builder(step)(r)
+        built = _builder(step)(r)
         if tail is None:
             return tuple(built)
         d, t = r.device, r.time
