@@ -153,22 +153,12 @@ class Performer:
         if calls is None:
             calls = self._calls = {}
         watch = self._watch
-        rec = recorded(plan.step, watch, self._name)
-        static = self._static(rec)
-        entry: _Call
+        head: tuple[int, Callable[[Any], object] | None, Any, Callable[[Any], object] | None]
         if watch and any(s in watch for s in (*plan.exited, *plan.entered)):
             run = partial(self._run, self._program(plan))
-            entry = (
-                1,
-                run,
-                None,
-                run,
-                rec,
-                static,
-                Builder(),
-            )  # watchers hear it between notifications
+            head = (1, run, None, run)  # watchers hear it between notifications
         elif not plan.notifies:
-            entry = (1, None, None, None, rec, static, Builder())
+            head = (1, None, None, None)
         elif len(plan.notifies) == 1:
             action = plan.notifies[0][1]
             route = self._routes.get(action.invoke)
@@ -176,18 +166,12 @@ class Performer:
                 self._name, action.invoke, action.name, action.method, action.event, None
             )
             call = route[0].update if route is not None else _nobody
-            entry = (
-                1 + _ONE_INVOKE,
-                call,
-                note,
-                partial(self._issue, plan),
-                rec,
-                static,
-                Builder(),
-            )
+            head = (1 + _ONE_INVOKE, call, note, partial(self._issue, plan))
         else:
             issue = partial(self._issue, plan)
-            entry = (1, issue, None, issue, rec, static, Builder())
+            head = (1, issue, None, issue)
+        rec = recorded(plan.step, watch, self._name)
+        entry: _Call = (*head, rec, self._static(rec), Builder())
         calls[plan] = entry
         return entry
 
