@@ -173,20 +173,25 @@ class TraceWriter:
         self._apis: dict[tuple[Any, ...], str] = {}  # ObserverCalled, per logged call
 
     def _line(self, record: Record) -> str:
-        at = (record.time, record.device)
-        if at != self._at:
-            self._at = at
-            self._prefix = f"t={record.time:7.2f}  {record.device:<{self.device_width}} "
+        prefix = self._column(record.time, record.device)
         kind = type(record)
         if type(record) is EventReceived and record.data is not None:  # may be unhashable
-            return self._prefix + self._kinds[kind] + _event_text(record) + "\n"
+            return prefix + self._kinds[kind] + _event_text(record) + "\n"
         key = (kind, fields_of(record))
         rest = self._rest.get(key)
         if rest is None:  # kind and text once per distinct record (time and device aside)
             if len(self._rest) >= _REST_MAX:
                 self._rest.clear()
             rest = self._rest[key] = self._kinds[kind] + _TEXTS[kind](record) + "\n"
-        return self._prefix + rest
+        return prefix + rest
+
+    def _column(self, time: float, device: str) -> str:
+        """The time and device column, made once per time and device."""
+        at = (time, device)
+        if at != self._at:
+            self._at = at
+            self._prefix = f"t={time:7.2f}  {device:<{self.device_width}} "
+        return self._prefix
 
     def __call__(self, record: Record) -> None:
         self.out.write(self._line(record))
@@ -212,11 +217,7 @@ class TraceWriter:
             if len(self._steps) >= _REST_MAX:
                 self._steps.clear()
             hit = self._steps[id(kernel)] = (kernel, self._step_lines(kernel))
-        at = (step.time, step.device)
-        if at != self._at:
-            self._at = at
-            self._prefix = f"t={step.time:7.2f}  {step.device:<{self.device_width}} "
-        prefix = self._prefix
+        prefix = self._column(step.time, step.device)
         event = step.event
         rest = self._received.get(event) if step.data is None else None
         if rest is None:
