@@ -35,7 +35,7 @@ Rules:
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import replace
 from typing import Any, Protocol, cast
 
@@ -117,16 +117,10 @@ class NodeLinks(CellLinks):
         pending = self.fired
         if not pending:
             return []
-        if len(pending) == 1:  # the hot path: one link fired
-            i = pending.pop()
-            if not self._guarded[i]:
-                return [self.cell.links[i]]
-            fired: Sequence[int] = (i,)
-        else:
-            fired = sorted(set(pending))
-            pending.clear()
-            if not any(self._guarded[i] for i in fired):
-                return [self.cell.links[i] for i in fired]
+        fired = (pending[0],) if len(pending) == 1 else sorted(set(pending))
+        pending.clear()
+        if not any(self._guarded[i] for i in fired):
+            return [self.cell.links[i] for i in fired]
         g = self.state()
         guards = self.model.link_guard
         out = []
@@ -358,8 +352,8 @@ class NodeSystem(System):
         return True
 
     def _dropping(self, link: Link) -> bool:
-        policy = self._policy.get(id(link))
-        return policy is not None and policy.on_peer_down is PeerDown.DROP and self._wire.down(link)
+        """A ``drop`` link (its route says so) whose peer is down now."""
+        return self._routes[id(link)][2] and self._wire.down(link)
 
     def _link_step(self, event: str, data: Any, outcome: str) -> None:
         """Rules 1 and 4 without a journal, on the owner after a device's step."""
@@ -369,11 +363,11 @@ class NodeSystem(System):
             return
         routes = self._routes
         for link in self.links.due():
-            target, forward, drops = routes[id(link)]
+            target, forward, _ = routes[id(link)]
             sent = data if forward else link.data
             if target is not None:
                 target.post(link.event, sent)
-            elif drops and self._wire.down(link):
+            elif self._dropping(link):
                 dropped = self._policy[id(link)].dropped
                 if dropped is not None:
                     self.subjects[link.source].post(dropped)

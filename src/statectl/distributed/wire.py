@@ -335,14 +335,12 @@ class Wire:
 
         The hot path of a link event, so everything per stream is looked up once
         here: the key is known (only the payload is parsed), the device, its
-        journal binding, the stream's inbound position key.
+        journal binding, the stream's inbound note.
         """
         decode = decode_link
         inbound = self.inbound
         lock = inbound.lock
         offer = inbound.offer
-        position = inbound.last
-        key = (node, device)
         system = self.system
         subject = system.subjects[device]
         bound = system.bound.get(device)
@@ -360,15 +358,11 @@ class Wire:
             e, n, event = msg.e, msg.n, msg.ev
             run = True
             with lock:
-                seen = position.get(key)
-                if seen is not None and seen[1] + 1 == n and seen[0] == e:
-                    position[key] = (e, n)  # the next one: Inbound.offer's common case, inline
-                else:
-                    verdict, last = offer(node, device, e, n)
-                    if verdict is not Verdict.APPLY:
-                        ack(node, device, e, last, verdict is Verdict.GAP)
-                        wake.set()
-                        return
+                verdict, last = offer(node, device, e, n)
+                if verdict is not Verdict.APPLY:
+                    ack(node, device, e, last, verdict is Verdict.GAP)
+                    wake.set()
+                    return
                 try:  # under the lock: the stream's next event waits until this one ran
                     if bound is not None:  # acknowledged once committed (_committed)
                         ticket = bound.post(event, msg.d, note=(note, f"{e} {n}"))
