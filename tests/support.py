@@ -6,7 +6,9 @@ import os
 from pathlib import Path
 from typing import Any
 
+from statectl.devices import connect, make_driver
 from statectl.observers import Notification
+from statectl.runtime import Subject, attach_monitors
 from statectl.runtime.records import fields_of
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -20,6 +22,36 @@ W3C_PACK = Path(
 )
 #: How a test that needs the pack says it was skipped; conftest.py's summary looks for it.
 W3C_SKIPPED = f"W3C pack not found at {W3C_PACK} (set {W3C_VARIABLE} to its directory)"
+
+
+#: The paper's whole Motor cycle, guarded event included, with the data Movement carries.
+PAPER_CYCLE: tuple[tuple[str, Any], ...] = (
+    ("Movement", {"amount": 10}),
+    ("Movement completion", None),
+    ("Initialization", None),  # guarded: previous == 'Moving'
+    ("Initialization completion", None),
+    ("Movement", {"amount": 10}),
+    ("Error", None),
+    ("Error completion", None),
+)
+
+
+class QuietFaults:
+    """A fault source that never faults: a monitor polls it and finds nothing."""
+
+    def poll_fault(self) -> str | None:
+        return None
+
+
+def wire_motor(subject: Subject, wiring: str) -> None:
+    """Wire a Motor Subject as a test names it: ``bare`` (a Recorder), ``monitor`` (and
+    its monitors), ``driver`` (the simulated motor, as the demo connects it), ``nobody``."""
+    if wiring in ("bare", "monitor"):
+        subject.attach(Recorder())
+    if wiring == "monitor":
+        attach_monitors(subject, QuietFaults())
+    elif wiring == "driver":
+        connect(subject, make_driver("sim-motor", {}, chart=subject.chart))
 
 
 class Recorder:

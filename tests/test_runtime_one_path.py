@@ -17,15 +17,10 @@ from statectl.journal import Journal
 from statectl.journal.device import JournalledDevice
 from statectl.model import Chart
 from statectl.runtime import SimClock, Subject, attach_monitors
-from support import Recorder
+from support import QuietFaults, Recorder
 
 #: The paper's cycle without its guarded event: every step is plannable today.
 CYCLE = ("Movement", "Movement completion", "Movement", "Error", "Error completion")
-
-
-class Quiet:
-    def poll_fault(self) -> str | None:
-        return None
 
 
 class Watcher:
@@ -60,7 +55,7 @@ def _wired(motor: Chart, wiring: str, tmp_path: Path) -> Subject:
     subject = Subject(motor, clock=SimClock())
     if wiring == "monitor":
         subject.attach(Recorder())
-        attach_monitors(subject, Quiet())
+        attach_monitors(subject, QuietFaults())
     elif wiring == "driver":
         connect(subject, make_driver("sim-motor", {}, chart=motor))
     elif wiring == "journal":

@@ -16,7 +16,6 @@ import pytest
 
 from statectl.cell import load_cell_or_raise
 from statectl.cli.problems import Problems as ProblemCounter  # statectl run's counter
-from statectl.devices import connect, make_driver
 from statectl.errors import UnhandledEventError
 from statectl.explore.replay import CellLinks
 from statectl.model import Chart
@@ -30,18 +29,11 @@ from statectl.runtime import (
     StepRecord,
     Subject,
     TraceWriter,
-    attach_monitors,
 )
-from support import Recorder
+from support import PAPER_CYCLE, wire_motor
 
 EVENTS = (
-    ("Movement", {"amount": 10}),
-    ("Movement completion", None),
-    ("Initialization", None),  # guarded: previous == 'Moving'
-    ("Initialization completion", None),
-    ("Movement", {"amount": 10}),
-    ("Error", None),
-    ("Error completion", None),
+    *PAPER_CYCLE,
     ("Movement completion", None),  # declared ignored in Blocked
     ("No such event", None),
     ("Initialization", None),  # declared ignored in Blocked when its guard is false
@@ -49,22 +41,12 @@ EVENTS = (
 WIRINGS = ("bare", "monitor", "driver", "nobody")
 
 
-class Quiet:
-    def poll_fault(self) -> str | None:
-        return None
-
-
 def _run(
     chart: Chart, wiring: str, policy: str, steps: bool
 ) -> tuple[list[Record], list[StepRecord]]:
     """The events through a Motor wired so: every typed record, or every step record."""
     subject = Subject(chart, clock=SimClock(), policy=policy)  # type: ignore[arg-type]
-    if wiring in ("bare", "monitor"):
-        subject.attach(Recorder())
-    if wiring == "monitor":
-        attach_monitors(subject, Quiet())
-    if wiring == "driver":
-        connect(subject, make_driver("sim-motor", {}, chart=chart))
+    wire_motor(subject, wiring)
     typed: list[Record] = []
     heard: list[StepRecord] = []
     if steps:

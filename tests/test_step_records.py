@@ -13,7 +13,6 @@ from typing import Any
 
 import pytest
 
-from statectl.devices import connect, make_driver
 from statectl.errors import UnhandledEventError
 from statectl.model import Chart, Invoke, Notify, State, StateKind, Transition
 from statectl.observers import Notification
@@ -26,26 +25,11 @@ from statectl.runtime import (
     SimClock,
     StepRecord,
     Subject,
-    attach_monitors,
 )
 from statectl.semantics import Unhandled
-from support import Recorder
+from support import PAPER_CYCLE, Recorder, wire_motor
 
-PAPER = (
-    ("Movement", {"amount": 10}),
-    ("Movement completion", None),
-    ("Initialization", None),  # guarded: previous == 'Moving'
-    ("Initialization completion", None),
-    ("Movement", {"amount": 10}),
-    ("Error", None),
-    ("Error completion", None),
-)
 STRAYS = (("Movement completion", None), ("No such event", None), ("Movement", {"amount": 1}))
-
-
-class Quiet:
-    def poll_fault(self) -> str | None:
-        return None
 
 
 class Failing:
@@ -53,19 +37,6 @@ class Failing:
 
     def update(self, notification: Notification) -> None:
         raise RuntimeError("the device is gone")
-
-
-def _wire(subject: Subject, wiring: str) -> None:
-    chart = subject.chart
-    if wiring == "bare":
-        subject.attach(Recorder())
-    elif wiring == "monitor":
-        subject.attach(Recorder())
-        attach_monitors(subject, Quiet())
-    elif wiring == "driver":
-        connect(subject, make_driver("sim-motor", {}, chart=chart))
-    elif wiring == "nobody":
-        pass
 
 
 def _run(
@@ -76,7 +47,7 @@ def _run(
     policy: str = "ignore",
 ) -> tuple[list[Record], list[StepRecord], str]:
     subject = Subject(chart, clock=SimClock(), policy=policy)  # type: ignore[arg-type]
-    _wire(subject, wiring)
+    wire_motor(subject, wiring)
     typed: list[Record] = []
     steps: list[StepRecord] = []
     hear(subject, typed, steps)
@@ -100,7 +71,9 @@ def _stepped(subject: Subject, typed: list[Record], steps: list[StepRecord]) -> 
 
 
 @pytest.mark.parametrize("wiring", ["bare", "monitor", "driver", "nobody"])
-@pytest.mark.parametrize("events", [PAPER, PAPER + STRAYS], ids=["paper", "with-strays"])
+@pytest.mark.parametrize(
+    "events", [PAPER_CYCLE, PAPER_CYCLE + STRAYS], ids=["paper", "with-strays"]
+)
 @pytest.mark.parametrize("policy", ["ignore", "error"])
 def test_step_records_hold_the_records_listen_gets(
     motor: Chart, wiring: str, events: tuple[tuple[str, Any], ...], policy: str
@@ -118,7 +91,7 @@ def test_step_records_hold_the_records_listen_gets(
 
 def test_a_step_record_says_what_happened_without_building_records(motor: Chart) -> None:
     """outcome, entered and exited come from the step; records are built when first read."""
-    _, steps, _ = _run(motor, "monitor", PAPER + STRAYS[:1], _stepped)
+    _, steps, _ = _run(motor, "monitor", PAPER_CYCLE + STRAYS[:1], _stepped)
     moved = next(s for s in steps if s.event == "Movement")
     assert (moved.outcome, moved.entered, moved.exited) == ("handled", ("Moving",), ("Blocked",))
     assert moved._records is None  # nothing read it yet
@@ -187,7 +160,7 @@ def test_with_a_listen_listener_too_both_get_the_same_records(motor: Chart, wiri
         subject.listen(typed.append)
         subject.listen_steps(steps.append)
 
-    typed, steps, _ = _run(motor, wiring, PAPER + STRAYS, both)
+    typed, steps, _ = _run(motor, wiring, PAPER_CYCLE + STRAYS, both)
     assert [r for s in steps for r in s.records] == typed
 
 
