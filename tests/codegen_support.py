@@ -28,10 +28,8 @@ from statectl.runtime.records import (
     EventReceived,
     Finished,
     InvokeIssued,
+    MicrostepTaken,
     Started,
-    StateEntered,
-    StateExited,
-    TransitionTaken,
 )
 
 GXX = shutil.which("g++")
@@ -43,25 +41,27 @@ needs_gxx = pytest.mark.skipif(GXX is None, reason="no g++ on this machine")
 Sequence_ = tuple[Mapping[str, int], Sequence[str]]
 
 
-def canonical(record: object) -> str | None:
+def canonical(record: object) -> list[str]:
+    """The canonical lines of one record (a microstep is a line per exit, transition
+    and entry, in that order); none for a record the C++ trace has no line for."""
     match record:
         case Started():
-            return "start"
+            return ["start"]
         case EventReceived(event=event):
-            return f"event {event}"
-        case StateExited(state=state):
-            return f"exit {state}"
-        case TransitionTaken(source=source, targets=targets, label=label):
-            return f"take {', '.join(source)} -> {', '.join(targets)} on {label}"
-        case StateEntered(state=state):
-            return f"enter {state}"
+            return [f"event {event}"]
+        case MicrostepTaken(exited=exited, transitions=transitions, entered=entered):
+            return [
+                *[f"exit {s}" for s in exited],
+                *[f"take {t.source} -> {', '.join(t.targets)} on {t.label}" for t in transitions],
+                *[f"enter {s}" for s in entered],
+            ]
         case InvokeIssued(invoke=invoke):
-            return f"invoke {invoke}"
+            return [f"invoke {invoke}"]
         case EventIgnored(event=event, reason=reason):
-            return f"ignored {event} ({reason})"
+            return [f"ignored {event} ({reason})"]
         case Finished():
-            return "finished"
-    return None
+            return ["finished"]
+    return []
 
 
 class _Recorder:
@@ -82,9 +82,7 @@ def python_trace(chart: Chart, context: Mapping[str, Any], events: Sequence[str]
         subject.attach(_Recorder(lines))
 
     def listen(record: object) -> None:
-        text = canonical(record)
-        if text is not None:
-            lines.append(text)
+        lines.extend(canonical(record))
 
     subject.listen(listen)
     subject.start()

@@ -55,9 +55,7 @@ def python_trace(chart: Chart, items: Sequence[Item]) -> list[str]:
         subject.attach(_Recorder(lines))
 
     def listen(record: object) -> None:
-        text = canonical(record)
-        if text is not None:
-            lines.append(text)
+        lines.extend(canonical(record))
 
     subject.listen(listen)
     subject.start()

@@ -14,7 +14,7 @@ from statectl.explore import verify_cell
 from statectl.model import MAX_DEFERRED, Chart
 from statectl.rules import check_paths
 from statectl.runtime import SimClock, Subject
-from statectl.runtime.records import EventReceived, EventRejected, Record, StateEntered
+from statectl.runtime.records import EventReceived, EventRejected, MicrostepTaken, Record
 
 ROOT = Path(__file__).resolve().parents[1]
 CLAMP = ROOT / "examples" / "clamp" / "clamp.yaml"
@@ -125,7 +125,7 @@ def test_at_most_max_deferred_events_are_kept(tmp_path: Path) -> None:
     subject.dispatch("Stroke done")
     # the first kept Eject ejects (Done -> Idle); the other 15 meet Idle, which ignores them
     assert received(records).count("Eject") == 2 * MAX_DEFERRED + 1
-    assert [r.state for r in records if isinstance(r, StateEntered)][-1] == "Idle"
+    assert [r.entered for r in records if isinstance(r, MicrostepTaken)][-1] == ("Idle",)
 
 
 def test_a_chart_without_defer_keeps_nothing() -> None:

@@ -11,73 +11,54 @@ import pytest
 
 import statectl
 from statectl.demo import FAULT, run_demo
-from statectl.runtime import Record, Subject
+from statectl.runtime import Record, Subject, Taken
 from support import record_keys
 
 ROOT = Path(__file__).parent.parent
 EXAMPLES = ROOT / "examples" / "motor"
 
+
+def moved(event: str, source: str, target: str, label: str | None = None) -> tuple[Any, ...]:
+    """The key of a microstep taking one transition from ``source`` to ``target``."""
+    took = (Taken(source, (target,), label or event),)
+    return ("MicrostepTaken", event, (source,), took, (target,))
+
+
 #: The demo's records as (type, key fields), device and time left out.
 EXPECTED: list[tuple[Any, ...]] = [
     ("Started",),
-    ("StateEntered", "Blocked"),
+    ("MicrostepTaken", None, (), (), ("Blocked",)),
     # an external Movement request of 10
     ("EventReceived", "Movement", {"amount": 10}),
-    ("StateExited", "Blocked"),
-    ("TransitionTaken", "Movement", ("Blocked",), ("Moving",), "Movement"),
-    ("StateEntered", "Moving"),
+    moved("Movement", "Blocked", "Moving"),
     ("MonitorStarted", "Moving"),
     ("InvokeIssued", 0, "Moving", "Movement", "Movement"),
     ("ObserverCalled", "Movement", "SimMotor.move_to(10.0)"),
     ("EventReceived", "Movement completion", {"position": 10.0}),
-    ("StateExited", "Moving"),
+    moved("Movement completion", "Moving", "Blocked"),
     ("MonitorStopped", "Moving"),
-    ("TransitionTaken", "Movement completion", ("Moving",), ("Blocked",), "Movement completion"),
-    ("StateEntered", "Blocked"),
     # Initialization back: previous == 'Moving' holds
     ("EventReceived", "Initialization", None),
-    ("StateExited", "Blocked"),
-    (
-        "TransitionTaken",
-        "Initialization",
-        ("Blocked",),
-        ("Returning",),
-        "Initialization [previous == 'Moving']",
-    ),
-    ("StateEntered", "Returning"),
+    moved("Initialization", "Blocked", "Returning", "Initialization [previous == 'Moving']"),
     ("InvokeIssued", 1, "Returning", "Initialization", "Initialization"),
     ("ObserverCalled", "Initialization", "SimMotor.return_to(0.0)"),
     ("EventReceived", "Initialization completion", {"position": 0.0}),
-    ("StateExited", "Returning"),
-    (
-        "TransitionTaken",
-        "Initialization completion",
-        ("Returning",),
-        ("Blocked",),
-        "Initialization completion",
-    ),
-    ("StateEntered", "Blocked"),
+    moved("Initialization completion", "Returning", "Blocked"),
     # a new Movement; the motor faults half-way and the monitor raises Error
     ("EventReceived", "Movement", {"amount": 10}),
-    ("StateExited", "Blocked"),
-    ("TransitionTaken", "Movement", ("Blocked",), ("Moving",), "Movement"),
-    ("StateEntered", "Moving"),
+    moved("Movement", "Blocked", "Moving"),
     ("MonitorStarted", "Moving"),
     ("InvokeIssued", 0, "Moving", "Movement", "Movement"),
     ("ObserverCalled", "Movement", "SimMotor.move_to(10.0)"),
     ("FaultDetected", "Moving", "Error", FAULT),
     ("EventReceived", "Error", {"detail": FAULT}),
-    ("StateExited", "Moving"),
+    moved("Error", "Moving", "Returning"),
     ("MonitorStopped", "Moving"),
-    ("TransitionTaken", "Error", ("Moving",), ("Returning",), "Error"),
-    ("StateEntered", "Returning"),
     ("InvokeIssued", 2, "Error", "Error", "Error"),
     ("ObserverCalled", "Error", "SimMotor.stop()"),
     ("ObserverCalled", "Error", "SimMotor.return_to(0.0)"),
     ("EventReceived", "Error completion", {"position": 0.0}),
-    ("StateExited", "Returning"),
-    ("TransitionTaken", "Error completion", ("Returning",), ("Blocked",), "Error completion"),
-    ("StateEntered", "Blocked"),
+    moved("Error completion", "Returning", "Blocked"),
     ("Finished",),
 ]
 
@@ -130,7 +111,10 @@ def test_demo_output_has_aligned_columns() -> None:
     """Every trace line has its kind column at the same place and no colour codes."""
     _, text, _ = demo()
     lines = [line for line in text.splitlines() if line.startswith("t=")]
-    assert len(lines) == len(EXPECTED)
+    per_record = [
+        len(k[2]) + len(k[3]) + len(k[4]) if k[0] == "MicrostepTaken" else 1 for k in EXPECTED
+    ]
+    assert len(lines) == sum(per_record)  # a microstep: a line per exit, transition, entry
     assert len({line.index("Motor") for line in lines}) == 1
     assert "\x1b" not in text
 

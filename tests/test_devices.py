@@ -21,13 +21,7 @@ from statectl.devices import (
 from statectl.errors import DiagnosticError, StatectlError
 from statectl.observers import Notification
 from statectl.runtime import ObserverCalled, Record, SimClock, Subject
-from statectl.runtime.records import (
-    EventIgnored,
-    EventReceived,
-    StateEntered,
-    StateExited,
-    TransitionTaken,
-)
+from statectl.runtime.records import EventIgnored, EventReceived, MicrostepTaken
 
 EXAMPLES = Path(__file__).parent.parent / "examples" / "motor"
 MOTOR = EXAMPLES / "motor.yaml"
@@ -260,9 +254,9 @@ def run_scenario(config: str) -> tuple[list[tuple[Any, ...]], list[str]]:
     subject.advance(2.0)
     subject.post("Error")
     subject.run_until_idle()
-    state_kinds = (EventReceived, StateExited, StateEntered, TransitionTaken, EventIgnored)
+    state_kinds = (EventReceived, MicrostepTaken, EventIgnored)
     trace = [
-        (type(r).__name__, getattr(r, "event", None), getattr(r, "state", None))
+        (type(r).__name__, getattr(r, "event", None), getattr(r, "entered", None))
         for r in records
         if isinstance(r, state_kinds)
     ]
@@ -277,7 +271,7 @@ def test_swapping_the_driver_config_changes_api_calls_not_states() -> None:
     motor_trace, motor_api = run_scenario("drivers.yaml")
     stepper_trace, stepper_api = run_scenario("stepper.yaml")
     assert motor_trace == stepper_trace
-    assert ("StateEntered", None, "Returning") in motor_trace
+    assert ("MicrostepTaken", "Error", ("Returning",)) in motor_trace
     assert motor_api != stepper_api
     assert all(a.startswith("SimMotor.") for a in motor_api)
     assert all(a.startswith("SimStepper.") for a in stepper_api)

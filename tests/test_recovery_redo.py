@@ -198,7 +198,7 @@ def test_the_trace_shows_the_redone_call(tmp_path: Path, device_file: Path) -> N
     finally:
         second.close()
     kinds = [type(r).__name__ for r in seen if type(r).__name__ != "Finished"]
-    assert kinds == ["Started", "StateEntered", "InvokeIssued", "ObserverCalled"]
+    assert kinds == ["Started", "MicrostepTaken", "InvokeIssued", "ObserverCalled"]
     issued = next(r for r in seen if isinstance(r, InvokeIssued))
     called = next(r for r in seen if isinstance(r, ObserverCalled))
     assert (issued.method, issued.event, called.api) == ("Error", "Error", "SimTwin.Error()")

@@ -20,12 +20,12 @@ from statectl.runtime import (
     EventRejected,
     Finished,
     InvokeIssued,
+    MicrostepTaken,
     ObserverCalled,
     Record,
     SimClock,
-    StateEntered,
-    StateExited,
     Subject,
+    Taken,
     WallClock,
 )
 from statectl.semantics import Machine, initial, step
@@ -57,11 +57,12 @@ def test_start_enters_the_initial_configuration(motor: Chart) -> None:
     """start() records Started and enters the default state."""
     subject, records = running(motor)
     assert subject.configuration == {"Blocked"}
-    assert keys(records) == [("Started",), ("StateEntered", "Blocked")]
+    assert keys(records) == [("Started",), ("MicrostepTaken", None, (), (), ("Blocked",))]
 
 
 def test_one_event_records_in_order(motor: Chart) -> None:
-    """Received, exited, transition, entered, then the invoke and the observer call."""
+    """Received, the microstep (exited, transition, entered), then the invoke and the
+    observer call."""
     subject, records = running(motor)
     subject.attach(Recorder())
     del records[:]
@@ -69,9 +70,13 @@ def test_one_event_records_in_order(motor: Chart) -> None:
     assert subject.run_until_idle() == 1
     assert keys(records) == [
         ("EventReceived", "Movement", {"amount": 10}),
-        ("StateExited", "Blocked"),
-        ("TransitionTaken", "Movement", ("Blocked",), ("Moving",), "Movement"),
-        ("StateEntered", "Moving"),
+        (
+            "MicrostepTaken",
+            "Movement",
+            ("Blocked",),
+            (Taken("Blocked", ("Moving",), "Movement"),),
+            ("Moving",),
+        ),
         ("InvokeIssued", 0, "Moving", "Movement", "Movement"),
         ("ObserverCalled", "Movement", "Recorder.update(#0)"),
     ]
@@ -245,7 +250,7 @@ def test_no_records_are_built_when_nobody_listens(
         raise AssertionError("record built")
 
     for module in (mod, perform):  # the Subject decides, its Performer half performs
-        for name in ("EventReceived", "StateEntered", "StateExited", "TransitionTaken"):
+        for name in ("EventReceived", "MicrostepTaken", "Taken", "taken"):
             if hasattr(module, name):
                 monkeypatch.setattr(module, name, refuse)
     subject = Subject(motor, clock=SimClock())
@@ -277,7 +282,11 @@ def test_worker_owns_the_subject_and_survives_errors(motor: Chart) -> None:
     subject = Subject(motor, clock=clock, policy="error")
     errors: list[BaseException] = []
     moved = threading.Event()
-    subject.listen(lambda r: moved.set() if r == StateEntered("Motor", r.time, "Moving") else None)
+    subject.listen(
+        lambda r: (
+            moved.set() if isinstance(r, MicrostepTaken) and r.entered == ("Moving",) else None
+        )
+    )
     subject.start_worker(on_error=errors.append)
     subject.post("Jump")
     subject.post("Movement", {"amount": 1})
@@ -308,6 +317,6 @@ def test_subject_follows_the_pure_semantics(events: list[str]) -> None:
     assert len(received) == len(events)
     for i in received:
         follow = records[i + 1]
-        assert isinstance(follow, StateExited | EventIgnored)
+        assert isinstance(follow, MicrostepTaken | EventIgnored)
     assert sum(isinstance(r, InvokeIssued) for r in records) == subject.invokes_issued
     assert not [r for r in records if isinstance(r, ObserverCalled)]  # nobody attached

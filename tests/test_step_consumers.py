@@ -78,7 +78,7 @@ def test_the_trace_of_steps_is_the_trace_of_records(
     for step in steps:
         per_step.step(step)
     assert outs[1].getvalue() == outs[0].getvalue()
-    assert per_step.lines == per_record.lines == len(typed)
+    assert per_step.lines == per_record.lines == outs[0].getvalue().count("\n") > len(typed)
 
 
 @pytest.mark.parametrize("policy", ["ignore", "error"])

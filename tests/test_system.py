@@ -7,7 +7,7 @@ import threading
 
 import pytest
 
-from statectl import QueueFull, SimClock, StatectlError, StateEntered, System
+from statectl import MicrostepTaken, QueueFull, SimClock, StatectlError, System
 from statectl.model import Chart
 from statectl.system import DeviceSetup
 from support import Recorder
@@ -150,8 +150,8 @@ def test_records_iterate_every_devices_records(motor: Chart) -> None:
 
 async def _collect(stream: object, seen: list[tuple[str, str]], n: int) -> None:
     async for r in stream:  # type: ignore[attr-defined]  # an async generator
-        if isinstance(r, StateEntered):
-            seen.append((r.device, r.state))
+        if isinstance(r, MicrostepTaken):
+            seen.extend((r.device, s) for s in r.entered)
             if len(seen) == n:
                 return
 

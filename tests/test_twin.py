@@ -18,7 +18,7 @@ from statectl.errors import DiagnosticError, StatectlError
 from statectl.model import Chart
 from statectl.observers import Notification
 from statectl.runtime import Record, SimClock, Subject
-from statectl.runtime.records import TransitionTaken
+from statectl.runtime.records import MicrostepTaken
 from support import PARALLEL_PRESS
 
 ROOT = Path(__file__).parent.parent
@@ -41,9 +41,10 @@ PAPER_CYCLE = [
 
 def transitions(records: list[Record]) -> list[tuple[str, str, str]]:
     return [
-        (r.event, ", ".join(r.source), ", ".join(r.targets))
+        (r.event, t.source, ", ".join(t.targets))
         for r in records
-        if isinstance(r, TransitionTaken)
+        if isinstance(r, MicrostepTaken)
+        for t in r.transitions
     ]
 
 

@@ -43,17 +43,43 @@ void print_number(double v) {
 
 // -- the trace -------------------------------------------------------------------------------
 
-void stamp(const char* kind) { std::printf("t=%7.2f  Motor  %-8s ", now, kind); }
+void stamp_at(double t, const char* kind) { std::printf("t=%7.2f  Motor  %-8s ", t, kind); }
+void stamp(const char* kind) { stamp_at(now, kind); }
+
+// A monitor starting or stopping is printed after its microstep's exit, transition and
+// entry lines, as statectl's trace has it (the record of a microstep comes first, then
+// what its hooks did): the hooks note the line, the printer writes it at the next line
+// that is not part of the microstep.
+struct Note {
+  double time;
+  const char* text;
+};
+Note notes[4];
+int noted = 0;
+
+void note(const char* text) {
+  if (noted < 4) notes[noted++] = Note{now, text};
+}
+
+void print_notes() {
+  for (int i = 0; i < noted; ++i) {
+    stamp_at(notes[i].time, "monitor");
+    std::puts(notes[i].text);
+  }
+  noted = 0;
+}
 
 Data current;  // the data of the event being dispatched
 
 class Printer final : public statectl::Tracer {
  public:
   void started(const char*) noexcept override {
+    print_notes();
     stamp("run");
     std::puts("started");
   }
   void event(const char*, const char* e) noexcept override {
+    print_notes();
     stamp("event");
     std::printf("%s", e);
     if (current.key != nullptr) {
@@ -80,15 +106,18 @@ class Printer final : public statectl::Tracer {
     std::puts(s);
   }
   void invoked(const char*, int n, const char* name, const char* method) noexcept override {
+    print_notes();
     stamp("invoke");
     std::printf("#%d %s -> observer %s()\n", n, name, method);
     ++invokes;
   }
   void ignored(const char*, const char* e, const char* r) noexcept override {
+    print_notes();
     stamp("ignored");
     std::printf("%s (%s)\n", e, r);
   }
   void finished(const char*) noexcept override {
+    print_notes();
     stamp("run");
     std::puts("finished");
   }
@@ -240,19 +269,18 @@ SimMotor sim;
 struct Monitor {
   void on_entry(motor::State s) noexcept {
     if (s == motor::State::Moving) {
-      stamp("monitor");
-      std::puts("Moving started");
+      note("Moving started");
       clock_.call_later(Timer::Poll, kPeriod);
     }
   }
   void on_exit(motor::State s) noexcept {
     if (s == motor::State::Moving) {
-      stamp("monitor");
-      std::puts("Moving stopped");
+      note("Moving stopped");
       clock_.cancel(Timer::Poll);
     }
   }
   static void poll() {
+    print_notes();
     if (sim.fault_due >= 0.0 && now >= sim.fault_due) {
       sim.fault_due = -1.0;
       stamp("fault");
@@ -330,6 +358,7 @@ int main() {
   until(motor::State::Blocked);
   printer.finished("Motor");
 
+  print_notes();
   std::printf("\nfinal state ");
   const char* sep = "";
   for (std::size_t s = 0; s < motor::kStateCount; ++s) {

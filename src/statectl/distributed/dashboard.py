@@ -21,7 +21,7 @@ from statectl.cell import Cell
 from statectl.errors import StatectlError
 from statectl.model import Chart
 from statectl.runtime import Subject
-from statectl.runtime.records import Record, StateEntered, StateExited, StepRecord
+from statectl.runtime.records import MicrostepTaken, Record, StepRecord
 from statectl.semantics import Snapshot
 
 __all__ = ["MirrorSubject", "serve_cell"]
@@ -67,8 +67,8 @@ class MirrorSubject:
                 return
             self.configuration = new
             self.events_processed += 1
-            records: list[Record] = [StateExited(self.name, wall, s) for s in sorted(old - new)]
-            records += [StateEntered(self.name, wall, s) for s in sorted(new - old)]
+            exited, entered = tuple(sorted(old - new)), tuple(sorted(new - old))
+            records: list[Record] = [MicrostepTaken(self.name, wall, None, exited, (), entered)]
         for r in records:
             for listener in tuple(self._listeners):
                 listener(r)

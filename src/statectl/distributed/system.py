@@ -47,7 +47,7 @@ from statectl.explore.conditions import bind_cross_guards
 from statectl.explore.enforce import CellRules
 from statectl.explore.replay import CellLinks
 from statectl.journal import JournalledDevice, Ticket
-from statectl.runtime import Record, StateEntered, Subject, TransitionTaken
+from statectl.runtime import MicrostepTaken, Record, Subject
 from statectl.runtime.eventdata import AssignError
 from statectl.semantics import Snapshot
 from statectl.semantics.eventview import GuardError
@@ -104,12 +104,11 @@ class NodeLinks(CellLinks):
         links = self._by_source.get(r.device)
         if links is None:
             return
-        entered = r.state if isinstance(r, StateEntered) else None
-        took = r.event if isinstance(r, TransitionTaken) else None
-        if entered is None and took is None:
+        if type(r) is not MicrostepTaken:
             return
+        took = r.event if r.transitions else None
         for i, enters, what in links:
-            if what == (entered if enters else took):
+            if what in r.entered if enters else what == took:
                 self.fired.append(i)
 
     def due(self) -> list[Link]:

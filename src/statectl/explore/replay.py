@@ -36,14 +36,14 @@ from statectl.explore.compose import Composed, Stimulus
 from statectl.explore.conditions import bind_cross_guards
 from statectl.runtime import (
     EventIgnored,
+    MicrostepTaken,
     Record,
     SimClock,
-    StateEntered,
     StepRecord,
     Subject,
-    TransitionTaken,
     format_record,
 )
+from statectl.runtime.records import taken
 from statectl.tables import safeyaml
 
 __all__ = ["CellLinks", "CellRun", "ReplayStep", "link_data", "load_replay", "run_cell"]
@@ -116,12 +116,13 @@ class CellLinks:
         self.fired: list[int] = []
 
     def watch(self, r: Record) -> None:
+        if type(r) is not MicrostepTaken:
+            return
+        took = r.event if r.transitions else None
         for i, k in enumerate(self.cell.links):
             if k.source != r.device:
                 continue
-            entered = isinstance(r, StateEntered) and r.state == k.what
-            took = isinstance(r, TransitionTaken) and r.event == k.what
-            if (k.trigger is Trigger.ENTERS and entered) or (k.trigger is Trigger.RAISES and took):
+            if k.what in r.entered if k.trigger is Trigger.ENTERS else k.what == took:
                 self.fired.append(i)
 
     def watch_step(self, step: StepRecord) -> None:
@@ -135,12 +136,8 @@ class CellLinks:
             return
         device, time = step.device, step.time
         for micro in decided.microsteps:
-            for x in micro.transitions:
-                self.watch(
-                    TransitionTaken(device, time, micro.event, (x.source,), x.targets, x.label)
-                )
-            for state in micro.entered:
-                self.watch(StateEntered(device, time, state))
+            took = taken(micro)
+            self.watch(MicrostepTaken(device, time, micro.event, micro.exited, took, micro.entered))
 
     def state(self) -> int:
         """The explorer's packed global state for the subjects' snapshots."""

@@ -48,8 +48,8 @@ from statectl.opcua.access import rules as _Rules
 from statectl.opcua.access import ua_module as _ua
 from statectl.opcua.certs import APP_URI, default_directory, ensure_certificate
 from statectl.opcua.packml import PackmlNaming, PackmlSpace, naming, packml_call
-from statectl.opcua.space import Layout, changes, layout
-from statectl.runtime import InvokeIssued, Record, Started, StepRecord, TransitionTaken
+from statectl.opcua.space import Change, Layout, changes, layout
+from statectl.runtime import InvokeIssued, MicrostepTaken, Started, StepRecord
 from statectl.system import QueueFull, System
 
 __all__ = ["NAMESPACE", "OpcuaServer", "OpcuaSettings"]
@@ -98,7 +98,7 @@ class _Device:
     transition_nodes: dict[int, Any] | None = None
     last_invoke: Any = None
     events: Any = None  # the TransitionEventType generator
-    pending: list[Record] | None = None
+    pending: list[Change] | None = None
 
 
 class OpcuaServer:
@@ -118,7 +118,7 @@ class OpcuaServer:
         }
         self._offs: list[Callable[[], None]] = []
         self._server: Any = None
-        self._updates: deque[tuple[_Device, frozenset[str], list[Record]]] = deque()
+        self._updates: deque[tuple[_Device, frozenset[str], list[Change]]] = deque()
         self._kick: Any = None  # an asyncio.Event of the server's loop
         self._loop_thread: int | None = None
         self._packml_space: PackmlSpace | None = None  # when a device declares PackML
@@ -139,7 +139,9 @@ class OpcuaServer:
                 for record in step.records:  # one made outside an event (start, a monitor)
                     if type(record) is Started:
                         buffer.clear()
-                    elif type(record) in (TransitionTaken, InvokeIssued):
+                    elif type(record) is MicrostepTaken:
+                        buffer.extend(record.transitions)
+                    elif type(record) is InvokeIssued:
                         buffer.append(record)
 
             def stepped(
@@ -355,7 +357,7 @@ class OpcuaServer:
 
     # -- updates on the loop (rule 1) ------------------------------------------------------
 
-    def _publish(self, device: _Device, active: frozenset[str], records: list[Record]) -> None:
+    def _publish(self, device: _Device, active: frozenset[str], records: list[Change]) -> None:
         self._updates.append((device, active, records))
         self._kick.set()
 
@@ -368,7 +370,7 @@ class OpcuaServer:
             while updates:
                 await self._write(*updates.popleft())
 
-    async def _write(self, device: _Device, active: frozenset[str], records: list[Record]) -> None:
+    async def _write(self, device: _Device, active: frozenset[str], records: list[Change]) -> None:
         ua = _ua()
 
         if device.machines is None or device.state_nodes is None:
@@ -400,11 +402,10 @@ class OpcuaServer:
         if records:
             await asyncio.sleep(0)  # let the publisher send the new states before the rest
         for record in records:
-            if type(record) is InvokeIssued:
+            if isinstance(record, InvokeIssued):
                 await put(device.last_invoke, record.invoke, ua.VariantType.Int32)
                 continue
-            assert type(record) is TransitionTaken
-            number = lay.by_record.get((record.source[0], record.targets, record.label))
+            number = lay.by_record.get((record.source, record.targets, record.label))
             if number is None or device.transition_nodes is None:
                 continue
             source, target = lay.ends[number]

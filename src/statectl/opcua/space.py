@@ -27,10 +27,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from statectl.model import Chart, EventKind, Notify, StateKind
-from statectl.runtime.records import InvokeIssued, Record, TransitionTaken
+from statectl.runtime.records import InvokeIssued, Taken, taken
 from statectl.semantics import Step
 
-__all__ = ["Layout", "MachineSpec", "changes", "layout"]
+__all__ = ["Change", "Layout", "MachineSpec", "changes", "layout"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,7 +53,7 @@ class Layout:
     transition_names: dict[int, str]
     #: transition number -> (source, target in its machine or None)
     ends: dict[int, tuple[str, str | None]]
-    #: (source, targets, label) of a TransitionTaken record -> transition number
+    #: (source, targets, label) of a transition taken (a ``Taken``) -> transition number
     by_record: dict[tuple[str, tuple[str, ...], str], int]
     commands: tuple[str, ...]
 
@@ -138,14 +138,15 @@ def layout(chart: Chart) -> Layout:
     return Layout(tuple(machines), numbers, names, ends, by_record, commands)
 
 
-def changes(device: str, time: float, step: Step) -> list[Record]:
+#: What the server publishes of a step: a transition it took, or a notification it issued.
+Change = Taken | InvokeIssued
+
+
+def changes(device: str, time: float, step: Step) -> list[Change]:
     """The transitions a step took and the notifications it issued, in the step's order."""
-    out: list[Record] = []
+    out: list[Change] = []
     for micro in step.microsteps:
-        out.extend(
-            TransitionTaken(device, time, micro.event, (x.source,), x.targets, x.label)
-            for x in micro.transitions
-        )
+        out.extend(taken(micro))
         out.extend(
             InvokeIssued(device, time, a.invoke, a.name, a.method, a.event)
             for a in micro.actions

@@ -28,14 +28,13 @@ from statectl.runtime.records import (
     Finished,
     IgnoreReason,
     InvokeIssued,
+    MicrostepTaken,
     ObserverCalled,
     Record,
-    StateEntered,
-    StateExited,
     StepRecord,
-    TransitionTaken,
     _Made,
     _Tail,
+    taken,
     update_api,
 )
 from statectl.semantics import Plan, Snapshot, Step, Unhandled
@@ -251,19 +250,9 @@ class Performer:
         watch = self._watch
         for micro in decision.microsteps:
             if listening:
-                for s in micro.exited:
-                    self.emit(StateExited(name, now, s))
-                    for w in watch.get(s, ()):
-                        w.exited(s)
-                for t in micro.transitions:
-                    self.emit(
-                        TransitionTaken(name, now, micro.event, (t.source,), t.targets, t.label)
-                    )
-                for s in micro.entered:
-                    self.emit(StateEntered(name, now, s))
-                    for w in watch.get(s, ()):
-                        w.entered(s)
-            elif watch:
+                took = taken(micro)
+                self.emit(MicrostepTaken(name, now, micro.event, micro.exited, took, micro.entered))
+            if watch:  # after the microstep's record (rule 3 of records.py)
                 for s in micro.exited:
                     for w in watch.get(s, ()):
                         w.exited(s)
@@ -318,18 +307,16 @@ class Performer:
 
 def recorded(step: Step, watch: Mapping[str, tuple[StateWatcher, ...]], device: str) -> Recorded:
     """A step's watcher calls and notifications in order, each with the typed records
-    before it (one per state exited, transition and state entered, one per
-    ``InvokeIssued``, itself included), and the count after the last of them. A
-    notification comes as the :class:`Notification` without data ``device`` sends."""
+    before it (one per microstep, one per ``InvokeIssued``, itself included), and the
+    count after the last of them. A notification comes as the :class:`Notification`
+    without data ``device`` sends."""
     items: list[tuple[Callable[[Any], object] | None, Any, int]] = []
     at = 1  # EventReceived
     for micro in step.microsteps:
+        at += 1  # MicrostepTaken; the watchers hear it after that record
         for s in micro.exited:
-            at += 1
             items.extend((w.exited, s, at) for w in watch.get(s, ()))
-        at += len(micro.transitions)
         for s in micro.entered:
-            at += 1
             items.extend((w.entered, s, at) for w in watch.get(s, ()))
         for a in micro.actions:
             if isinstance(a, Notify):

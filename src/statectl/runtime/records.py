@@ -9,10 +9,16 @@ Rules:
    kind with the same fields; :func:`fields_of` gives the fields after device and time.
 2. Listeners receive records in the order things happened, never strings;
    formatting is :mod:`statectl.runtime.trace`'s job.
-3. For one event the order is: ``EventReceived``, then per microstep
-   ``StateExited``..., ``TransitionTaken``..., ``StateEntered``..., then that
-   microstep's ``InvokeIssued`` + ``ObserverCalled``...; or, when no transition
-   was taken, ``EventReceived`` then one ``EventIgnored`` / ``EventRejected``.
+3. For one event the order is: ``EventReceived``, then per microstep one
+   ``MicrostepTaken`` (the states it exited, the transitions it took, the states it
+   entered: what the kernel's microstep says, once), then that microstep's
+   ``InvokeIssued`` + ``ObserverCalled``...; or, when no transition was taken,
+   ``EventReceived`` then one ``EventIgnored`` / ``EventRejected``. A monitor
+   starting or stopping for the microstep's states comes right after its
+   ``MicrostepTaken``. One record per microstep rather than one per state and
+   transition: a listener that reads every record gets three or four per event
+   of the paper's Motor, not six, and a transition across levels of a nested
+   chart is still one record.
 4. A :class:`StepRecord` is what one event did, as one object: the kernel's step
    (or why nothing happened), the API calls its notifications made and anything
    recorded meanwhile (a monitor starting). Its typed records are those of rule 3,
@@ -33,7 +39,7 @@ from statectl.semantics import Unhandled
 if TYPE_CHECKING:
     from collections.abc import Iterator
 
-    from statectl.semantics import Step
+    from statectl.semantics import Microstep, Step
 
 __all__ = [
     "ApiCall",
@@ -45,15 +51,14 @@ __all__ = [
     "Finished",
     "IgnoreReason",
     "InvokeIssued",
+    "MicrostepTaken",
     "MonitorStarted",
     "MonitorStopped",
     "ObserverCalled",
     "Record",
     "Started",
-    "StateEntered",
-    "StateExited",
     "StepRecord",
-    "TransitionTaken",
+    "Taken",
     "fields_of",
     "format_args",
     "records_plan",
@@ -80,21 +85,26 @@ class EventReceived(_Record, frozen=True, gc=False):
     data: Any = None
 
 
-class TransitionTaken(_Record, frozen=True, gc=False):
-    """One transition of a microstep; ``event`` is ``None`` for an eventless one."""
+class Taken(msgspec.Struct, frozen=True, gc=False):
+    """One transition a microstep took: from ``source`` to ``targets``, on ``label``."""
+
+    source: str
+    targets: tuple[str, ...]
+    label: str  # the event, or "" for an eventless transition
+
+
+class MicrostepTaken(_Record, frozen=True, gc=False):
+    """One microstep: what it ``exited``, the ``transitions`` it took, what it ``entered``.
+
+    ``event`` is ``None`` for an eventless microstep and for the configuration a
+    device starts in or is restored to (no transition then). States are in the
+    kernel's order: exits innermost first, entries outermost first.
+    """
 
     event: str | None
-    source: tuple[str, ...]
-    targets: tuple[str, ...]
-    label: str
-
-
-class StateExited(_Record, frozen=True, gc=False):
-    state: str
-
-
-class StateEntered(_Record, frozen=True, gc=False):
-    state: str
+    exited: tuple[str, ...]
+    transitions: tuple[Taken, ...]
+    entered: tuple[str, ...]
 
 
 class InvokeIssued(_Record, frozen=True, gc=False):
@@ -146,9 +156,7 @@ class Finished(_Record, frozen=True, gc=False):
 Record = (
     Started
     | EventReceived
-    | TransitionTaken
-    | StateExited
-    | StateEntered
+    | MicrostepTaken
     | InvokeIssued
     | ObserverCalled
     | EventIgnored
@@ -338,16 +346,16 @@ def _called(out: list[Record], d: str, t: float, did: _Made, method: str) -> Non
         out.extend([ObserverCalled(d, t, method, str(c)) for c in did])
 
 
+def taken(micro: Microstep) -> tuple[Taken, ...]:
+    """The transitions of a kernel microstep as a ``MicrostepTaken`` record gives them."""
+    return tuple(Taken(x.source, x.targets, x.label) for x in micro.transitions)
+
+
 def records_plan(step: Step) -> list[tuple[Any, tuple[Any, ...]] | Notify]:
     """Rule 3's records of ``step`` after ``EventReceived``: (kind, fields) or a notification."""
     plan: list[tuple[Any, tuple[Any, ...]] | Notify] = []
     for micro in step.microsteps:
-        plan.extend((StateExited, (s,)) for s in micro.exited)
-        plan.extend(
-            (TransitionTaken, (micro.event, (x.source,), x.targets, x.label))
-            for x in micro.transitions
-        )
-        plan.extend((StateEntered, (s,)) for s in micro.entered)
+        plan.append((MicrostepTaken, (micro.event, micro.exited, taken(micro), micro.entered)))
         for a in micro.actions:
             if isinstance(a, Notify):
                 plan.append((InvokeIssued, (a.invoke, a.name, a.method, a.event)))

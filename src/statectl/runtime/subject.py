@@ -72,9 +72,9 @@ from statectl.runtime.recording import StepListener as StepRecordListener
 from statectl.runtime.records import (
     EventReceived,
     Finished,
+    MicrostepTaken,
     Record,
     Started,
-    StateEntered,
     StepRecord,
     _Tail,
 )
@@ -331,8 +331,8 @@ class Subject(Wiring):
     def restore(self, snapshot: Snapshot) -> None:
         """Take up ``snapshot`` (a journal's) instead of :meth:`start`; nothing is notified.
 
-        Listeners get ``Started`` and a ``StateEntered`` per active state in document
-        order, so the monitors of active states run again.
+        Listeners get ``Started`` and a ``MicrostepTaken`` entering the active states in
+        document order (no transition), and the monitors of active states run again.
         """
         if self._snapshot is not None:
             raise StatectlError(f"{self.name} was started already; restore before start()")
@@ -343,12 +343,11 @@ class Subject(Wiring):
             raise StatectlError(f"{self.name}: states {unknown} are not in {self.chart.name!r}")
         self._commit(self.machine.intern(snapshot))
         now = self.clock.now()
-        listening = self.listening
-        if listening:
+        active = tuple(sorted(snapshot.active, key=order.__getitem__))
+        if self.listening:
             self.emit(Started(self.name, now))
-        for state in sorted(snapshot.active, key=order.__getitem__):
-            if listening:
-                self.emit(StateEntered(self.name, now, state))
+            self.emit(MicrostepTaken(self.name, now, None, (), (), active))
+        for state in active:
             for w in self._watch.get(state, ()):
                 w.entered(state)
 

@@ -1,8 +1,10 @@
-"""One readable line per trace record.
+"""Readable lines of trace records: one per record, one per state and transition of a microstep.
 
 Rules:
 1. A line is ``t=<time>  <device>  <kind>  <text>``; time, device and kind are
-   padded so the text column lines up down a trace.
+   padded so the text column lines up down a trace. A ``MicrostepTaken`` is a line
+   per state exited (``exit``), transition taken (``state``) and state entered
+   (``enter``), in that order.
 2. Event data reads like YAML flow style (``{amount: 10}``); API calls read like
    the call (``SimMotor.move_to(10.0)``).
 3. No colour codes unless asked for (``colour=True``), so a trace can be
@@ -27,15 +29,14 @@ from statectl.runtime.records import (
     FaultDetected,
     Finished,
     InvokeIssued,
+    MicrostepTaken,
     MonitorStarted,
     MonitorStopped,
     ObserverCalled,
     Record,
     Started,
-    StateEntered,
-    StateExited,
     StepRecord,
-    TransitionTaken,
+    Taken,
     fields_of,
     records_plan,
 )
@@ -79,9 +80,7 @@ KINDS: Mapping[type, str] = {
     Started: "run",
     Finished: "run",
     EventReceived: "event",
-    TransitionTaken: "state",
-    StateExited: "exit",
-    StateEntered: "enter",
+    MicrostepTaken: "state",
     InvokeIssued: "invoke",
     ObserverCalled: "api",
     EventIgnored: "ignored",
@@ -93,7 +92,12 @@ KINDS: Mapping[type, str] = {
 
 
 def kind_of(record: Record) -> str:
-    """The short kind column of a record."""
+    """The short kind column of a record (of its first line: a microstep's first exit,
+    else its first transition, else its first entry)."""
+    if type(record) is MicrostepTaken and not record.transitions:
+        return "exit" if record.exited else "enter"
+    if type(record) is MicrostepTaken and record.exited:
+        return "exit"
     return KINDS[type(record)]
 
 
@@ -101,8 +105,8 @@ def _event_text(r: Any) -> str:
     return r.event if r.data is None else f"{r.event} {format_data(r.data)}"
 
 
-def _transition_text(r: Any) -> str:
-    return f"{_states(r.source)} -> {_states(r.targets)}  on {r.label or '(eventless)'}"
+def _transition_text(t: Taken) -> str:
+    return f"{_states((t.source,))} -> {_states(t.targets)}  on {t.label or '(eventless)'}"
 
 
 def _rejected_text(r: Any) -> str:
@@ -116,9 +120,6 @@ _TEXTS: Mapping[type, Callable[[Any], str]] = {
     Started: lambda r: "started",
     Finished: lambda r: "finished",
     EventReceived: _event_text,
-    TransitionTaken: _transition_text,
-    StateExited: lambda r: r.state,
-    StateEntered: lambda r: r.state,
     InvokeIssued: lambda r: f"#{r.invoke} {r.name} -> observer {r.method}()",
     ObserverCalled: lambda r: f"{r.method}() -> {r.api}",
     EventIgnored: lambda r: f"{r.event} ({r.reason})",
@@ -129,8 +130,16 @@ _TEXTS: Mapping[type, Callable[[Any], str]] = {
 }
 
 
-def _text(record: Record) -> str:
-    return _TEXTS[type(record)](record)
+def _lines(record: Record, kinds: Mapping[str, str]) -> list[str]:
+    """The lines of ``record`` after the time and device column, each with its kind
+    column (``kinds`` maps a kind to it) and ending in a newline."""
+    if type(record) is not MicrostepTaken:
+        return [kinds[KINDS[type(record)]] + _TEXTS[type(record)](record) + "\n"]
+    return [
+        *[kinds["exit"] + s + "\n" for s in record.exited],
+        *[kinds["state"] + _transition_text(t) + "\n" for t in record.transitions],
+        *[kinds["enter"] + s + "\n" for s in record.entered],
+    ]
 
 
 def _padded(kind: str, colour: bool) -> str:
@@ -138,10 +147,17 @@ def _padded(kind: str, colour: bool) -> str:
     return f"{_COLOURS.get(kind, '')}{padded}{_RESET}" if colour else padded
 
 
+#: The kind columns of every line kind, padded, without colour.
+_PLAIN = {k: " " + _padded(k, False) + " " for k in (*KINDS.values(), "exit", "enter")}
+
+
 def format_record(record: Record, *, device_width: int = 0, colour: bool = False) -> str:
-    """One aligned line: ``t=   0.00  Motor  event    Movement {amount: 10}``."""
-    padded = _padded(KINDS[type(record)], colour)
-    return f"t={record.time:7.2f}  {record.device:<{device_width}}  {padded} {_text(record)}"
+    """The record's aligned lines (one, or one per state and transition of a
+    ``MicrostepTaken``), without a final newline:
+    ``t=   0.00  Motor  event    Movement {amount: 10}``."""
+    kinds = _PLAIN if not colour else {k: " " + _padded(k, True) + " " for k in _PLAIN}
+    prefix = f"t={record.time:7.2f}  {record.device:<{device_width}} "
+    return "".join([prefix + line for line in _lines(record, kinds)])[:-1]
 
 
 #: Distinct record lines a writer keeps the text of (then it starts again).
@@ -163,27 +179,28 @@ class TraceWriter:
         self.device_width = device_width
         self.colour = colour
         self.lines = 0
-        self._kinds = {t: " " + _padded(k, colour) + " " for t, k in KINDS.items()}
+        self._kinds = {k: " " + _padded(k, colour) + " " for k in _PLAIN}
         self._at: tuple[float, str] | None = None  # (time, device) of ``_prefix``
         self._prefix = ""
-        self._rest: dict[tuple[type, tuple[Any, ...]], str] = {}  # the line after the prefix
-        self._steps: dict[int, tuple[Step, list[str | tuple[str]]]] = {}  # per kernel step
+        self._rest: dict[tuple[type, tuple[Any, ...]], list[str]] = {}  # lines after the prefix
+        self._steps: dict[int, tuple[Step, list[list[str] | tuple[str]]]] = {}  # per kernel step
         self._received: dict[str | None, str] = {}  # EventReceived without data, per event
         self._calls: dict[tuple[str, str], str] = {}  # ObserverCalled, per method and api
         self._apis: dict[tuple[Any, ...], str] = {}  # ObserverCalled, per logged call
 
-    def _line(self, record: Record) -> str:
+    def _line(self, record: Record) -> tuple[str, int]:
+        """The record's lines, and how many."""
         prefix = self._column(record.time, record.device)
         kind = type(record)
         if type(record) is EventReceived and record.data is not None:  # may be unhashable
-            return prefix + self._kinds[kind] + _event_text(record) + "\n"
+            return prefix + self._kinds["event"] + _event_text(record) + "\n", 1
         key = (kind, fields_of(record))
-        rest = self._rest.get(key)
-        if rest is None:  # kind and text once per distinct record (time and device aside)
+        rests = self._rest.get(key)
+        if rests is None:  # kind and text once per distinct record (time and device aside)
             if len(self._rest) >= _REST_MAX:
                 self._rest.clear()
-            rest = self._rest[key] = self._kinds[kind] + _TEXTS[kind](record) + "\n"
-        return prefix + rest
+            rests = self._rest[key] = _lines(record, self._kinds)
+        return prefix + prefix.join(rests), len(rests)
 
     def _column(self, time: float, device: str) -> str:
         """The time and device column, made once per time and device."""
@@ -194,8 +211,9 @@ class TraceWriter:
         return self._prefix
 
     def __call__(self, record: Record) -> None:
-        self.out.write(self._line(record))
-        self.lines += 1
+        text, n = self._line(record)
+        self.out.write(text)
+        self.lines += n
 
     def step(self, step: StepRecord) -> None:
         """A step listener: every line of ``step``'s records, in one write.
@@ -207,10 +225,9 @@ class TraceWriter:
         """
         kernel, tail = step.step, step._tail
         if kernel is None or (tail is not None and (tail.final or tail.upto is not None)):
-            records = step.records  # unhandled, finished or failed: from its typed records
-            line = self._line
-            self.out.write("".join([line(r) for r in records]))
-            self.lines += len(records)
+            lines = [self._line(r) for r in step.records]  # unhandled, finished or failed
+            self.out.write("".join([text for text, _ in lines]))
+            self.lines += sum(n for _, n in lines)
             return
         hit = self._steps.get(id(kernel))
         if hit is None or hit[0] is not kernel:
@@ -221,43 +238,56 @@ class TraceWriter:
         event = step.event
         rest = self._received.get(event) if step.data is None else None
         if rest is None:
-            rest = self._kinds[EventReceived] + _event_text(step) + "\n"
+            rest = self._kinds["event"] + _event_text(step) + "\n"
             if step.data is None:
                 self._received[event] = rest
+        extras = tail.extras if tail is not None else ()
+        starts = [0] if extras else None  # the line each typed record starts at
         rests = [rest]
         made = step._made
         k = 0
         for item in hit[1]:
-            if type(item) is str:
-                rests.append(item)
+            if type(item) is not tuple:  # a record's lines
+                if starts is not None:
+                    starts.append(len(rests))
+                rests.extend(item)
                 continue
             did = made[k] if k < len(made) else None
             k += 1
             if isinstance(did, str):
+                if starts is not None:
+                    starts.append(len(rests))
                 rests.append(self._called(item[0], did))
             elif did is not None:
-                rests.extend([self._logged(item[0], c) for c in did])
-        if tail is None or not tail.extras:
+                for c in did:
+                    if starts is not None:
+                        starts.append(len(rests))
+                    rests.append(self._logged(item[0], c))
+        if starts is None:
             self.out.write(prefix + prefix.join(rests))
             self.lines += len(rests)
             return
-        lines = [prefix + r for r in rests]  # and what others recorded meanwhile, in place
-        for shift, (before, record) in enumerate(tail.extras):
-            lines.insert(before + shift, self._line(record))  # its own time
-        self.out.write("".join(lines))
-        self.lines += len(lines)
+        starts.append(len(rests))
+        out = [prefix + r for r in rests]  # and what others recorded meanwhile, in place
+        for shift, (before, record) in enumerate(extras):
+            at = starts[min(before, len(starts) - 1)] + shift
+            text, n = self._line(record)  # its own time
+            out.insert(at, text)
+            self.lines += n - 1
+        self.out.write("".join(out))
+        self.lines += len(out)
 
-    def _step_lines(self, kernel: Step) -> list[str | tuple[str]]:
-        """The text of each line of ``kernel``'s records after ``EventReceived``, with
+    def _step_lines(self, kernel: Step) -> list[list[str] | tuple[str]]:
+        """The lines of each of ``kernel``'s records after ``EventReceived``, with
         each notification's observer calls as ``(method,)`` (they vary per event)."""
-        lines: list[str | tuple[str]] = []
+        lines: list[list[str] | tuple[str]] = []
         for item in records_plan(kernel):
             if isinstance(item, Notify):
                 lines.append((item.method,))
                 continue
             kind, fields = item
             record = kind("", 0.0, *fields)  # only to render its text, once per step
-            lines.append(self._kinds[kind] + _TEXTS[kind](record) + "\n")
+            lines.append(_lines(record, self._kinds))
         return lines
 
     def _logged(self, method: str, call: ApiCall) -> str:
@@ -281,5 +311,5 @@ class TraceWriter:
         if rest is None:
             if len(self._calls) >= _REST_MAX:
                 self._calls.clear()
-            rest = self._calls[key] = f"{self._kinds[ObserverCalled]}{method}() -> {api}\n"
+            rest = self._calls[key] = f"{self._kinds['api']}{method}() -> {api}\n"
         return rest

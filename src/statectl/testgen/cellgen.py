@@ -28,7 +28,7 @@ from typing import Any
 
 from statectl.cell import Cell, Trigger, load_cell_or_raise
 from statectl.model import Chart
-from statectl.runtime import EventReceived, Record, StateEntered, TransitionTaken
+from statectl.runtime import EventReceived, MicrostepTaken, Record
 from statectl.semantics import compiled
 from statectl.semantics import step as kernel_step
 from statectl.testgen.cases import describe, where
@@ -88,10 +88,11 @@ def _fired(cell: Cell, device: str, first: list[Record]) -> list[int]:
     for i, k in enumerate(cell.links):
         if k.source != device:
             continue
+        steps = [r for r in first if type(r) is MicrostepTaken]
         if k.trigger is Trigger.ENTERS:
-            hit = any(isinstance(r, StateEntered) and r.state == k.what for r in first)
+            hit = any(k.what in r.entered for r in steps)
         else:
-            hit = any(isinstance(r, TransitionTaken) and r.event == k.what for r in first)
+            hit = any(r.transitions and r.event == k.what for r in steps)
         if hit:
             out.append(i)
     return out
