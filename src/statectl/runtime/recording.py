@@ -124,13 +124,12 @@ class Recording(Performer):
         self._cursor = at
         final = False
         try:
+            self._counts += entry[0]
             if data is None:
-                self._counts += entry[0]
                 call = entry[1]
                 if call is not None:
                     call(entry[2])
             else:
-                self._counts += 1
                 run = entry[3]
                 if run is not None:
                     run(data)

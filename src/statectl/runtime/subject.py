@@ -506,13 +506,12 @@ class Subject(Wiring):
             for callback in self._steppers:
                 callback(event, data, "handled")
             return
+        self._counts += entry[0]
         if data is None:
-            self._counts += entry[0]
             call = entry[1]
             if call is not None:
                 call(entry[2])
         else:
-            self._counts += 1
             run = entry[3]
             if run is not None:
                 run(data)
