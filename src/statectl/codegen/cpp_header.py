@@ -11,6 +11,7 @@ import os
 from statectl.codegen.cpp_assign import assign_functions
 from statectl.codegen.cpp_tables import (
     _OPS,
+    REASONS,
     _c,
     _cases,
     _cells,
@@ -179,8 +180,8 @@ def _header(flat: FlatChart, cls: str, ns: str) -> str:
         add('    "",  // unused: the chart has no events')
     add("};")
     add("")
-    add("inline constexpr const char* kReasons[4] = {")
-    add('    "", "declared ignored", "guard false", "no transition",')
+    add(f"inline constexpr const char* kReasons[{len(REASONS)}] = {{")
+    add("    " + " ".join(f"{_c(r.value if r is not None else '')}," for r in REASONS))
     add("};")
     add("")
     n_trans = max(1, len(flat.transitions))

@@ -18,12 +18,15 @@ from statectl.codegen.flatten import (
     Unhandled,
 )
 
-_REASON_BITS = {
-    None: 0,
-    Unhandled.DECLARED_IGNORED: 1,
-    Unhandled.GUARD_FALSE: 2,
-    Unhandled.NO_TRANSITION: 3,
-}
+#: The reasons a flattened outcome can give, by their number in the outcome's flags
+#: (``None``: handled); the C++ ``kReasons`` table is written from this tuple.
+REASONS: tuple[Unhandled | None, ...] = (
+    None,
+    Unhandled.DECLARED_IGNORED,
+    Unhandled.GUARD_FALSE,
+    Unhandled.NO_TRANSITION,
+)
+_REASON_BITS = {reason: i for i, reason in enumerate(REASONS)}
 
 
 _OPS = {

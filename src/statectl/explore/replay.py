@@ -44,6 +44,7 @@ from statectl.runtime import (
     format_record,
 )
 from statectl.runtime.records import taken
+from statectl.semantics import Unhandled
 from statectl.tables import safeyaml
 
 __all__ = ["CellLinks", "CellRun", "ReplayStep", "link_data", "load_replay", "run_cell"]
@@ -204,7 +205,7 @@ class _Runner:
         if (
             isinstance(r, EventIgnored)
             and self.delivering == (r.device, r.event)
-            and r.reason in ("no transition", "unknown event")
+            and r.reason in (Unhandled.NO_TRANSITION, Unhandled.UNKNOWN_EVENT)
             and not self.harmless
         ):
             self.unhandled.append(f"{r.device} gets {r.event} ({r.reason})")

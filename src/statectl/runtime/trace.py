@@ -17,6 +17,7 @@ from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, TextIO
 
 from statectl.model import Notify
+from statectl.semantics import Unhandled
 
 if TYPE_CHECKING:
     from statectl.semantics import Step
@@ -110,7 +111,7 @@ def _transition_text(t: Taken) -> str:
 
 
 def _rejected_text(r: Any) -> str:
-    if r.reason == "guard error":  # refused whatever the policy (runtime/eventdata.py)
+    if r.reason is Unhandled.GUARD_ERROR:  # refused whatever the policy (runtime/eventdata.py)
         return f"{r.event} ({r.reason})"
     return f"{r.event} ({r.reason}; policy error)"
 
