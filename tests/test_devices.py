@@ -329,6 +329,33 @@ def test_the_api_log_keeps_the_recent_calls_and_counts_them_all(made: int) -> No
     assert [c.args[0] for c in log] == list(range(made - len(log), made))
 
 
+@pytest.mark.parametrize(
+    ("before", "then", "settle"),
+    [
+        (0, 3, False),
+        (5, 2, False),
+        (5, 2, True),
+        (1990, 30, False),
+        (1990, 30, True),
+        (7, 0, False),
+    ],
+)
+def test_api_since_gives_the_calls_the_log_would(before: int, then: int, settle: bool) -> None:
+    """api_since(n) is the log's calls after the first n, whether or not the log was read
+    (settled) in between and however often it was cut."""
+    motor, _, _ = bound(SimMotor(speed=10))
+    for i in range(before):
+        motor.log_call("probe", i)
+    mark = motor.api_calls
+    if settle:
+        assert len(motor.api_log) > 0
+    for i in range(then):
+        motor.log_call("probe", before + i)
+    since = motor.api_since(mark)
+    assert since == tuple(motor.api_log[len(motor.api_log) - then :]) if then else since == ()
+    assert [c.args[0] for c in since] == list(range(before, before + then))
+
+
 @pytest.mark.parametrize("heard", ["records", "steps"])
 def test_the_trace_names_the_api_calls_after_the_log_was_cut(heard: str) -> None:
     """ObserverCalled records name the calls a notification made, however long the run,

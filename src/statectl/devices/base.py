@@ -110,6 +110,23 @@ class Driver:
         """Every API call made so far, also those no longer in :attr:`api_log`."""
         return self._api_dropped + len(self._api_log) + len(self._api_new)
 
+    def api_since(self, before: int) -> tuple[ApiCall, ...]:
+        """The calls made since :attr:`api_calls` was ``before``, as values.
+
+        What a step listener's Subject asks after every notification: read from the
+        calls logged since the last read, without settling the log (which then stays
+        cheap for whoever reads it next), and under the lock a notification takes.
+        """
+        with self._lock:
+            new = self._api_new
+            n = self._api_dropped + len(self._api_log) + len(new) - before
+            if n <= 0:
+                return ()
+            if n <= len(new):
+                owner = self._owner
+                return tuple([ApiCall(t, owner, f, a) for t, f, a in new[len(new) - n :]])
+        return tuple(self.api_log[-n:])  # some were settled meanwhile: the log has them
+
     def _settle_log(self) -> None:
         """Turn the calls logged since the last read into :class:`ApiCall` values (rule 3).
 

@@ -12,7 +12,8 @@ Rules:
    shows which function of which device actually ran. A driver may keep only
    the recent ones if it also counts them all in ``api_calls`` (the shipped
    drivers keep the last 1,000): the Subject then takes a notification's calls
-   by that count.
+   by that count. A driver that also has ``api_since(count)`` (the shipped base
+   class does) is asked for them directly, without reading its log.
 """
 
 from __future__ import annotations

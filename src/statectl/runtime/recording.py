@@ -35,6 +35,9 @@ __all__ = ["Recording", "StepListener"]
 StepListener = Callable[[StepRecord], None]
 
 
+#: Makes a notification from its fields without the named tuple's Python constructor.
+_NEW = tuple.__new__
+
 #: A recorded step before anything was recorded meanwhile (a list is made only then).
 _NONE_YET: list[tuple[int, Record]] = []
 
@@ -203,9 +206,7 @@ class Recording(Performer):
                     continue
                 observer, logging = route
                 if data is not None:  # arg is the notification without data
-                    arg = Notification(
-                        arg.device, arg.invoke, arg.name, arg.method, arg.event, data
-                    )
+                    arg = _NEW(Notification, (*arg[:-1], data))  # see perform._with_data
                 if logging:
                     before = api_count(observer)
                     observer.update(arg)
