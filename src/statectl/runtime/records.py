@@ -346,9 +346,21 @@ def _called(out: list[Record], d: str, t: float, did: _Made, method: str) -> Non
         out.extend([ObserverCalled(d, t, method, str(c)) for c in did])
 
 
+#: Per kernel microstep (by identity): its transitions as ``Taken`` values. A memoised
+#: step's microsteps recur, so a record listener's ``MicrostepTaken`` reuses them.
+_TAKEN: dict[int, tuple[Microstep, tuple[Taken, ...]]] = {}
+
+
 def taken(micro: Microstep) -> tuple[Taken, ...]:
     """The transitions of a kernel microstep as a ``MicrostepTaken`` record gives them."""
-    return tuple(Taken(x.source, x.targets, x.label) for x in micro.transitions)
+    hit = _TAKEN.get(id(micro))
+    if hit is not None and hit[0] is micro:
+        return hit[1]
+    made = tuple(Taken(x.source, x.targets, x.label) for x in micro.transitions)
+    if len(_TAKEN) >= _TEMPLATES_MAX:
+        _TAKEN.clear()
+    _TAKEN[id(micro)] = (micro, made)
+    return made
 
 
 def records_plan(step: Step) -> list[tuple[Any, tuple[Any, ...]] | Notify]:
