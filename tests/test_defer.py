@@ -11,8 +11,8 @@ from statectl.codegen.cpp import render
 from statectl.codegen.flatten import flatten
 from statectl.errors import Severity
 from statectl.explore import verify_cell
-from statectl.model import MAX_DEFERRED, Chart
-from statectl.rules import check_paths
+from statectl.model import MAX_DEFERRED, Chart, State, StateKind, Transition
+from statectl.rules import check_chart, check_paths
 from statectl.runtime import SimClock, Subject
 from statectl.runtime.records import EventReceived, EventRejected, MicrostepTaken, Record
 
@@ -229,3 +229,72 @@ def test_c410_sees_a_superstate_row_leaving_the_deferring_state(tmp_path: Path) 
     )
     found = [d for d in check_paths([str(press(tmp_path, text))]) if d.code == "C410"]
     assert [("'Abort'" in d.message, "'Eject'" in d.message) for d in found] == [(True, True)]
+
+
+# -- C410 and parallel regions: what a transition enters is the kernel's answer --------------
+
+
+def regions_c410(
+    target: str,
+    handle: tuple[str, ...] = (),
+    ignore: tuple[str, ...] = (),
+    defer: tuple[str, ...] = (),
+) -> list[str]:
+    """The states C410 names when A, deferring x, goes to ``target`` in a chart with a
+    parallel P (regions R1: r1a, R2: r2a) and a compound C (c1 first, then c2); the
+    states in ``handle`` have an x row, those in ``ignore`` ignore x, those in ``defer``
+    defer it too."""
+    states = (
+        State("A", defer=("x",)),
+        State("P", kind=StateKind.PARALLEL),
+        State("R1", kind=StateKind.COMPOUND, parent="P", initial=("r1a",)),
+        State("r1a", parent="R1", defer=("x",) if "r1a" in defer else ()),
+        State("R2", kind=StateKind.COMPOUND, parent="P", initial=("r2a",)),
+        State("r2a", parent="R2", defer=("x",) if "r2a" in defer else ()),
+        State("C", kind=StateKind.COMPOUND, initial=("c1",)),
+        State("c1", parent="C"),
+        State("c2", parent="C"),
+        State("done"),
+    )
+    rows = (
+        Transition("A", ("go",), (target,)),
+        *(Transition(s, ("x",), ("done",)) for s in handle),
+        Transition("done", ("back",), ("A",)),
+    )
+    chart = Chart("T", states, rows, ("A",), ignored=frozenset((s, "x") for s in ignore))
+    found = [d for d in check_chart(chart) if d.code == "C410"]
+    named = [
+        n for d in found for n in ("P", "r1a", "r2a", "c1", "c2") if f"for {n!r}," in d.message
+    ]
+    assert len(named) == len(found), [d.message for d in found]
+    return named
+
+
+@pytest.mark.parametrize(
+    ("target", "handle", "ignore", "defer", "named"),
+    [
+        ("P", ("r1a",), (), (), []),  # the first region's default child takes x
+        ("P", ("r2a",), (), (), []),  # the second region's
+        ("P", ("R2",), (), (), []),  # a region itself
+        ("P", (), ("r2a",), (), []),  # one region ignores it: losing it is meant
+        ("P", (), (), ("r1a",), []),  # one region keeps it
+        ("r1a", ("r2a",), (), (), []),  # entering r1a enters the sibling region's r2a too
+        ("r2a", ("r1a",), (), (), []),
+        ("P", (), (), (), ["P"]),  # no region does anything with x
+        ("r1a", (), (), (), ["P"]),
+        ("P", ("c1",), (), (), ["P"]),  # a row elsewhere does not help
+        ("C", ("c1",), (), (), []),  # compound: its initial child takes x
+        ("C", ("c2",), (), (), ["c1"]),  # ...not a sibling that is not entered
+        ("c2", ("c1",), (), (), ["c2"]),
+    ],
+)
+def test_c410_asks_the_kernel_what_the_transition_enters(
+    target: str,
+    handle: tuple[str, ...],
+    ignore: tuple[str, ...],
+    defer: tuple[str, ...],
+    named: list[str],
+) -> None:
+    """C410 warns only when no state of the configuration a transition enters handles,
+    ignores or defers the kept event: every region of a parallel state counts."""
+    assert regions_c410(target, handle, ignore, defer) == named

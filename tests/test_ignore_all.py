@@ -4,12 +4,14 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from statectl.build import chart_to_tables, load_and_build
 from statectl.errors import Diagnostic, Severity
-from statectl.rules import check_paths
+from statectl.model import Chart, ControlKind, EventDef, EventKind, State, StateKind, Transition
+from statectl.rules import check_chart, check_paths
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = [
@@ -174,6 +176,58 @@ def test_a_trigger_state_entered_only_by_completions_is_c411(tmp_path: Path) -> 
     found = [d for d in check_paths([str(path)]) if d.code == "C411"]
     assert len(found) == 1 and "'Idle'" in found[0].message
     assert found[0].severity is Severity.WARNING
+
+
+def regions_c411(trigger: str, target: str, kind: EventKind) -> list[str]:
+    """The states C411 names when ``trigger`` is 'event trigger required' and the only way
+    into the parallel P (regions R1: r1a, r1b and R2: r2a, r2b) is a ``kind`` event from A
+    to ``target``; every other event is a completion."""
+    marked = frozenset({ControlKind.TRIGGER})
+
+    def state(name: str, **more: Any) -> State:
+        return State(name, controls=marked if name == trigger else frozenset(), **more)
+
+    states = [state("A"), state("P", kind=StateKind.PARALLEL)]
+    for region, kids in {"R1": ("r1a", "r1b"), "R2": ("r2a", "r2b")}.items():
+        states.append(state(region, kind=StateKind.COMPOUND, parent="P", initial=kids[:1]))
+        states.extend(state(k, parent=region) for k in kids)
+    rows = (
+        Transition("A", ("go",), (target,)),
+        Transition("r1a", ("next",), ("r1b",)),
+        Transition("r2a", ("next",), ("r2b",)),
+        Transition("P", ("back",), ("A",)),
+    )
+    events = (
+        EventDef("go", kind),
+        EventDef("next", EventKind.COMPLETION),
+        EventDef("back", EventKind.COMPLETION),
+    )
+    chart = Chart("T", tuple(states), rows, ("A",), events=events)
+    found = [d for d in check_chart(chart) if d.code == "C411"]
+    assert all(f"state {trigger!r} " in d.message for d in found), found
+    return [trigger for _ in found]
+
+
+@pytest.mark.parametrize(
+    ("trigger", "target", "kind", "named"),
+    [
+        ("r2a", "r1a", EventKind.COMMAND, []),  # entering r1a enters R2's default r2a too
+        ("R2", "r1a", EventKind.COMMAND, []),  # ...and the region R2 itself
+        ("r1a", "r2a", EventKind.FAULT, []),
+        ("r2a", "P", EventKind.COMMAND, []),  # the parallel state's default entry
+        ("r1a", "r1a", EventKind.COMMAND, []),  # the target itself
+        ("P", "r2a", EventKind.COMMAND, []),  # an ancestor of the target
+        ("r2b", "r1a", EventKind.COMMAND, ["r2b"]),  # R2 starts in r2a, not r2b
+        ("r2b", "P", EventKind.COMMAND, ["r2b"]),  # likewise through P's default entry
+        ("r2a", "r1a", EventKind.COMPLETION, ["r2a"]),  # entered, but not by a command
+    ],
+)
+def test_c411_asks_the_kernel_what_a_command_enters(
+    trigger: str, target: str, kind: EventKind, named: list[str]
+) -> None:
+    """A trigger state counts as entered by a command when the kernel's entry set of a
+    command (or fault) transition holds it: every region of a parallel state it enters."""
+    assert regions_c411(trigger, target, kind) == named
 
 
 @pytest.mark.parametrize("example", EXAMPLES, ids=lambda p: p.name)

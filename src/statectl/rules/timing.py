@@ -11,7 +11,8 @@ from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
 from statectl.errors import Diagnostic, Severity
-from statectl.model import ControlKind, EventKind, StateKind
+from statectl.model import ControlKind, EventKind, StateKind, Transition
+from statectl.semantics import Machine, entry_set, structural
 
 if TYPE_CHECKING:
     from statectl.rules import _Structure
@@ -22,15 +23,12 @@ __all__ = ["check_deferred", "check_timeouts", "check_triggers"]
 # -- C409 .. C411: timeouts, deferred events, trigger states ---------------------------------
 
 
-def _settled(st: _Structure, name: str) -> str:
-    """The atomic state default entry into ``name`` ends in (its initial chain)."""
-    seen = {name}
-    while st.kind(name) is StateKind.COMPOUND and st.by_name[name].initial:
-        name = st.by_name[name].initial[0]
-        if name in seen or name not in st.by_name:
-            break
-        seen.add(name)
-    return name
+def _entered(st: _Structure, m: Machine, t: Transition) -> tuple[str, ...]:
+    """What taking ``t`` enters, by the kernel (:func:`~statectl.semantics.entry_set`):
+    targets, their ancestors, default children and every region of a parallel state."""
+    if not t.targets or not all(x in st.by_name for x in (t.source, *t.targets)):
+        return ()
+    return entry_set(m, [t])
 
 
 def _atoms_in(st: _Structure, name: str) -> list[str]:
@@ -63,53 +61,78 @@ def check_timeouts(st: _Structure) -> Iterator[Diagnostic]:
             )
 
 
+def _reached(st: _Structure, entered: tuple[str, ...]) -> tuple[tuple[str, ...], str]:
+    """The innermost states of ``entered`` (one per active region) and the state to name
+    in a message: that state alone, or the nearest one holding all of them (a parallel
+    state whose regions were entered)."""
+    names = set(entered)
+    inner = [n for n in entered if not any(c in names for c in st.children.get(n, ()))]
+    if len(inner) == 1:
+        return tuple(inner), inner[0]
+    common = [a for a in st.ancestors.get(inner[0], ()) if all(a in st.ancestors[n] for n in inner)]
+    return tuple(inner), (common[0] if common else inner[0])
+
+
 def check_deferred(st: _Structure) -> Iterator[Diagnostic]:
-    """C410: leaving a deferring state releases its events; the state reached should use them."""
+    """C410: leaving a deferring state releases its events; the state reached should use them.
+
+    The state reached is what the kernel enters: with a parallel state, every region's
+    state, any one of which may handle, defer or ignore the event.
+    """
+    m: Machine | None = None
     for s in st.chart.states:
         if not s.defer:
             continue
+        if m is None:
+            m = structural(st.chart)
         inside = {s.name, *(a for a in st.by_name if s.name in st.ancestors.get(a, ()))}
         leaving = inside | set(st.ancestors.get(s.name, ()))  # a superstate's row leaves too
         for t in st.chart.transitions:
             if t.source not in leaving or not t.targets or all(x in inside for x in t.targets):
                 continue
-            for target in t.targets:
-                lands = _settled(st, target)
-                lineage = (lands, *st.ancestors.get(lands, ()))
-                for event in s.defer:
-                    if (
-                        st.handles(lands, event)
-                        or st.ignores(lands, event)
-                        or any(event in st.by_name[a].defer for a in lineage)
-                    ):
-                        continue
-                    yield Diagnostic(
-                        "C410",
-                        Severity.WARNING,
-                        t.origin,
-                        f"{t.label!r} leaves {s.name!r}, which defers {event!r}, for {lands!r}, "
-                        f"which neither handles, defers nor ignores it: a kept {event!r} is lost",
-                        f"add an event row {event!r} from {lands!r}, or list it in its ignore "
-                        "or defer cell",
-                    )
+            entered = _entered(st, m, t)
+            if not entered:
+                continue
+            inner, lands = _reached(st, entered)
+            for event in s.defer:
+                if any(
+                    st.handles(a, event)
+                    or st.ignores(a, event)
+                    or any(event in st.by_name[b].defer for b in (a, *st.ancestors.get(a, ())))
+                    for a in inner
+                ):
+                    continue
+                yield Diagnostic(
+                    "C410",
+                    Severity.WARNING,
+                    t.origin,
+                    f"{t.label!r} leaves {s.name!r}, which defers {event!r}, for {lands!r}, "
+                    f"which neither handles, defers nor ignores it: a kept {event!r} is lost",
+                    f"add an event row {event!r} from {lands!r}, or list it in its ignore "
+                    "or defer cell",
+                )
 
 
 def check_triggers(st: _Structure) -> Iterator[Diagnostic]:
-    """C411: an ``event trigger required`` state is entered by a command (or fault) event."""
+    """C411: an ``event trigger required`` state is entered by a command (or fault) event.
+
+    Entered means in the kernel's entry set of such a transition: its target, a substate,
+    an ancestor's default entry, or a region entered beside the target's.
+    """
     chart = st.chart
-    for s in chart.states:
-        if ControlKind.TRIGGER not in s.controls:
-            continue
-        # entered through itself, a substate, or an ancestor's default entry
-        inside = {s.name, *st.ancestors.get(s.name, ())}
-        inside.update(a for a in st.by_name if s.name in st.ancestors.get(a, ()))
-        triggered = any(
+    marked = [s for s in chart.states if ControlKind.TRIGGER in s.controls]
+    if not marked:
+        return
+    m = structural(chart)
+    triggered: set[str] = set()
+    for t in chart.transitions:
+        if any(
             (d := chart.event(e)) is None or d.kind in (EventKind.COMMAND, EventKind.FAULT)
-            for t in chart.transitions
-            if any(x in inside for x in t.targets)
             for e in t.events
-        )
-        if not triggered:
+        ):
+            triggered.update(_entered(st, m, t))
+    for s in marked:
+        if s.name not in triggered:
             yield Diagnostic(
                 "C411",
                 Severity.WARNING,
