@@ -47,7 +47,7 @@ if TYPE_CHECKING:
         Taken,
         WallClock,
     )
-    from statectl.system import QueueFull, System
+    from statectl.system import DeviceSetup, QueueFull, System
 
 __version__ = "0.1.0"
 
@@ -61,6 +61,7 @@ _LAZY = {
     "Notification": "statectl.observers",
     "Observer": "statectl.observers",
     "System": "statectl.system",
+    "DeviceSetup": "statectl.system",
     "QueueFull": "statectl.system",
     **dict.fromkeys(
         (
@@ -105,6 +106,7 @@ __all__ = [
     "Chart",
     "ControlKind",
     "DeviceDriver",
+    "DeviceSetup",
     "Diagnostic",
     "DiagnosticError",
     "EventIgnored",
