@@ -13,7 +13,7 @@ import pytest
 
 from statectl import SimClock, Subject, load
 from statectl.cell import load_cell_or_raise
-from statectl.explore import Kind, explore
+from statectl.explore import Composed, Kind, explore
 from statectl.explore.local import LocalSpace
 from statectl.model import Transition
 from statectl.semantics import Machine, Run, Unhandled, initial, step
@@ -54,8 +54,8 @@ def gate(tmp_path: Path, guard: str, scale: int) -> Path:
     return path
 
 
-def verify(tmp_path: Path, guard: str, scale: int, linked: bool) -> dict[Kind, tuple[int, ...]]:
-    """Each failing finding kind with the lengths of its traces."""
+def cell(tmp_path: Path, guard: str, scale: int, linked: bool) -> Path:
+    """The gate alone (the environment sends Go) or poked through a link without data."""
     gate(tmp_path, guard, scale)
     (tmp_path / "poker.yaml").write_text(POKER, encoding="utf-8")
     if linked:
@@ -69,7 +69,12 @@ def verify(tmp_path: Path, guard: str, scale: int, linked: bool) -> dict[Kind, t
         body = "devices: {gate: gate.yaml}\nenvironment:\n  - {send: Go, to: gate}\n"
     path = tmp_path / "cell.yaml"
     path.write_text(body, encoding="utf-8")
-    report = explore(load_cell_or_raise(path))
+    return path
+
+
+def verify(tmp_path: Path, guard: str, scale: int, linked: bool) -> dict[Kind, tuple[int, ...]]:
+    """Each failing finding kind with the lengths of its traces."""
+    report = explore(load_cell_or_raise(cell(tmp_path, guard, scale, linked)))
     out: dict[Kind, list[int]] = {}
     for f in report.failures:
         out.setdefault(f.kind, []).append(len(f.trace) if f.trace is not None else -1)
@@ -98,19 +103,33 @@ def test_raising_guard_is_a_finding(
     assert verify(tmp_path, guard, scale, linked) == expected
 
 
-def test_guard_error_message_names_the_row_and_the_choice(tmp_path: Path) -> None:
-    """The finding says which guard raised (file:line), why, and under which free choice."""
-    gate(tmp_path, MIXED, 0)
-    (tmp_path / "cell.yaml").write_text(
-        "devices: {gate: gate.yaml}\nenvironment:\n  - {send: Go, to: gate}\n", encoding="utf-8"
-    )
-    report = explore(load_cell_or_raise(tmp_path / "cell.yaml"))
+@pytest.mark.parametrize(
+    ("linked", "why"),
+    [
+        # the environment's data is free: the guard raises once the free part is true
+        (False, "ZeroDivisionError: division by zero when _event.data.speed > 1 is True"),
+        # the link sends no data: reading the field raises first, as at run time
+        (True, "AttributeError: 'NoneType' object has no attribute 'speed';"),
+    ],
+)
+def test_guard_error_message_says_why(tmp_path: Path, linked: bool, why: str) -> None:
+    """The finding names the guard's row (file:line), the runtime's exception and the choices."""
+    report = explore(load_cell_or_raise(cell(tmp_path, MIXED, 0, linked)))
     (finding,) = report.failures
     assert finding.name == "gate.Go"
-    assert "gate.yaml:8" in finding.message
-    assert "ZeroDivisionError" in finding.message
-    assert "_event.data.speed > 1 is True" in finding.message
+    assert "gate.yaml:8" in finding.message and why in finding.message
     assert ("no guard raises", "fails") in report.properties
+
+
+@pytest.mark.parametrize("guard", [MIXED, TRACKED])
+def test_fast_successors_report_guard_errors_as_branches_do(tmp_path: Path, guard: str) -> None:
+    """The search's successors and the detailed branches agree on a link's guard error."""
+    model = Composed(load_cell_or_raise(cell(tmp_path, guard, 0, linked=True)))
+    (g,) = model.initial
+    (s,) = [s for s in model.stimuli if s.event == "Poke"]
+    slow = [(b.state, b.unhandled, b.livelock) for b in model.branches(g, s)]
+    assert model.successors(g, s) == slow
+    assert [u[3] < 0 for _, bad, _ in slow for u in bad] == [True]  # one, marked ~link
 
 
 def runtime(path: Path, speed: float) -> str:

@@ -182,8 +182,9 @@ def explore(
     unhandled: dict[tuple[int, str, str], tuple[int, Stimulus, int]] = {}
     unhandled_count: dict[tuple[int, str, str], int] = {}
     livelocks: dict[int, tuple[int, Stimulus]] = {}
-    # (device, local state label, event) -> first (state, stimulus, target or -1, local id)
-    errors: dict[tuple[int, str, str], tuple[int, Stimulus, int, int]] = {}
+    # (device, local state label, event) -> first (state, stimulus, target or -1,
+    # local id, link or -1)
+    errors: dict[tuple[int, str, str], tuple[int, Stimulus, int, int, int]] = {}
     error_count: dict[tuple[int, str, str], int] = {}
     guard_errors = tables.errors
     unant_first: dict[tuple[int, int, str, InputKind], int] = {}
@@ -236,7 +237,7 @@ def explore(
                         key = (t, model.spaces[t].state_of(tlid), event)
                         if link < 0:  # the delivery's guard raised (compose._bad)
                             error_count[key] = error_count.get(key, 0) + 1
-                            errors.setdefault(key, (head, s, h, tlid))
+                            errors.setdefault(key, (head, s, h, tlid, ~link))
                             continue
                         unhandled_count[key] = unhandled_count.get(key, 0) + 1
                         if key not in unhandled:
@@ -270,7 +271,7 @@ def explore(
                         continue
                 key = (d, model.spaces[d].state_of(lid), s.event)
                 error_count[key] = error_count.get(key, 0) + 1
-                errors.setdefault(key, (head, s, -1, lid))
+                errors.setdefault(key, (head, s, -1, lid, -1))
             if not complete:
                 break
         if not complete:
@@ -435,7 +436,7 @@ def _guard_errors(
     model: Composed,
     parent: array[int],
     states: list[int],
-    errors: dict[tuple[int, str, str], tuple[int, Stimulus, int, int]],
+    errors: dict[tuple[int, str, str], tuple[int, Stimulus, int, int, int]],
     count: dict[tuple[int, str, str], int],
 ) -> list[Finding]:
     """Rule 6: each device, state and event whose guard raised, with its shortest trace.
@@ -444,11 +445,10 @@ def _guard_errors(
     branch shows a refused stimulus); a link delivery ends with the step that made it.
     """
     out: list[Finding] = []
-    for key, (at, s, target, lid) in errors.items():
+    for key, (at, s, target, lid, link) in errors.items():
         t, label, event = key
         name = model.names[t]
-        space = model.spaces[t]
-        bad = next((o for o in space.outcomes(lid, event) if o.failure), None)
+        bad = next((o for o in model.outcomes(t, lid, event, link) if o.failure), None)
         why = bad.failure if bad is not None else f"a guard of {event!r} raised"
         if bad is not None and bad.choices:
             why += " when " + " and ".join(f"{p} is {v}" for p, v in bad.choices)
