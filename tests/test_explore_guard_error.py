@@ -13,7 +13,7 @@ import pytest
 
 from statectl import SimClock, Subject, load
 from statectl.cell import load_cell_or_raise
-from statectl.explore import Composed, Kind, explore
+from statectl.explore import Composed, Kind, explore, export_promela
 from statectl.explore.local import LocalSpace
 from statectl.model import Transition
 from statectl.semantics import Machine, Run, Unhandled, initial, step
@@ -183,3 +183,16 @@ def test_an_oracle_that_raises_is_a_guard_error(tmp_path: Path) -> None:
     assert result.unhandled is Unhandled.GUARD_ERROR and not result.handled
     assert result.failure is not None and "ZeroDivisionError: forced" in result.failure.reason
     assert result.target == start
+
+
+@pytest.mark.parametrize("guard", [MIXED, TRACKED])
+def test_spin_agrees_on_a_link_guard_error(tmp_path: Path, guard: str) -> None:
+    """The Promela export fails an assertion where a link's guard raises, as verify fails."""
+    from test_promela import HAVE_SPIN, spin
+
+    if not HAVE_SPIN:
+        pytest.skip("SPIN (Debian package spin) or gcc absent")
+    loaded = load_cell_or_raise(cell(tmp_path, guard, 0, linked=True))
+    model = Composed(loaded)
+    (finding,) = explore(loaded, model=model).failures
+    assert spin(export_promela(model), tmp_path, "-E") == (True, len(finding.trace or ()))
