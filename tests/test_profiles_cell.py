@@ -38,7 +38,8 @@ def test_axis_drive_cell_holds() -> None:
     report = verify(EXAMPLE / "cell.yaml")
     assert report["verdict"] == "holds" and report["complete"] is True
     assert failed(report) == []
-    assert len(report["properties"]) == 6  # type: ignore[arg-type]
+    # deadlock, link events, guard errors, livelock, and the cell's invariants and recovery
+    assert len(report["properties"]) == 7  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize(("device", "profile"), [("axis", "plcopen-axis"), ("drive", "cia402")])

@@ -28,7 +28,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from statectl.cell import Cell, GlobalExpr, InputKind, Link, Trigger
-from statectl.explore.conditions import data_consistent, foreign_leaf
+from statectl.explore.conditions import foreign_leaf, under_link
 from statectl.explore.local import LocalSpace, Outcome
 from statectl.explore.nodes import crossing, peer_lost
 from statectl.explore.timeouts import timeout_events, timing_out
@@ -79,15 +79,18 @@ class Branch:
 
     state: int
     deliveries: tuple[Delivery, ...]
-    unhandled: tuple[tuple[int, int, str, int], ...]  # (device, local id, event, link)
+    #: (device, local id, event, link); ``~link`` (negative) when the delivery's guard
+    #: raised (a guard error) instead of finding no transition
+    unhandled: tuple[tuple[int, int, str, int], ...]
     livelock: bool = False
 
 
-#: One outcome of a device step: target local id, handled, unhandled (a missed
-#: transition), the links it fires as (target device, event, link, guard), and the
-#: condition on the global state before the step under which the outcome is possible
-#: (another device's state a guard read; None: always).
-Move = tuple[int, bool, bool, tuple[tuple[int, str, int, Predicate | None], ...], Predicate | None]
+#: One outcome of a device step: target local id, handled, why not handled (the
+#: kernel's reason; None: handled), the links it fires as (target device, event, link,
+#: guard), and the condition on the global state before the step under which the
+#: outcome is possible (another device's state a guard read; None: always).
+Fired = tuple[tuple[int, str, int, Predicate | None], ...]
+Move = tuple[int, bool, Unhandled | None, Fired, Predicate | None]
 
 
 class _InRewriter(ast.NodeTransformer):
@@ -277,7 +280,9 @@ class Composed:
         if link < 0 or self.links[link].forward_data or event != self.links[link].event:
             return outs
         data = self.links[link].data
-        return tuple(o for o in outs if data_consistent(self.spaces[d], o, event, data))
+        space = self.spaces[d]
+        kept = (under_link(space, lid, o, event, data) for o in outs)
+        return tuple(dict.fromkeys(o for o in kept if o is not None))
 
     def _pop(
         self, pending: tuple[tuple[int, str, int], ...]
@@ -368,8 +373,7 @@ class Composed:
                     continue
                 g2 = self.replace(g1, t, o.target) if o.handled else g1
                 more = self._queue(g2, t, o) if o.handled else ()
-                missed = o.unhandled is Unhandled.NO_TRANSITION and not self.harmless[link]
-                bad2 = (*bad, (t, tlid, event, link)) if missed else bad
+                bad2 = _bad(bad, t, tlid, event, link, o.unhandled, self.harmless[link])
                 log2 = log
                 if detail:
                     k = self.links[link]
@@ -405,7 +409,7 @@ class Composed:
                 (
                     o.target,
                     o.handled,
-                    o.unhandled is Unhandled.NO_TRANSITION,
+                    o.unhandled,
                     tuple(
                         (
                             self.position[self.links[i].target],
@@ -470,7 +474,7 @@ class Composed:
                     )
                 else:
                     g2, more = g1, ()
-                bad2 = (*bad, (t, tlid, event, link)) if unhandled and not harmless[link] else bad
+                bad2 = _bad(bad, t, tlid, event, link, unhandled, harmless[link])
                 work.append((g2, rest + more, bad2, count + 1))
         return out
 
@@ -487,3 +491,21 @@ class Composed:
                     continue
             out.append(s)
         return out
+
+
+def _bad(
+    bad: tuple[tuple[int, int, str, int], ...],
+    t: int,
+    lid: int,
+    event: str,
+    link: int,
+    why: Unhandled | None,
+    harmless: bool,
+) -> tuple[tuple[int, int, str, int], ...]:
+    """``bad`` and this delivery if it went wrong: a missed transition the link does not
+    excuse, or a guard that raised (``~link``: no ``ignore_if_unhandled`` excuses it)."""
+    if why is Unhandled.GUARD_ERROR:
+        return (*bad, (t, lid, event, ~link))
+    if why is Unhandled.NO_TRANSITION and not harmless:
+        return (*bad, (t, lid, event, link))
+    return bad

@@ -8,8 +8,10 @@ Rules:
 2. A link sends exactly its data (``None`` without any) unless it forwards the
    triggering event's data: a guard part that reads only ``_event`` and data with
    values is evaluated with that data, as the runtime evaluates it; an outcome that
-   took it the other way is dropped. Forwarded data, and data of environment
-   commands, stay free choices (the outside may send anything).
+   took it the other way is dropped, and a part that raises there (a field the link
+   does not send) makes the delivery a guard error, as the runtime refuses it.
+   Forwarded data, and data of environment commands, stay free choices (the
+   outside may send anything).
 3. The runtime honours rule 1 through :func:`bind_cross_guards`: a Subject of a
    cell gets its own compiled machine whose guards that name another device read
    that device's live state; every other guard is the shared one.
@@ -26,12 +28,13 @@ from typing import TYPE_CHECKING, Any
 from statectl.errors import Location
 from statectl.explore.local import LocalSpace, Outcome
 from statectl.expr import Expression, compile_expression
-from statectl.semantics import Machine
+from statectl.semantics import Machine, Unhandled
+from statectl.semantics.eventview import EventView
 
 if TYPE_CHECKING:
     from statectl.runtime import Subject
 
-__all__ = ["FOREIGN_IN", "bind_cross_guards", "data_consistent", "foreign_leaf"]
+__all__ = ["FOREIGN_IN", "bind_cross_guards", "foreign_leaf", "under_link"]
 
 #: ``In('device.State')`` as the explorer writes a free guard part.
 FOREIGN_IN = re.compile(r"^In\((['\"])([A-Za-z_][A-Za-z0-9_]*)\.(.+)\1\)$")
@@ -56,22 +59,35 @@ def _decidable(leaf: str, tracked: frozenset[str]) -> Expression | None:
     return _leaf_cache[key]
 
 
-def data_consistent(space: LocalSpace, o: Outcome, event: str, data: Any) -> bool:
-    """Rule 2: whether ``o``'s free choices agree with a link sending ``data``."""
+def under_link(space: LocalSpace, lid: int, o: Outcome, event: str, data: Any) -> Outcome | None:
+    """Rule 2: ``o`` as a link sending ``data`` leaves it: ``o``, ``None`` when its free
+    choices disagree with the data, or a guard error where a decided part raises (the
+    runtime refuses the event; the explorer never reads that as false)."""
+    values = space.valuations[lid] if lid < len(space.valuations) else ()
+    known = space.tracker.values(space.data, values) if values else space.data
     tracked = frozenset(k for k, v in space.data.items() if v is not None)
-    for leaf, value in o.choices:
+    env: dict[str, Any] = {k: v for k, v in known.items() if v is not None}
+    env["_event"] = EventView(event, data)
+    for i, (leaf, value) in enumerate(o.choices):
         expr = _decidable(leaf, tracked)
         if expr is None:
             continue
-        env: dict[str, Any] = {k: v for k, v in space.data.items() if v is not None}
-        env["_event"] = {"name": event, "data": data}
         try:
             actual = bool(expr.evaluate(env))
-        except Exception:  # a failing guard is false, as in the kernel
-            actual = False
+        except Exception as exc:
+            rows = (f"{g.guard!r} ({g.where})" for g in space.free_guards if leaf in g.parts)
+            where = next(rows, "")
+            return Outcome(
+                lid,
+                Unhandled.GUARD_ERROR,
+                frozenset(),
+                frozenset(),
+                choices=o.choices[:i],
+                failure=f"the guard {where or repr(leaf)} raised {type(exc).__name__}: {exc}",
+            )
         if actual is not value:
-            return False
-    return True
+            return None
+    return o
 
 
 @dataclass(frozen=True, slots=True)

@@ -20,7 +20,9 @@ Rules:
    states that no guard can tell apart are one state.
 4. Each outcome says how the device reacted: handled, or the kernel's
    :class:`~statectl.semantics.Unhandled` reason (declared ignored, guard false,
-   no transition: the missed transition the cell checks for).
+   no transition: the missed transition the cell checks for, guard error: a guard
+   raised, e.g. ``10 / scale`` with ``scale`` 0; the runtime refuses that event, so
+   the explorer never reads it as false and the cell reports it).
 """
 
 from __future__ import annotations
@@ -66,6 +68,7 @@ class Outcome:
     entered_order: tuple[str, ...] = ()
     notifies: tuple[str, ...] = ()  # observer methods called, in order
     choices: tuple[tuple[str, bool], ...] = ()  # free guard parts and the value taken
+    failure: str = ""  # a GUARD_ERROR step: the guard, its row and why it raised
 
     @property
     def handled(self) -> bool:
@@ -110,10 +113,9 @@ class _Oracle:
         current = run.current
         env = guard_env(run, current.data if current is not None else None)
         env[ORACLE] = self.choose
-        try:
-            return bool(expr.evaluate(env))
-        except Exception:  # a failing guard is false, as in the kernel
-            return False
+        # a part over tracked data may raise (10 / scale with scale 0): not caught here,
+        # the kernel refuses the step as GUARD_ERROR, as the runtime does (GuardOracle)
+        return bool(expr.evaluate(env))
 
 
 def _untracked(node: ast.AST, tracked_data: frozenset[str], chart: Chart | None = None) -> bool:
@@ -160,6 +162,13 @@ class _Rewriter(ast.NodeTransformer):
         self.leaves.append(ast.unparse(node))
         call = ast.Call(ast.Name(ORACLE, ast.Load()), [ast.Constant(len(self.leaves) - 1)], [])
         return ast.copy_location(call, node)
+
+
+def _failure(result: Step) -> str:
+    f = result.failure
+    if f is None:
+        return ""
+    return f"the guard {f.guard!r} ({f.origin}) raised {f.reason}"
 
 
 def _literal(text: str | None) -> Any:
@@ -291,6 +300,7 @@ class LocalSpace:
             result.entered,
             notifies,
             choices,
+            _failure(result),
         )
 
     def _close(self) -> tuple[Outcome, ...]:

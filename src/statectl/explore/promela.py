@@ -10,8 +10,10 @@ Rules:
    outcome table, then the link queue drained first in, first out, then every
    invariant asserted. Free choices are nondeterministic ``if`` options.
 3. A link event delivered to a state that neither handles nor ignores it fails
-   an assertion; a global state with no enabled option is an invalid end state
-   (SPIN's deadlock), matching rule 3 of :mod:`statectl.explore.search`.
+   an assertion, as does one whose guard raises there (a guard error; one on an
+   environment stimulus or a completion is not exported); a global state with no
+   enabled option is an invalid end state (SPIN's deadlock), matching rule 3 of
+   :mod:`statectl.explore.search`.
 4. Each option prints ``statectl-step`` so the length of a SPIN trail counts
    stimuli, comparable with statectl's traces. Recovery (a branching-time
    property) and link livelock are not exported.
@@ -133,6 +135,11 @@ class _Writer:
                     body = self.outcome(d, o, indent + "      ")
                     body[0] = f"{indent}   :: {when}" + body[0].lstrip()
                     lines.extend(body)
+                elif o.unhandled is Unhandled.GUARD_ERROR:
+                    lines.append(
+                        f'{indent}   :: {when}printf("guard error: {self.m.names[d]} in '
+                        f'{space.state_of(lid)} gets {event}\\n"); assert(false)'
+                    )
                 elif o.unhandled is Unhandled.NO_TRANSITION and not (
                     link >= 0 and self.m.harmless[link]
                 ):

@@ -2,7 +2,7 @@
 
 Rules:
 1. A finding is a failure (deadlock, invariant, recovery, unhandled link event,
-   link livelock) or a warning (a device state never reached); only failures
+   link livelock, guard error) or a warning (a device state never reached); only failures
    decide the verdict.
 2. The verdict is ``holds`` only when the search was complete and nothing
    failed; a bounded search that found nothing is ``incomplete``.
@@ -29,10 +29,13 @@ class Kind(enum.Enum):
     RECOVERY = "recovery"
     UNHANDLED = "unhandled link event"
     LIVELOCK = "link livelock"
+    GUARD_ERROR = "guard error"
     UNREACHED = "unreached state"
 
 
-FAILURES = frozenset({Kind.DEADLOCK, Kind.INVARIANT, Kind.RECOVERY, Kind.UNHANDLED, Kind.LIVELOCK})
+FAILURES = frozenset(
+    {Kind.DEADLOCK, Kind.INVARIANT, Kind.RECOVERY, Kind.UNHANDLED, Kind.LIVELOCK, Kind.GUARD_ERROR}
+)
 
 
 @dataclass(frozen=True, slots=True)

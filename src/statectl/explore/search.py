@@ -13,7 +13,10 @@ Rules:
 4. Recovery is checked over the explored graph: a backward search from the goal
    states; a state where ``from`` holds that the search does not reach fails.
    With ``--max-states`` reached, deadlocks and recovery are not judged.
-5. ``max_states`` bounds the stored states; the report then says incomplete.
+6. A step the kernel refuses because a guard raised (``Unhandled.GUARD_ERROR``,
+   as the runtime refuses it) is a failure, whether a stimulus or a link delivers
+   the event: never read as the guard being false.
+7. ``max_states`` bounds the stored states; the report then says incomplete.
 """
 
 from __future__ import annotations
@@ -53,22 +56,28 @@ class _Tables:
         self.live: list[tuple[bool, ...]] = []
         self.complex: list[tuple[tuple[tuple[int, Stimulus], ...], ...]] = []
         self.unant: list[tuple[tuple[tuple[int, Stimulus], ...], ...]] = []
+        # per device and local id: the stimuli some of whose outcomes are guard errors
+        self.errors: list[tuple[tuple[Stimulus, ...], ...]] = []
         for d, space in enumerate(model.spaces):
             mine = [(i, s) for i, s in enumerate(model.stimuli) if s.device == d]
             simple: list[tuple[int, ...]] = []
             live: list[bool] = []
             cx: list[tuple[tuple[int, Stimulus], ...]] = []
             un: list[tuple[tuple[int, Stimulus], ...]] = []
+            errs: list[tuple[Stimulus, ...]] = []
             for lid in range(model.mask[d] + 1):
                 deltas: list[int] = []
                 alive = False
                 cxs: list[tuple[int, Stimulus]] = []
                 uns: list[tuple[int, Stimulus]] = []
+                err: list[Stimulus] = []
                 if lid < len(space.snapshots):
                     for i, s in mine:
                         if not model.enabled_locally(s, lid):
                             continue
                         outs = space.outcomes(lid, s.event)
+                        if any(o.unhandled is Unhandled.GUARD_ERROR for o in outs):
+                            err.append(s)
                         handled = [o for o in outs if o.handled]
                         if not handled:
                             if outs and all(o.unhandled is Unhandled.NO_TRANSITION for o in outs):
@@ -89,10 +98,12 @@ class _Tables:
                 live.append(alive)
                 cx.append(tuple(cxs))
                 un.append(tuple(uns))
+                errs.append(tuple(err))
             self.simple.append(tuple(simple))
             self.live.append(tuple(live))
             self.complex.append(tuple(cx))
             self.unant.append(tuple(un))
+            self.errors.append(tuple(errs))
 
 
 def trace_to(
@@ -171,6 +182,11 @@ def explore(
     unhandled: dict[tuple[int, str, str], tuple[int, Stimulus, int]] = {}
     unhandled_count: dict[tuple[int, str, str], int] = {}
     livelocks: dict[int, tuple[int, Stimulus]] = {}
+    # (device, local state label, event) -> first (state, stimulus, target or -1,
+    # local id, link or -1)
+    errors: dict[tuple[int, str, str], tuple[int, Stimulus, int, int, int]] = {}
+    error_count: dict[tuple[int, str, str], int] = {}
+    guard_errors = tables.errors
     unant_first: dict[tuple[int, int, str, InputKind], int] = {}
     unant_count: dict[tuple[int, int, str, InputKind], int] = {}
     unant_states = 0
@@ -217,8 +233,12 @@ def explore(
                         continue
                 for h, bad, livelock in model.successors(g, s):
                     alive = True
-                    for t, tlid, event, _link in bad:
+                    for t, tlid, event, link in bad:
                         key = (t, model.spaces[t].state_of(tlid), event)
+                        if link < 0:  # the delivery's guard raised (compose._bad)
+                            error_count[key] = error_count.get(key, 0) + 1
+                            errors.setdefault(key, (head, s, h, tlid, ~link))
+                            continue
                         unhandled_count[key] = unhandled_count.get(key, 0) + 1
                         if key not in unhandled:
                             unhandled[key] = (head, s, h)
@@ -244,6 +264,14 @@ def explore(
                 unant_count[key2] = unant_count.get(key2, 0) + 1
                 unant_first.setdefault(key2, head)
                 flagged = True
+            for s in guard_errors[d][lid]:
+                if s.when >= 0:
+                    when = model.when[s.when]
+                    if when is not None and not when(g):
+                        continue
+                key = (d, model.spaces[d].state_of(lid), s.event)
+                error_count[key] = error_count.get(key, 0) + 1
+                errors.setdefault(key, (head, s, -1, lid, -1))
             if not complete:
                 break
         if not complete:
@@ -306,6 +334,8 @@ def explore(
                 unhandled_count[key],
             )
         )
+    properties.append(("no guard raises", verdict(bool(errors))))
+    findings.extend(_guard_errors(model, parent, states, errors, error_count))
     properties.append(("no link livelock", verdict(bool(livelocks))))
     for at, s in livelocks.values():
         findings.append(
@@ -400,6 +430,45 @@ def _shows(model: Composed, key: tuple[int, str, str], target: int) -> Callable[
         )
 
     return match
+
+
+def _guard_errors(
+    model: Composed,
+    parent: array[int],
+    states: list[int],
+    errors: dict[tuple[int, str, str], tuple[int, Stimulus, int, int, int]],
+    count: dict[tuple[int, str, str], int],
+) -> list[Finding]:
+    """Rule 6: each device, state and event whose guard raised, with its shortest trace.
+
+    A stimulus refused outright ends the trace in the state it was offered in (no
+    branch shows a refused stimulus); a link delivery ends with the step that made it.
+    """
+    out: list[Finding] = []
+    for key, (at, s, target, lid, link) in errors.items():
+        t, label, event = key
+        name = model.names[t]
+        bad = next((o for o in model.outcomes(t, lid, event, link) if o.failure), None)
+        why = bad.failure if bad is not None else f"a guard of {event!r} raised"
+        if bad is not None and bad.choices:
+            why += " when " + " and ".join(f"{p} is {v}" for p, v in bad.choices)
+        if target < 0:
+            trace = trace_to(model, parent, states, at)
+            how = s.kind.value
+        else:
+            trace = trace_to(model, parent, states, at, s, _shows(model, key, target))
+            how = f"from a link, after {s.label(model.names)}"
+        out.append(
+            Finding(
+                Kind.GUARD_ERROR,
+                f"{name}.{event}",
+                f"{name} in {label} gets {event!r} ({how}): {why}; the runtime refuses "
+                "the event (guard error), the explorer never reads it as false",
+                trace,
+                count[key],
+            )
+        )
+    return out
 
 
 def _recovery(

@@ -72,12 +72,12 @@ def condition_match(m: Machine, run: Run, t: Transition, event_data: Any) -> boo
         run.guarded = True
         return run.executor.condition(run, t)
     oracle = run.oracle
-    if oracle is not None:
-        forced = oracle(run, t)
+    try:
+        # an oracle evaluates the guard too: if it raises, the guard failed (GuardOracle)
+        forced = oracle(run, t) if oracle is not None else None
         if forced is not None:
             run.guarded = True
             return forced
-    try:
         value = bool(m.guards[guard].evaluate(guard_env(run, event_data)))
     except Exception as exc:  # no silent false (eventview rule 3): the host reports it
         value = False

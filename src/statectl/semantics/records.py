@@ -223,6 +223,8 @@ PlanTable = dict[str, Plan]
 #: Forces guard outcomes through the kernel: ``oracle(run, transition)`` returns the
 #: guard's value, or ``None`` to let the kernel evaluate it as usual. A step taken
 #: with an oracle is never memoised (an explorer or a code generator asks "what if").
+#: An oracle that raises is a guard that raised: the step is refused as
+#: :attr:`Unhandled.GUARD_ERROR`, as when the kernel evaluates the guard itself.
 GuardOracle = Callable[[Run, Transition], "bool | None"]
 
 
