@@ -295,14 +295,12 @@ def late(*olds: str) -> str:
         (
             late("r1a", "r1b", "r2a", "r2b")
             + "  - {event: done.state.P, old: P, new: Idle, kind: internal}\n",
-            "  - {state: f1, parent: R1, type: final}\n"
-            "  - {state: f2, parent: R2, type: final}\n",
+            "  - {state: f1, parent: R1, type: final}\n  - {state: f2, parent: R2, type: final}\n",
             None,
         ),
         (
             late("r1a", "r1b", "r2a", "r2b"),
-            "  - {state: f1, parent: R1, type: final}\n"
-            "  - {state: f2, parent: R2, type: final}\n",
+            "  - {state: f1, parent: R1, type: final}\n  - {state: f2, parent: R2, type: final}\n",
             ("f1", "f2"),
         ),
     ],

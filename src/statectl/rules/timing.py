@@ -76,9 +76,9 @@ def check_timeouts(st: _Structure) -> Iterator[Diagnostic]:
         event = s.timeout.event
         anyone, nonfinal = _lost(st, s.name, event)
         lost = nonfinal
-        if lost is None and anyone is not None:  # only final configurations lose it
-            if not st.handles(s.name, f"done.state.{s.name}"):
-                lost = anyone
+        done = f"done.state.{s.name}"
+        if lost is None and anyone is not None and not st.handles(s.name, done):
+            lost = anyone  # only configurations of final states lose it, and they stay
         if lost is None:
             continue
         if lost == (s.name,):
