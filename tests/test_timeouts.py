@@ -237,6 +237,128 @@ events:
     assert "C409" not in codes(check_paths([str(path)]))
 
 
+#: A parallel Cell with a timeout; {rows} are the event rows for its timeout event Late.
+PARALLEL = """\
+device: Cell
+states:
+  - {{state: Idle, control: default, ignore: [all others]}}
+  - {{state: Top}}
+  - {{state: P, parent: Top, type: parallel, timeout: 10s -> Late}}
+  - {{state: R1, parent: P}}
+  - {{state: r1a, parent: R1, control: default}}
+  - {{state: r1b, parent: R1}}
+  - {{state: R2, parent: P}}
+  - {{state: r2a, parent: R2, control: default}}
+  - {{state: r2b, parent: R2}}
+{more}events:
+  - {{event: Go, old: Idle, new: P}}
+  - {{event: N1, old: r1a, new: r1b}}
+  - {{event: N2, old: r2a, new: r2b}}
+  - {{event: Done, old: P, new: Idle}}
+{rows}"""
+
+
+def c409(tmp_path: Path, rows: str, more: str = "") -> list[str]:
+    """The C409 messages ``statectl check`` gives the parallel Cell with these rows."""
+    path = tmp_path / "cell.yaml"
+    path.write_text(PARALLEL.format(rows=rows, more=more), encoding="utf-8")
+    return [d.message for d in check_paths([str(path)]) if d.code == "C409"]
+
+
+def late(*olds: str) -> str:
+    return "".join(f"  - {{event: Late, old: {o}, new: Idle}}\n" for o in olds)
+
+
+@pytest.mark.parametrize(
+    ("rows", "more", "named"),
+    [
+        # one region handling it in every state is enough: the kernel offers the event to
+        # every active state of every region
+        (late("r1a", "r1b"), "", None),
+        (late("R1"), "", None),
+        (late("r2a", "r2b"), "", None),
+        # the parallel state itself or an ancestor handles it
+        (late("P"), "", None),
+        (late("Top"), "", None),
+        # no region handles it everywhere: r1b beside r2a loses it
+        (late("r1a", "r2b"), "", ("r1b", "r2a")),
+        (late("r1a"), "", ("r1b", "r2a")),
+        # no row at all: the first configuration is named
+        ("  - {event: Late, old: Idle, new: Idle}\n", "", ("r1a", "r2a")),
+        # a region waiting in its final state is a configuration too
+        (
+            late("r1a", "r1b"),
+            "  - {state: f1, parent: R1, type: final}\n",
+            ("f1", "r2a"),
+        ),
+        # ... unless every region is final and done.state.P leaves P
+        (
+            late("r1a", "r1b", "r2a", "r2b")
+            + "  - {event: done.state.P, old: P, new: Idle, kind: internal}\n",
+            "  - {state: f1, parent: R1, type: final}\n  - {state: f2, parent: R2, type: final}\n",
+            None,
+        ),
+        (
+            late("r1a", "r1b", "r2a", "r2b"),
+            "  - {state: f1, parent: R1, type: final}\n  - {state: f2, parent: R2, type: final}\n",
+            ("f1", "f2"),
+        ),
+    ],
+)
+def test_a_parallel_timeout_needs_one_handling_state_in_every_configuration(
+    tmp_path: Path, rows: str, more: str, named: tuple[str, ...] | None
+) -> None:
+    """A parallel state's timeout is C409 only where some configuration inside it has no
+    active state (or ancestor) handling it; the message names that configuration."""
+    found = c409(tmp_path, rows, more)
+    if named is None:
+        assert found == []
+        return
+    assert len(found) == 1, found
+    listed = " and ".join(repr(n) for n in named)
+    assert f"state 'P' times out with 'Late', which none of {listed}" in found[0], found
+
+
+@pytest.mark.parametrize(
+    ("olds", "named"),
+    [
+        (("A",), "B"),  # as before: every substate must handle it
+        (("B",), "A"),
+        (("A", "B"), None),
+        (("Run",), None),
+        (("Top",), None),  # an ancestor's row counts
+        ((), "A"),  # the first substate losing it is named
+    ],
+)
+def test_a_compound_timeout_needs_every_substate(
+    tmp_path: Path, olds: tuple[str, ...], named: str | None
+) -> None:
+    """A compound state's timeout is C409 naming a substate that does not handle it."""
+    text = (
+        "device: Cycle\nstates:\n"
+        "  - {state: Idle, control: default, ignore: [all others]}\n"
+        "  - {state: Top}\n"
+        "  - {state: Run, parent: Top, timeout: 10s -> Late}\n"
+        "  - {state: A, parent: Run, control: default}\n"
+        "  - {state: B, parent: Run}\n"
+        "events:\n"
+        "  - {event: Go, old: Idle, new: Run}\n"
+        "  - {event: Next, old: A, new: B}\n"
+        "  - {event: Done, old: Run, new: Idle}\n"
+        "  - {event: Late, old: Idle, new: Idle}\n" + late(*olds)
+    )
+    path = tmp_path / "cycle.yaml"
+    path.write_text(text, encoding="utf-8")
+    found = [d.message for d in check_paths([str(path)]) if d.code == "C409"]
+    if named is None:
+        assert found == []
+        return
+    assert found == [
+        f"state 'Run' times out with 'Late', which {named!r} does not handle: "
+        "the timeout would be lost"
+    ]
+
+
 # -- the runtime ----------------------------------------------------------------------------
 
 

@@ -31,34 +31,69 @@ def _entered(st: _Structure, m: Machine, t: Transition) -> tuple[str, ...]:
     return entry_set(m, [t])
 
 
-def _atoms_in(st: _Structure, name: str) -> list[str]:
-    out, pending = [], [name]
-    while pending:
-        n = pending.pop()
-        kids = st.children.get(n, ())
-        if not kids and st.kind(n) is StateKind.ATOMIC:
-            out.append(n)
-        pending.extend(kids)
-    return out
+#: An unhandled configuration inside a state, as leaf names in region order: any one,
+#: and one with a state that is not final (a configuration that does not leave at once).
+_Lost = tuple[tuple[str, ...] | None, tuple[str, ...] | None]
+
+
+def _lost(st: _Structure, name: str, event: str) -> _Lost:
+    """Where inside ``name`` the kernel offers ``event`` to no active state (or ancestor)
+    that handles it. A parallel state's regions are all active: one region handling it
+    everywhere is enough, and a lost configuration takes a lost one from every region."""
+    kind = st.kind(name)
+    kids = [k for k in st.children.get(name, ()) if not st.kind(k).is_history]
+    if not kids:
+        if st.handles(name, event):
+            return None, None
+        return (name,), (None if kind is StateKind.FINAL else (name,))
+    parts = [_lost(st, k, event) for k in kids]
+    if kind is not StateKind.PARALLEL:  # one child active at a time: the first that loses it
+        lost = next((a for a, _ in parts if a is not None), None)
+        return lost, next((n for _, n in parts if n is not None), None)
+    if any(a is None for a, _ in parts):
+        return None, None
+    anyone = tuple(x for a, _ in parts for x in a or ())
+    live = next((i for i, (_, n) in enumerate(parts) if n is not None), None)
+    if live is None:
+        return anyone, None
+    nonfinal = tuple(x for i, (a, n) in enumerate(parts) for x in ((n if i == live else a) or ()))
+    return anyone, nonfinal
+
+
+def _quoted(names: tuple[str, ...]) -> str:
+    return " and ".join(repr(n) for n in names)
 
 
 def check_timeouts(st: _Structure) -> Iterator[Diagnostic]:
-    """C409: a state's timeout event is handled wherever in the state the timer can run out."""
+    """C409: a state's timeout event is handled wherever in the state the timer can run out.
+
+    With a parallel state that is every configuration of its regions. One where every
+    state waiting is final counts only if ``done.state.NAME`` is not handled.
+    """
     for s in st.chart.states:
         if s.timeout is None:
             continue
         event = s.timeout.event
-        missing = [a for a in (_atoms_in(st, s.name) or [s.name]) if not st.handles(a, event)]
-        if missing:
-            yield Diagnostic(
-                "C409",
-                Severity.ERROR,
-                s.timeout.origin,
-                f"state {s.name!r} times out with {event!r}, which "
-                + (f"{missing[0]!r}" if missing != [s.name] else "it")
-                + " does not handle: the timeout would be lost",
-                f"add an event row {event!r} with old state {s.name!r}",
-            )
+        anyone, nonfinal = _lost(st, s.name, event)
+        lost = nonfinal
+        done = f"done.state.{s.name}"
+        if lost is None and anyone is not None and not st.handles(s.name, done):
+            lost = anyone  # only configurations of final states lose it, and they stay
+        if lost is None:
+            continue
+        if lost == (s.name,):
+            who = "it does not handle"
+        elif len(lost) == 1:
+            who = f"{lost[0]!r} does not handle"
+        else:
+            who = f"none of {_quoted(lost)} (active together) handles"
+        yield Diagnostic(
+            "C409",
+            Severity.ERROR,
+            s.timeout.origin,
+            f"state {s.name!r} times out with {event!r}, which {who}: the timeout would be lost",
+            f"add an event row {event!r} with old state {s.name!r}",
+        )
 
 
 def _reached(st: _Structure, entered: tuple[str, ...]) -> tuple[tuple[str, ...], str]:
