@@ -298,3 +298,61 @@ def test_c410_asks_the_kernel_what_the_transition_enters(
     """C410 warns only when no state of the configuration a transition enters handles,
     ignores or defers the kept event: every region of a parallel state counts."""
     assert regions_c410(target, handle, ignore, defer) == named
+
+
+def within_region(
+    handle: tuple[str, ...] = (), ignore: tuple[str, ...] = (), defer: tuple[str, ...] = ()
+) -> Chart:
+    """A parallel P: R1 (r1a deferring x, then r1b on n) beside R2 (r2a, then r2b on m);
+    the states in ``handle`` go to ``done`` on x, those in ``ignore`` / ``defer`` do so."""
+    states = (
+        State("P", kind=StateKind.PARALLEL),
+        State("R1", kind=StateKind.COMPOUND, parent="P", initial=("r1a",)),
+        State("r1a", parent="R1", defer=("x",)),
+        State("r1b", parent="R1"),
+        State("R2", kind=StateKind.COMPOUND, parent="P", initial=("r2a",)),
+        *(State(n, parent="R2", defer=("x",) if n in defer else ()) for n in ("r2a", "r2b")),
+        State("done"),
+    )
+    rows = (
+        Transition("r1a", ("n",), ("r1b",)),
+        Transition("r2a", ("m",), ("r2b",)),
+        *(Transition(s, ("x",), ("done",)) for s in handle),
+        Transition("done", ("back",), ("P",)),
+    )
+    return Chart("W", states, rows, ("P",), ignored=frozenset((s, "x") for s in ignore))
+
+
+@pytest.mark.parametrize(
+    ("handle", "ignore", "defer", "warned"),
+    [
+        ((), (), (), True),  # nobody takes x after r1a -> r1b
+        (("r1b",), (), (), False),  # the state entered takes it
+        (("r2a", "r2b"), (), (), False),  # the other region takes it in every state
+        (("R2",), (), (), False),  # ... by a row of the region itself
+        (("r2a",), (), (), True),  # r2b beside r1b would lose it
+        (("r2a",), ("r2b",), (), False),  # r2b ignores it: losing it there is meant
+        (("r2a",), (), ("r2b",), False),  # r2b keeps it again
+    ],
+)
+def test_c410_counts_the_regions_a_transition_inside_one_region_leaves_active(
+    handle: tuple[str, ...], ignore: tuple[str, ...], defer: tuple[str, ...], warned: bool
+) -> None:
+    """Leaving a deferring state inside one region releases the kept event to the whole
+    configuration: C410 only when some configuration of the other regions drops it."""
+    found = [
+        d.message for d in check_chart(within_region(handle, ignore, defer)) if d.code == "C410"
+    ]
+    assert bool(found) is warned, found
+    if warned:
+        assert found[0].startswith("'n' leaves 'r1a', which defers 'x', for 'r1b'"), found
+
+
+def test_the_other_region_takes_the_released_event_at_run_time() -> None:
+    """What C410 relies on: after r1a -> r1b, the kernel offers the kept x to R2 as well."""
+    subject, records = run(within_region(handle=("r2b",)))
+    subject.dispatch("x")  # no state takes x: r1a keeps it
+    subject.dispatch("m")
+    assert subject.configuration >= {"r1a", "r2b"}, subject.configuration
+    subject.dispatch("n")  # leaving r1a releases x; r2b takes it
+    assert subject.configuration == {"done"}, [r for r in records if isinstance(r, MicrostepTaken)]

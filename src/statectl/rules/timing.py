@@ -7,7 +7,8 @@ one concern.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from functools import partial
 from typing import TYPE_CHECKING
 
 from statectl.errors import Diagnostic, Severity
@@ -36,17 +37,18 @@ def _entered(st: _Structure, m: Machine, t: Transition) -> tuple[str, ...]:
 _Lost = tuple[tuple[str, ...] | None, tuple[str, ...] | None]
 
 
-def _lost(st: _Structure, name: str, event: str) -> _Lost:
-    """Where inside ``name`` the kernel offers ``event`` to no active state (or ancestor)
-    that handles it. A parallel state's regions are all active: one region handling it
-    everywhere is enough, and a lost configuration takes a lost one from every region."""
+def _lost(st: _Structure, name: str, uses: Callable[[str], bool]) -> _Lost:
+    """Where inside ``name`` the kernel offers an event to no active state that ``uses``
+    it (``uses`` asks about a leaf, its ancestors included). A parallel state's regions
+    are all active: one region using it everywhere is enough, and a lost configuration
+    takes a lost one from every region."""
     kind = st.kind(name)
     kids = [k for k in st.children.get(name, ()) if not st.kind(k).is_history]
     if not kids:
-        if st.handles(name, event):
+        if uses(name):
             return None, None
         return (name,), (None if kind is StateKind.FINAL else (name,))
-    parts = [_lost(st, k, event) for k in kids]
+    parts = [_lost(st, k, uses) for k in kids]
     if kind is not StateKind.PARALLEL:  # one child active at a time: the first that loses it
         lost = next((a for a, _ in parts if a is not None), None)
         return lost, next((n for _, n in parts if n is not None), None)
@@ -74,7 +76,7 @@ def check_timeouts(st: _Structure) -> Iterator[Diagnostic]:
         if s.timeout is None:
             continue
         event = s.timeout.event
-        anyone, nonfinal = _lost(st, s.name, event)
+        anyone, nonfinal = _lost(st, s.name, partial(st.handles, event=event))
         lost = nonfinal
         done = f"done.state.{s.name}"
         if lost is None and anyone is not None and not st.handles(s.name, done):
@@ -108,11 +110,28 @@ def _reached(st: _Structure, entered: tuple[str, ...]) -> tuple[tuple[str, ...],
     return tuple(inner), (common[0] if common else inner[0])
 
 
+def _staying(st: _Structure, entered: tuple[str, ...]) -> list[str]:
+    """The regions a transition that enters ``entered`` leaves active: those of every
+    parallel state it stays inside, but for the region it enters (their states are
+    whatever they were, so the kept event meets any configuration of them)."""
+    names = set(entered)
+    out: list[str] = []
+    for a in st.ancestors.get(entered[0], ()):
+        if a in names or st.kind(a) is not StateKind.PARALLEL:
+            continue
+        out.extend(
+            r for r in st.children.get(a, ()) if r not in names and not st.kind(r).is_history
+        )
+    return out
+
+
 def check_deferred(st: _Structure) -> Iterator[Diagnostic]:
     """C410: leaving a deferring state releases its events; the state reached should use them.
 
     The state reached is what the kernel enters: with a parallel state, every region's
-    state, any one of which may handle, defer or ignore the event.
+    state, any one of which may handle, defer or ignore the event. A transition inside one
+    region of a parallel state leaves the other regions active: the event is used when one
+    of them uses it in every configuration it can be in.
     """
     m: Machine | None = None
     for s in st.chart.states:
@@ -129,12 +148,18 @@ def check_deferred(st: _Structure) -> Iterator[Diagnostic]:
             if not entered:
                 continue
             inner, lands = _reached(st, entered)
+            staying = _staying(st, entered)
             for event in s.defer:
-                if any(
-                    st.handles(a, event)
-                    or st.ignores(a, event)
-                    or any(event in st.by_name[b].defer for b in (a, *st.ancestors.get(a, ())))
-                    for a in inner
+
+                def uses(a: str, event: str = event) -> bool:
+                    return (
+                        st.handles(a, event)
+                        or st.ignores(a, event)
+                        or any(event in st.by_name[b].defer for b in (a, *st.ancestors.get(a, ())))
+                    )
+
+                if any(uses(a) for a in inner) or any(
+                    _lost(st, r, uses) == (None, None) for r in staying
                 ):
                     continue
                 yield Diagnostic(
