@@ -380,7 +380,7 @@ def test_cut_off_node_is_lost_within_its_lease_and_comes_back(
         os.kill(arm.pid, signal.SIGCONT)
     deadline = time.monotonic() + WAIT
     while c.log("line").count("peer arm up") < 2:
-        assert time.monotonic() < deadline, c.log("line")
+        assert time.monotonic() < deadline, "\n".join(c.log(n) for n in ("line", "arm", "gripper"))
         time.sleep(0.05)
 
 
@@ -443,7 +443,7 @@ def test_killed_sender_resumes_and_nothing_is_applied_twice(
     c.start("line", "--journal", str(dbs["line"]), "--resume")
     deadline = time.monotonic() + WAIT
     while c.log("line").count("peer arm up") < 2:
-        assert time.monotonic() < deadline, c.log("line")
+        assert time.monotonic() < deadline, "\n".join(c.log(n) for n in ("line", "arm", "gripper"))
         time.sleep(0.05)
     time.sleep(1.5)  # hello, acknowledgement and any resend: RESEND_AFTER is 0.5 s
     wait_states(view, one_process(ONE_CELL, SCRIPT[:2]))
