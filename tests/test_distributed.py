@@ -627,3 +627,55 @@ def test_node_dashboard_shows_the_devices_of_every_node(
     accepted = _http(url + "api/post", {"device": "conveyor", "event": "Start"}, token)
     assert isinstance(accepted, dict) and accepted["accepted"] is True
     wait_states(view, {"conveyor": "Running"})
+
+
+class _Node:
+    """One node's system and wire in this process (as `statectl node` makes them)."""
+
+    def __init__(self, cell_path: Path, name: str) -> None:
+        from statectl.distributed.system import NodeSystem
+        from statectl.distributed.wire import Wire
+        from statectl.runner.cells import load_setups
+        from statectl.runtime import WallClock
+
+        cell, _ = load_cell(str(cell_path))
+        assert cell is not None and cell.nodes is not None
+        setups, _ = load_setups(cell, journalled=False)
+        mine = cell.nodes.node(name).devices
+        self.out = io.StringIO()
+        self.system = NodeSystem(
+            tuple(s for s in setups if s.name in mine), WallClock(), None, cell
+        )
+        self.wire = Wire(cell, name, self.system, out=self.out)
+        self.wire.open()
+        self.system.start()
+        self.wire.listen()
+
+    def close(self) -> None:
+        self.wire.close()
+        self.system.close()
+
+
+def test_a_lost_peer_is_asked_for_until_its_token_answers(tmp_path: Path) -> None:
+    """A node asks for a lost peer's token once a lease: a peer Zenoh kept the session
+    with but never declared again (a stalled process) is seen back, not lost for good."""
+    ports = dict(zip(("line", "arm", "gripper"), free_ports(3), strict=True))
+    path = tmp_path / "cell.yaml"
+    path.write_text(cell_text(ports))
+    line = _Node(path, "line")
+    arm = _Node(path, "arm")
+    try:
+        deadline = time.monotonic() + WAIT
+        while "arm" not in line.wire.up:
+            assert time.monotonic() < deadline, line.out.getvalue()
+            time.sleep(0.02)
+        line.wire.up.discard("arm")  # what the stall left: lost here, its token never put again
+        line.wire.lost_at["arm"] = time.monotonic()
+        deadline = time.monotonic() + 5 * 0.5  # a few leases
+        while "arm" not in line.wire.up:
+            assert time.monotonic() < deadline, line.out.getvalue()
+            time.sleep(0.02)
+        assert line.out.getvalue().count("peer arm up") == 2, line.out.getvalue()
+    finally:
+        arm.close()
+        line.close()

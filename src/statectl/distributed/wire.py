@@ -9,7 +9,9 @@ Rules:
    peer come (its token appears) and go (disappears: the process ended, was
    killed, or its lease ran out); when a peer goes, each device of this node
    listed in ``peer_lost`` that a link joins to a device on that peer gets its
-   declared event. Every change is printed: ``peers: a, b``.
+   declared event. Every change is printed: ``peers: a, b``. A lost peer's token is
+   asked for once a lease: one that stalled (SIGSTOP) may keep its session and
+   never put its token again.
 3. Link events go once and in order per stream (statectl.distributed.streams),
    as a JSON array ``[e, n, ev, d]`` (epoch, number, event, data); a node has one
    subscriber per stream it may receive (each other node, each device of its
@@ -122,6 +124,7 @@ class Wire:
         self._thread: threading.Thread | None = None
         self._mirrored = False  # whether other nodes' states are taken in (open())
         self.lost_at: dict[str, float] = {}  # node -> monotonic time it was noticed gone
+        self._asked = 0.0  # when lost peers' tokens were last asked for (rule 2)
         self.on_state: list[Callable[[str, Snapshot, float], None]] = []
         #: called with each forwarded environment command this node refused (its 'when')
         self.on_refused: list[Callable[[Exception], None]] = []
@@ -532,6 +535,7 @@ class Wire:
                 return
             try:
                 self._put_states()
+                self._ask_lost(session)
                 acked = self._send_acks(session)
                 self._resend(session)
                 if acked:
@@ -539,6 +543,17 @@ class Wire:
             except Exception as exc:  # the session closed under us: stop quietly
                 if not self._stop.is_set():
                     self._say(f"wire: {exc}")
+
+    def _ask_lost(self, session: Any) -> None:
+        """Rule 2: while a peer is lost, ask for its token once a lease; a reply brings it up."""
+        now = time.monotonic()
+        if now >= self._asked + self.me.lease and any(n not in self.up for n in self.lost_at):
+            self._asked = now
+            session.liveliness().get(f"{self.keys.root}/node/*", self._on_alive)
+
+    def _on_alive(self, reply: Any) -> None:
+        if getattr(reply, "ok", None) is not None:
+            self._on_presence(reply.ok)  # a PUT: only a node not up yet is said
 
     def _put_states(self) -> None:
         """Rule 5: put each device's newest snapshot (a burst of steps costs one put)."""
