@@ -273,8 +273,8 @@ class NodeSystem(System):
             self.rules = CellRules(replace(cell, invariants=watched), links)
         sources = {k.source for k in cell.links}
         for name, s in self.subjects.items():
-            if name in self.bound and name in sources:  # the journal's step hook came first
-                s.listen(links.watch)
+            if name in self.bound and name in sources:  # heard before the journal's step hook
+                s.listen_steps(links.watch_step)
             elif name in sources:  # heard without records (NodeLinks.hook)
                 links.hook(name, s)
             if name in self.bound:
