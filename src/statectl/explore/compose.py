@@ -478,19 +478,19 @@ class Composed:
                 work.append((g2, rest + more, bad2, count + 1))
         return out
 
+    def offered(self, s: Stimulus, g: int) -> bool:
+        """Whether ``s``'s ``when`` (if it has one) holds in ``g``. The search's inner
+        loops test it inline, as this does, for speed."""
+        when = self.when[s.when] if s.when >= 0 else None
+        return when is None or bool(when(g))
+
     def enabled(self, g: int) -> list[Stimulus]:
         """The stimuli offered in ``g`` (rule 3), in the cell's order."""
-        out = []
-        for s in self.stimuli:
-            lid = self.local(g, s.device)
-            if not self.enabled_locally(s, lid):
-                continue
-            if s.when >= 0:
-                when = self.when[s.when]
-                if when is not None and not when(g):
-                    continue
-            out.append(s)
-        return out
+        return [
+            s
+            for s in self.stimuli
+            if self.enabled_locally(s, self.local(g, s.device)) and self.offered(s, g)
+        ]
 
 
 def _bad(

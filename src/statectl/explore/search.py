@@ -13,10 +13,10 @@ Rules:
 4. Recovery is checked over the explored graph: a backward search from the goal
    states; a state where ``from`` holds that the search does not reach fails.
    With ``--max-states`` reached, deadlocks and recovery are not judged.
-6. A step the kernel refuses because a guard raised (``Unhandled.GUARD_ERROR``,
+5. A step the kernel refuses because a guard raised (``Unhandled.GUARD_ERROR``,
    as the runtime refuses it) is a failure, whether a stimulus or a link delivers
    the event: never read as the guard being false.
-7. ``max_states`` bounds the stored states; the report then says incomplete.
+6. ``max_states`` bounds the stored states; the report then says incomplete.
 """
 
 from __future__ import annotations
@@ -265,10 +265,8 @@ def explore(
                 unant_first.setdefault(key2, head)
                 flagged = True
             for s in guard_errors[d][lid]:
-                if s.when >= 0:
-                    when = model.when[s.when]
-                    if when is not None and not when(g):
-                        continue
+                if not model.offered(s, g):
+                    continue
                 key = (d, model.spaces[d].state_of(lid), s.event)
                 error_count[key] = error_count.get(key, 0) + 1
                 errors.setdefault(key, (head, s, -1, lid, -1))
@@ -439,7 +437,7 @@ def _guard_errors(
     errors: dict[tuple[int, str, str], tuple[int, Stimulus, int, int, int]],
     count: dict[tuple[int, str, str], int],
 ) -> list[Finding]:
-    """Rule 6: each device, state and event whose guard raised, with its shortest trace.
+    """Rule 5: each device, state and event whose guard raised, with its shortest trace.
 
     A stimulus refused outright ends the trace in the state it was offered in (no
     branch shows a refused stimulus); a link delivery ends with the step that made it.
