@@ -125,6 +125,15 @@ def _staying(st: _Structure, entered: tuple[str, ...]) -> list[str]:
     return out
 
 
+def _keeps(st: _Structure, event: str, state: str) -> bool:
+    """Whether ``state`` (or a superstate) handles, ignores or defers ``event``."""
+    return (
+        st.handles(state, event)
+        or st.ignores(state, event)
+        or any(event in st.by_name[b].defer for b in (state, *st.ancestors.get(state, ())))
+    )
+
+
 def check_deferred(st: _Structure) -> Iterator[Diagnostic]:
     """C410: leaving a deferring state releases its events; the state reached should use them.
 
@@ -150,14 +159,7 @@ def check_deferred(st: _Structure) -> Iterator[Diagnostic]:
             inner, lands = _reached(st, entered)
             staying = _staying(st, entered)
             for event in s.defer:
-
-                def uses(a: str, event: str = event) -> bool:
-                    return (
-                        st.handles(a, event)
-                        or st.ignores(a, event)
-                        or any(event in st.by_name[b].defer for b in (a, *st.ancestors.get(a, ())))
-                    )
-
+                uses = partial(_keeps, st, event)
                 if any(uses(a) for a in inner) or any(
                     _lost(st, r, uses) == (None, None) for r in staying
                 ):

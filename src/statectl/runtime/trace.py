@@ -148,15 +148,20 @@ def _padded(kind: str, colour: bool) -> str:
     return f"{_COLOURS.get(kind, '')}{padded}{_RESET}" if colour else padded
 
 
-#: The kind columns of every line kind, padded, without colour.
-_PLAIN = {k: " " + _padded(k, False) + " " for k in (*KINDS.values(), "exit", "enter")}
+def _kind_columns(colour: bool) -> dict[str, str]:
+    """The kind column of every line kind, padded (and coloured if asked)."""
+    return {k: " " + _padded(k, colour) + " " for k in (*KINDS.values(), "exit", "enter")}
+
+
+#: The kind columns without colour.
+_PLAIN = _kind_columns(False)
 
 
 def format_record(record: Record, *, device_width: int = 0, colour: bool = False) -> str:
     """The record's aligned lines (one, or one per state and transition of a
     ``MicrostepTaken``), without a final newline:
     ``t=   0.00  Motor  event    Movement {amount: 10}``."""
-    kinds = _PLAIN if not colour else {k: " " + _padded(k, True) + " " for k in _PLAIN}
+    kinds = _kind_columns(True) if colour else _PLAIN
     prefix = f"t={record.time:7.2f}  {record.device:<{device_width}} "
     return "".join([prefix + line for line in _lines(record, kinds)])[:-1]
 
@@ -180,7 +185,7 @@ class TraceWriter:
         self.device_width = device_width
         self.colour = colour
         self.lines = 0
-        self._kinds = {k: " " + _padded(k, colour) + " " for k in _PLAIN}
+        self._kinds = _kind_columns(colour)
         self._at: tuple[float, str] | None = None  # (time, device) of ``_prefix``
         self._prefix = ""
         self._rest: dict[tuple[type, tuple[Any, ...]], list[str]] = {}  # lines after the prefix

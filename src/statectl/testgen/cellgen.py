@@ -85,10 +85,10 @@ def _first_step(records: list[Record]) -> list[Record]:
 
 def _fired(cell: Cell, device: str, first: list[Record]) -> list[int]:
     out = []
+    steps = [r for r in first if type(r) is MicrostepTaken]
     for i, k in enumerate(cell.links):
         if k.source != device:
             continue
-        steps = [r for r in first if type(r) is MicrostepTaken]
         if k.trigger is Trigger.ENTERS:
             hit = any(k.what in r.entered for r in steps)
         else:
