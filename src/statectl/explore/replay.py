@@ -47,7 +47,7 @@ from statectl.runtime.records import taken
 from statectl.semantics import Unhandled
 from statectl.tables import safeyaml
 
-__all__ = ["CellLinks", "CellRun", "ReplayStep", "link_data", "load_replay", "run_cell"]
+__all__ = ["CellLinks", "CellRun", "ReplayStep", "fires", "link_data", "load_replay", "run_cell"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -100,6 +100,14 @@ class CellRun:
     unhandled: tuple[str, ...]
 
 
+def fires(link: Link, r: MicrostepTaken) -> bool:
+    """Whether ``link`` of ``r``'s device fires on that microstep: it entered the link's
+    state (``enters``), or took a transition on the link's event (``raises``)."""
+    if link.trigger is Trigger.ENTERS:
+        return link.what in r.entered
+    return bool(r.transitions) and r.event == link.what
+
+
 class CellLinks:
     """A cell's links over running Subjects: which links a step fired, and whether they hold.
 
@@ -119,11 +127,8 @@ class CellLinks:
     def watch(self, r: Record) -> None:
         if type(r) is not MicrostepTaken:
             return
-        took = r.event if r.transitions else None
         for i, k in enumerate(self.cell.links):
-            if k.source != r.device:
-                continue
-            if k.what in r.entered if k.trigger is Trigger.ENTERS else k.what == took:
+            if k.source == r.device and fires(k, r):
                 self.fired.append(i)
 
     def watch_step(self, step: StepRecord) -> None:

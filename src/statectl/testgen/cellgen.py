@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from statectl.cell import Cell, Trigger, load_cell_or_raise
+from statectl.explore.replay import fires
 from statectl.model import Chart
 from statectl.runtime import EventReceived, MicrostepTaken, Record
 from statectl.semantics import compiled
@@ -87,13 +88,7 @@ def _fired(cell: Cell, device: str, first: list[Record]) -> list[int]:
     out = []
     steps = [r for r in first if type(r) is MicrostepTaken]
     for i, k in enumerate(cell.links):
-        if k.source != device:
-            continue
-        if k.trigger is Trigger.ENTERS:
-            hit = any(k.what in r.entered for r in steps)
-        else:
-            hit = any(r.transitions and r.event == k.what for r in steps)
-        if hit:
+        if k.source == device and any(fires(k, r) for r in steps):
             out.append(i)
     return out
 
