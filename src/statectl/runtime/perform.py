@@ -93,6 +93,10 @@ def api_calls_since(observer: object, before: int) -> Sequence[ApiCall]:
     return log[max(0, len(log) - new) :] if new > 0 else ()
 
 
+#: Makes a notification from its fields without the named tuple's Python constructor.
+_NEW = tuple.__new__
+
+
 def _nobody(note: Notification) -> None:
     """The call for a notification no observer is attached for: it is only counted."""
 
@@ -135,28 +139,8 @@ class Performer:
     _finished: bool
 
     def emit(self, record: Record) -> None:
-        """Deliver ``record`` to every listener, after any record being delivered now."""
-        if self._emitting:  # a listener emitted: deliver after the current record
-            pending = self._pending
-            if pending is None:
-                pending = self._pending = deque()
-            pending.append(record)
-            return
-        self._emitting = True
-        try:
-            for callback in self._listeners:
-                callback(record)
-            pending = self._pending
-            while pending:
-                r = pending.popleft()
-                for callback in self._listeners:
-                    callback(r)
-        except BaseException:
-            if self._pending:
-                self._pending.clear()
-            raise
-        finally:
-            self._emitting = False
+        """Deliver ``record`` to every listener (:mod:`statectl.runtime.recording`)."""
+        raise NotImplementedError
 
     def _call_for(self, plan: Plan) -> _Call:
         """What the plan path calls for ``plan``, worked out once per plan and instance.
@@ -298,31 +282,24 @@ class Performer:
 
     def _notify(self, action: Notify, data: Any, now: float, listening: bool) -> None:
         self._counts += _ONE_INVOKE
+        a, name = action, self._name
         if listening:
-            a = action
-            self.emit(InvokeIssued(self._name, now, a.invoke, a.name, a.method, a.event))
-        route = self._routes.get(action.invoke)
+            self.emit(InvokeIssued(name, now, a.invoke, a.name, a.method, a.event))
+        route = self._routes.get(a.invoke)
         if route is None:
             return
         observer, logging = route
+        note = _NEW(Notification, (name, a.invoke, a.name, a.method, a.event, data))
         if not listening:
-            observer.update(
-                Notification(
-                    self._name, action.invoke, action.name, action.method, action.event, data
-                )
-            )
-            return
-        before = api_count(observer) if logging else 0
-        observer.update(
-            Notification(self._name, action.invoke, action.name, action.method, action.event, data)
-        )
-        if listening:
-            if not logging:
-                api = f"{type(observer).__name__}.update(#{action.invoke})"
-                self.emit(ObserverCalled(self._name, now, action.method, api))
-            else:
-                for call in api_calls_since(observer, before):
-                    self.emit(ObserverCalled(self._name, now, action.method, str(call)))
+            observer.update(note)
+        elif not logging:
+            observer.update(note)
+            self.emit(ObserverCalled(name, now, a.method, update_api(observer, a.invoke)))
+        else:
+            before = api_count(observer)
+            observer.update(note)
+            for call in api_calls_since(observer, before):
+                self.emit(ObserverCalled(name, now, a.method, str(call)))
 
 
 def recorded(step: Step, watch: Mapping[str, tuple[StateWatcher, ...]], device: str) -> Recorded:

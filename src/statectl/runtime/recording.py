@@ -13,11 +13,13 @@ gets each as a step record of its own (:meth:`StepRecord.of`).
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable
 from typing import Any
 
 from statectl.observers import Notification
 from statectl.runtime.perform import (
+    _NEW,
     _ONE_INVOKE,
     Performer,
     Recorded,
@@ -34,9 +36,6 @@ __all__ = ["Recording", "StepListener"]
 #: Hears one :class:`StepRecord` per event (and one per record made outside an event).
 StepListener = Callable[[StepRecord], None]
 
-
-#: Makes a notification from its fields without the named tuple's Python constructor.
-_NEW = tuple.__new__
 
 #: A recorded step before anything was recorded meanwhile (a list is made only then).
 _NONE_YET: list[tuple[int, Record]] = []
@@ -67,7 +66,8 @@ class Recording(Performer):
         return off
 
     def emit(self, record: Record) -> None:
-        """Deliver ``record``: into the step being recorded, else to every listener."""
+        """Deliver ``record``: into the step being recorded, else to every listener, after
+        any record being delivered now (a listener that emits is heard after it)."""
         extras = self._recording
         if extras is not None:  # made during a recorded step: kept in its place
             if extras is _NONE_YET:
@@ -76,8 +76,29 @@ class Recording(Performer):
             return
         if self._recorders:
             self._hand(StepRecord.of(record))
-        if self._listeners:
-            Performer.emit(self, record)
+        if not self._listeners:
+            return
+        if self._emitting:  # a listener emitted: delivered after the current record
+            pending = self._pending
+            if pending is None:
+                pending = self._pending = deque()
+            pending.append(record)
+            return
+        self._emitting = True
+        try:
+            for callback in self._listeners:
+                callback(record)
+            pending = self._pending
+            while pending:
+                r = pending.popleft()
+                for callback in self._listeners:
+                    callback(r)
+        except BaseException:
+            if self._pending:
+                self._pending.clear()
+            raise
+        finally:
+            self._emitting = False
 
     def _hand_later(self) -> None:
         """Hand the step records that listeners made while one was being handed."""

@@ -492,8 +492,18 @@ class Subject(Wiring):
                     now = self.clock.now()
                     self._hand(StepRecord(self._name, now, event, data, None, (), _Tail(reason)))
             return
-        if self._listeners:
-            self._process_slow(event, data, plan)  # the records, from the plan's step
+        if self._listeners:  # the records as they happen, from the plan's step
+            if self._recorders:
+                self._process_slow(event, data, plan)
+                return
+            self._counts += 1
+            now = self.clock.now()
+            self.emit(EventReceived(self._name, now, event, data))
+            self._snapshot = plan.target
+            self._table = plan.table
+            self._perform(plan.step, data, now, True)
+            for callback in self._steppers:
+                callback(event, data, "handled")
             return
         self._snapshot = plan.target
         self._table = plan.table
