@@ -213,9 +213,8 @@ class Performer:
             self._counts += _ONE_INVOKE
             route = self._routes.get(arg.invoke)
             if route is not None:
-                route[0].update(
-                    Notification(self._name, arg.invoke, arg.name, arg.method, arg.event, data)
-                )
+                note = (self._name, arg.invoke, arg.name, arg.method, arg.event, data)
+                route[0].update(_NEW(Notification, note))
 
     def _issue(self, plan: Plan, data: Any) -> None:
         """Issue the notifications of ``plan`` in order, as :meth:`_notify` does unheard."""
@@ -223,10 +222,9 @@ class Performer:
             self._counts += _ONE_INVOKE
             route = self._routes.get(action.invoke)
             if route is not None:
+                a = action
                 route[0].update(
-                    Notification(
-                        self._name, action.invoke, action.name, action.method, action.event, data
-                    )
+                    _NEW(Notification, (self._name, a.invoke, a.name, a.method, a.event, data))
                 )
 
     def _unhandled(
