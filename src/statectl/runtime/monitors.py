@@ -71,9 +71,10 @@ class Monitor:
             return
         self.active = True
         s = self.subject
-        self._due = s.clock.now() + self.period
+        now = s.clock.now()
+        self._due = now + self.period
         if s.listening:
-            s.emit(MonitorStarted(s.name, s.clock.now(), self.spec.state))
+            s.emit(MonitorStarted(s.name, now, self.spec.state))
         if self._timer is None:  # else the armed timer comes first and waits the rest
             self._arm(self.period)
 
