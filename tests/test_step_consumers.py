@@ -171,3 +171,40 @@ def test_the_trace_writes_each_event_with_its_own_data_however_often_it_repeats(
         writer(record)
     want = "".join(format_record(r, device_width=5) + "\n" for r in records)
     assert out.getvalue() == want
+
+
+class TickingClock(SimClock):
+    """Every reading is a quarter second later, so a record made meanwhile (a monitor
+    starting) has a time of its own, not its step's."""
+
+    def now(self) -> float:
+        self._now += 0.25
+        return self._now
+
+
+@pytest.mark.parametrize("clock", [SimClock, TickingClock])
+@pytest.mark.parametrize("wiring", WIRINGS)
+def test_a_steps_trace_puts_what_was_recorded_meanwhile_in_place(
+    motor: Chart, wiring: str, clock: type[SimClock]
+) -> None:
+    """TraceWriter.step writes a monitor's lines where its records are, each with its
+    own time: what the writer writes for the step's typed records one by one."""
+    subject = Subject(motor, clock=clock())
+    wire_motor(subject, wiring)
+    steps: list[StepRecord] = []
+    subject.listen_steps(steps.append)
+    subject.start()
+    for event, data in EVENTS:
+        subject.dispatch(event, data)
+    subject.close()
+    outs = (io.StringIO(), io.StringIO())
+    per_record = TraceWriter(outs[0], device_width=7)
+    per_step = TraceWriter(outs[1], device_width=7)
+    for step in steps:
+        for record in step.records:
+            per_record(record)
+        per_step.step(step)
+    assert outs[1].getvalue() == outs[0].getvalue()
+    assert per_step.lines == per_record.lines == outs[0].getvalue().count("\n")
+    apart = [r for s in steps for r in s.meanwhile if r.time != s.time]
+    assert bool(apart) == (wiring in ("monitor", "driver") and clock is TickingClock)

@@ -197,16 +197,24 @@ class TraceWriter:
     def _line(self, record: Record) -> tuple[str, int]:
         """The record's lines, and how many."""
         prefix = self._column(record.time, record.device)
-        kind = type(record)
         if type(record) is EventReceived and record.data is not None:  # may be unhashable
             return prefix + self._kinds["event"] + _event_text(record) + "\n", 1
-        key = (kind, fields_of(record))
+        rests = self._rest.get((type(record), fields_of(record)))
+        if rests is None:  # not kept yet (:meth:`_rests` keeps it)
+            rests = self._rests(record)
+        return prefix + prefix.join(rests), len(rests)
+
+    def _rests(self, record: Record) -> list[str]:
+        """The record's lines after the time and device column."""
+        if type(record) is EventReceived and record.data is not None:  # may be unhashable
+            return [self._kinds["event"] + _event_text(record) + "\n"]
+        key = (type(record), fields_of(record))
         rests = self._rest.get(key)
         if rests is None:  # kind and text once per distinct record (time and device aside)
             if len(self._rest) >= _REST_MAX:
                 self._rest.clear()
             rests = self._rest[key] = _lines(record, self._kinds)
-        return prefix + prefix.join(rests), len(rests)
+        return rests
 
     def _column(self, time: float, device: str) -> str:
         """The time and device column, made once per time and device."""
@@ -269,11 +277,28 @@ class TraceWriter:
                     if starts is not None:
                         starts.append(len(rests))
                     rests.append(self._logged(item[0], c))
-        if starts is None:
-            self.out.write(prefix + prefix.join(rests))
-            self.lines += len(rests)
-            return
-        starts.append(len(rests))
+        if starts is not None:  # what others recorded meanwhile, in place
+            starts.append(len(rests))
+            if any(r.time != step.time or r.device != step.device for _, r in extras):
+                self._write_apart(prefix, rests, starts, extras)
+                return
+            added = 0
+            for before, record in extras:  # at the step's time: lines of the same column
+                at = starts[min(before, len(starts) - 1)] + added
+                more = self._rests(record)
+                rests[at:at] = more
+                added += len(more)
+        self.out.write(prefix + prefix.join(rests))
+        self.lines += len(rests)
+
+    def _write_apart(
+        self,
+        prefix: str,
+        rests: list[str],
+        starts: list[int],
+        extras: tuple[tuple[int, Record], ...] | list[tuple[int, Record]],
+    ) -> None:
+        """A step's lines with records made meanwhile at another time, each its own column."""
         out = [prefix + r for r in rests]  # and what others recorded meanwhile, in place
         for shift, (before, record) in enumerate(extras):
             at = starts[min(before, len(starts) - 1)] + shift
