@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import io
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 import pytest
@@ -30,6 +31,7 @@ from statectl.runtime import (
     Subject,
     TraceWriter,
 )
+from statectl.runtime.trace import format_data
 from support import PAPER_CYCLE, wire_motor
 
 EVENTS = (
@@ -208,3 +210,24 @@ def test_a_steps_trace_puts_what_was_recorded_meanwhile_in_place(
     assert per_step.lines == per_record.lines == outs[0].getvalue().count("\n")
     apart = [r for s in steps for r in s.meanwhile if r.time != s.time]
     assert bool(apart) == (wiring in ("monitor", "driver") and clock is TickingClock)
+
+
+@pytest.mark.parametrize(
+    ("data", "text"),
+    [
+        ({"amount": 10}, "{amount: 10}"),
+        ({"on": True, "off": None, "gain": 2.50}, "{on: True, off: None, gain: 2.5}"),
+        ({"at": [1, 2.0, (3, "x")]}, "{at: [1, 2, [3, x]]}"),
+        ({"name": "a, b", "empty": "", "pad": " x"}, "{name: 'a, b', empty: '', pad: ' x'}"),
+        (MappingProxyType({"n": {"m": -1}}), "{n: {m: -1}}"),
+        (7, "7"),
+        (False, "False"),
+        (1e-7, "1e-07"),
+        ("plain", "plain"),
+        (b"raw", "b'raw'"),
+    ],
+)
+def test_event_data_reads_like_yaml_flow_style(data: Any, text: str) -> None:
+    """format_data: mappings and sequences in flow style, floats short, strings bare
+    unless they would read wrongly, anything else as its repr."""
+    assert format_data(data) == text

@@ -60,8 +60,11 @@ _RESET = "\x1b[0m"
 
 def format_data(value: Any) -> str:
     """Event data in YAML flow style: ``{amount: 10, target: 2.5}``."""
-    if isinstance(value, Mapping):
-        return "{" + ", ".join(f"{k}: {format_data(v)}" for k, v in value.items()) + "}"
+    kind = type(value)
+    if kind is int or kind is bool or value is None:  # the usual leaves, without the ABC checks
+        return repr(value)
+    if kind is dict or isinstance(value, Mapping):
+        return "{" + ", ".join([f"{k}: {format_data(v)}" for k, v in value.items()]) + "}"
     if isinstance(value, list | tuple):
         return "[" + ", ".join(format_data(v) for v in value) + "]"
     if isinstance(value, str):
