@@ -208,6 +208,24 @@ def _rig() -> Chart:
     )
 
 
+def test_a_planned_step_unheard_issues_every_notification_in_order() -> None:
+    """A plan with two notifications, nobody listening: each observer gets its own, in
+    the step's order, with the event's data, every time the plan runs."""
+    subject = Subject(_rig(), clock=SimClock())
+    heard: list[tuple[int, Any]] = []
+    for invoke in (0, 1):
+        subject.attach(Recorder(lambda n: heard.append((n.invoke, n.data))), (invoke,))
+    subject.start()
+    for n in range(3):
+        subject.dispatch("go", {"speed": n} if n else None)
+        subject.dispatch("stop")
+    assert heard == [
+        (0, None), (1, None), (1, None),
+        (0, {"speed": 1}), (1, {"speed": 1}), (1, None),
+        (0, {"speed": 2}), (1, {"speed": 2}), (1, None),
+    ]  # fmt: skip
+
+
 @pytest.mark.parametrize(
     "observers", [("plain", "plain"), ("calls", "plain"), ("calls", "calls"), ("none", "calls")]
 )

@@ -109,7 +109,7 @@ def _with_data(call: Callable[[Notification], object], note: Notification) -> Ca
     the named tuple's own constructor does after a Python call of its own, which took
     half the time of a data event's step.
     """
-    new, kind, fields = tuple.__new__, Notification, tuple(note)[:-1]
+    new, kind, fields = _NEW, Notification, tuple(note)[:-1]
 
     def notify(data: Any) -> None:
         call(new(kind, (*fields, data)))
@@ -148,21 +148,19 @@ class Performer:
         Without event data: ``counts`` are added and ``call(arg)`` made; a single
         notification is prebuilt for the observer routed now (attach and rename drop
         these). With data: ``with_data(data)`` is called, which counts the invokes it
-        issues. A plan that enters or exits a watched state runs a *program*: the
-        watcher calls and notifications of its step in the order :meth:`_perform`
-        makes them, resolved once instead of per event.
+        issues. A plan that enters or exits a watched state, or issues several
+        notifications, runs a *program*: the watcher calls and notifications of its step
+        in the order :meth:`_perform` makes them, resolved once instead of per event.
         """
         calls = self._calls
         if calls is None:
             calls = self._calls = {}
         watch = self._watch
         head: tuple[int, Callable[[Any], object] | None, Any, Callable[[Any], object] | None]
-        if watch and any(s in watch for s in (*plan.exited, *plan.entered)):
-            run = partial(self._run, self._program(plan))
-            head = (1, run, None, run)  # watchers hear it between notifications
-        elif not plan.notifies:
+        watched = bool(watch) and any(s in watch for s in (*plan.exited, *plan.entered))
+        if not watched and not plan.notifies:
             head = (1, None, None, None)
-        elif len(plan.notifies) == 1:
+        elif not watched and len(plan.notifies) == 1:
             action = plan.notifies[0][1]
             route = self._routes.get(action.invoke)
             note = Notification(
@@ -170,9 +168,9 @@ class Performer:
             )
             call = route[0].update if route is not None else _nobody
             head = (1 + _ONE_INVOKE, call, note, _with_data(call, note))
-        else:
-            issue = partial(self._issue, plan)
-            head = (1, issue, None, issue)
+        else:  # watchers hear it between notifications; several notifications in order
+            run = partial(self._run, self._program(plan))
+            head = (1, run, None, run)
         rec = recorded(plan.step, watch, self._name)
         entry: _Call = (*head, rec, self._static(rec), Builder())
         calls[plan] = entry
@@ -215,17 +213,6 @@ class Performer:
             if route is not None:
                 note = (self._name, arg.invoke, arg.name, arg.method, arg.event, data)
                 route[0].update(_NEW(Notification, note))
-
-    def _issue(self, plan: Plan, data: Any) -> None:
-        """Issue the notifications of ``plan`` in order, as :meth:`_notify` does unheard."""
-        for _, action in plan.notifies:
-            self._counts += _ONE_INVOKE
-            route = self._routes.get(action.invoke)
-            if route is not None:
-                a = action
-                route[0].update(
-                    _NEW(Notification, (self._name, a.invoke, a.name, a.method, a.event, data))
-                )
 
     def _unhandled(
         self, event: str, data: Any, reason: IgnoreReason, now: float, snap: Snapshot
