@@ -5,7 +5,7 @@ from __future__ import annotations
 import io
 import json
 import sqlite3
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -485,3 +485,21 @@ def test_show_interleaves_accepted_events_and_steps_in_time_order(
             seq = lines[i].split("  ", 1)[1].split()[0]
             later = [x for x in lines[i + 1 :] if f"({seq})" in x]
             assert later, f"no step after accepted {seq}"
+
+
+@pytest.mark.parametrize("command", [journal_show, journal_export, journal_replay])
+def test_a_device_the_journal_does_not_hold_is_an_error(
+    tmp_path: Path, device_file: Path, command: Callable[..., int]
+) -> None:
+    """``--device`` naming no journalled device (a typo) exits 1 naming the devices, no output.
+
+    Otherwise ``journal replay --device Motr`` replays nothing and passes.
+    """
+    db = tmp_path / "j.db"
+    system = make_system(db, device_file)
+    system.start()
+    system.close()
+    out, err = io.StringIO(), io.StringIO()
+    assert command(str(db), device="Motr", out=out, err=err) == 1
+    assert out.getvalue() == ""
+    assert "no device 'Motr' in the journal; devices journalled: Motor" in err.getvalue()

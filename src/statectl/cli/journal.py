@@ -75,6 +75,22 @@ def _reader_in_window(
     return reader if isinstance(reader, int) else (reader, lo, hi)
 
 
+def _unknown_device(command: str, reader: JournalSource, device: str | None, err: TextIO) -> bool:
+    """Say so when ``--device`` names no journalled device (a typo), so that
+    ``replay --device Motr`` does not replay nothing and pass."""
+    if device is None:
+        return False
+    names = [d.name for d in reader.devices()]
+    if device in names:
+        return False
+    found = ", ".join(names) or "none"
+    err.write(
+        f"statectl journal {command}: no device {device!r} in the journal; "
+        f"devices journalled: {found}\n"
+    )
+    return True
+
+
 @contextlib.contextmanager
 def _reading(command: str, path: str, err: TextIO) -> Iterator[list[int]]:
     """Turn a failure while the journal is read (damage SQLite meets late, I/O) into exit 1.
@@ -123,6 +139,8 @@ def journal_show(
             yield s.wall, 1, text
 
     with reader, _reading("show", path, err) as code:
+        if _unknown_device("show", reader, device, err):
+            return PROBLEMS
         # Both come in journal order, which is wall-clock order: merged as they stream, so
         # a journal of millions of rows is shown without being held in memory.
         for wall, _, text in heapq.merge(accepted(), steps(), key=lambda x: (x[0], x[1])):
@@ -152,6 +170,8 @@ def journal_export(
         return opened
     reader, lo, hi = opened
     with reader, _reading("export", path, err) as code:
+        if _unknown_device("export", reader, device, err):
+            return PROBLEMS
         if to is None:
             export_jsonl(reader, out, device=device, since=lo, until=hi)
             return OK
@@ -195,6 +215,8 @@ def journal_replay(
     if isinstance(reader, int):
         return reader
     with reader, _reading("replay", path, err) as code:
+        if _unknown_device("replay", reader, device, err):
+            return PROBLEMS
         charts: dict[str, Chart] = {}
         for d in reader.devices():
             if device is not None and d.name != device:
