@@ -25,6 +25,13 @@ def test_every_exported_name_resolves(name: str) -> None:
     assert getattr(statectl, name) is not None
 
 
+def test_every_exported_name_is_documented() -> None:
+    """docs/api.md names each exported name: the stable API is "the names below"."""
+    text = (ROOT / "docs" / "api.md").read_text(encoding="utf-8")
+    named = set(re.findall(r"`([A-Za-z_]\w*)", text))
+    assert [n for n in statectl.__all__ if n != "__version__" and n not in named] == []
+
+
 def test_an_unknown_name_is_an_attribute_error() -> None:
     """A typo gets the usual AttributeError, naming the attribute."""
     with pytest.raises(AttributeError, match="no_such_thing"):
