@@ -167,3 +167,15 @@ def test_send_refuses_a_journalled_system(motor: Chart, tmp_path: object) -> Non
     with pytest.raises(StatectlError, match="with one, post\\(\\) and wait for the ticket"):
         asyncio.run(system.send("M0", "Movement"))
     system.close()
+
+
+def test_a_driver_given_where_the_rules_go_is_refused(motor: Chart) -> None:
+    """``DeviceSetup(name, chart, driver)``: the third field is the rules, so it is a TypeError.
+
+    Otherwise the driver lands in ``rules`` and the device runs with no driver at all.
+    """
+    from statectl.devices import SimMotor
+
+    with pytest.raises(TypeError, match="give a driver as driver="):
+        DeviceSetup("M", motor, SimMotor())  # type: ignore[arg-type]  # the mistake tested
+    assert isinstance(DeviceSetup("M", motor, driver=SimMotor()).driver, SimMotor)

@@ -103,6 +103,16 @@ class DeviceSetup:
     source: str = ""
     driver: DeviceDriver | None = None
 
+    def __post_init__(self) -> None:
+        """A driver given third lands in ``rules`` and would be dropped without a word."""
+        if not isinstance(self.rules, tuple | list) or not all(
+            isinstance(r, RecoveryRule) for r in self.rules
+        ):
+            raise TypeError(
+                f"DeviceSetup {self.name!r}: rules must be RecoveryRule values, "
+                f"got {self.rules!r}; give a driver as driver=..."
+            )
+
 
 @dataclass(slots=True)
 class System:
