@@ -462,19 +462,20 @@ def test_a_journalled_run_answers_a_call_once_the_step_ran(tmp_path: Path) -> No
 
 
 @pytest.mark.parametrize(
-    ("endpoint", "env", "message"),
+    ("endpoint", "env", "exit", "message"),
     [
-        ("http://127.0.0.1:4840", {}, "is not an opc.tcp://HOST:PORT URL"),
-        (None, {"STATECTL_OPCUA_USER": "op", "STATECTL_OPCUA_PASSWORD": "tiny"}, "shorter than"),
-        (None, {"STATECTL_OPCUA_USER": "op"}, "set both STATECTL_OPCUA_USER"),
-        ("busy", {}, "opcua: cannot serve"),
+        ("http://127.0.0.1:4840", {}, 2, "--opcua must be an opc.tcp://HOST:PORT URL"),
+        (None, {"STATECTL_OPCUA_USER": "op", "STATECTL_OPCUA_PASSWORD": "tiny"}, 1, "shorter than"),
+        (None, {"STATECTL_OPCUA_USER": "op"}, 1, "set both STATECTL_OPCUA_USER"),
+        ("busy", {}, 1, "opcua: cannot serve"),
     ],
 )
 def test_a_bad_opcua_setting_fails_the_run_with_a_message(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, endpoint: str | None,
-    env: dict[str, str], message: str,
+    env: dict[str, str], exit: int, message: str,
 ) -> None:  # fmt: skip
-    """A bad endpoint, environment user or a taken port: exit 1, one line, no secret shown."""
+    """A bad endpoint, environment user or a taken port: one line, no secret shown; exit 1,
+    or 2 for an --opcua URL that is no opc.tcp:// URL (a usage error, as --port's)."""
     import io
 
     from statectl.cli.run import run as run_cli
@@ -497,7 +498,7 @@ def test_a_bad_opcua_setting_fails_the_run_with_a_message(
             str(MOTOR), config=str(config), opcua=endpoint, events=io.StringIO(""), out=out,
             err=err, stop=threading.Event(),
         )  # fmt: skip
-    assert code == 1
+    assert code == exit
     assert message in err.getvalue()
     assert "Traceback" not in err.getvalue()
     assert "tiny" not in err.getvalue() + out.getvalue()

@@ -64,6 +64,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, TextIO
+from urllib.parse import urlparse
 
 from statectl.cell import Cell, load_cell
 from statectl.cli.commands import PROBLEMS, USAGE
@@ -295,6 +296,9 @@ def run(
         return USAGE
     if port is not None and not 0 <= port <= MAX_PORT:
         err.write(f"statectl run: --port must be 0 (any free port) to {MAX_PORT} (got {port})\n")
+        return USAGE
+    if opcua and not (opcua.startswith("opc.tcp://") and urlparse(opcua).hostname):
+        err.write(f"statectl run: --opcua must be an opc.tcp://HOST:PORT URL (got {opcua!r})\n")
         return USAGE
     try:
         mode = Sync(sync.lower())
