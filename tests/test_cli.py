@@ -230,3 +230,26 @@ def test_scxml_run_without_a_final_state_exits_non_zero(tmp_path: Path) -> None:
     code, out, err = cli("scxml", "run", str(doc), "--timeout", "1")
     assert (code, out) == (1, "")
     assert "no top-level final state" in err
+
+
+PAIR = ROOT / "examples" / "motor" / "motor.csv"  # names the shipped CSV pair; no such file
+
+
+@pytest.mark.parametrize(
+    ("argv", "stdin"),
+    [
+        (["check", str(PAIR)], ""),
+        (["build", str(PAIR)], ""),
+        (["observers", str(PAIR)], ""),
+        (["run", str(PAIR)], "Movement\n"),
+    ],
+)
+def test_name_csv_names_the_pair_in_every_command(
+    argv: list[str], stdin: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``NAME.csv`` loads the pair NAME.states.csv + NAME.events.csv (docs/tables.md), in
+    check and run too, not only in the commands that take it: no 'no such file'."""
+    assert not PAIR.exists()
+    monkeypatch.setattr("sys.stdin", io.StringIO(stdin))
+    code, _, err = cli(*argv)
+    assert (code, err) == (0, "")

@@ -36,6 +36,7 @@ from statectl.cli.commands import (
     cmd_scxml_run,
     cmd_tables,
     cmd_verify,
+    input_exists,
 )
 from statectl.errors import DiagnosticError, StatectlError
 
@@ -284,19 +285,7 @@ def _missing_input(args: argparse.Namespace) -> str | None:
             paths.append(value)
         elif isinstance(value, list):
             paths.extend(v for v in value if isinstance(v, str))
-    return next((p for p in paths if not _exists(Path(p))), None)
-
-
-def _exists(path: Path) -> bool:
-    """The file exists, or ``NAME.csv`` names a CSV pair whose states file exists."""
-    if path.exists():
-        return True
-    if path.suffix.lower() != ".csv":
-        return False
-    from statectl.tables.csv_io import csv_paths
-
-    pair = csv_paths(path)
-    return pair is not None and pair.states.exists()
+    return next((p for p in paths if not input_exists(Path(p))), None)
 
 
 def main(

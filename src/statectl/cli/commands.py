@@ -23,6 +23,18 @@ if TYPE_CHECKING:  # the pipeline is imported inside each command, to keep --hel
 OK, PROBLEMS, USAGE = 0, 1, 2
 
 
+def input_exists(path: Path) -> bool:
+    """The file exists, or ``NAME.csv`` names a CSV pair whose states file exists."""
+    if path.exists():
+        return True
+    if path.suffix.lower() != ".csv":
+        return False
+    from statectl.tables.csv_io import csv_paths
+
+    pair = csv_paths(path)
+    return pair is not None and pair.states.exists()
+
+
 def _print_diagnostics(diags: Sequence[Diagnostic], out: TextIO, as_json: bool) -> None:
     if as_json:
         json.dump([d.to_json() for d in diags], out, indent=2)
@@ -68,7 +80,7 @@ def cmd_check(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         err.write("statectl check: name at least one FILE (or --explain CODE)\n")
         return USAGE
     for p in args.files:
-        if not Path(p).exists():
+        if not input_exists(Path(p)):
             err.write(f"statectl check: {p}: no such file\n")
             return USAGE
     from statectl.cli.kinds import cell_given_to_check

@@ -67,7 +67,7 @@ from typing import Any, TextIO
 from urllib.parse import urlparse
 
 from statectl.cell import Cell, load_cell
-from statectl.cli.commands import PROBLEMS, USAGE
+from statectl.cli.commands import PROBLEMS, USAGE, input_exists
 from statectl.cli.problems import Problems, verdict
 from statectl.cli.settle import unsettled_note
 from statectl.cli.steps import StepLog
@@ -286,7 +286,7 @@ def run(
     if (resume or fresh) and journal is None:
         err.write(f"statectl run: {'--resume' if resume else '--fresh'} needs --journal DB\n")
         return USAGE
-    if not Path(path).exists():
+    if not input_exists(Path(path)):
         err.write(f"statectl run: {path}: no such file\n")
         return USAGE
     if settle_limit is not None and not settle_limit > 0:
