@@ -91,6 +91,17 @@ def test_generated_modules_pass_against_the_twin(tmp_path: Path) -> None:
     assert counts(result) == {"passed": total}
 
 
+def test_a_module_generated_from_name_csv_finds_its_pair(tmp_path: Path) -> None:
+    """Generated from ``motor.csv`` (the CSV pair's name, no such file), the module's
+    ``STATECTL_TABLES`` names it and the plugin loads the pair: every test passes."""
+    pair = MOTOR.parent / "motor.csv"
+    assert not pair.exists()
+    made = generate(pair, "rows", tmp_path)
+    result = run_pytest(tmp_path)
+    assert result.returncode == 0, result.stdout[-3000:]
+    assert counts(result) == {"passed": made.tests}
+
+
 @pytest.mark.parametrize(
     ("name", "where"),
     [

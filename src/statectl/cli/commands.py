@@ -24,15 +24,10 @@ OK, PROBLEMS, USAGE = 0, 1, 2
 
 
 def input_exists(path: Path) -> bool:
-    """The file exists, or ``NAME.csv`` names a CSV pair whose states file exists."""
-    if path.exists():
-        return True
-    if path.suffix.lower() != ".csv":
-        return False
-    from statectl.tables.csv_io import csv_paths
+    """The file exists, or ``NAME.csv`` names a CSV pair (imported on use: start-up stays cheap)."""
+    from statectl.tables.csv_io import input_exists as exists
 
-    pair = csv_paths(path)
-    return pair is not None and pair.states.exists()
+    return exists(path)
 
 
 def _print_diagnostics(diags: Sequence[Diagnostic], out: TextIO, as_json: bool) -> None:

@@ -39,7 +39,7 @@ from statectl.tables.schema import (
     state_columns,
 )
 
-__all__ = ["CsvFiles", "csv_paths", "dump_csv", "read_csv"]
+__all__ = ["CsvFiles", "csv_paths", "dump_csv", "input_exists", "read_csv"]
 
 DEVICE_LINE = re.compile(r"^#\s*device\s*:\s*(.*)$", re.IGNORECASE)
 PROFILE_LINE = re.compile(r"^#\s*profile\s*:\s*(.*)$", re.IGNORECASE)
@@ -80,6 +80,20 @@ def file_stem(device: str) -> str:
     name such as ``../x`` cannot write outside the directory it is saved into."""
     stem = re.sub(r'[\\/:*?"<>|\x00-\x1f]', "_", device).strip().lstrip(".")
     return stem or "device"
+
+
+def input_exists(path: Path) -> bool:
+    """The file exists, or ``NAME.csv`` names a CSV pair whose states file exists.
+
+    Every reader of a device file asks this one question (the CLI, the pytest
+    plugin), so ``NAME.csv`` is a device file wherever a path is taken.
+    """
+    if path.exists():
+        return True
+    if path.suffix.lower() != ".csv":
+        return False
+    pair = csv_paths(path)
+    return pair is not None and pair.states.exists()
 
 
 def csv_paths(path: Path, device: str | None = None) -> CsvFiles | None:

@@ -43,6 +43,7 @@ from statectl.cell import Cell, load_cell
 from statectl.errors import DiagnosticError, Severity
 from statectl.model import Chart
 from statectl.runtime import Record
+from statectl.tables.csv_io import input_exists
 from statectl.testgen.cellharness import CellUnderTest
 from statectl.testgen.coverage import Tally
 from statectl.testgen.generator import write_atomic
@@ -115,7 +116,7 @@ def pytest_configure(config: pytest.Config) -> None:
 def _beside(request: pytest.FixtureRequest, given: str, what: str) -> Path:
     """``given`` relative to the test module; a missing file fails the test saying so."""
     path = (Path(request.module.__file__).parent / given).resolve()
-    if not path.exists():
+    if not input_exists(path):  # NAME.csv: the CSV pair, as testgen writes it
         pytest.fail(f"{request.module.__name__}: {what} {path}: no such file", pytrace=False)
     return path
 
