@@ -253,3 +253,17 @@ def test_name_csv_names_the_pair_in_every_command(
     monkeypatch.setattr("sys.stdin", io.StringIO(stdin))
     code, _, err = cli(*argv)
     assert (code, err) == (0, "")
+
+
+def test_check_says_where_an_scxml_document_goes(tmp_path: Path) -> None:
+    """``statectl check doc.scxml`` (device tables only) names scxml run and scxml import."""
+    doc = tmp_path / "doc.scxml"
+    doc.write_text(
+        '<scxml xmlns="http://www.w3.org/2005/07/scxml" version="1.0" initial="a">'
+        '<final id="a"/></scxml>',
+        encoding="utf-8",
+    )
+    code, out, _ = cli("check", str(doc))
+    assert code == 1
+    assert "T102" in out and f"statectl scxml run {doc} runs it" in out
+    assert f"statectl scxml import {doc} writes" in out

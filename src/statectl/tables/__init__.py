@@ -99,12 +99,13 @@ def _format(fmt: str | Format | None, path: Path) -> Format:
 
 def _unknown_format(path: Path, fmt: str | None = None) -> Diagnostic:
     what = f"format {fmt!r}" if fmt else f"the file name {path.name!r}"
-    return diag(
-        "T102",
-        Location(str(path)),
-        f"{what} names no device table format",
-        "use .yaml, .csv (a NAME.states.csv + NAME.events.csv pair), .xlsx or .md",
-    )
+    hint = "use .yaml, .csv (a NAME.states.csv + NAME.events.csv pair), .xlsx or .md"
+    if not fmt and path.suffix.lower() == ".scxml":  # a document, not tables: say where it goes
+        hint = (
+            f"an SCXML document: statectl scxml run {path} runs it, statectl scxml "
+            f"import {path} writes it as device tables when it fits them"
+        )
+    return diag("T102", Location(str(path)), f"{what} names no device table format", hint)
 
 
 def _read_text(path: Path, diags: list[Diagnostic]) -> str | None:
