@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import io
+import json
 import re
 from pathlib import Path
 
@@ -50,3 +52,21 @@ def test_docs_example_runs(page: str, block: str, monkeypatch: pytest.MonkeyPatc
     """Each python block of the pages runs from the project root, its asserts holding."""
     monkeypatch.chdir(ROOT)
     exec(compile(block, f"docs/{page}", "exec"), {})
+
+
+@pytest.mark.parametrize(
+    ("path", "codes"),
+    [
+        ("examples/motor/motor.yaml", []),
+        ("examples/clamp/cell.yaml", ["C415"]),  # a cell: use verify
+        ("examples/motor/drivers.yaml", ["C415"]),  # a run config: use run --config
+    ],
+)
+def test_check_reports_what_statectl_check_prints(path: str, codes: list[str]) -> None:
+    """``statectl.check`` gives the command's diagnostics: C415 for a cell or run config."""
+    from statectl.cli import main
+
+    out = io.StringIO()
+    main(["check", "--json", "-v", str(ROOT / path)], out, io.StringIO())
+    printed = [d["code"] for d in json.loads(out.getvalue())]
+    assert [d.code for d in statectl.check(ROOT / path)] == printed == codes

@@ -31,7 +31,17 @@ def load(path: str | os.PathLike[str]) -> Chart:
 
 
 def check(*paths: str | os.PathLike[str]) -> list[Diagnostic]:
-    """Every problem ``statectl check`` reports for these device files, in file order."""
+    """Every problem ``statectl check`` reports for these device files, in file order.
+
+    A cell file or a run config is C415 (use verify, or run --config), as on the
+    command line, not the device loader's T102.
+    """
+    from statectl.cli.kinds import cell_given_to_check
     from statectl.rules import check_paths
 
-    return check_paths([os.fspath(p) for p in paths])
+    found: list[Diagnostic] = []
+    for given in paths:
+        p = os.fspath(given)
+        cell = cell_given_to_check(p)
+        found.extend([cell] if cell is not None else check_paths([p]))
+    return found
