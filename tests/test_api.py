@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
+import inspect
 import io
 import json
+import pydoc
 import re
+import typing
 from pathlib import Path
 
 import pytest
@@ -25,6 +29,19 @@ BLOCKS = [
 def test_every_exported_name_resolves(name: str) -> None:
     """``statectl.NAME`` works for each name in ``__all__`` (lazy names included)."""
     assert getattr(statectl, name) is not None
+
+
+@pytest.mark.parametrize(
+    "name", [n for n in statectl.__all__ if isinstance(getattr(statectl, n), type)]
+)
+def test_every_exported_class_shows_its_signature(name: str) -> None:
+    """``help()`` and ``inspect.signature`` work on each exported class: the types its
+    fields are annotated with resolve at run time (a forward reference once did not)."""
+    cls = getattr(statectl, name)
+    with contextlib.suppress(ValueError):  # a class with no Python-visible signature
+        inspect.signature(cls)
+    typing.get_type_hints(cls)
+    assert name in pydoc.render_doc(cls)
 
 
 def test_every_exported_name_is_documented() -> None:

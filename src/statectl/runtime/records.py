@@ -34,12 +34,12 @@ from typing import TYPE_CHECKING, Any
 import msgspec
 
 from statectl.model import Notify
-from statectl.semantics import Unhandled
+from statectl.semantics import Step, Unhandled  # at run time: the fields' types resolve
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
 
-    from statectl.semantics import Microstep, Step
+    from statectl.semantics import Microstep
 
 __all__ = [
     "ApiCall",
