@@ -217,7 +217,11 @@ def test_a_steps_trace_puts_what_was_recorded_meanwhile_in_place(
     [
         ({"amount": 10}, "{amount: 10}"),
         ({"on": True, "off": None, "gain": 2.50}, "{on: True, off: None, gain: 2.5}"),
-        ({"at": [1, 2.0, (3, "x")]}, "{at: [1, 2, [3, x]]}"),
+        ({"at": [1, 2.0, (3, "x")]}, "{at: [1, 2.0, [3, x]]}"),
+        (
+            {"to": 123456789.0, "by": 0.1, "far": 1.0000001},
+            "{to: 123456789.0, by: 0.1, far: 1.0000001}",
+        ),
         ({"name": "a, b", "empty": "", "pad": " x"}, "{name: 'a, b', empty: '', pad: ' x'}"),
         (MappingProxyType({"n": {"m": -1}}), "{n: {m: -1}}"),
         (7, "7"),
@@ -228,6 +232,6 @@ def test_a_steps_trace_puts_what_was_recorded_meanwhile_in_place(
     ],
 )
 def test_event_data_reads_like_yaml_flow_style(data: Any, text: str) -> None:
-    """format_data: mappings and sequences in flow style, floats short, strings bare
+    """format_data: mappings and sequences in flow style, numbers exact, strings bare
     unless they would read wrongly, anything else as its repr."""
     assert format_data(data) == text

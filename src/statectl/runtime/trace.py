@@ -59,7 +59,8 @@ _RESET = "\x1b[0m"
 
 
 def format_data(value: Any) -> str:
-    """Event data in YAML flow style: ``{amount: 10, target: 2.5}``."""
+    """Event data in YAML flow style: ``{amount: 10, target: 2.5}``, every number exact
+    (a trace or ``journal show`` that rounded would misreport what the device was sent)."""
     kind = type(value)
     if kind is int or kind is bool or value is None:  # the usual leaves, without the ABC checks
         return repr(value)
@@ -70,9 +71,7 @@ def format_data(value: Any) -> str:
     if isinstance(value, str):
         plain = value and value.strip() == value and not any(c in value for c in ",:{}[]'\"#")
         return value if plain else repr(value)
-    if isinstance(value, float):
-        return f"{value:g}"
-    return repr(value)
+    return repr(value)  # a float as its shortest exact text: 123456789.0 stays whole
 
 
 def _states(names: tuple[str, ...]) -> str:
