@@ -13,6 +13,7 @@ from statectl.cli.run import run
 from statectl.explore import Composed, Kind, explore
 from statectl.explore.enforce import Refused
 from statectl.explore.replay import ReplayStep, run_cell
+from statectl.journal import Journal
 from statectl.runtime import SimClock
 from statectl.system import DeviceSetup, System
 
@@ -67,6 +68,25 @@ def test_the_system_refuses_through_post() -> None:
     system.post("axis1", "Power On")  # an entry without `when` is never refused
     system.drain()
     assert _states(system)["axis1"] == "Standstill"
+
+
+@pytest.mark.parametrize("journalled", [False, True])
+def test_a_when_is_judged_after_what_was_posted_before_it(tmp_path: Path, journalled: bool) -> None:
+    """Start then Part in, posted back to back with no drain between (a live run's
+    reader): Part in's `when` (conveyor Running) is judged once Start has run, as
+    verify takes the sequence, so it is accepted, not refused against a stale state."""
+    cell = load_cell_or_raise(ROOT / "examples" / "pick-and-place" / "cell.yaml")
+    setups = [DeviceSetup(d.name, d.chart) for d in cell.devices]
+    journal = Journal(tmp_path / "j.db") if journalled else None
+    system = System(setups, SimClock(), cell=cell, journal=journal)
+    system.start()
+    try:
+        system.post("conveyor", "Start")
+        system.post("sensor", "Part in")  # refused before: conveyor was still Stopped
+        system.quiesce()
+        assert _states(system)["sensor"] == "Detected"
+    finally:
+        system.close()
 
 
 @pytest.mark.parametrize("journalled", [False, True])

@@ -27,7 +27,7 @@ Rules:
    run it) or neither is (the step runs again on resume and fires them again).
    Each device's queue is first in, first out.
 4. :meth:`System.post` never blocks (but for a cell's command with a ``when``,
-   which waits for the owner's current cascade to judge it, rule 6). With
+   which waits for the owner to run what came before it, rule 6). With
    ``max_queue`` a device whose queue holds that many events refuses more with
    :class:`QueueFull`, which tells a producer it outruns the device instead of
    letting memory grow.
@@ -38,7 +38,10 @@ Rules:
    loop with ``call_soon_threadsafe``: the owner never waits for a coroutine.
 6. A cell's rules hold at run time as verify assumed them (explore/enforce.py):
    an environment command whose every ``when`` is false is refused by
-   :meth:`System.post` (:class:`~statectl.explore.enforce.Refused`); invariants
+   :meth:`System.post` (:class:`~statectl.explore.enforce.Refused`), judged as verify
+   takes a command: once everything posted or accepted before it has run and its
+   links have settled (the poster runs them as the owner if the owner has not yet);
+   invariants
    are checked once a stimulus's cascade has settled (every link event it caused
    delivered, as verify takes a stimulus and its links as one move), each
    violation goes to the ``on_violation`` callbacks and sends the invariant's
@@ -146,6 +149,8 @@ class System:
     settle_cut: int = 0
     #: a step of a cell ran since the invariants were last checked (rule 6)
     _unchecked: bool = False
+    #: the owner is draining now (rule 6: a post from one of its steps does not drain again)
+    _draining: bool = False
     #: ``statectl run --driver none``: settling never moves time (only ``advance`` does), so
     #: a timeout runs out only when the user lets time pass
     hold_time: bool = False
@@ -313,7 +318,10 @@ class System:
         """
         name = self._admit(device)
         if self.rules is not None and self.rules.guarded(name, event):
-            with self.owner:  # the global state between the owner's cascades (rule 6)
+            with self.owner:  # the global state once what came before has settled (rule 6)
+                if not self._draining:  # (a post from a step: the drain running is the owner)
+                    self._commit()  # accepted into the journal before it: delivered and run
+                    self._drain()  # posted before it: run, with the links they fire
                 self.rules.admit(name, event)  # Refused when every 'when' is false
         bound = self.bound.get(name)
         if bound is not None:
@@ -336,19 +344,23 @@ class System:
         """As the owner: run the devices that have work until none has (rule 1)."""
         total = 0
         ready = self._ready
-        while True:
-            while ready:
-                s = ready.popleft()
-                if s.queued:
-                    try:
-                        total += s.run_until_idle()
-                    except (GuardError, AssignError) as exc:  # rule 7: that event only
-                        for callback in self.on_failure:
-                            callback(exc)
-                        if s.queued:
-                            ready.append(s)
-            if not self._settled_check():
-                return total
+        was, self._draining = self._draining, True
+        try:
+            while True:
+                while ready:
+                    s = ready.popleft()
+                    if s.queued:
+                        try:
+                            total += s.run_until_idle()
+                        except (GuardError, AssignError) as exc:  # rule 7: that event only
+                            for callback in self.on_failure:
+                                callback(exc)
+                            if s.queued:
+                                ready.append(s)
+                if not self._settled_check():
+                    return total
+        finally:
+            self._draining = was
 
     def advance(self, seconds: float) -> None:
         """On a SimClock: let ``seconds`` pass as the owner, draining after every timer."""
