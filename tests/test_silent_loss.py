@@ -13,7 +13,10 @@ import pytest
 from statectl.build import build, load_and_build
 from statectl.cli import main
 from statectl.cli.run import run
+from statectl.devices.twin import SimTwin
 from statectl.errors import Severity
+from statectl.runtime import SimClock
+from statectl.system import DeviceSetup, System
 from statectl.tables import load
 from statectl.tables.yaml_io import read_yaml
 
@@ -138,21 +141,53 @@ def test_check_reports_conflicting_api_rows(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(
-    ("limit", "code", "note"),
+    ("limit", "lines", "code", "said", "final"),
     [
-        (None, 0, False),  # one second of movement settles within the default 60 s
-        (0.5, 1, True),
-        (5.0, 0, False),
+        (None, "Movement\n", 0, "", "Blocked"),  # one second settles within the default 60 s
+        (5.0, "Movement\n", 0, "", "Blocked"),
+        # cut at 0.25 s after the line, and again at the end (0.5 s): left part-way
+        (0.25, "Movement\n", 1, "the run ended with device work still in flight", "Moving"),
+        # cut at 0.5 s, done by the end's settle at 1 s: nothing acted on it part-way
+        (0.5, "Movement\n", 0, "", "Blocked"),
+        # +SECONDS lines let the work finish: not a problem
+        (0.25, "Movement\n+0.5\n+0.5\n", 0, "", "Blocked"),
+        # an event line that comes while the movement is in flight: line 2 acted part-way
+        (0.5, "Movement\nError\n", 1, "line 2 came while device work was still in", None),
+        (0.1, "Movement\nError\nMovement\n", 1, "lines 2, 3 came while", None),
     ],
 )
-def test_a_settle_cut_short_is_reported(limit: float | None, code: int, note: bool) -> None:
-    """A batch run whose device work outlasts --settle-limit says so and exits 1."""
+def test_work_outlasting_a_settle_is_reported_when_it_matters(
+    limit: float | None, lines: str, code: int, said: str, final: str | None
+) -> None:
+    """A batch run whose device work outlasts --settle-limit exits 1 naming the event lines
+    that came while it was in flight, or the end that left it part-way; a cut whose
+    work finished before the next event line (the limit's time passed) is no problem."""
     out, err = io.StringIO(), io.StringIO()
-    got = run(str(MOTOR), settle_limit=limit, events=io.StringIO("Movement\n"), out=out, err=err)
+    got = run(str(MOTOR), settle_limit=limit, events=io.StringIO(lines), out=out, err=err)
     assert got == code, err.getvalue()
-    assert ("settle limit" in err.getvalue()) is note
-    final = "final state Moving" if note else "final state Blocked"
-    assert final in out.getvalue()
+    assert ("--settle-limit" in err.getvalue()) is bool(said)
+    assert said in err.getvalue()
+    if final is not None:
+        assert f"final state {final}" in out.getvalue()
+
+
+def test_a_settle_cut_short_lets_its_limit_pass() -> None:
+    """System.settle stops at the limit with the limit's time passed (monitor polls ran),
+    and work_pending says the cut work is still due until it is done."""
+    chart, _ = load_and_build(MOTOR)
+    assert chart is not None
+    clock = SimClock()
+    system = System([DeviceSetup("Motor", chart, driver=SimTwin(chart, delay=1.0))], clock)
+    system.start()
+    try:
+        system.post("Motor", "Movement")
+        system.settle(0.25)
+        assert (clock.now(), system.work_pending(), system.settle_cut) == (0.25, True, 1)
+        system.settle(1.0)
+        assert (clock.now(), system.work_pending(), system.settle_cut) == (1.0, False, 1)
+        assert system.subjects["Motor"].configuration == {"Blocked"}
+    finally:
+        system.close()
 
 
 def test_the_settle_limit_option_must_be_positive() -> None:

@@ -374,7 +374,8 @@ class System:
 
     def settle(self, limit: float | None = None) -> None:
         """On a SimClock: let time pass until the work in flight is done (or ``limit`` seconds,
-        default :attr:`settle_limit`; a settle cut short there is counted in :attr:`settle_cut`).
+        default :attr:`settle_limit`, all of which pass; such a cut is counted in
+        :attr:`settle_cut` and :meth:`work_pending` says the work is still due).
 
         Work is every timer but the background ones: a monitor polls for as long as
         its state is active, so waiting for it would always run to the limit. Polls
@@ -393,11 +394,24 @@ class System:
                 self._commit()
                 due = clock.next_deadline(work_only=True)
                 if due is not None and due > end and not self.hold_time:
-                    self.settle_cut += 1  # work pending at the limit: the run says so
+                    self.settle_cut += 1  # work pending at the limit: the limit's time passes
+                    clock.run_until(end, settle=self._drain)
+                    self._drain()
+                    self._commit()
+                    break
                 if due is None or due > end:
                     break
                 clock.run_until(due, settle=self._drain)
                 self._drain()
+
+    def work_pending(self) -> bool:
+        """On a SimClock: device work (not a monitor's polls) is still due, as after a
+        :meth:`settle` cut short at its limit; never with :attr:`hold_time`."""
+        clock = self.clock
+        if not isinstance(clock, SimClock) or self.hold_time:
+            return False
+        with self.owner:
+            return clock.next_deadline(work_only=True) is not None
 
     def _commit(self) -> None:
         """As the owner: let accepted events (links) commit and run before time moves on.

@@ -180,10 +180,13 @@ def _feed(
     batch: bool,
     problems: Problems | None = None,
     steps: StepLog | None = None,
+    early: list[int] | None = None,
 ) -> None:
     """Post each event line; a batch run settles after each (rule 3); count bad lines (rule 9).
 
-    ``steps`` (a :class:`~statectl.cli.steps.StepLog`, ``--json``) writes what each line did.
+    ``steps`` (a :class:`~statectl.cli.steps.StepLog`, ``--json``) writes what each line did;
+    ``early`` gets the event lines a batch run posted while work outlasting its settle
+    limit was still in flight (cli/settle.py).
     """
     for number, line in enumerate(lines, 1):
         try:
@@ -200,6 +203,8 @@ def _feed(
                     steps.advance(number, parsed)
                 continue
             device, event, data = parsed
+            if batch and early is not None and system.work_pending():
+                early.append(number)
             ticket = system.post(device, event, data)
             if batch:
                 if ticket is not None:
@@ -414,9 +419,10 @@ def run(
             lines = events if events is not None else sys.stdin
             if steps is not None:
                 steps.begin()  # what the start did is not a line's
-            _feed(system, lines, err, batch=True, problems=problems, steps=steps)
+            early: list[int] = []
+            _feed(system, lines, err, batch=True, problems=problems, steps=steps, early=early)
             system.quiesce()
-            problems.unsettled = unsettled_note(system)
+            problems.unsettled = unsettled_note(system, early, system.work_pending())
             for name, subject in system.subjects.items():
                 final = ", ".join(sorted(subject.configuration))
                 info.write(f"final state {final}\n" if cell is None else f"final {name}: {final}\n")
