@@ -229,7 +229,7 @@ def test_scxml_run_without_a_final_state_exits_non_zero(tmp_path: Path) -> None:
     )
     code, out, err = cli("scxml", "run", str(doc), "--timeout", "1")
     assert (code, out) == (1, "")
-    assert "no top-level final state" in err
+    assert "no top-level final state within 1 s" in err  # the timeout as given, not 1.0
 
 
 PAIR = ROOT / "examples" / "motor" / "motor.csv"  # names the shipped CSV pair; no such file

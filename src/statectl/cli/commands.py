@@ -234,7 +234,7 @@ def cmd_scxml_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     finally:
         timer.cancel()
     if final is None:
-        err.write(f"statectl scxml run: no top-level final state within {args.timeout} s\n")
+        err.write(f"statectl scxml run: no top-level final state within {args.timeout:g} s\n")
         return PROBLEMS
     out.write(f"final: {final}\n")
     out.flush()
