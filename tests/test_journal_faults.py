@@ -224,6 +224,27 @@ def test_a_journal_without_steps_is_not_resumed_and_nothing_is_redelivered(
     assert "steps" not in tables
 
 
+def test_a_journal_of_another_chart_is_refused_and_left_as_it_was(
+    good_journal: Path, tmp_path: Path
+) -> None:
+    """Resuming with a device file whose states differ from the journalled ones (Moving
+    renamed) is refused with what to do, and the journal still names its own chart: the
+    refused resume used to rewrite the ``devices`` row, so replay then mismatched."""
+    other = tmp_path / "renamed.yaml"
+    other.write_text(MOTOR.read_text().replace("Moving", "Running"))
+    db = damaged(good_journal, tmp_path, lambda _: None)
+    before = snapshot_of(db)
+    out, err = io.StringIO(), io.StringIO()
+    code = run(str(other), journal=str(db), resume=True, events=io.StringIO(), out=out, err=err)
+    said = err.getvalue()
+    assert (code, "written by another chart" in said, "Moving" in said) == (1, True, True), said
+    assert ("Nothing was started" in said, "resumed" in out.getvalue()) == (True, False)
+    assert snapshot_of(db) == before
+    with JournalReader(db) as reader:
+        row = reader.device("Motor")
+    assert row is not None and row.source == str(MOTOR)
+
+
 def test_replay_names_an_event_applied_twice_even_unchecked(
     good_journal: Path, tmp_path: Path
 ) -> None:

@@ -255,6 +255,14 @@ class System:
             path = self.journal.path
             try:
                 with JournalReader(path, check=False) as reader:
+                    misfits = [m for d in self.setups if (m := self.bound[d.name].misfit(reader))]
+                    if misfits:
+                        raise JournalError(
+                            f"journal {path} was written by another chart: "
+                            f"{'; '.join(misfits)}. Nothing was started. Resume with the "
+                            "device file the journal was written with, or give another "
+                            "--journal"
+                        )
                     for d in self.setups:
                         resumed[d.name] = self.bound[d.name].resume(reader, d.rules)
             except JournalError as exc:
