@@ -55,10 +55,10 @@ import yaml
 from statectl.devices.cia402 import Cia402Driver, Cia402SimDriver
 from statectl.devices.cia402.options import cia402_option_problems
 from statectl.devices.modbus import ModbusIO, modbus_option_problems
-from statectl.devices.motor import SimMotor
+from statectl.devices.motor import SimMotor, motor_option_problems
 from statectl.devices.opcua_config import OpcuaConfig, parse_opcua
 from statectl.devices.protocol import DeviceDriver
-from statectl.devices.stepper import SimStepper
+from statectl.devices.stepper import SimStepper, stepper_option_problems
 from statectl.devices.twin import SimTwin, twin_option_problems
 from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, StatectlError
 from statectl.model import Chart
@@ -106,6 +106,15 @@ BUS_LIBRARIES: Mapping[str, tuple[str, str]] = {
 #: Checks of option values, by driver name: each returns the problems it finds.
 OPTION_CHECKS: Mapping[str, Callable[[Mapping[str, Any]], Sequence[str]]] = {
     "sim-twin": twin_option_problems,
+    "sim-motor": motor_option_problems,
+    "sim-stepper": stepper_option_problems,
+}
+
+#: What to do about a D509, by driver name.
+OPTION_HINTS: Mapping[str, str] = {
+    "sim-twin": "give seconds as numbers >= 0, e.g. {delay: 0.5, faults: {Moving: 0.4}}",
+    "sim-motor": "give numbers, e.g. {speed: 10, position: 0}",
+    "sim-stepper": "give numbers, e.g. {steps_per_unit: 100, pulse_rate: 1000, step: 0}",
 }
 
 #: Constructor parameters statectl supplies itself, never a config file.
@@ -413,7 +422,7 @@ def load_run_config(path: str | Path) -> RunConfig:
                 "D509",
                 line_of(fields["options"][1]),
                 f"device {device!r}: {text}",
-                "give seconds as numbers >= 0, e.g. {delay: 0.5, faults: {Moving: 0.4}}",
+                OPTION_HINTS.get(driver, ""),
             )
         if bad:
             continue
