@@ -7,7 +7,7 @@ import threading
 
 import pytest
 
-from statectl import MicrostepTaken, QueueFull, SimClock, StatectlError, System
+from statectl import MicrostepTaken, QueueFull, SimClock, StatectlError, System, WallClock
 from statectl.model import Chart
 from statectl.system import DeviceSetup
 from support import Recorder
@@ -38,6 +38,22 @@ def test_events_posted_before_the_start_are_run_at_the_start(motor: Chart) -> No
     system.start()
     system.drain()
     assert system.subjects["M1"].configuration == {"Moving"}
+    system.close()
+
+
+@pytest.mark.parametrize("clock", [SimClock, WallClock])
+def test_events_posted_before_stop_are_run_before_serve_returns(
+    motor: Chart, clock: type[SimClock] | type[WallClock]
+) -> None:
+    """A live run's feeder posts the last line and sets stop at once: serve() still runs
+    that event (it used to return at the stop and drop it)."""
+    system = System((DeviceSetup("M", motor),), clock())
+    system.start()
+    system.post("M", "Movement")
+    stop = threading.Event()
+    stop.set()
+    system.serve(stop)
+    assert system.subjects["M"].configuration == {"Moving"}
     system.close()
 
 

@@ -410,6 +410,8 @@ class System:
         """The owner loop until ``stop``: drain when woken; on a SimClock follow the wall clock.
 
         Events wake it at once; the tick only moves a paced SimClock on and looks at ``stop``.
+        Events posted before ``stop`` are run before it returns (the last line typed before
+        the input ends, posted just before the feeder sets ``stop``, used to be dropped).
         """
         last = time.monotonic()
         sim = paced and isinstance(self.clock, SimClock)
@@ -422,6 +424,7 @@ class System:
                 last = now
             else:
                 self.drain()
+        self.drain()
 
     # -- asyncio (rule 5) ---------------------------------------------------------------------
 
