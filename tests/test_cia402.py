@@ -331,3 +331,20 @@ def test_the_socketcan_example_config_loads() -> None:
         "Motor"
     ]
     assert (name, options["interface"], options["channel"]) == ("cia402", "socketcan", "can0")
+
+
+@pytest.mark.parametrize(("realtime", "code", "moved"), [(False, 2, False), (True, 0, True)])
+def test_a_bus_driver_runs_on_wall_time_only(realtime: bool, code: int, moved: bool) -> None:
+    """A batch run of a bus driver on simulated time is a usage error naming --realtime (it
+    used to end at once with the Motor still Moving, exit 0); with --realtime the typed
+    Movement runs."""
+    import io
+
+    from statectl.cli.run import run
+
+    motor = Path(__file__).parent.parent / "examples" / "motor" / "motor.yaml"
+    out, err = io.StringIO(), io.StringIO()
+    lines = io.StringIO("Movement {amount: 1}\n")
+    got = run(str(motor), driver="cia402-sim", realtime=realtime, events=lines, out=out, err=err)
+    assert (got, "--realtime" in err.getvalue()) == (code, not realtime), err.getvalue()
+    assert ("Cia402SimDriver.move_to(1.0)" in out.getvalue()) == moved

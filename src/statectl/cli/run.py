@@ -14,7 +14,9 @@ Rules:
 3. Time: ``--realtime`` runs on a :class:`WallClock`; otherwise a
    :class:`SimClock`, which a live run (``--dashboard``) moves in step with the
    wall clock and a batch run (events from a file or stdin) moves only to let
-   each event's consequences settle, so a batch run is deterministic.
+   each event's consequences settle, so a batch run is deterministic. A bus
+   driver (``realtime``: cia402, cia402-sim, modbus) runs on wall time, so a batch
+   run with one is refused (usage): it needs ``--realtime``.
 4. A cell file runs the same way, its links sent by the System.
 5. Events come as lines ``[DEVICE:] EVENT [DATA]`` (DATA in YAML flow style, e.g.
    ``Movement {amount: 10}``); ``+SECONDS`` lets simulated time pass; ``#``
@@ -336,6 +338,13 @@ def run(
                 raise StatectlError(f"{config}: its opcua: section makes a live run; not --json")
         info = err if as_json else out  # rule 10: --json writes nothing else to stdout
         drivers = _drivers(devices, driver, config, table)
+        walled = [n for n, d in drivers.items() if getattr(d, "realtime", False)]
+        if walled and not live:  # rule 3: a bus on wall time never settles on a SimClock
+            err.write(
+                f"statectl run: the driver of {', '.join(walled)} runs on the bus's wall time; "
+                "a batch run on simulated time would end before it reports: add --realtime\n"
+            )
+            return USAGE
         host, port, token, token_from = _dashboard_settings(
             host, port, token, config, table.dashboard
         )
