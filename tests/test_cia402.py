@@ -309,6 +309,26 @@ def test_bad_cia402_options_are_d511_all_at_once(tmp_path: Path) -> None:
     }
 
 
+@pytest.mark.parametrize(
+    ("driver", "option"),
+    [
+        ("cia402", "scale"),
+        ("cia402-sim", "speed"),
+        ("cia402", "sdo_timeout"),
+        ("cia402", "stale_after"),
+    ],
+)
+def test_an_infinite_cia402_number_is_d511(tmp_path: Path, driver: str, option: str) -> None:
+    """.inf is no scale or timeout: D511 at the options' line (a scale of .inf used to
+    load and end the first Movement in an OverflowError traceback)."""
+    path = tmp_path / "run.yaml"
+    path.write_text(f"devices:\n  Motor:\n    driver: {driver}\n    options: {{{option}: .inf}}\n")
+    with pytest.raises(DiagnosticError) as info:
+        load_driver_config(path)
+    found = [(d.code, d.where.line, option in d.message) for d in info.value.diagnostics]
+    assert found == [("D511", 4, True)]
+
+
 def test_demo_runs_the_motor_scenario_on_the_simulated_drive() -> None:
     """`statectl demo --driver cia402-sim` ends Blocked, its fault an EMCY from the drive."""
     import io
