@@ -49,7 +49,11 @@ Rules:
    e.g. a linked event sent without the data its guard reads) refuses that event
    only: the device records it (``EventRejected``, guard error), the message goes
    to the ``on_failure`` callbacks (``statectl run`` prints it and exits 1), and
-   the other devices and the device's later events go on.
+   the other devices and the device's later events go on. In the live owner loop
+   (:meth:`System.serve`) an observer that raises a ``StatectlError`` (a driver
+   refusing an event's data, ``Movement {amount: abc}``) fails the same way: the
+   message goes to ``on_failure`` and the loop goes on; before, one bad event sent
+   from the dashboard or typed into a ``--realtime`` run ended the whole run.
 """
 
 from __future__ import annotations
@@ -64,7 +68,7 @@ from typing import Any
 
 from statectl.cell import Cell
 from statectl.devices import DeviceDriver, connect
-from statectl.errors import StatectlError, UnhandledEventError
+from statectl.errors import StatectlError
 from statectl.explore.conditions import bind_cross_guards
 from statectl.explore.enforce import CellRules, Violation
 from statectl.explore.replay import CellLinks, link_data
@@ -126,7 +130,7 @@ class System:
     #: called on the owner with each invariant violation a step caused (rule 6)
     on_violation: list[Callable[[Violation], None]] = field(default_factory=list)
     #: called on the owner with each row that failed while draining (rule 7)
-    on_failure: list[Callable[[UnhandledEventError], None]] = field(default_factory=list)
+    on_failure: list[Callable[[StatectlError], None]] = field(default_factory=list)
     _live: bool = False  # started and not closing: the writer may drain
     #: devices that had something queued since the owner last looked (rule 1)
     _ready: deque[Subject] = field(default_factory=deque)
@@ -418,13 +422,29 @@ class System:
         while not stop.is_set():
             self.wake.wait(_TICK)
             self.wake.clear()
-            if sim:
-                now = time.monotonic()
-                self.advance(now - last)
-                last = now
-            else:
+            try:
+                if sim:
+                    now = time.monotonic()
+                    self.advance(now - last)
+                    last = now
+                else:
+                    self.drain()
+            except StatectlError as exc:  # rule 7: a driver refused the event's data
+                self._failed(exc)
+        while True:  # each failure took its event off the queue: this ends
+            try:
                 self.drain()
-        self.drain()
+                return
+            except StatectlError as exc:
+                self._failed(exc)
+
+    def _failed(self, exc: StatectlError) -> None:
+        """Rule 7 for the live owner loop: an observer (a driver) that raised during a step
+        fails that event only; the run goes on, and the devices with events left are
+        visited again."""
+        for callback in self.on_failure:
+            callback(exc)
+        self._ready.extend(s for s in self.subjects.values() if s.queued)
 
     # -- asyncio (rule 5) ---------------------------------------------------------------------
 

@@ -12,6 +12,7 @@ from collections.abc import Callable
 from typing import Any, TextIO
 
 from statectl.cli.commands import OK, PROBLEMS
+from statectl.errors import UnhandledEventError
 from statectl.explore.enforce import Refused, Violation
 from statectl.runtime.records import EventIgnored, EventRejected, StepRecord
 from statectl.semantics import Unhandled
@@ -29,6 +30,7 @@ class Problems:
         self.unsettled = ""  # a batch settle stopped at --settle-limit: what to say
         self.refused = 0  # environment commands whose 'when' was false (a cell)
         self.violated = 0  # invariant violations seen live (a cell)
+        self.failed = 0  # events a driver refused in a live run (system.py rule 7)
 
     def record(self, record: object) -> None:
         """A listener: count the events a device refused or did not know."""
@@ -54,6 +56,9 @@ class Problems:
 
         def say(exc: Exception) -> None:
             err.write(f"{exc}\n")
+            if not isinstance(exc, UnhandledEventError):  # a driver's: no record counts it
+                with self._lock:
+                    self.failed += 1
 
         return say
 
@@ -101,6 +106,8 @@ class Problems:
             parts.append(f"{self.refused} environment command(s) refused by the cell's 'when'")
         if self.violated:
             parts.append(f"{self.violated} invariant violation(s)")
+        if self.failed:
+            parts.append(f"{self.failed} event(s) a driver refused, reported above")
         return "; ".join(parts) or None
 
 
