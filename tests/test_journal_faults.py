@@ -515,3 +515,19 @@ def test_check_journal_finds_a_damaged_journal_as_a_value(
         db,
         ("table inbox is missing", "table steps is missing"),
     )
+
+
+@pytest.mark.parametrize("suffix", ["", "-wal"])
+def test_export_out_the_journal_itself_is_refused_and_the_journal_kept(
+    good_journal: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, suffix: str
+) -> None:
+    """`journal export run.db --out run.db` (the journal, or its -wal file) is refused,
+    exit 1, and the journal still reads; it used to be replaced by the JSON Lines."""
+    db = damaged(good_journal, tmp_path, lambda _: None)
+    aside = Path(f"{db}{suffix}")
+    aside.touch()
+    before = snapshot_of(db)
+    code, out, err = cli(["journal", "export", str(db), "--out", str(aside)], monkeypatch)
+    assert (code, "is the journal itself" in err, out) == (1, True, ""), err
+    assert snapshot_of(db) == before
+    check_journal(db)  # still a journal

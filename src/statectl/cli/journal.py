@@ -147,6 +147,12 @@ def journal_export(
     over it once complete, so a failure (a damaged row, a full disk) leaves no
     partial file and an existing FILE untouched.
     """
+    if to is not None and _is_the_journal(Path(to), path):
+        err.write(
+            f"statectl journal export: --out {to} is the journal itself (or its -wal/-shm "
+            "file); writing there would destroy it: name another file\n"
+        )
+        return PROBLEMS
     opened = _reader_in_window("export", path, since, until, err)
     if isinstance(opened, int):
         return opened
@@ -176,6 +182,18 @@ def journal_export(
         if code[0] == OK:
             out.write(f"wrote {n} line(s) to {to}\n")
     return code[0]
+
+
+def _is_the_journal(target: Path, journal: str) -> bool:
+    """Whether ``target`` is the journal file (or one of SQLite's files beside it)."""
+    if not target.exists():
+        return False
+    for suffix in ("", "-wal", "-shm", "-journal"):
+        beside = Path(journal + suffix)
+        with contextlib.suppress(OSError):
+            if beside.exists() and os.path.samefile(target, beside):
+                return True
+    return False
 
 
 def journal_replay(
