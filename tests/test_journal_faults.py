@@ -531,3 +531,20 @@ def test_export_out_the_journal_itself_is_refused_and_the_journal_kept(
     assert (code, "is the journal itself" in err, out) == (1, True, ""), err
     assert snapshot_of(db) == before
     check_journal(db)  # still a journal
+
+
+@pytest.mark.parametrize("fresh", [False, True])
+def test_a_journal_path_that_is_the_device_file_is_refused(tmp_path: Path, fresh: bool) -> None:
+    """`run motor.yaml --journal motor.yaml [--fresh]` is refused, exit 1, the device file
+    untouched; with --fresh (which the refusal of a non-journal suggests) it used to move
+    the device file aside and write a journal in its place."""
+    device = tmp_path / "motor.yaml"
+    shutil.copyfile(MOTOR, device)
+    before = snapshot_of(device)
+    out, err = io.StringIO(), io.StringIO()
+    code = run(
+        str(device), journal=str(device), fresh=fresh, events=io.StringIO(), out=out, err=err
+    )
+    assert (code, "is the run's input file" in err.getvalue()) == (1, True), err.getvalue()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["motor.yaml"]
+    assert snapshot_of(device) == before

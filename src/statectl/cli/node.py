@@ -255,8 +255,9 @@ def node_main(
         setups = tuple(replace(d, driver=drivers.get(d.name)) for d in devices)
         store = None
         if journal is not None:
+            read = (path, config, *(d.source for d in devices))
             store = runcli._open_journal(
-                journal, Sync.NORMAL, promise, resume=resume, fresh=fresh, out=out
+                journal, Sync.NORMAL, promise, resume=resume, fresh=fresh, out=out, inputs=read
             )
         system = NodeSystem(setups, WallClock(), store, cell)
         wire = Wire(

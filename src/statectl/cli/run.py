@@ -352,7 +352,10 @@ def run(
         clock: Clock = WallClock() if realtime else SimClock()
         store = None
         if journal is not None:
-            store = _open_journal(journal, mode, promise, resume=resume, fresh=fresh, out=info)
+            read = (path, config, *(d.source for d in devices))
+            store = _open_journal(
+                journal, mode, promise, resume=resume, fresh=fresh, out=info, inputs=read
+            )
         if table.ship is not None:
             shipping = _start_shipping(table.ship, store, config, err)
         system = System(setups, clock, store, cell)
@@ -476,15 +479,31 @@ def _feed_then_stop(
 
 
 def _open_journal(
-    path: str, sync: Sync, guarantee: Guarantee, *, resume: bool, fresh: bool, out: TextIO
+    path: str,
+    sync: Sync,
+    guarantee: Guarantee,
+    *,
+    resume: bool,
+    fresh: bool,
+    out: TextIO,
+    inputs: Sequence[str | None] = (),
 ) -> Journal:
     """The run's journal, checked before anything starts; ``--fresh`` sets the old one aside.
 
     ``fresh`` without ``resume``: any existing journal is set aside. With
     ``resume``: only one that cannot be trusted (:class:`JournalDamaged`). Without
     ``fresh`` such a journal is refused, and the message says how to start over.
+    A journal path that is one of the run's ``inputs`` (its device, cell or config
+    file) is refused first: ``--fresh`` would move that file aside.
     """
     p = Path(path)
+    for given in inputs:
+        with contextlib.suppress(OSError):
+            if given and p.exists() and os.path.samefile(p, given):
+                raise StatectlError(
+                    f"--journal {path} is the run's input file {given}, not a journal; "
+                    "nothing was started: name another file, e.g. --journal run.db"
+                )
     if resume and p.is_file() and p.stat().st_size == 0:  # a new journal has its schema
         damage: JournalDamaged | None = JournalDamaged(p, ["it is empty (0 bytes)"])
     else:
