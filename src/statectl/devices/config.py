@@ -186,6 +186,16 @@ def resolve_driver(name: str) -> Callable[..., DeviceDriver]:
             f"package {top}/) beside the model file, or add the directory that holds it to "
             "PYTHONPATH"
         ) from None
+    except SyntaxError as exc:
+        raise StatectlError(
+            f"{exc.filename}:{exc.lineno}: driver {name!r}: {module_name!r} is not valid "
+            f"Python ({exc.msg}); fix the module"
+        ) from None
+    except Exception as exc:  # the module's own code failed: say where, not a traceback
+        raise StatectlError(
+            f"{_where(exc)}driver {name!r}: importing {module_name!r} failed: "
+            f"{type(exc).__name__}: {exc}; fix the module"
+        ) from None
     obj = module
     for part in attr.split("."):
         if not hasattr(obj, part):
@@ -216,7 +226,27 @@ def make_driver(
         if chart is None:
             raise StatectlError(f"driver {name!r} is derived from the device's chart; pass chart=")
         kwargs["chart"] = chart
-    return factory(**kwargs)
+    if name in DRIVERS:
+        return factory(**kwargs)
+    try:
+        return factory(**kwargs)
+    except StatectlError:
+        raise
+    except Exception as exc:  # a driver of the user's own failed: say where, not a traceback
+        raise StatectlError(
+            f"{_where(exc)}driver {name!r} failed while it was made: "
+            f"{type(exc).__name__}: {exc}; fix the driver or its options"
+        ) from None
+
+
+def _where(exc: BaseException) -> str:
+    """``file:line: `` of the innermost frame that raised ``exc`` (empty if unknown)."""
+    tb = exc.__traceback__
+    if tb is None:
+        return ""
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    return f"{tb.tb_frame.f_code.co_filename}:{tb.tb_lineno}: "
 
 
 def _takes_chart(factory: Callable[..., Any]) -> bool:
