@@ -485,3 +485,30 @@ def test_show_interleaves_accepted_events_and_steps_in_time_order(
             seq = lines[i].split("  ", 1)[1].split()[0]
             later = [x for x in lines[i + 1 :] if f"({seq})" in x]
             assert later, f"no step after accepted {seq}"
+
+
+def test_a_line_of_bytes_that_are_not_utf8_is_a_bad_line_not_a_dead_journal(
+    tmp_path: Path,
+) -> None:
+    """`statectl run --journal` fed a line with a byte that is not UTF-8 (in the event name
+    or its data) reports that line and goes on; the name used to fail the journal's write,
+    which stops accepting anything, and the data a YAML traceback."""
+    import os
+    import subprocess
+    import sys
+
+    db = tmp_path / "run.db"
+    src = str(Path(__file__).parent.parent / "src")
+    done = subprocess.run(
+        [sys.executable, "-m", "statectl", "run", str(MOTOR), "--journal", str(db)],
+        input=b'Movement\xff\nInitialization {a: "x\xfe"}\nMovement {amount: 1}\n',
+        capture_output=True,
+        timeout=120,
+        env={**os.environ, "PYTHONPATH": src},
+    )
+    err = done.stderr.decode("utf-8", "replace")
+    assert (done.returncode, "Traceback" in err, "write failed" in err) == (1, False, False), err
+    assert "line 1: the line is not UTF-8 text (byte 0xff" in err
+    assert "line 2: the line is not UTF-8 text (byte 0xfe" in err
+    with JournalReader(db) as reader:
+        assert [row.event for row in reader.inbox()] == ["Movement"]
