@@ -242,3 +242,31 @@ def test_a_realtime_run_goes_on_past_a_driver_refusing_a_line_and_exits_1() -> N
         True,
     ), said
     assert "Moving -> Returning  on Error" in out.getvalue()
+
+
+def test_a_driver_failure_on_the_journal_writers_drain_is_reported(
+    motor: Chart, tmp_path: object
+) -> None:
+    """Under durable-first the journal's writer runs the events it committed; a driver that
+    refuses an event's data there goes to on_failure and the next event runs (it used to
+    print a traceback on the writer's thread and count for nothing)."""
+    from pathlib import Path
+
+    from statectl.devices import SimMotor
+    from statectl.journal import Journal
+
+    journal = Journal(Path(str(tmp_path)) / "j.db", guarantee="durable-first")
+    system = System((DeviceSetup("A", motor, driver=SimMotor()),), SimClock(), journal)
+    failures: list[str] = []
+    system.on_failure.append(lambda exc: failures.append(str(exc)))
+    system.start()
+    for event, data in (("Movement", {"amount": "abc"}), ("Error", None)):
+        ticket = system.post("A", event, data)
+        assert ticket is not None
+        ticket.wait()
+    deadline = time.monotonic() + WAIT
+    while system.subjects["A"].configuration == {"Moving"} and time.monotonic() < deadline:
+        time.sleep(0.01)
+    system.close()
+    assert [("a movement needs" in f) for f in failures] == [True]
+    assert system.subjects["A"].configuration != {"Moving"}  # Error ran after the failure
