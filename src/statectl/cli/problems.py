@@ -33,10 +33,11 @@ class Problems:
         self.failed = 0  # events a driver refused in a live run (system.py rule 7)
 
     def record(self, record: object) -> None:
-        """A listener: count the events a device refused or did not know."""
-        refused = isinstance(record, EventRejected) or (
-            isinstance(record, EventIgnored) and record.reason is Unhandled.UNKNOWN_EVENT
-        )
+        """A listener: count the events a device refused or did not know (a guard error is
+        counted by :meth:`failure`, which hears it whether records are built or not)."""
+        refused = (
+            isinstance(record, EventRejected) and record.reason is not Unhandled.GUARD_ERROR
+        ) or (isinstance(record, EventIgnored) and record.reason is Unhandled.UNKNOWN_EVENT)
         if refused:
             with self._lock:
                 self.unknown += 1
@@ -46,18 +47,25 @@ class Problems:
         if step.event is None:  # a record made outside any event
             for record in step.records:
                 self.record(record)
-        elif step.step is None and (step.rejected or step.reason is Unhandled.UNKNOWN_EVENT):
+        elif step.step is None and (
+            (step.rejected and step.reason is not Unhandled.GUARD_ERROR)
+            or step.reason is Unhandled.UNKNOWN_EVENT
+        ):
             with self._lock:
                 self.unknown += 1
 
     def failure(self, err: TextIO) -> Callable[[Exception], None]:
-        """A System callback: a row that failed while draining is said where (its
-        EventRejected record is what counts it)."""
+        """A System callback: a row that failed while draining (a guard or an assignment
+        that raised) is said where and counted as rejected; a driver that refused an
+        event's data is counted apart. Counted here, not from records: a run without a
+        ``listen()`` listener gets no record of a guard error, and an assignment's none."""
 
         def say(exc: Exception) -> None:
             err.write(f"{exc}\n")
-            if not isinstance(exc, UnhandledEventError):  # a driver's: no record counts it
-                with self._lock:
+            with self._lock:
+                if isinstance(exc, UnhandledEventError):
+                    self.unknown += 1
+                else:
                     self.failed += 1
 
         return say
