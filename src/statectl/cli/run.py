@@ -195,6 +195,11 @@ def _feed(
                 if isinstance(system.clock, SimClock) and batch:
                     system.advance(parsed)
                     system.quiesce()
+                elif parsed > threading.TIMEOUT_MAX:  # time.sleep would overflow, killing the feed
+                    raise StatectlError(
+                        f"'+' waits at most {threading.TIMEOUT_MAX:.0f} s in a live run "
+                        f"(got {parsed:g})"
+                    )
                 else:
                     time.sleep(parsed)
                 if steps is not None:
