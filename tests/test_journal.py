@@ -512,3 +512,19 @@ def test_a_line_of_bytes_that_are_not_utf8_is_a_bad_line_not_a_dead_journal(
     assert "line 2: the line is not UTF-8 text (byte 0xfe" in err
     with JournalReader(db) as reader:
         assert [row.event for row in reader.inbox()] == ["Movement"]
+
+
+@pytest.mark.parametrize(("since", "code"), [("nan", 2), ("yesterday", 2), ("0", 0)])
+def test_a_since_that_is_no_time_is_a_usage_error(
+    tmp_path: Path, device_file: Path, since: str, code: int
+) -> None:
+    """`journal show --since nan` is a usage error like any text that is no time (it used
+    to show an empty window and exit 0: no comparison with NaN holds)."""
+    db = tmp_path / "j.db"
+    ran = run(
+        str(device_file), journal=str(db), events=io.StringIO("Movement\n"), out=io.StringIO()
+    )
+    assert ran == 0
+    out, err = io.StringIO(), io.StringIO()
+    assert journal_show(str(db), since=since, out=out, err=err) == code, err.getvalue()
+    assert ("not a time" in err.getvalue(), out.getvalue() != "") == (code == 2, code == 0)

@@ -59,9 +59,13 @@ def parse_event_line(line: str) -> tuple[str | None, str, Any] | float | None:
 def parse_time(text: str) -> float:
     """Seconds since the epoch, or an ISO 8601 date-time (local time if it has no zone)."""
     try:
-        return float(text)
+        seconds = float(text)
     except ValueError:
         pass
+    else:
+        if math.isnan(seconds):  # every comparison with it is false: the window holds nothing
+            raise StatectlError(f"not a time: {text!r}; give seconds since the epoch or ISO 8601")
+        return seconds
     try:
         return dt.datetime.fromisoformat(text).timestamp()
     except ValueError:
