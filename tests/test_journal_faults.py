@@ -548,3 +548,26 @@ def test_a_journal_path_that_is_the_device_file_is_refused(tmp_path: Path, fresh
     assert (code, "is the run's input file" in err.getvalue()) == (1, True), err.getvalue()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["motor.yaml"]
     assert snapshot_of(device) == before
+
+
+GRIPPER = Path(__file__).parent.parent / "examples" / "pick-and-place" / "gripper.yaml"
+
+
+@pytest.mark.parametrize("existing", [False, True])
+def test_a_run_refused_before_it_starts_leaves_the_journal_as_it_was(
+    good_journal: Path, tmp_path: Path, existing: bool
+) -> None:
+    """A run refused after its journal opened (a driver that cannot drive the device)
+    leaves no new journal and an existing one as it was, with no -wal/-shm beside it; it
+    used to leave the new file and an unmerged 74 KB -wal, the journal never closed."""
+    db = tmp_path / "run.db"
+    if existing:
+        shutil.copyfile(good_journal, db)
+    before = snapshot_of(db)
+    out, err = io.StringIO(), io.StringIO()
+    code = run(
+        str(GRIPPER), driver="sim-motor", journal=str(db), events=io.StringIO(), out=out, err=err
+    )
+    assert (code, "SimMotor cannot drive Gripper" in err.getvalue()) == (1, True), err.getvalue()
+    assert sorted(p.name for p in tmp_path.iterdir()) == (["run.db"] if existing else [])
+    assert snapshot_of(db) == before

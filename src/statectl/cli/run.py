@@ -62,7 +62,7 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, TextIO
@@ -358,12 +358,14 @@ def run(
         store = None
         if journal is not None:
             read = (path, config, *(d.source for d in devices))
+            made = _new_journal(journal, resume=resume, fresh=fresh)
             store = _open_journal(
                 journal, mode, promise, resume=resume, fresh=fresh, out=info, inputs=read
             )
+        with _undone_on_failure(store, journal if store is not None and made else None):
+            system = System(setups, clock, store, cell)
         if table.ship is not None:
             shipping = _start_shipping(table.ship, store, config, err)
-        system = System(setups, clock, store, cell)
         if settle_limit is not None:
             system.settle_limit = settle_limit
         system.hold_time = driver == NO_DRIVER and config is None  # time moves on +S lines only
@@ -529,6 +531,29 @@ def _open_journal(
         aside = set_aside(p)
         out.write(f"{exc}\njournal {p} set aside as {aside}; starting a new journal\n")
         return Journal(p, sync=sync, guarantee=guarantee)
+
+
+def _new_journal(path: str, *, resume: bool, fresh: bool) -> bool:
+    """Whether opening ``path`` makes a new journal file (none there, or ``--fresh``)."""
+    return not Path(path).exists() or (fresh and not resume)
+
+
+@contextlib.contextmanager
+def _undone_on_failure(store: Journal | None, made: str | None) -> Iterator[None]:
+    """A run refused before it started (a driver that cannot drive its device, links a
+    journal cannot hold) closes the journal it opened, and removes it if this run made
+    it: nothing is left half-written (an unmerged ``-wal`` beside a new, empty file)."""
+    try:
+        yield
+    except BaseException:
+        if store is not None:
+            with contextlib.suppress(StatectlError, OSError):
+                store.close()
+        if made is not None:
+            for suffix in ("", "-wal", "-shm", "-journal"):
+                with contextlib.suppress(OSError):
+                    Path(made + suffix).unlink(missing_ok=True)
+        raise
 
 
 def _start_shipping(
