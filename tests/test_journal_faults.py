@@ -571,3 +571,14 @@ def test_a_run_refused_before_it_starts_leaves_the_journal_as_it_was(
     assert (code, "SimMotor cannot drive Gripper" in err.getvalue()) == (1, True), err.getvalue()
     assert sorted(p.name for p in tmp_path.iterdir()) == (["run.db"] if existing else [])
     assert snapshot_of(db) == before
+
+
+def test_a_journal_in_a_directory_that_does_not_exist_says_so(tmp_path: Path) -> None:
+    """`--journal nowhere/run.db`: exit 1 naming the missing directory and what to do, and
+    nothing made (SQLite's own words were 'unable to open database file')."""
+    db = tmp_path / "nowhere" / "run.db"
+    out, err = io.StringIO(), io.StringIO()
+    code = run(str(MOTOR), journal=str(db), events=io.StringIO("Movement\n"), out=out, err=err)
+    said = err.getvalue()
+    assert (code, f"the directory {db.parent} does not exist" in said) == (1, True), said
+    assert (list(tmp_path.iterdir()), out.getvalue()) == ([], "")

@@ -504,6 +504,11 @@ def _open_journal(
     file) is refused first: ``--fresh`` would move that file aside.
     """
     p = Path(path)
+    if not p.parent.is_dir():
+        raise StatectlError(
+            f"--journal {path}: the directory {p.parent} does not exist; nothing was started: "
+            "make it first, or give a journal path in a directory that exists"
+        )
     for given in inputs:
         with contextlib.suppress(OSError):
             if given and p.exists() and os.path.samefile(p, given):
