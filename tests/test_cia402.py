@@ -309,6 +309,26 @@ def test_bad_cia402_options_are_d511_all_at_once(tmp_path: Path) -> None:
     }
 
 
+@pytest.mark.parametrize(
+    ("driver", "option"),
+    [
+        ("cia402", "scale"),
+        ("cia402-sim", "speed"),
+        ("cia402", "sdo_timeout"),
+        ("cia402", "stale_after"),
+    ],
+)
+def test_an_infinite_cia402_number_is_d511(tmp_path: Path, driver: str, option: str) -> None:
+    """.inf is no scale or timeout: D511 at the options' line (a scale of .inf used to
+    load and end the first Movement in an OverflowError traceback)."""
+    path = tmp_path / "run.yaml"
+    path.write_text(f"devices:\n  Motor:\n    driver: {driver}\n    options: {{{option}: .inf}}\n")
+    with pytest.raises(DiagnosticError) as info:
+        load_driver_config(path)
+    found = [(d.code, d.where.line, option in d.message) for d in info.value.diagnostics]
+    assert found == [("D511", 4, True)]
+
+
 def test_demo_runs_the_motor_scenario_on_the_simulated_drive() -> None:
     """`statectl demo --driver cia402-sim` ends Blocked, its fault an EMCY from the drive."""
     import io
@@ -331,3 +351,20 @@ def test_the_socketcan_example_config_loads() -> None:
         "Motor"
     ]
     assert (name, options["interface"], options["channel"]) == ("cia402", "socketcan", "can0")
+
+
+@pytest.mark.parametrize(("realtime", "code", "moved"), [(False, 2, False), (True, 0, True)])
+def test_a_bus_driver_runs_on_wall_time_only(realtime: bool, code: int, moved: bool) -> None:
+    """A batch run of a bus driver on simulated time is a usage error naming --realtime (it
+    used to end at once with the Motor still Moving, exit 0); with --realtime the typed
+    Movement runs."""
+    import io
+
+    from statectl.cli.run import run
+
+    motor = Path(__file__).parent.parent / "examples" / "motor" / "motor.yaml"
+    out, err = io.StringIO(), io.StringIO()
+    lines = io.StringIO("Movement {amount: 1}\n")
+    got = run(str(motor), driver="cia402-sim", realtime=realtime, events=lines, out=out, err=err)
+    assert (got, "--realtime" in err.getvalue()) == (code, not realtime), err.getvalue()
+    assert ("Cia402SimDriver.move_to(1.0)" in out.getvalue()) == moved

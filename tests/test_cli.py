@@ -179,10 +179,12 @@ CELLS = ROOT / "examples" / "pick-and-place"
         (["verify", "--max-states", "3", str(CELLS / "cell.yaml")], 1, "incomplete"),
         (["verify", "missing-cell.yaml"], 2, ""),
         (["run", str(CELLS / "cell.yaml"), "--walk", "5"], 0, "conveyor"),
+        (["run", str(CELLS / "cell.yaml"), "--walk", "-1"], 2, "0 or more"),
     ],
 )
 def test_cell_commands(argv: list[str], code: int, needle: str) -> None:
-    """verify exits 0 when every property holds, 1 when one fails or the search was cut short."""
+    """verify exits 0 when every property holds, 1 when one fails or the search was cut short;
+    a random walk of a negative number of steps is a usage error (it used to pass, exit 0)."""
     got, out, err = cli(*argv)
     assert got == code, out + err
     assert needle in out + err

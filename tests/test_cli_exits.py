@@ -315,3 +315,34 @@ def test_a_driver_module_found_nowhere_says_what_to_do(tmp_path: Path) -> None:
     assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
     assert "put nosuch_valve.py" in done.stderr and "beside the model file" in done.stderr
     assert "PYTHONPATH" in done.stderr
+
+
+FAILS_MADE = """\
+from statectl.devices import Driver
+
+
+class Valve(Driver):
+    def __init__(self) -> None:
+        raise ValueError("no bus")
+"""
+
+
+@pytest.mark.parametrize(
+    ("module", "says"),
+    [
+        ("def close(:\n", "broken_valve.py:1: driver 'broken_valve:Valve': 'broken_valve' is not"),
+        ("raise RuntimeError('no bus')\n", "broken_valve.py:1: driver 'broken_valve:Valve': impo"),
+        (FAILS_MADE, "broken_valve.py:6: driver 'broken_valve:Valve' failed while it was made"),
+    ],
+)
+def test_a_driver_module_that_fails_is_one_line_naming_its_file_and_line(
+    tmp_path: Path, module: str, says: str
+) -> None:
+    """A driver of one's own that is not Python, fails at import or in its constructor: exit
+    1 with its file:line and the error, no traceback (each used to be a traceback)."""
+    (tmp_path / "gripper.yaml").write_text(GRIPPER.read_text(encoding="utf-8"), encoding="utf-8")
+    (tmp_path / "broken_valve.py").write_text(module, encoding="utf-8")
+    argv = ["run", str(tmp_path / "gripper.yaml"), "--driver", "broken_valve:Valve"]
+    done = statectl(argv, tmp_path, "Grip\n")
+    assert (done.returncode, "Traceback" in done.stderr) == (1, False), done.stderr
+    assert says in done.stderr, done.stderr

@@ -76,6 +76,24 @@ def test_movement_without_an_amount_is_an_error(data: Any) -> None:
         motor.update(notify("Movement", data))
 
 
+@pytest.mark.parametrize("driver", [SimMotor, SimStepper])
+@pytest.mark.parametrize(
+    "data",
+    [{"amount": float("nan")}, {"amount": float("inf")}, {"target": -float("inf")},
+     {"amount": True}],
+)  # fmt: skip
+def test_a_movement_to_no_finite_number_is_refused_before_any_api_call(
+    driver: type[SimMotor] | type[SimStepper], data: dict[str, Any]
+) -> None:
+    """{amount: .nan}, .inf or true is a StatectlError saying what a movement needs, and no
+    API call is made (the stepper ended in ValueError: cannot convert float NaN to integer,
+    the motor said 'timer delay must be a number >= 0', true moved one unit)."""
+    made, _, reports = bound(driver())
+    with pytest.raises(StatectlError, match="a movement needs a finite number"):
+        made.update(notify("Movement", data))
+    assert (calls(made), reports) == ([], [])
+
+
 def test_initialization_returns_to_the_previous_position() -> None:
     """Initialization() -> return_to(where the last movement started)."""
     motor, clock, reports = bound(SimMotor(speed=10, position=3))

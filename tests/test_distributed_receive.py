@@ -19,6 +19,7 @@ import pytest
 
 from statectl.cell import load_cell
 from statectl.distributed import NodeSystem, Wire
+from statectl.errors import StatectlError
 from statectl.runner.cells import cell_setups
 from statectl.runtime import SimClock
 
@@ -165,6 +166,32 @@ def test_receiver_runs_the_device_on_its_thread_when_nobody_owns_it(tmp_path: Pa
     _system, wire, hits = _receiver_b(tmp_path)
     wire._receiver("a", "pong")(_event("ep1", 1))
     assert hits.threads == [threading.current_thread()]
+
+
+class _Refuses(_Hits):
+    """pong's observer as a driver that refuses the first notification's data."""
+
+    def update(self, notification: Any) -> None:
+        if not self.threads:
+            self.threads.append(threading.current_thread())
+            raise StatectlError("a hit needs {force: <number>}")
+        super().update(notification)
+
+
+def test_a_driver_refusing_a_link_event_fails_that_event_only(tmp_path: Path) -> None:
+    """A link event whose observer raises goes to on_failure (the node counts it and exits
+    1) and the stream goes on; it used to be said on the wire only, and count for nothing."""
+    system, wire = _node(tmp_path, "b")
+    refuses = _Refuses()
+    system.subjects["pong"].attach(refuses)
+    failures: list[str] = []
+    system.on_failure.append(lambda exc: failures.append(str(exc)))
+    on_link = wire._receiver("a", "pong")
+    on_link(_event("ep1", 1))
+    on_link(_event("ep1", 2))
+    assert failures == ["a hit needs {force: <number>}"]
+    assert len(refuses.threads) == 2  # the next event ran
+    assert system.subjects["pong"].configuration == frozenset({"Up"})  # both toggles taken
 
 
 def test_receiver_leaves_the_event_to_a_busy_owner(tmp_path: Path) -> None:

@@ -315,3 +315,35 @@ def test_codegen_refuses_a_guard_that_fails_when_evaluated() -> None:
     _, diags = flatten(chart)
     assert [d.code for d in diags] == ["G714"]
     assert "TypeError" in diags[0].message
+
+
+ASSIGNS = PRESS.replace(
+    "    data: {{pressure: float, part: str}}\n",
+    "    data: {{pressure: float, part: str}}\n    assign: {{indexed: _event.data.part + 1}}\n",
+)
+
+
+@pytest.mark.parametrize("as_json", [False, True])
+@pytest.mark.parametrize(
+    ("line", "says"),
+    [
+        ("Press", "guard '_event.data.pressure > 2.5' of event 'Press' failed"),
+        ("Press {pressure: 3, part: a}", "assignment indexed = _event.data.part + 1"),
+    ],
+)
+def test_a_guard_or_assignment_that_fails_counts_once_either_way(
+    tmp_path: Path, as_json: bool, line: str, says: str
+) -> None:
+    """A guard or an assignment that raises is said and makes `statectl run` exit 1, with
+    or without --json, counted once (the trace run exited 0: no record reached its count)."""
+    import io
+
+    from statectl.cli.run import run
+
+    device = tmp_path / "press.yaml"
+    device.write_text(ASSIGNS.format(guard=f'"{GOOD_GUARD}"'), encoding="utf-8")
+    out, err = io.StringIO(), io.StringIO()
+    code = run(str(device), events=io.StringIO(line + "\n"), out=out, err=err, as_json=as_json)
+    said = err.getvalue()
+    assert (code, says in said) == (1, True), said
+    assert "statectl run: 1 event(s) unknown to the device or rejected: exit 1" in said

@@ -503,3 +503,67 @@ def test_a_device_the_journal_does_not_hold_is_an_error(
     assert command(str(db), device="Motr", out=out, err=err) == 1
     assert out.getvalue() == ""
     assert "no device 'Motr' in the journal; devices journalled: Motor" in err.getvalue()
+
+
+def test_a_line_of_bytes_that_are_not_utf8_is_a_bad_line_not_a_dead_journal(
+    tmp_path: Path,
+) -> None:
+    """`statectl run --journal` fed a line with a byte that is not UTF-8 (in the event name
+    or its data) reports that line and goes on; the name used to fail the journal's write,
+    which stops accepting anything, and the data a YAML traceback."""
+    import os
+    import subprocess
+    import sys
+
+    db = tmp_path / "run.db"
+    src = str(Path(__file__).parent.parent / "src")
+    done = subprocess.run(
+        [sys.executable, "-m", "statectl", "run", str(MOTOR), "--journal", str(db)],
+        input=b'Movement\xff\nInitialization {a: "x\xfe"}\nMovement {amount: 1}\n',
+        capture_output=True,
+        timeout=120,
+        env={**os.environ, "PYTHONPATH": src},
+    )
+    err = done.stderr.decode("utf-8", "replace")
+    assert (done.returncode, "Traceback" in err, "write failed" in err) == (1, False, False), err
+    assert "line 1: the line is not UTF-8 text (byte 0xff" in err
+    assert "line 2: the line is not UTF-8 text (byte 0xfe" in err
+    with JournalReader(db) as reader:
+        assert [row.event for row in reader.inbox()] == ["Movement"]
+
+
+@pytest.mark.parametrize(("since", "code"), [("nan", 2), ("yesterday", 2), ("0", 0)])
+def test_a_since_that_is_no_time_is_a_usage_error(
+    tmp_path: Path, device_file: Path, since: str, code: int
+) -> None:
+    """`journal show --since nan` is a usage error like any text that is no time (it used
+    to show an empty window and exit 0: no comparison with NaN holds)."""
+    db = tmp_path / "j.db"
+    ran = run(
+        str(device_file), journal=str(db), events=io.StringIO("Movement\n"), out=io.StringIO()
+    )
+    assert ran == 0
+    out, err = io.StringIO(), io.StringIO()
+    assert journal_show(str(db), since=since, out=out, err=err) == code, err.getvalue()
+    assert ("not a time" in err.getvalue(), out.getvalue() != "") == (code == 2, code == 0)
+
+
+@pytest.mark.parametrize(
+    ("command", "code"), [(journal_show, 0), (journal_export, 0), (journal_replay, 1)]
+)
+def test_a_device_with_only_sent_events_is_shown_not_replayed(
+    tmp_path: Path, device_file: Path, command: Callable[..., int], code: int
+) -> None:
+    """A device this journal only holds accepted events for (a node's link events to
+    another node's device) is one show and export list; replay, which needs its chart,
+    says it is not journalled here."""
+    db = tmp_path / "j.db"
+    system = make_system(db, device_file)
+    system.start()
+    assert system.journal is not None
+    system.journal.accept("Conveyor", "Arrive")
+    system.journal.flush()
+    system.close()
+    out, err = io.StringIO(), io.StringIO()
+    assert command(str(db), device="Conveyor", out=out, err=err) == code, err.getvalue()
+    assert ("Arrive" in out.getvalue()) is (code == 0)

@@ -224,6 +224,27 @@ def test_a_journal_without_steps_is_not_resumed_and_nothing_is_redelivered(
     assert "steps" not in tables
 
 
+def test_a_journal_of_another_chart_is_refused_and_left_as_it_was(
+    good_journal: Path, tmp_path: Path
+) -> None:
+    """Resuming with a device file whose states differ from the journalled ones (Moving
+    renamed) is refused with what to do, and the journal still names its own chart: the
+    refused resume used to rewrite the ``devices`` row, so replay then mismatched."""
+    other = tmp_path / "renamed.yaml"
+    other.write_text(MOTOR.read_text().replace("Moving", "Running"))
+    db = damaged(good_journal, tmp_path, lambda _: None)
+    before = snapshot_of(db)
+    out, err = io.StringIO(), io.StringIO()
+    code = run(str(other), journal=str(db), resume=True, events=io.StringIO(), out=out, err=err)
+    said = err.getvalue()
+    assert (code, "written by another chart" in said, "Moving" in said) == (1, True, True), said
+    assert ("Nothing was started" in said, "resumed" in out.getvalue()) == (True, False)
+    assert snapshot_of(db) == before
+    with JournalReader(db) as reader:
+        row = reader.device("Motor")
+    assert row is not None and row.source == str(MOTOR)
+
+
 def test_replay_names_an_event_applied_twice_even_unchecked(
     good_journal: Path, tmp_path: Path
 ) -> None:
@@ -494,3 +515,70 @@ def test_check_journal_finds_a_damaged_journal_as_a_value(
         db,
         ("table inbox is missing", "table steps is missing"),
     )
+
+
+@pytest.mark.parametrize("suffix", ["", "-wal"])
+def test_export_out_the_journal_itself_is_refused_and_the_journal_kept(
+    good_journal: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, suffix: str
+) -> None:
+    """`journal export run.db --out run.db` (the journal, or its -wal file) is refused,
+    exit 1, and the journal still reads; it used to be replaced by the JSON Lines."""
+    db = damaged(good_journal, tmp_path, lambda _: None)
+    aside = Path(f"{db}{suffix}")
+    aside.touch()
+    before = snapshot_of(db)
+    code, out, err = cli(["journal", "export", str(db), "--out", str(aside)], monkeypatch)
+    assert (code, "is the journal itself" in err, out) == (1, True, ""), err
+    assert snapshot_of(db) == before
+    check_journal(db)  # still a journal
+
+
+@pytest.mark.parametrize("fresh", [False, True])
+def test_a_journal_path_that_is_the_device_file_is_refused(tmp_path: Path, fresh: bool) -> None:
+    """`run motor.yaml --journal motor.yaml [--fresh]` is refused, exit 1, the device file
+    untouched; with --fresh (which the refusal of a non-journal suggests) it used to move
+    the device file aside and write a journal in its place."""
+    device = tmp_path / "motor.yaml"
+    shutil.copyfile(MOTOR, device)
+    before = snapshot_of(device)
+    out, err = io.StringIO(), io.StringIO()
+    code = run(
+        str(device), journal=str(device), fresh=fresh, events=io.StringIO(), out=out, err=err
+    )
+    assert (code, "is the run's input file" in err.getvalue()) == (1, True), err.getvalue()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["motor.yaml"]
+    assert snapshot_of(device) == before
+
+
+GRIPPER = Path(__file__).parent.parent / "examples" / "pick-and-place" / "gripper.yaml"
+
+
+@pytest.mark.parametrize("existing", [False, True])
+def test_a_run_refused_before_it_starts_leaves_the_journal_as_it_was(
+    good_journal: Path, tmp_path: Path, existing: bool
+) -> None:
+    """A run refused after its journal opened (a driver that cannot drive the device)
+    leaves no new journal and an existing one as it was, with no -wal/-shm beside it; it
+    used to leave the new file and an unmerged 74 KB -wal, the journal never closed."""
+    db = tmp_path / "run.db"
+    if existing:
+        shutil.copyfile(good_journal, db)
+    before = snapshot_of(db)
+    out, err = io.StringIO(), io.StringIO()
+    code = run(
+        str(GRIPPER), driver="sim-motor", journal=str(db), events=io.StringIO(), out=out, err=err
+    )
+    assert (code, "SimMotor cannot drive Gripper" in err.getvalue()) == (1, True), err.getvalue()
+    assert sorted(p.name for p in tmp_path.iterdir()) == (["run.db"] if existing else [])
+    assert snapshot_of(db) == before
+
+
+def test_a_journal_in_a_directory_that_does_not_exist_says_so(tmp_path: Path) -> None:
+    """`--journal nowhere/run.db`: exit 1 naming the missing directory and what to do, and
+    nothing made (SQLite's own words were 'unable to open database file')."""
+    db = tmp_path / "nowhere" / "run.db"
+    out, err = io.StringIO(), io.StringIO()
+    code = run(str(MOTOR), journal=str(db), events=io.StringIO("Movement\n"), out=out, err=err)
+    said = err.getvalue()
+    assert (code, f"the directory {db.parent} does not exist" in said) == (1, True), said
+    assert (list(tmp_path.iterdir()), out.getvalue()) == ([], "")

@@ -256,3 +256,25 @@ def test_the_example_gripper_runs_on_modbus_and_a_reset_link_is_its_slip(
         subject.close()
         getattr(driver, "close")()  # noqa: B009 - not on the DeviceDriver protocol
         clock.stop()
+
+
+@pytest.mark.parametrize(
+    ("options", "says"),
+    [
+        ("{host: 5}", "host must be"),
+        ("{unit: x}", "unit must be a Modbus device id"),
+        ("{unit: 300}", "unit must be a Modbus device id"),
+        ("{period: .inf}", "period must be seconds > 0"),
+        ("{timeout: .nan}", "timeout must be seconds > 0"),
+    ],
+)
+def test_bad_modbus_link_options_are_d511(tmp_path: Path, options: str, says: str) -> None:
+    """A host that is not a name, a unit id outside 0-255 or a period that is not a finite
+    number of seconds is a D511 at the options' line (a host of 5 used to end in a
+    TypeError traceback from the socket library at the first Grip)."""
+    path = tmp_path / "run.yaml"
+    path.write_text(f"devices:\n  Gripper:\n    driver: modbus\n    options: {options}\n")
+    with pytest.raises(DiagnosticError) as info:
+        load_driver_config(path)
+    found = [(d.code, d.where.line, says in d.message) for d in info.value.diagnostics]
+    assert found == [("D511", 4, True)]

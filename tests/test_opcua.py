@@ -387,6 +387,9 @@ def test_the_gantry_serves_sub_state_machines_in_process() -> None:
     [
         ("opcua: 5", "'opcua' must be a mapping"),
         ("opcua: {endpoint: http://x}", "endpoint must be an opc.tcp:// URL"),
+        ("opcua: {endpoint: 'opc.tcp://127.0.0.1:99999'}", "(Port out of range"),
+        ("opcua: {endpoint: 'opc.tcp://[::1:4840'}", "(Invalid IPv6 URL)"),
+        ("opcua: {endpoint: 'opc.tcp://:4840'}", "names no host"),
         ("opcua: {user: op, password: short}", "password must be text of 12 characters"),
         ("opcua: {user: op}", "give both user and password"),
         ("opcua: {security: [Basic128]}", "security must list Basic256Sha256"),
@@ -468,14 +471,18 @@ def test_a_journalled_run_answers_a_call_once_the_step_ran(tmp_path: Path) -> No
         (None, {"STATECTL_OPCUA_USER": "op", "STATECTL_OPCUA_PASSWORD": "tiny"}, 1, "shorter than"),
         (None, {"STATECTL_OPCUA_USER": "op"}, 1, "set both STATECTL_OPCUA_USER"),
         ("busy", {}, 1, "opcua: cannot serve"),
+        ("opc.tcp://127.0.0.1:99999", {}, 1, "Port out of range"),
+        ("opc.tcp://nonexistent.invalid:4840", {}, 1, "host 'nonexistent.invalid' is unknown"),
     ],
 )
 def test_a_bad_opcua_setting_fails_the_run_with_a_message(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, endpoint: str | None,
-    env: dict[str, str], exit: int, message: str,
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture,
+    endpoint: str | None, env: dict[str, str], exit: int, message: str,
 ) -> None:  # fmt: skip
-    """A bad endpoint, environment user or a taken port: one line, no secret shown; exit 1,
-    or 2 for an --opcua URL that is no opc.tcp:// URL (a usage error, as --port's)."""
+    """A bad endpoint, environment user or a taken port: one line, no secret shown, and no
+    traceback logged either (asyncua used to log one for a port in use, a port out of
+    range or a host it cannot resolve); exit 1, or 2 for an --opcua URL that is no
+    opc.tcp:// URL (a usage error, as --port's)."""
     import io
 
     from statectl.cli.run import run as run_cli
@@ -502,6 +509,7 @@ def test_a_bad_opcua_setting_fails_the_run_with_a_message(
     assert message in err.getvalue()
     assert "Traceback" not in err.getvalue()
     assert "tiny" not in err.getvalue() + out.getvalue()
+    assert [r.getMessage() for r in caplog.records if r.exc_info] == []
 
 
 def test_the_stored_certificate_is_reused_by_the_next_run(motor: Served) -> None:

@@ -139,3 +139,28 @@ def test_json_says_when_an_ignored_event_is_kept(
     assert code == exit_code
     assert rows[index]["why"] == "declared ignored"
     assert rows[index].get("kept", False) is kept
+
+
+def test_a_plus_line_too_long_to_wait_is_a_bad_line_in_a_live_run() -> None:
+    """`+1e308` in a --realtime run is reported and the next line still runs; time.sleep
+    used to overflow, which killed the feeding thread with a traceback and left the run
+    waiting forever for input it could no longer read."""
+    import io
+    import threading
+
+    from statectl.cli.run import run
+
+    motor = ROOT / "examples" / "motor" / "motor.yaml"
+    out, err = io.StringIO(), io.StringIO()
+    lines = io.StringIO("+1e308\nMovement\n")
+    stop = threading.Event()
+    bound = threading.Timer(30.0, stop.set)  # a bound on a run that hangs, not a measurement
+    bound.start()
+    try:
+        code = run(
+            str(motor), driver="none", realtime=True, events=lines, out=out, err=err, stop=stop
+        )
+    finally:
+        bound.cancel()
+    assert (code, "line 1: '+' waits at most" in err.getvalue()) == (1, True), err.getvalue()
+    assert "Blocked -> Moving" in out.getvalue()

@@ -212,3 +212,27 @@ def test_a_short_token_is_refused_before_anything_runs(monkeypatch: pytest.Monke
     assert code == 1
     assert f"from {TOKEN_VARIABLE} is shorter than 16 characters" in err.getvalue()
     assert "short" not in out.getvalue()
+
+
+@pytest.mark.parametrize(
+    ("driver", "options", "says"),
+    [
+        ("sim-motor", "{speed: fast}", ["speed must be a number"]),
+        ("sim-motor", "{speed: .inf, position: x}", ["speed must be", "position must be"]),
+        ("sim-motor", "{speed: 0}", ["speed must be"]),
+        ("sim-stepper", "{pulse_rate: x}", ["pulse_rate must be"]),
+        ("sim-stepper", "{step: oops, steps_per_unit: yes}", ["steps_per_unit", "step must"]),
+        ("sim-stepper", "{pulse_rate: .nan}", ["pulse_rate must be"]),
+    ],
+)
+def test_bad_simulated_motor_options_are_d509_at_their_line(
+    tmp_path: Path, driver: str, options: str, says: list[str]
+) -> None:
+    """A sim-motor or sim-stepper option of the wrong type or out of range is a D509 at the
+    options' line, every one at once (a speed of 'fast' used to end in a TypeError traceback)."""
+    path = write(tmp_path, f"devices:\n  Motor:\n    driver: {driver}\n    options: {options}\n")
+    with pytest.raises(DiagnosticError) as info:
+        load_driver_config(path)
+    found = info.value.diagnostics
+    assert [(d.code, d.where.line) for d in found] == [("D509", 4)] * len(says)
+    assert [s in d.message for s, d in zip(says, found, strict=True)] == [True] * len(says)

@@ -229,6 +229,8 @@ def test_show_export_and_replay_read_a_shipped_journal_as_the_file(
 BAD = [
     ("postgresql://statectl:s3cret@127.0.0.1:1/nowhere", "cannot connect"),
     ("postgresql://127.0.0.1:1/x?bogus_option=1", "cannot connect"),
+    ("postgresql://statectl:s3cret@[::1/nowhere", "not a valid URL"),  # was a traceback
+    ("postgresql://statectl:s3cret@127.0.0.1:port/x", "not a valid URL"),
 ]
 
 
@@ -335,6 +337,7 @@ SHIP_CONFIGS = [
     ("ship: {to: 'postgresql://h/db', speed: 3}\n", "unknown key 'speed'"),
     ("ship: {source: a}\n", "no 'to'"),
     ("ship: [1]\n", "'ship' must be a mapping"),
+    ("ship: {to: 'postgresql://u:s3cret@[::1/db'}\n", "to is not a valid URL (Invalid IPv6"),
 ]
 
 
@@ -352,6 +355,7 @@ def test_ship_section_problems_are_d520_with_their_line(
         load_run_config(config)
     (diag,) = info.value.diagnostics
     assert diag.code == "D530" and says in diag.message and diag.where.line == 1
+    assert "s3cret" not in str(diag)
 
 
 def test_reader_without_a_shipped_journal_says_so(url: str) -> None:

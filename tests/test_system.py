@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import asyncio
 import threading
+import time
 
 import pytest
 
-from statectl import MicrostepTaken, QueueFull, SimClock, StatectlError, System
+from statectl import MicrostepTaken, QueueFull, SimClock, StatectlError, System, WallClock
 from statectl.model import Chart
 from statectl.system import DeviceSetup
 from support import Recorder
+
+WAIT = 10.0  # a bound on the owner loop's work, not a measurement
 
 
 def _system(motor: Chart, n: int, **kw: object) -> System:
@@ -38,6 +41,57 @@ def test_events_posted_before_the_start_are_run_at_the_start(motor: Chart) -> No
     system.start()
     system.drain()
     assert system.subjects["M1"].configuration == {"Moving"}
+    system.close()
+
+
+@pytest.mark.parametrize("clock", [SimClock, WallClock])
+def test_events_posted_before_stop_are_run_before_serve_returns(
+    motor: Chart, clock: type[SimClock] | type[WallClock]
+) -> None:
+    """A live run's feeder posts the last line and sets stop at once: serve() still runs
+    that event (it used to return at the stop and drop it)."""
+    system = System((DeviceSetup("M", motor),), clock())
+    system.start()
+    system.post("M", "Movement")
+    stop = threading.Event()
+    stop.set()
+    system.serve(stop)
+    assert system.subjects["M"].configuration == {"Moving"}
+    system.close()
+
+
+@pytest.mark.parametrize(("paced", "stop_first"), [(True, False), (False, False), (False, True)])
+def test_a_driver_that_refuses_an_events_data_fails_that_event_only(
+    motor: Chart, paced: bool, stop_first: bool
+) -> None:
+    """In the live owner loop (and its last drain at the stop) a driver raising on bad
+    data ({amount: abc}) goes to on_failure and the loop goes on: the device's next event
+    and the other devices run (the error used to leave serve() and end a --realtime or
+    --dashboard run)."""
+    from statectl.devices import SimMotor
+
+    setups = (DeviceSetup("A", motor, driver=SimMotor()), DeviceSetup("B", motor))
+    system = System(setups, SimClock())
+    failures: list[str] = []
+    system.on_failure.append(lambda exc: failures.append(str(exc)))
+    system.start()
+    stop = threading.Event()
+    if stop_first:
+        stop.set()
+    system.post("A", "Movement", {"amount": "abc"})
+    system.post("A", "Error")
+    system.post("B", "Movement")
+    owner = threading.Thread(target=system.serve, args=(stop,), kwargs={"paced": paced})
+    owner.start()
+    deadline = time.monotonic() + WAIT
+    while owner.is_alive() and system.subjects["B"].configuration != {"Moving"}:
+        assert time.monotonic() < deadline, "the owner loop stopped serving"
+        time.sleep(0.01)
+    stop.set()
+    owner.join(WAIT)
+    assert [("a movement needs" in f) for f in failures] == [True]
+    assert system.subjects["B"].configuration == {"Moving"}
+    assert system.subjects["A"].configuration != {"Moving"}  # Error left it
     system.close()
 
 
@@ -179,3 +233,52 @@ def test_a_driver_given_where_the_rules_go_is_refused(motor: Chart) -> None:
     with pytest.raises(TypeError, match="give a driver as driver="):
         DeviceSetup("M", motor, SimMotor())  # type: ignore[arg-type]  # the mistake tested
     assert isinstance(DeviceSetup("M", motor, driver=SimMotor()).driver, SimMotor)
+
+
+def test_a_realtime_run_goes_on_past_a_driver_refusing_a_line_and_exits_1() -> None:
+    """`statectl run --realtime`: a line whose data the driver refuses is reported, the
+    next lines still run, and the run exits 1 saying so (it used to stop at that line)."""
+    import io
+    from pathlib import Path
+
+    from statectl.cli.run import run
+
+    motor = Path(__file__).parent.parent / "examples" / "motor" / "motor.yaml"
+    out, err = io.StringIO(), io.StringIO()
+    lines = io.StringIO("Movement {amount: abc}\nError\n")
+    code = run(str(motor), driver="sim-motor", realtime=True, events=lines, out=out, err=err)
+    said = err.getvalue()
+    assert (code, "a movement needs" in said, "1 event(s) a driver refused" in said) == (
+        1,
+        True,
+        True,
+    ), said
+    assert "Moving -> Returning  on Error" in out.getvalue()
+
+
+def test_a_driver_failure_on_the_journal_writers_drain_is_reported(
+    motor: Chart, tmp_path: object
+) -> None:
+    """Under durable-first the journal's writer runs the events it committed; a driver that
+    refuses an event's data there goes to on_failure and the next event runs (it used to
+    print a traceback on the writer's thread and count for nothing)."""
+    from pathlib import Path
+
+    from statectl.devices import SimMotor
+    from statectl.journal import Journal
+
+    journal = Journal(Path(str(tmp_path)) / "j.db", guarantee="durable-first")
+    system = System((DeviceSetup("A", motor, driver=SimMotor()),), SimClock(), journal)
+    failures: list[str] = []
+    system.on_failure.append(lambda exc: failures.append(str(exc)))
+    system.start()
+    for event, data in (("Movement", {"amount": "abc"}), ("Error", None)):
+        ticket = system.post("A", event, data)
+        assert ticket is not None
+        ticket.wait()
+    deadline = time.monotonic() + WAIT
+    while system.subjects["A"].configuration == {"Moving"} and time.monotonic() < deadline:
+        time.sleep(0.01)
+    system.close()
+    assert [("a movement needs" in f) for f in failures] == [True]
+    assert system.subjects["A"].configuration != {"Moving"}  # Error ran after the failure

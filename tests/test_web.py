@@ -104,6 +104,7 @@ def test_an_event_with_the_token_reaches_the_device(served: Served) -> None:
     [
         ({"Content-Type": "application/json"}, 401),
         ({"Content-Type": "application/json", "X-Statectl-Token": "wrong"}, 401),
+        ({"Content-Type": "application/json", "X-Statectl-Token": "\u00e9" * 24}, 401),
         ({**POST, "Origin": "http://evil.example"}, 403),
         ({**POST, "Host": "evil.example"}, 403),
         ({**POST, "Content-Type": "text/plain"}, 415),
@@ -112,7 +113,8 @@ def test_an_event_with_the_token_reaches_the_device(served: Served) -> None:
 def test_posts_without_token_or_from_elsewhere_are_refused(
     served: Served, headers: dict[str, str], status: int
 ) -> None:
-    """No token, a wrong token, a foreign origin or host, a form body: refused, nothing posted."""
+    """No token, a wrong token (one of bytes that are not UTF-8 too: it used to be a 500 and
+    a traceback), a foreign origin or host, a form body: refused, nothing posted."""
     got, _, _ = served.request("POST", "/api/post", {"event": "Movement"}, headers)
     assert got == status
     assert served.system.subjects["Motor"].queued == 0

@@ -52,7 +52,11 @@ Rules:
    e.g. a linked event sent without the data its guard reads) refuses that event
    only: the device records it (``EventRejected``, guard error), the message goes
    to the ``on_failure`` callbacks (``statectl run`` prints it and exits 1), and
-   the other devices and the device's later events go on.
+   the other devices and the device's later events go on. In the live owner loop
+   (:meth:`System.serve`) an observer that raises a ``StatectlError`` (a driver
+   refusing an event's data, ``Movement {amount: abc}``) fails the same way: the
+   message goes to ``on_failure`` and the loop goes on; before, one bad event sent
+   from the dashboard or typed into a ``--realtime`` run ended the whole run.
 """
 
 from __future__ import annotations
@@ -67,7 +71,7 @@ from typing import Any
 
 from statectl.cell import Cell
 from statectl.devices import DeviceDriver, connect
-from statectl.errors import StatectlError, UnhandledEventError
+from statectl.errors import StatectlError
 from statectl.explore.conditions import bind_cross_guards
 from statectl.explore.enforce import CellRules, Violation
 from statectl.explore.replay import CellLinks, link_data
@@ -139,7 +143,7 @@ class System:
     #: called on the owner with each invariant violation a step caused (rule 6)
     on_violation: list[Callable[[Violation], None]] = field(default_factory=list)
     #: called on the owner with each row that failed while draining (rule 7)
-    on_failure: list[Callable[[UnhandledEventError], None]] = field(default_factory=list)
+    on_failure: list[Callable[[StatectlError], None]] = field(default_factory=list)
     _live: bool = False  # started and not closing: the writer may drain
     #: devices that had something queued since the owner last looked (rule 1)
     _ready: deque[Subject] = field(default_factory=deque)
@@ -241,7 +245,7 @@ class System:
             return
         if self.owner.acquire(blocking=False):
             try:
-                self._drain()
+                self._drain_past_failures()
             finally:
                 self.owner.release()
         else:
@@ -270,6 +274,14 @@ class System:
             path = self.journal.path
             try:
                 with JournalReader(path, check=False) as reader:
+                    misfits = [m for d in self.setups if (m := self.bound[d.name].misfit(reader))]
+                    if misfits:
+                        raise JournalError(
+                            f"journal {path} was written by another chart: "
+                            f"{'; '.join(misfits)}. Nothing was started. Resume with the "
+                            "device file the journal was written with, or give another "
+                            "--journal"
+                        )
                     for d in self.setups:
                         resumed[d.name] = self.bound[d.name].resume(reader, d.rules)
             except JournalError as exc:
@@ -438,18 +450,44 @@ class System:
         """The owner loop until ``stop``: drain when woken; on a SimClock follow the wall clock.
 
         Events wake it at once; the tick only moves a paced SimClock on and looks at ``stop``.
+        Events posted before ``stop`` are run before it returns (the last line typed before
+        the input ends, posted just before the feeder sets ``stop``, used to be dropped).
         """
         last = time.monotonic()
         sim = paced and isinstance(self.clock, SimClock)
         while not stop.is_set():
             self.wake.wait(_TICK)
             self.wake.clear()
-            if sim:
-                now = time.monotonic()
-                self.advance(now - last)
-                last = now
-            else:
-                self.drain()
+            try:
+                if sim:
+                    now = time.monotonic()
+                    self.advance(now - last)
+                    last = now
+                else:
+                    self.drain()
+            except StatectlError as exc:  # rule 7: a driver refused the event's data
+                self._failed(exc)
+        with self.owner:
+            self._drain_past_failures()
+
+    def _drain_past_failures(self) -> None:
+        """As the owner: :meth:`_drain`, each driver failure reported (rule 7) and the rest
+        run; the journal's writer drains so under durable-first, where a failure used to
+        print a traceback on the writer's thread and count for nothing."""
+        while True:  # each failure took its event off the queue: this ends
+            try:
+                self._drain()
+                return
+            except StatectlError as exc:
+                self._failed(exc)
+
+    def _failed(self, exc: StatectlError) -> None:
+        """Rule 7 for the live owner loop: an observer (a driver) that raised during a step
+        fails that event only; the run goes on, and the devices with events left are
+        visited again."""
+        for callback in self.on_failure:
+            callback(exc)
+        self._ready.extend(s for s in self.subjects.values() if s.queued)
 
     # -- asyncio (rule 5) ---------------------------------------------------------------------
 

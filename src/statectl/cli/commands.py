@@ -277,6 +277,11 @@ def cmd_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         if not is_cell(args.file):
             err.write("statectl run: --replay and --walk take a cell file\n")
             return USAGE
+        if args.walk is not None and args.walk < 0:
+            err.write(
+                f"statectl run: --walk takes a number of steps, 0 or more (got {args.walk})\n"
+            )
+            return USAGE
         from statectl.cli.replay import run_main
 
         return run_main(

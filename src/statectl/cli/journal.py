@@ -75,13 +75,17 @@ def _reader_in_window(
     return reader if isinstance(reader, int) else (reader, lo, hi)
 
 
-def _unknown_device(command: str, reader: JournalSource, device: str | None, err: TextIO) -> bool:
+def _unknown_device(
+    command: str, reader: JournalSource, device: str | None, err: TextIO, *, sent: bool = True
+) -> bool:
     """Say so when ``--device`` names no journalled device (a typo), so that
-    ``replay --device Motr`` does not replay nothing and pass."""
+    ``replay --device Motr`` does not replay nothing and pass. With ``sent``, a device
+    that only has accepted events here counts: a node journals the link events it sends
+    to another node's device (show and export list them; replay needs the chart)."""
     if device is None:
         return False
     names = [d.name for d in reader.devices()]
-    if device in names:
+    if device in names or (sent and next(iter(reader.inbox(device=device)), None) is not None):
         return False
     found = ", ".join(names) or "none"
     err.write(
@@ -165,6 +169,12 @@ def journal_export(
     over it once complete, so a failure (a damaged row, a full disk) leaves no
     partial file and an existing FILE untouched.
     """
+    if to is not None and _is_the_journal(Path(to), path):
+        err.write(
+            f"statectl journal export: --out {to} is the journal itself (or its -wal/-shm "
+            "file); writing there would destroy it: name another file\n"
+        )
+        return PROBLEMS
     opened = _reader_in_window("export", path, since, until, err)
     if isinstance(opened, int):
         return opened
@@ -198,6 +208,18 @@ def journal_export(
     return code[0]
 
 
+def _is_the_journal(target: Path, journal: str) -> bool:
+    """Whether ``target`` is the journal file (or one of SQLite's files beside it)."""
+    if not target.exists():
+        return False
+    for suffix in ("", "-wal", "-shm", "-journal"):
+        beside = Path(journal + suffix)
+        with contextlib.suppress(OSError):
+            if beside.exists() and os.path.samefile(target, beside):
+                return True
+    return False
+
+
 def journal_replay(
     path: str,
     *,
@@ -215,7 +237,7 @@ def journal_replay(
     if isinstance(reader, int):
         return reader
     with reader, _reading("replay", path, err) as code:
-        if _unknown_device("replay", reader, device, err):
+        if _unknown_device("replay", reader, device, err, sent=False):
             return PROBLEMS
         charts: dict[str, Chart] = {}
         for d in reader.devices():

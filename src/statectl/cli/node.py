@@ -255,10 +255,13 @@ def node_main(
         setups = tuple(replace(d, driver=drivers.get(d.name)) for d in devices)
         store = None
         if journal is not None:
+            read = (path, config, *(d.source for d in devices))
+            made = runcli._new_journal(journal, resume=resume, fresh=fresh)
             store = runcli._open_journal(
-                journal, Sync.NORMAL, promise, resume=resume, fresh=fresh, out=out
+                journal, Sync.NORMAL, promise, resume=resume, fresh=fresh, out=out, inputs=read
             )
-        system = NodeSystem(setups, WallClock(), store, cell)
+        with runcli._undone_on_failure(store, journal if store is not None and made else None):
+            system = NodeSystem(setups, WallClock(), store, cell)
         wire = Wire(
             cell,
             node,

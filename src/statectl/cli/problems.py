@@ -12,6 +12,7 @@ from collections.abc import Callable
 from typing import Any, TextIO
 
 from statectl.cli.commands import OK, PROBLEMS
+from statectl.errors import UnhandledEventError
 from statectl.explore.enforce import Refused, Violation
 from statectl.runtime.records import EventIgnored, EventRejected, StepRecord
 from statectl.semantics import Unhandled
@@ -29,12 +30,14 @@ class Problems:
         self.unsettled = ""  # a batch settle stopped at --settle-limit: what to say
         self.refused = 0  # environment commands whose 'when' was false (a cell)
         self.violated = 0  # invariant violations seen live (a cell)
+        self.failed = 0  # events a driver refused in a live run (system.py rule 7)
 
     def record(self, record: object) -> None:
-        """A listener: count the events a device refused or did not know."""
-        refused = isinstance(record, EventRejected) or (
-            isinstance(record, EventIgnored) and record.reason is Unhandled.UNKNOWN_EVENT
-        )
+        """A listener: count the events a device refused or did not know (a guard error is
+        counted by :meth:`failure`, which hears it whether records are built or not)."""
+        refused = (
+            isinstance(record, EventRejected) and record.reason is not Unhandled.GUARD_ERROR
+        ) or (isinstance(record, EventIgnored) and record.reason is Unhandled.UNKNOWN_EVENT)
         if refused:
             with self._lock:
                 self.unknown += 1
@@ -44,16 +47,26 @@ class Problems:
         if step.event is None:  # a record made outside any event
             for record in step.records:
                 self.record(record)
-        elif step.step is None and (step.rejected or step.reason is Unhandled.UNKNOWN_EVENT):
+        elif step.step is None and (
+            (step.rejected and step.reason is not Unhandled.GUARD_ERROR)
+            or step.reason is Unhandled.UNKNOWN_EVENT
+        ):
             with self._lock:
                 self.unknown += 1
 
     def failure(self, err: TextIO) -> Callable[[Exception], None]:
-        """A System callback: a row that failed while draining is said where (its
-        EventRejected record is what counts it)."""
+        """A System callback: a row that failed while draining (a guard or an assignment
+        that raised) is said where and counted as rejected; a driver that refused an
+        event's data is counted apart. Counted here, not from records: a run without a
+        ``listen()`` listener gets no record of a guard error, and an assignment's none."""
 
         def say(exc: Exception) -> None:
             err.write(f"{exc}\n")
+            with self._lock:
+                if isinstance(exc, UnhandledEventError):
+                    self.unknown += 1
+                else:
+                    self.failed += 1
 
         return say
 
@@ -101,6 +114,8 @@ class Problems:
             parts.append(f"{self.refused} environment command(s) refused by the cell's 'when'")
         if self.violated:
             parts.append(f"{self.violated} invariant violation(s)")
+        if self.failed:
+            parts.append(f"{self.failed} event(s) a driver refused, reported above")
         return "; ".join(parts) or None
 
 

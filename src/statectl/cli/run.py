@@ -14,7 +14,9 @@ Rules:
 3. Time: ``--realtime`` runs on a :class:`WallClock`; otherwise a
    :class:`SimClock`, which a live run (``--dashboard``) moves in step with the
    wall clock and a batch run (events from a file or stdin) moves only to let
-   each event's consequences settle, so a batch run is deterministic.
+   each event's consequences settle, so a batch run is deterministic. A bus
+   driver (``realtime``: cia402, cia402-sim, modbus) runs on wall time, so a batch
+   run with one is refused (usage): it needs ``--realtime``.
 4. A cell file runs the same way, its links sent by the System.
 5. Events come as lines ``[DEVICE:] EVENT [DATA]`` (DATA in YAML flow style, e.g.
    ``Movement {amount: 10}``); ``+SECONDS`` lets simulated time pass; ``#``
@@ -60,7 +62,7 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, TextIO
@@ -197,6 +199,11 @@ def _feed(
                 if isinstance(system.clock, SimClock) and batch:
                     system.advance(parsed)
                     system.quiesce()
+                elif parsed > threading.TIMEOUT_MAX:  # time.sleep would overflow, killing the feed
+                    raise StatectlError(
+                        f"'+' waits at most {threading.TIMEOUT_MAX:.0f} s in a live run "
+                        f"(got {parsed:g})"
+                    )
                 else:
                     time.sleep(parsed)
                 if steps is not None:
@@ -345,6 +352,13 @@ def run(
                 raise StatectlError(f"{config}: its opcua: section makes a live run; not --json")
         info = err if as_json else out  # rule 10: --json writes nothing else to stdout
         drivers = _drivers(devices, driver, config, table)
+        walled = [n for n, d in drivers.items() if getattr(d, "realtime", False)]
+        if walled and not live:  # rule 3: a bus on wall time never settles on a SimClock
+            err.write(
+                f"statectl run: the driver of {', '.join(walled)} runs on the bus's wall time; "
+                "a batch run on simulated time would end before it reports: add --realtime\n"
+            )
+            return USAGE
         host, port, token, token_from = _dashboard_settings(
             host, port, token, config, table.dashboard
         )
@@ -352,10 +366,15 @@ def run(
         clock: Clock = WallClock() if realtime else SimClock()
         store = None
         if journal is not None:
-            store = _open_journal(journal, mode, promise, resume=resume, fresh=fresh, out=info)
+            read = (path, config, *(d.source for d in devices))
+            made = _new_journal(journal, resume=resume, fresh=fresh)
+            store = _open_journal(
+                journal, mode, promise, resume=resume, fresh=fresh, out=info, inputs=read
+            )
+        with _undone_on_failure(store, journal if store is not None and made else None):
+            system = System(setups, clock, store, cell)
         if table.ship is not None:
             shipping = _start_shipping(table.ship, store, config, err)
-        system = System(setups, clock, store, cell)
         if settle_limit is not None:
             system.settle_limit = settle_limit
         system.hold_time = driver == NO_DRIVER and config is None  # time moves on +S lines only
@@ -477,15 +496,36 @@ def _feed_then_stop(
 
 
 def _open_journal(
-    path: str, sync: Sync, guarantee: Guarantee, *, resume: bool, fresh: bool, out: TextIO
+    path: str,
+    sync: Sync,
+    guarantee: Guarantee,
+    *,
+    resume: bool,
+    fresh: bool,
+    out: TextIO,
+    inputs: Sequence[str | None] = (),
 ) -> Journal:
     """The run's journal, checked before anything starts; ``--fresh`` sets the old one aside.
 
     ``fresh`` without ``resume``: any existing journal is set aside. With
     ``resume``: only one that cannot be trusted (:class:`JournalDamaged`). Without
     ``fresh`` such a journal is refused, and the message says how to start over.
+    A journal path that is one of the run's ``inputs`` (its device, cell or config
+    file) is refused first: ``--fresh`` would move that file aside.
     """
     p = Path(path)
+    if not p.parent.is_dir():
+        raise StatectlError(
+            f"--journal {path}: the directory {p.parent} does not exist; nothing was started: "
+            "make it first, or give a journal path in a directory that exists"
+        )
+    for given in inputs:
+        with contextlib.suppress(OSError):
+            if given and p.exists() and os.path.samefile(p, given):
+                raise StatectlError(
+                    f"--journal {path} is the run's input file {given}, not a journal; "
+                    "nothing was started: name another file, e.g. --journal run.db"
+                )
     if resume and p.is_file() and p.stat().st_size == 0:  # a new journal has its schema
         damage: JournalDamaged | None = JournalDamaged(p, ["it is empty (0 bytes)"])
     else:
@@ -506,6 +546,29 @@ def _open_journal(
         aside = set_aside(p)
         out.write(f"{exc}\njournal {p} set aside as {aside}; starting a new journal\n")
         return Journal(p, sync=sync, guarantee=guarantee)
+
+
+def _new_journal(path: str, *, resume: bool, fresh: bool) -> bool:
+    """Whether opening ``path`` makes a new journal file (none there, or ``--fresh``)."""
+    return not Path(path).exists() or (fresh and not resume)
+
+
+@contextlib.contextmanager
+def _undone_on_failure(store: Journal | None, made: str | None) -> Iterator[None]:
+    """A run refused before it started (a driver that cannot drive its device, links a
+    journal cannot hold) closes the journal it opened, and removes it if this run made
+    it: nothing is left half-written (an unmerged ``-wal`` beside a new, empty file)."""
+    try:
+        yield
+    except BaseException:
+        if store is not None:
+            with contextlib.suppress(StatectlError, OSError):
+                store.close()
+        if made is not None:
+            for suffix in ("", "-wal", "-shm", "-journal"):
+                with contextlib.suppress(OSError):
+                    Path(made + suffix).unlink(missing_ok=True)
+        raise
 
 
 def _start_shipping(

@@ -45,6 +45,7 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import inspect
+import urllib.parse
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -55,10 +56,10 @@ import yaml
 from statectl.devices.cia402 import Cia402Driver, Cia402SimDriver
 from statectl.devices.cia402.options import cia402_option_problems
 from statectl.devices.modbus import ModbusIO, modbus_option_problems
-from statectl.devices.motor import SimMotor
+from statectl.devices.motor import SimMotor, motor_option_problems
 from statectl.devices.opcua_config import OpcuaConfig, parse_opcua
 from statectl.devices.protocol import DeviceDriver
-from statectl.devices.stepper import SimStepper
+from statectl.devices.stepper import SimStepper, stepper_option_problems
 from statectl.devices.twin import SimTwin, twin_option_problems
 from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, StatectlError
 from statectl.model import Chart
@@ -106,6 +107,15 @@ BUS_LIBRARIES: Mapping[str, tuple[str, str]] = {
 #: Checks of option values, by driver name: each returns the problems it finds.
 OPTION_CHECKS: Mapping[str, Callable[[Mapping[str, Any]], Sequence[str]]] = {
     "sim-twin": twin_option_problems,
+    "sim-motor": motor_option_problems,
+    "sim-stepper": stepper_option_problems,
+}
+
+#: What to do about a D509, by driver name.
+OPTION_HINTS: Mapping[str, str] = {
+    "sim-twin": "give seconds as numbers >= 0, e.g. {delay: 0.5, faults: {Moving: 0.4}}",
+    "sim-motor": "give numbers, e.g. {speed: 10, position: 0}",
+    "sim-stepper": "give numbers, e.g. {steps_per_unit: 100, pulse_rate: 1000, step: 0}",
 }
 
 #: Constructor parameters statectl supplies itself, never a config file.
@@ -176,6 +186,16 @@ def resolve_driver(name: str) -> Callable[..., DeviceDriver]:
             f"package {top}/) beside the model file, or add the directory that holds it to "
             "PYTHONPATH"
         ) from None
+    except SyntaxError as exc:
+        raise StatectlError(
+            f"{exc.filename}:{exc.lineno}: driver {name!r}: {module_name!r} is not valid "
+            f"Python ({exc.msg}); fix the module"
+        ) from None
+    except Exception as exc:  # the module's own code failed: say where, not a traceback
+        raise StatectlError(
+            f"{_where(exc)}driver {name!r}: importing {module_name!r} failed: "
+            f"{type(exc).__name__}: {exc}; fix the module"
+        ) from None
     obj = module
     for part in attr.split("."):
         if not hasattr(obj, part):
@@ -206,7 +226,27 @@ def make_driver(
         if chart is None:
             raise StatectlError(f"driver {name!r} is derived from the device's chart; pass chart=")
         kwargs["chart"] = chart
-    return factory(**kwargs)
+    if name in DRIVERS:
+        return factory(**kwargs)
+    try:
+        return factory(**kwargs)
+    except StatectlError:
+        raise
+    except Exception as exc:  # a driver of the user's own failed: say where, not a traceback
+        raise StatectlError(
+            f"{_where(exc)}driver {name!r} failed while it was made: "
+            f"{type(exc).__name__}: {exc}; fix the driver or its options"
+        ) from None
+
+
+def _where(exc: BaseException) -> str:
+    """``file:line: `` of the innermost frame that raised ``exc`` (empty if unknown)."""
+    tb = exc.__traceback__
+    if tb is None:
+        return ""
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    return f"{tb.tb_frame.f_code.co_filename}:{tb.tb_lineno}: "
 
 
 def _takes_chart(factory: Callable[..., Any]) -> bool:
@@ -413,7 +453,7 @@ def load_run_config(path: str | Path) -> RunConfig:
                 "D509",
                 line_of(fields["options"][1]),
                 f"device {device!r}: {text}",
-                "give seconds as numbers >= 0, e.g. {delay: 0.5, faults: {Moving: 0.4}}",
+                OPTION_HINTS.get(driver, ""),
             )
         if bad:
             continue
@@ -475,6 +515,15 @@ def _dashboard(
 _SHIP_KEYS = ("to", "source", "interval", "retry", "batch")
 
 
+def _not_a_url(url: str) -> str:
+    """Why ``url`` cannot be parsed (an unclosed ``[``, a port that is no number), or ''."""
+    try:
+        urllib.parse.urlsplit(url).port  # noqa: B018  # the port is checked when read
+    except ValueError as exc:
+        return str(exc)
+    return ""
+
+
 def _ship(
     node: yaml.Node,
     value: Callable[[yaml.Node], Any],
@@ -502,6 +551,8 @@ def _ship(
         ):
             shown = "a text that is not one" if isinstance(val, str) else repr(val)
             problem = f"ship: to must be a postgresql:// URL (got {shown})"  # may hold a password
+        elif name == "to" and (why := _not_a_url(val)):
+            problem = f"ship: to is not a valid URL ({why})"  # the URL itself is not shown
         elif name == "source" and not (isinstance(val, str) and val):
             problem = f"ship: source must be a name (got {val!r})"
         elif name in ("interval", "retry") and not (number and 0.01 <= val <= 3600):

@@ -22,6 +22,7 @@ Rules:
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections.abc import Mapping, Sequence
@@ -69,9 +70,17 @@ def modbus_option_problems(options: Mapping[str, Any]) -> Sequence[str]:
     port = options.get("port", 502)
     if not (isinstance(port, int) and not isinstance(port, bool) and 0 < port <= 65535):
         problems.append(f"port must be a number 1-65535 (got {port!r})")
+    host = options.get("host", "127.0.0.1")
+    if not (isinstance(host, str) and host):
+        problems.append(f"host must be a host name or address, e.g. 127.0.0.1 (got {host!r})")
+    unit = options.get("unit", 1)
+    if not (isinstance(unit, int) and not isinstance(unit, bool) and 0 <= unit <= 255):
+        problems.append(f"unit must be a Modbus device id 0-255 (got {unit!r})")
     for key in ("period", "timeout", "stale_after"):
         v = options.get(key, 1.0)
-        if not (isinstance(v, int | float) and not isinstance(v, bool) and v > 0):
+        if not (
+            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) and v > 0
+        ):
             problems.append(f"{key} must be seconds > 0 (got {v!r})")
     actions = options.get("actions", {})
     if not isinstance(actions, Mapping):
@@ -119,7 +128,8 @@ class ModbusIO(Driver):
     ) -> None:
         super().__init__()
         options = {"coils": coils or {}, "inputs": inputs or {}, "actions": actions or {}}
-        problems = modbus_option_problems({**options, "port": port, "period": period})
+        given = {"port": port, "period": period, "timeout": timeout, "stale_after": stale_after}
+        problems = modbus_option_problems({**options, **given, "host": host, "unit": unit})
         if problems:
             raise StatectlError("ModbusIO: " + "; ".join(problems))
         self.host, self.port, self.unit = host, port, unit

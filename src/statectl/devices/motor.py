@@ -17,20 +17,39 @@ Rules:
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import math
+from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
-from statectl.devices.base import Driver, requested_target
+from statectl.devices.base import Driver
+from statectl.devices.targets import finite_target
 from statectl.errors import StatectlError
 from statectl.observers import Notification
 from statectl.runtime.clock import Clock, Timer
 
-__all__ = ["SimMotor"]
+__all__ = ["SimMotor", "motor_option_problems"]
 
 #: The observer methods update() serves itself: Movement -> move_to, the others -> return_to.
 _CALLS = frozenset({"Movement", "Initialization", "Error"})
 #: An arrival timer this close to the arrival completes it (clock arithmetic is floating point).
 _EARLY = 1e-9
+
+
+def _number(value: Any) -> bool:
+    """A finite int or float; a bool (``yes``) is not a number of units."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def motor_option_problems(options: Mapping[str, Any]) -> tuple[str, ...]:
+    """Every problem with SimMotor option values, so a config file shows them at its line."""
+    problems: list[str] = []
+    speed = options.get("speed", 10.0)
+    if not (_number(speed) and speed > 0):
+        problems.append(f"speed must be a number of units/s > 0 (got {speed!r})")
+    position = options.get("position", 0.0)
+    if not _number(position):
+        problems.append(f"position must be a number of units (got {position!r})")
+    return tuple(problems)
 
 
 class SimMotor(Driver):
@@ -58,8 +77,9 @@ class SimMotor(Driver):
 
     def __init__(self, *, speed: float = 10.0, position: float = 0.0) -> None:
         super().__init__()
-        if not speed > 0:
-            raise StatectlError(f"SimMotor speed must be > 0 units/s (got {speed!r})")
+        problems = motor_option_problems({"speed": speed, "position": position})
+        if problems:
+            raise StatectlError(f"SimMotor {'; '.join(problems)}")
         self.speed = float(speed)
         self._position = float(position)  # where the motor is when it is not moving
         self.previous = float(position)  # where the last movement started
@@ -97,7 +117,7 @@ class SimMotor(Driver):
     def arguments(self, method: str, data: Any) -> tuple[Any, ...]:
         if method == "Movement":
             where = self._at(self.clock.now()) if self._moving else self._position
-            return (requested_target(where, data),)
+            return (finite_target(where, data),)
         return (self.previous,)
 
     def update(self, notification: Notification) -> None:
@@ -114,7 +134,7 @@ class SimMotor(Driver):
             now = clock.now()
             if method == "Movement":
                 where = self._at(now) if self._moving else self._position
-                self._go(clock, now, "move_to", requested_target(where, notification.data))
+                self._go(clock, now, "move_to", finite_target(where, notification.data))
             else:
                 self._go(clock, now, "return_to", self.previous)
 

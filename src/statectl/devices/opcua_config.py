@@ -18,13 +18,14 @@ Rules:
 
 from __future__ import annotations
 
+import urllib.parse
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import yaml
 
-__all__ = ["MIN_PASSWORD", "POLICIES", "OpcuaConfig", "parse_opcua"]
+__all__ = ["MIN_PASSWORD", "POLICIES", "OpcuaConfig", "endpoint_problem", "parse_opcua"]
 
 #: The security policies a config may list (OPC UA names).
 POLICIES = ("Basic256Sha256", "None")
@@ -51,6 +52,20 @@ class OpcuaConfig:
         )
 
 
+def endpoint_problem(url: Any) -> str | None:
+    """Why ``url`` is no ``opc.tcp://HOST:PORT`` endpoint a server can bind, or None."""
+    if not (isinstance(url, str) and url.startswith("opc.tcp://")):
+        return f"endpoint must be an opc.tcp:// URL (got {url!r})"
+    try:
+        parts = urllib.parse.urlsplit(url)
+        parts.port  # noqa: B018  # a port out of range or not a number raises here
+    except ValueError as exc:
+        return f"endpoint {url!r} is not an opc.tcp://HOST:PORT URL ({exc})"
+    if not parts.hostname:
+        return f"endpoint {url!r} names no host: write opc.tcp://HOST:PORT"
+    return None
+
+
 def parse_opcua(
     node: yaml.Node,
     value: Callable[[yaml.Node], Any],
@@ -70,8 +85,8 @@ def parse_opcua(
         if name not in _KEYS:
             error("D520", line_of(k), f"opcua: unknown key {name!r}",
                   f"the opcua section has {', '.join(_KEYS)}")  # fmt: skip
-        elif name == "endpoint" and not (isinstance(val, str) and val.startswith("opc.tcp://")):
-            error("D520", line, f"opcua: endpoint must be an opc.tcp:// URL (got {val!r})",
+        elif name == "endpoint" and (why := endpoint_problem(val)):
+            error("D520", line, f"opcua: {why}",
                   "write 'endpoint: opc.tcp://127.0.0.1:4840' (loopback only)")  # fmt: skip
         elif name in ("user", "certificates") and not (isinstance(val, str) and val):
             error("D520", line, f"opcua: {name} must be text (got {val!r})", "")

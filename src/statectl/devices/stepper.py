@@ -13,14 +13,41 @@ Rules:
 
 from __future__ import annotations
 
+import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from statectl.devices.base import Driver, requested_target
+from statectl.devices.base import Driver
+from statectl.devices.targets import finite_target
 from statectl.errors import StatectlError
 from statectl.runtime.clock import Timer
 
-__all__ = ["SimStepper"]
+__all__ = ["SimStepper", "stepper_option_problems"]
+
+
+def _integer(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def stepper_option_problems(options: Mapping[str, Any]) -> tuple[str, ...]:
+    """Every problem with SimStepper option values, so a config file shows them at its line."""
+    problems: list[str] = []
+    per_unit = options.get("steps_per_unit", 100)
+    if not (_integer(per_unit) and per_unit > 0):
+        problems.append(f"steps_per_unit must be an int > 0 (got {per_unit!r})")
+    rate = options.get("pulse_rate", 1000.0)
+    if not (
+        isinstance(rate, int | float)
+        and not isinstance(rate, bool)
+        and math.isfinite(rate)
+        and rate > 0
+    ):
+        problems.append(f"pulse_rate must be a number of steps/s > 0 (got {rate!r})")
+    step = options.get("step", 0)
+    if not _integer(step):
+        problems.append(f"step must be an int, a step count (got {step!r})")
+    return tuple(problems)
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,10 +76,10 @@ class SimStepper(Driver):
         self, *, steps_per_unit: int = 100, pulse_rate: float = 1000.0, step: int = 0
     ) -> None:
         super().__init__()
-        if not (isinstance(steps_per_unit, int) and steps_per_unit > 0):
-            raise StatectlError(f"steps_per_unit must be an int > 0 (got {steps_per_unit!r})")
-        if not pulse_rate > 0:
-            raise StatectlError(f"pulse_rate must be > 0 steps/s (got {pulse_rate!r})")
+        given = {"steps_per_unit": steps_per_unit, "pulse_rate": pulse_rate, "step": step}
+        problems = stepper_option_problems(given)
+        if problems:
+            raise StatectlError(f"SimStepper {'; '.join(problems)}")
         self.steps_per_unit = steps_per_unit
         self.pulse_rate = float(pulse_rate)
         self._count = int(step)
@@ -80,7 +107,7 @@ class SimStepper(Driver):
 
     def arguments(self, method: str, data: Any) -> tuple[Any, ...]:
         if method == "Movement":
-            goal = round(requested_target(self.position, data) * self.steps_per_unit)
+            goal = round(finite_target(self.position, data) * self.steps_per_unit)
             delta = goal - self.count
             return (abs(delta), 1 if delta >= 0 else -1)
         return (self.home,)

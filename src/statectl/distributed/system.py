@@ -48,9 +48,7 @@ from statectl.explore.enforce import CellRules
 from statectl.explore.replay import CellLinks
 from statectl.journal import JournalledDevice, Ticket
 from statectl.runtime import MicrostepTaken, Record, Subject
-from statectl.runtime.eventdata import AssignError
 from statectl.semantics import Snapshot
-from statectl.semantics.eventview import GuardError
 from statectl.system import System
 
 __all__ = ["NodeLinks", "NodeSystem", "RemoteDevice", "WireSide"]
@@ -341,11 +339,10 @@ class NodeSystem(System):
         try:
             try:
                 self.subjects[device].dispatch(event, data)
-            except (GuardError, AssignError) as exc:  # statectl.system rule 7: that event only
-                for callback in self.on_failure:
-                    callback(exc)
+            except StatectlError as exc:  # statectl.system rule 7: that event only (a guard,
+                self._failed(exc)  # an assignment, a driver refusing the event's data)
             if self._ready:
-                self._drain()
+                self._drain_past_failures()
         finally:
             self.owner.release()
         return True

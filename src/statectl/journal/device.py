@@ -42,6 +42,10 @@ Rules:
    or neither; the events then reach their devices as accepted events do (rule
    1), with the target devices' locks held so each device still gets its events
    in ``seq`` order.
+6. The device's ``devices`` row (chart, file, datamodel: what ``journal replay``
+   runs) is written when it starts or resumes, not when it is bound: a resume
+   refused because the journal was written by another chart (:meth:`misfit`:
+   its last snapshot names states this chart lacks) leaves the journal as it was.
 """
 
 from __future__ import annotations
@@ -93,7 +97,7 @@ class JournalledDevice:
         #: "redo S: nothing to redo" for a redo rule skipped (rule 3).
         self.recovered: tuple[str, ...] = ()
         self.redelivered = 0  # accepted events processed on resume
-        journal.register(self.name, subject.chart.name, source, dict(subject.data))
+        self.source = source  # registered at start or resume (rule 6), not before
         self._unlisten = subject.on_step(self._on_step)
 
     # -- in ------------------------------------------------------------------------------
@@ -185,8 +189,35 @@ class JournalledDevice:
 
     # -- coming up -----------------------------------------------------------------------
 
+    def _register(self) -> None:
+        """Note the device's chart and file (rule 6): only once it starts or resumes."""
+        s = self.subject
+        self.journal.register(self.name, s.chart.name, self.source, dict(s.data))
+
+    def misfit(self, reader: JournalReader) -> str | None:
+        """Why the device's last journalled snapshot is not one of its chart (rule 6)."""
+        last = reader.last_step(self.name)
+        if last is None:
+            return None
+        known = self.subject.machine.order
+        snap = last.snapshot
+        named = set(snap.active) | {s for _, states in snap.history for s in states}
+        named |= {h for h, _ in snap.history}
+        if snap.previous is not None:
+            named.add(snap.previous)
+        unknown = sorted(named - known.keys())
+        if not unknown:
+            return None
+        row = reader.device(self.name)
+        written = f" ({row.source})" if row is not None and row.source else ""
+        return (
+            f"{self.name} was journalled with a chart{written} that has state(s) "
+            f"{', '.join(unknown)}, which {self.source or self.subject.chart.name} does not"
+        )
+
     def start(self) -> None:
         """Enter the initial configuration and journal it."""
+        self._register()
         self.subject.start()
         self._record_now(StepKind.START)
 
@@ -200,6 +231,7 @@ class JournalledDevice:
             self.start()
             pending = reader.pending(self.name)
         else:
+            self._register()
             restore_subject(self.subject, last.snapshot)
             replay_assigned_data(self.subject, reader, last.id)  # journal/assigned.py
             self._record_now(StepKind.RESTORE)

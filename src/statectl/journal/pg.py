@@ -41,6 +41,7 @@ __all__ = [
     "ensure_schema",
     "is_pg_url",
     "split_url",
+    "url_problem",
 ]
 
 #: The shared schema (docs/journal.md, "Shipping to PostgreSQL"). Idempotent.
@@ -109,8 +110,22 @@ def is_pg_url(text: str) -> bool:
     return text.startswith(("postgresql://", "postgres://"))
 
 
+def url_problem(url: str) -> str | None:
+    """What makes ``url`` no URL at all (an unclosed ``[`` of an IPv6 host), or None; the
+    text never holds the URL, which may hold a password."""
+    try:
+        parts = urllib.parse.urlsplit(url)
+        parts.port  # noqa: B018  # a port that is not a number raises here
+    except ValueError as exc:
+        return f"it is not a valid URL ({exc})"
+    return None
+
+
 def split_url(url: str) -> tuple[str, str | None]:
     """``(url for libpq, source)``: the ``source`` query parameter taken off (rule 4)."""
+    problem = url_problem(url)
+    if problem is not None:
+        raise JournalError(f"{display_url(url)}: {problem}")
     parts = urllib.parse.urlsplit(url)
     query = urllib.parse.parse_qsl(parts.query, keep_blank_values=True)
     source = next((v for k, v in query if k == "source"), None)
@@ -120,8 +135,12 @@ def split_url(url: str) -> tuple[str, str | None]:
 
 def display_url(url: str) -> str:
     """The URL without its password (rule 4): safe in a message or a log."""
-    parts = urllib.parse.urlsplit(url)
-    if parts.password is None:
+    try:
+        parts = urllib.parse.urlsplit(url)
+        password = parts.password
+    except ValueError:  # not a URL: show its scheme only, it may hold a password
+        return f"{url.split('://', 1)[0]}://***"
+    if password is None:
         return url
     netloc = parts.netloc.rsplit("@", 1)[1]
     user = parts.username or ""

@@ -33,15 +33,17 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import functools
+import logging
 import threading
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlparse
 
+from statectl.devices.opcua_config import endpoint_problem
 from statectl.errors import StatectlError
 from statectl.opcua.access import Users as _Users
 from statectl.opcua.access import rules as _Rules
@@ -56,6 +58,19 @@ __all__ = ["NAMESPACE", "OpcuaServer", "OpcuaSettings"]
 
 NAMESPACE = "urn:statectl"
 _START_TIMEOUT = 30.0
+
+
+@contextlib.contextmanager
+def _quiet_start() -> Iterator[None]:
+    """asyncua logs a failed start (a port in use) with a traceback before it raises; the
+    failure is reported once, by :meth:`OpcuaServer.start`, as one line."""
+    log = logging.getLogger("asyncua.server.server")
+    was = log.disabled
+    log.disabled = True
+    try:
+        yield
+    finally:
+        log.disabled = was
 
 
 @dataclass(frozen=True, slots=True)
@@ -218,7 +233,12 @@ class OpcuaServer:
         self._kick = asyncio.Event()
         self._loop_thread = threading.get_ident()
         writer = asyncio.create_task(self._writer())
-        await server.start()
+        try:
+            with _quiet_start():
+                await server.start()
+        except BaseException:
+            writer.cancel()
+            raise
         try:
             self._ready.set()
             await self._stop.wait()
@@ -230,9 +250,16 @@ class OpcuaServer:
         ua = _ua()
 
         settings = self.settings
-        parsed = urlparse(settings.endpoint)
-        if parsed.scheme != "opc.tcp" or not parsed.hostname:
-            raise StatectlError(f"opcua: {settings.endpoint!r} is not an opc.tcp://HOST:PORT URL")
+        problem = endpoint_problem(settings.endpoint)
+        if problem is not None:
+            raise StatectlError(f"opcua: {problem}")
+        host = urlparse(settings.endpoint).hostname
+        try:  # asyncua would log a traceback of its own for a host it cannot bind
+            await asyncio.get_running_loop().getaddrinfo(host, None)
+        except OSError as exc:
+            raise StatectlError(
+                f"opcua: cannot serve {settings.endpoint}: host {host!r} is unknown ({exc})"
+            ) from None
         server.set_endpoint(settings.endpoint)
         server.set_server_name("statectl")
         await server.set_application_uri(APP_URI)

@@ -18,6 +18,16 @@ def parse_event_line(line: str) -> tuple[str | None, str, Any] | float | None:
     text = line.split("#", 1)[0].strip()
     if not text:
         return None
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError as exc:  # bytes stdin could not decode, kept as surrogates
+        bad = text[exc.start]
+        byte = ord(bad) - 0xDC00 if 0xDC80 <= ord(bad) <= 0xDCFF else None
+        what = f"byte 0x{byte:02x}" if byte is not None else repr(bad)
+        raise StatectlError(
+            f"the line is not UTF-8 text ({what} at column {exc.start + 1}); "
+            "write event lines in UTF-8"
+        ) from None
     if text.startswith("+"):
         try:
             seconds = float(text[1:])
@@ -49,9 +59,13 @@ def parse_event_line(line: str) -> tuple[str | None, str, Any] | float | None:
 def parse_time(text: str) -> float:
     """Seconds since the epoch, or an ISO 8601 date-time (local time if it has no zone)."""
     try:
-        return float(text)
+        seconds = float(text)
     except ValueError:
         pass
+    else:
+        if math.isnan(seconds):  # every comparison with it is false: the window holds nothing
+            raise StatectlError(f"not a time: {text!r}; give seconds since the epoch or ISO 8601")
+        return seconds
     try:
         return dt.datetime.fromisoformat(text).timestamp()
     except ValueError:

@@ -484,4 +484,9 @@ class Dashboard:
         return f"{entry.subject.name} has no event {event!r}; its events: {', '.join(names)}"
 
     def authorised(self, given: str | None) -> bool:
-        return given is not None and hmac.compare_digest(given.encode(), self.token.encode())
+        """The token's bytes compared in constant time; a header of bytes that are not
+        UTF-8 (aiohttp keeps them as surrogates) is compared as sent, never a 500."""
+        if given is None:
+            return False
+        sent = given.encode("utf-8", "surrogateescape")
+        return hmac.compare_digest(sent, self.token.encode("utf-8", "surrogateescape"))
