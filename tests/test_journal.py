@@ -567,3 +567,24 @@ def test_a_device_with_only_sent_events_is_shown_not_replayed(
     out, err = io.StringIO(), io.StringIO()
     assert command(str(db), device="Conveyor", out=out, err=err) == code, err.getvalue()
     assert ("Arrive" in out.getvalue()) is (code == 0)
+
+
+def test_a_step_whose_driver_refuses_its_data_is_journalled(
+    tmp_path: Path, device_file: Path
+) -> None:
+    """Movement with data the driver refuses still moved the device (the transition comes
+    before the call): the journal has that step, so replay agrees with the run and a
+    resume does not redeliver the event to fail again."""
+    db = tmp_path / "j.db"
+    lines = io.StringIO("Movement {amount: abc}\nError\n")
+    out, err = io.StringIO(), io.StringIO()
+    code = run(
+        str(device_file), driver="sim-motor", journal=str(db), events=lines, out=out, err=err
+    )
+    assert code == 1, err.getvalue()
+    out, err = io.StringIO(), io.StringIO()
+    assert journal_replay(str(db), out=out, err=err) == 0, out.getvalue() + err.getvalue()
+    assert "0 mismatch(es)" in out.getvalue()
+    out, err = io.StringIO(), io.StringIO()
+    assert journal_show(str(db), out=out, err=err) == 0
+    assert "Movement {amount: abc} (#1) -> [Moving]" in out.getvalue()

@@ -140,3 +140,35 @@ def test_undoing_a_watch_stops_the_calls(motor: Chart) -> None:
     subject.dispatch("Movement completion")
     subject.dispatch("Movement")
     assert watcher.heard == [("entered", "Moving")]
+
+
+class Refusing:
+    """An observer that refuses every call, as a driver refuses data it cannot use."""
+
+    def update(self, notification: Any) -> None:
+        raise ValueError(f"refused {notification.method}")
+
+
+@pytest.mark.parametrize("path", ["plan", "kernel"])
+@pytest.mark.parametrize("listening", ["none", "steps", "records"])
+def test_a_step_whose_observer_raises_is_still_heard_as_taken(
+    motor: Chart, path: str, listening: str
+) -> None:
+    """The transition is committed before the observer runs, so when the observer raises
+    the on_step hooks still hear the step as handled (the journal writes its row: replay
+    and resume agree with the device), and the error reaches the caller."""
+    subject = Subject(motor, clock=SimClock())
+    subject.attach(Refusing())
+    if listening == "steps":
+        subject.listen_steps(lambda step: None)
+    elif listening == "records":
+        subject.listen(lambda record: None)
+    heard: list[tuple[str, str]] = []
+    subject.on_step(lambda event, data, outcome: heard.append((event, str(outcome))))
+    subject.start()
+    if path == "kernel":
+        subject._table = {}  # no plan: the kernel decides the step
+    with pytest.raises(ValueError, match="refused"):
+        subject.dispatch("Movement")
+    assert subject.configuration == {"Moving"}
+    assert heard == [("Movement", "handled")]

@@ -501,9 +501,11 @@ class Subject(Wiring):
             self.emit(EventReceived(self._name, now, event, data))
             self._snapshot = plan.target
             self._table = plan.table
-            self._perform(plan.step, data, now, True)
-            for callback in self._steppers:
-                callback(event, data, "handled")
+            try:
+                self._perform(plan.step, data, now, True)
+            finally:  # taken, even when an observer raised: the journal must hear it
+                for callback in self._steppers:
+                    callback(event, data, "handled")
             return
         self._snapshot = plan.target
         self._table = plan.table
@@ -511,24 +513,24 @@ class Subject(Wiring):
         entry = calls.get(plan) if calls is not None else None
         if entry is None:
             entry = self._call_for(plan)
-        if self._recorders:  # one step record for the step listeners (recording.py)
-            self._record_plan(event, data, plan, entry)
+        try:
+            if self._recorders:  # one step record for the step listeners (recording.py)
+                self._record_plan(event, data, plan, entry)
+            else:
+                self._counts += entry[0]
+                if data is None:
+                    call = entry[1]
+                    if call is not None:
+                        call(entry[2])
+                else:
+                    run = entry[3]
+                    if run is not None:
+                        run(data)
+                if plan.final and not self._finished:
+                    self._finish(0.0, False)
+        finally:  # taken, even when an observer raised: the journal must hear it
             for callback in self._steppers:
                 callback(event, data, "handled")
-            return
-        self._counts += entry[0]
-        if data is None:
-            call = entry[1]
-            if call is not None:
-                call(entry[2])
-        else:
-            run = entry[3]
-            if run is not None:
-                run(data)
-        if plan.final and not self._finished:
-            self._finish(0.0, False)
-        for callback in self._steppers:
-            callback(event, data, "handled")
 
     def _process_then(self, event: str, data: Any, then: Callable[[str], object]) -> None:
         """:meth:`_process`, then ``then(outcome)``: the outcome a step listener would hear."""
@@ -570,9 +572,11 @@ class Subject(Wiring):
         if updates:
             self._data.update(updates)
         self._commit(plan.target if plan is not None else decision.target)
-        if listening or not self._recorders:
-            self._perform(decision, data, now, listening)
-        else:  # only step listeners: one step record (recording.py)
-            self._record_step(event, data, decision, now)
-        for callback in self._steppers:
-            callback(event, data, "handled")
+        try:
+            if listening or not self._recorders:
+                self._perform(decision, data, now, listening)
+            else:  # only step listeners: one step record (recording.py)
+                self._record_step(event, data, decision, now)
+        finally:  # taken, even when an observer raised: the journal must hear it
+            for callback in self._steppers:
+                callback(event, data, "handled")
