@@ -17,6 +17,7 @@ from statectl.devices import (
     connect,
     load_driver_config,
     make_driver,
+    requested_target,
 )
 from statectl.errors import DiagnosticError, StatectlError
 from statectl.observers import Notification
@@ -394,3 +395,28 @@ def test_the_trace_names_the_api_calls_after_the_log_was_cut(heard: str) -> None
     subject.dispatch("Movement", {"amount": 1})
     apis = [r.api for r in records if isinstance(r, ObserverCalled)]
     assert apis == ["SimMotor.stop()", "SimMotor.move_to(1.0)"]
+
+
+@pytest.mark.parametrize(
+    ("data", "target"),
+    [
+        ({"amount": 5}, 7.0),
+        ({"target": 1.5}, 1.5),
+        ({"target": 1.5, "amount": 5}, 1.5),  # an absolute target wins
+        ({"target": "x", "amount": 5}, 7.0),  # ... when it is a number
+        ({"amount": float("nan")}, None),
+        ({"target": float("inf")}, None),
+        ({"amount": 1e308, "x": 0}, 1e308),
+        ({"amount": False}, None),
+        ({"amount": "5"}, None),
+        (None, None),
+    ],
+)
+def test_requested_target_takes_finite_numbers_only(data: Any, target: float | None) -> None:
+    """requested_target, which drivers of one's own use too, answers a finite target or
+    refuses with what a movement needs (a bool is no number here)."""
+    if target is None:
+        with pytest.raises(StatectlError, match="a movement needs a finite number"):
+            requested_target(2.0, data)
+    else:
+        assert requested_target(2.0, data) == target

@@ -25,6 +25,7 @@ Rules:
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any, ClassVar
@@ -45,15 +46,28 @@ __all__ = ["API_LOG_KEEP", "Driver", "check_serves", "connect", "requested_targe
 API_LOG_KEEP = 1000
 
 
+def _number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
 def requested_target(position: float, data: Any) -> float:
-    """The absolute target a Movement asks for: ``{"target": x}`` or ``{"amount": dx}``."""
+    """The absolute target a Movement asks for: ``{"target": x}`` or ``{"amount": dx}``.
+
+    Refused unless a finite number: a ``.nan`` or ``.inf`` amount (or ``true``, which
+    Python counts as 1) would fail deep in a driver (a NaN timer delay, ``round(nan)``,
+    an encoder count of infinity) instead of as one clear error before any API call.
+    """
     if type(data) is dict or isinstance(data, Mapping):  # the common case first
-        if "target" in data and isinstance(data["target"], (int, float)):
-            return float(data["target"])
-        if "amount" in data and isinstance(data["amount"], (int, float)):
-            return position + float(data["amount"])
+        target = None
+        if "target" in data and _number(data["target"]):
+            target = float(data["target"])
+        elif "amount" in data and _number(data["amount"]):
+            target = position + float(data["amount"])
+        if target is not None and math.isfinite(target):
+            return target
     raise StatectlError(
-        f"a movement needs event data {{amount: <number>}} or {{target: <number>}} (got {data!r})"
+        "a movement needs a finite number: event data {amount: <number>} or "
+        f"{{target: <number>}} (got {data!r})"
     )
 
 

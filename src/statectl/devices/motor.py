@@ -21,8 +21,7 @@ import math
 from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
-from statectl.devices.base import Driver
-from statectl.devices.targets import finite_target
+from statectl.devices.base import Driver, requested_target
 from statectl.errors import StatectlError
 from statectl.observers import Notification
 from statectl.runtime.clock import Clock, Timer
@@ -117,7 +116,7 @@ class SimMotor(Driver):
     def arguments(self, method: str, data: Any) -> tuple[Any, ...]:
         if method == "Movement":
             where = self._at(self.clock.now()) if self._moving else self._position
-            return (finite_target(where, data),)
+            return (requested_target(where, data),)
         return (self.previous,)
 
     def update(self, notification: Notification) -> None:
@@ -134,7 +133,7 @@ class SimMotor(Driver):
             now = clock.now()
             if method == "Movement":
                 where = self._at(now) if self._moving else self._position
-                self._go(clock, now, "move_to", finite_target(where, notification.data))
+                self._go(clock, now, "move_to", requested_target(where, notification.data))
             else:
                 self._go(clock, now, "return_to", self.previous)
 

@@ -18,8 +18,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from statectl.devices.base import Driver
-from statectl.devices.targets import finite_target
+from statectl.devices.base import Driver, requested_target
 from statectl.errors import StatectlError
 from statectl.runtime.clock import Timer
 
@@ -107,7 +106,7 @@ class SimStepper(Driver):
 
     def arguments(self, method: str, data: Any) -> tuple[Any, ...]:
         if method == "Movement":
-            goal = round(finite_target(self.position, data) * self.steps_per_unit)
+            goal = round(requested_target(self.position, data) * self.steps_per_unit)
             delta = goal - self.count
             return (abs(delta), 1 if delta >= 0 else -1)
         return (self.home,)

@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from statectl.devices.base import Driver
+from statectl.devices.base import Driver, requested_target
 from statectl.devices.cia402.profile import (
     CW_ENABLE_OPERATION,
     CW_NEW_SETPOINT,
@@ -42,7 +42,6 @@ from statectl.devices.cia402.profile import (
     next_command,
 )
 from statectl.devices.protocol import Report
-from statectl.devices.targets import finite_target
 from statectl.errors import StatectlError
 from statectl.runtime.clock import Clock
 
@@ -184,7 +183,7 @@ class Cia402Driver(Driver):
 
     def arguments(self, method: str, data: Any) -> tuple[Any, ...]:
         if method == "Movement":
-            return (finite_target(self.actual / self.scale, data),)
+            return (requested_target(self.actual / self.scale, data),)
         return (self.previous,)
 
     def move_to(self, target: float) -> None:
