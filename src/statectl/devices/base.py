@@ -25,7 +25,6 @@ Rules:
 
 from __future__ import annotations
 
-import math
 import threading
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any, ClassVar
@@ -47,7 +46,9 @@ API_LOG_KEEP = 1000
 
 
 def _number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
+    """An int or a float, not a bool (which Python counts as 1)."""
+    kind = type(value)
+    return kind is int or kind is float or (isinstance(value, int | float) and kind is not bool)
 
 
 def requested_target(position: float, data: Any) -> float:
@@ -63,7 +64,7 @@ def requested_target(position: float, data: Any) -> float:
             target = float(data["target"])
         elif "amount" in data and _number(data["amount"]):
             target = position + float(data["amount"])
-        if target is not None and math.isfinite(target):
+        if target is not None and target - target == 0.0:  # finite: inf - inf and nan are nan
             return target
     raise StatectlError(
         "a movement needs a finite number: event data {amount: <number>} or "
