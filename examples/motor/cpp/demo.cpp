@@ -10,6 +10,7 @@
 //   Printer   - the statectl::Tracer that prints `t=  0.00  Motor  kind  text` lines.
 // Events carry data here (amount, position, detail), so the application keeps its own
 // small queue of (event, data) and is the device's owner; post() is for monitor threads.
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -31,14 +32,20 @@ struct Data {
   const char* key = nullptr;  // nullptr: no data
   double number = 0.0;
   const char* text = nullptr;
+  bool integral = false;  // an int in the Python demo (amount), else a float (position)
 };
 
-void print_number(double v) {
-  if (v == std::floor(v) && std::fabs(v) < 1e15) {
+// As the Python trace prints numbers: an int as it is, a float as its shortest exact
+// text with ".0" when that has no point or exponent (10.0, 2.5, 1e-07).
+void print_number(double v, bool integral) {
+  if (integral) {
     std::printf("%.0f", v);
-  } else {
-    std::printf("%g", v);
+    return;
   }
+  char text[32];
+  auto end = std::to_chars(text, text + sizeof text - 1, v).ptr;
+  *end = '\0';
+  std::printf("%s%s", text, std::strpbrk(text, ".ein") != nullptr ? "" : ".0");
 }
 
 // -- the trace -------------------------------------------------------------------------------
@@ -87,7 +94,7 @@ class Printer final : public statectl::Tracer {
       if (current.text != nullptr) {
         std::printf("%s", current.text);
       } else {
-        print_number(current.number);
+        print_number(current.number, current.integral);
       }
       std::printf("}");
     }
@@ -349,11 +356,11 @@ int main() {
   current = Data{};
   device.start();
 
-  post(motor::Event::Movement, Data{"amount", 10, nullptr});
+  post(motor::Event::Movement, Data{"amount", 10, nullptr, true});
   until(motor::State::Blocked);
   post(motor::Event::Initialization, Data{});
   until(motor::State::Blocked);
-  post(motor::Event::Movement, Data{"amount", 10, nullptr});
+  post(motor::Event::Movement, Data{"amount", 10, nullptr, true});
   sim.fault_due = now + 0.45;
   until(motor::State::Blocked);
   printer.finished("Motor");
