@@ -84,6 +84,39 @@ def test_mistake_ends_cleanly(
     assert (tmp_path / "existing.txt").read_text(encoding="utf-8") == "keep me\n"
 
 
+BAD_FILES = [
+    # (name, content of an input file in tmp, argv naming it as {input}, exit code, stderr says)
+    ("t.json", "{\n", ["run", str(CELL), "--replay", "{input}"], 1, "t.json:2: T101"),
+    ("t.json", "steps: 3\n", ["run", str(CELL), "--replay", "{input}"], 1, "'steps:' (a list)"),
+    (
+        "t.json",
+        "steps: [{to: gripper, event: Grip, deliveries: 5}]\n",
+        ["run", str(CELL), "--replay", "{input}"],
+        1,
+        "step 1: 'deliveries' must be a list",
+    ),
+    (
+        "t.json",
+        "steps: [{to: gripper, event: Grip, source: link}]\n",
+        ["run", str(CELL), "--replay", "{input}"],
+        1,
+        "step 1: source must be one of",
+    ),
+]
+
+
+@pytest.mark.parametrize(("name", "content", "argv", "code", "says"), BAD_FILES)
+def test_bad_input_file_ends_cleanly(
+    name: str, content: str, argv: list[str], code: int, says: str, tmp_path: Path
+) -> None:
+    """A malformed input file is bad input: its message, exit 1, no traceback, nothing written."""
+    (tmp_path / name).write_text(content, encoding="utf-8")
+    done = statectl([a.replace("{input}", name) for a in argv], tmp_path)
+    assert "Traceback" not in done.stderr, done.stderr
+    assert (done.returncode, says in done.stderr) == (code, True), done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["existing.txt", name])
+
+
 def test_clean_run_exits_0(tmp_path: Path) -> None:
     """A batch run whose every line was accepted exits 0 (the rule 9 count starts at zero)."""
     done = statectl(["run", str(MOTOR)], tmp_path, "Movement {amount: 5}\n+2\n")

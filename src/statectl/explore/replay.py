@@ -83,9 +83,12 @@ def load_replay(path: str | os.PathLike[str]) -> list[ReplayStep]:
         state = s.get("state") or {}
         pairs = state.items() if isinstance(state, dict) else ()
         expect = tuple((str(k), str(v)) for k, v in pairs)
+        deliveries = s.get("deliveries") or []
+        if not isinstance(deliveries, list):
+            raise StatectlError(f"{path}: step {i}: 'deliveries' must be a list of mappings")
         fates = tuple(
             (str(d.get("via", "")), str(d["fate"]))
-            for d in s.get("deliveries") or ()
+            for d in deliveries
             if isinstance(d, dict) and d.get("fate")
         )
         out.append(ReplayStep(kind, str(s["to"]), str(s["event"]), expect, fates))
