@@ -84,7 +84,12 @@ def test_mistake_ends_cleanly(
     assert (tmp_path / "existing.txt").read_text(encoding="utf-8") == "keep me\n"
 
 
+#: A device whose name is too long for a file name (codegen and testgen name files after it).
+LONG_NAMED = MOTOR.read_text(encoding="utf-8").replace("device: Motor", "device: " + "M" * 300)
+
 BAD_FILES = [
+    ("m.yaml", LONG_NAMED, ["codegen", "{input}", "--out", "out/cpp"], 1, "T110"),
+    ("m.yaml", LONG_NAMED, ["testgen", "{input}", "--out", "out/tests"], 1, "cannot write"),
     # (name, content of an input file in tmp, argv naming it as {input}, exit code, stderr says)
     ("t.json", "{\n", ["run", str(CELL), "--replay", "{input}"], 1, "t.json:2: T101"),
     ("t.json", "steps: 3\n", ["run", str(CELL), "--replay", "{input}"], 1, "'steps:' (a list)"),

@@ -215,24 +215,45 @@ def write_files(
     :class:`DiagnosticError` (T110) naming the file that could not be written and why.
     """
     target: Path | None = None
+    made: list[Path] = []  # folders this call created, removed again on failure
     try:
         for target in contents:
             if target.is_dir():
                 raise _NotWritable(target, "it is a directory; name a file in it")
             if make_dirs:
-                target.parent.mkdir(parents=True, exist_ok=True)
+                _make_dirs(target.parent, made)
             elif target.parent.exists() and not target.parent.is_dir():
                 raise _NotWritable(target, f"{target.parent} is a file, not a directory")
             elif not target.parent.is_dir():
                 raise _NotWritable(target, f"no such directory {target.parent}; create it first")
         _write_all(contents, stale)
     except _NotWritable as exc:
+        _remove_dirs(made)
         raise DiagnosticError([diag("T110", Location(str(exc.path)), exc.reason)]) from None
     except OSError as exc:
+        _remove_dirs(made)
         where = str(target) if target is not None else str(exc.filename)
         raise DiagnosticError(
             [diag("T110", Location(where), f"cannot write: {exc.strerror or exc}")]
         ) from exc
+
+
+def _make_dirs(folder: Path, made: list[Path]) -> None:
+    """``mkdir -p folder``, noting in ``made`` each folder it created, outermost first."""
+    missing: list[Path] = []
+    while not folder.exists() and folder != folder.parent:
+        missing.append(folder)
+        folder = folder.parent
+    for each in reversed(missing):
+        each.mkdir(exist_ok=True)
+        made.append(each)
+
+
+def _remove_dirs(made: list[Path]) -> None:
+    """Remove the folders a failed write created, innermost first, if still empty."""
+    for each in reversed(made):
+        with contextlib.suppress(OSError):
+            each.rmdir()
 
 
 class _NotWritable(Exception):
