@@ -122,6 +122,53 @@ def test_bad_input_file_ends_cleanly(
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["existing.txt", name])
 
 
+NOT_REGULAR = [
+    # (argv naming {fifo}, a FIFO whose name has the suffix the command expects)
+    ["check", "{fifo}.yaml"],
+    ["check", "{fifo}.md"],
+    ["check", "{fifo}.xlsx"],
+    ["check", "{fifo}.states.csv"],
+    ["build", "{fifo}.yaml"],
+    ["codegen", "{fifo}.yaml", "--out", "{tmp}/out"],
+    ["testgen", "{fifo}.yaml", "--out", "{tmp}/out"],
+    ["verify", "{tmp}/cell.yaml"],
+    ["run", str(MOTOR), "--config", "{fifo}.yaml"],
+    ["coverage", "{fifo}.db", str(MOTOR)],
+    ["coverage", "{fifo}.json", str(MOTOR)],
+    ["scxml", "run", "{fifo}.scxml"],
+    ["scxml", "import", "{fifo}.scxml"],
+    ["scxml", "export", "{fifo}.yaml"],
+]
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs on this system")
+@pytest.mark.parametrize("argv", NOT_REGULAR)
+def test_a_fifo_for_an_input_file_is_refused_unread(argv: list[str], tmp_path: Path) -> None:
+    """A FIFO named like an input file is exit 1, 'not a regular file': no read that hangs."""
+    fifo = tmp_path / "f"
+    for arg in argv:
+        if "{fifo}" in arg:
+            os.mkfifo(arg.format(fifo=fifo, tmp=tmp_path))
+    (tmp_path / "f.events.csv").write_text("event,old,new\n", encoding="utf-8")
+    (tmp_path / "cell.yaml").write_text("cell: C\ndevices:\n  a: f.yaml\n", encoding="utf-8")
+    if "{tmp}/cell.yaml" in argv:
+        os.mkfifo(tmp_path / "f.yaml")
+    args = [a.format(fifo=fifo, tmp=tmp_path) for a in argv]
+    done = subprocess.run(
+        [sys.executable, "-m", "statectl", *args],
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        text=True,
+        timeout=60,  # without the check the read waits for a writer that never comes
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+    )
+    text = done.stdout + done.stderr
+    assert "Traceback" not in text, text
+    assert (done.returncode, "not a regular file" in text) == (1, True), text
+    assert not (tmp_path / "out").exists()
+
+
 def test_clean_run_exits_0(tmp_path: Path) -> None:
     """A batch run whose every line was accepted exits 0 (the rule 9 count starts at zero)."""
     done = statectl(["run", str(MOTOR)], tmp_path, "Movement {amount: 5}\n+2\n")

@@ -33,6 +33,7 @@ from statectl.model import Chart
 from statectl.scxml import read_scxml, write_scxml
 from statectl.scxml.reader import statectl_elements
 from statectl.tables import DeviceTables, load, save
+from statectl.tables.inputs import read_input
 from statectl.tables.schema import (
     RECOVERY_COLUMNS,
     RawRow,
@@ -127,7 +128,7 @@ def import_file(
     """
     source = Path(path)
     try:
-        content = source.read_bytes()  # decoded by the reader, as the prolog declares
+        content = read_input(source)  # decoded by the reader, as the prolog declares
     except OSError as exc:
         raise DiagnosticError(
             [

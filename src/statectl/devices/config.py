@@ -63,6 +63,7 @@ from statectl.devices.twin import SimTwin, twin_option_problems
 from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, StatectlError
 from statectl.model import Chart
 from statectl.tables import safeyaml
+from statectl.tables.inputs import read_input_text
 
 __all__ = [
     "DRIVERS",
@@ -273,7 +274,7 @@ def load_run_config(path: str | Path) -> RunConfig:
         diags.append(Diagnostic(code, Severity.ERROR, Location(file, line), message, hint))
 
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = read_input_text(path)
     except (OSError, UnicodeDecodeError) as exc:
         error("D501", None, f"cannot read driver config ({exc})", "check the path")
         raise DiagnosticError(diags) from None

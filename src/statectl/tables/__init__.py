@@ -27,6 +27,7 @@ from pathlib import Path
 
 from statectl.errors import Diagnostic, DiagnosticError, Location
 from statectl.tables.csv_io import csv_paths, dump_csv, read_csv
+from statectl.tables.inputs import read_input
 from statectl.tables.md_io import dump_md, read_md
 from statectl.tables.schema import (
     CODES,
@@ -109,7 +110,7 @@ def _unknown_format(path: Path, fmt: str | None = None) -> Diagnostic:
 
 def _read_text(path: Path, diags: list[Diagnostic]) -> str | None:
     try:
-        return path.read_bytes().decode("utf-8-sig")
+        return read_input(path).decode("utf-8-sig")
     except FileNotFoundError:
         diags.append(diag("T110", Location(str(path)), "file not found"))
     except UnicodeDecodeError as exc:
@@ -155,7 +156,7 @@ def load(path: str | os.PathLike[str]) -> tuple[DeviceTables | None, list[Diagno
         return tables, [*diags, *more]
     if fmt is Format.XLSX:
         try:
-            content = p.read_bytes()
+            content = read_input(p)
         except FileNotFoundError:
             return None, [diag("T110", Location(str(p)), "file not found")]
         except OSError as exc:
