@@ -45,6 +45,7 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import inspect
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -104,9 +105,41 @@ BUS_LIBRARIES: Mapping[str, tuple[str, str]] = {
     "modbus": ("pymodbus", "modbus"),
 }
 
+
+def _number_problems(
+    options: Mapping[str, Any], names: Mapping[str, tuple[type, bool]]
+) -> tuple[str, ...]:
+    """Each option in ``names`` (name -> (int or float, must be > 0)) that is not such."""
+    problems: list[str] = []
+    for name, (kind, positive) in names.items():
+        if name not in options:
+            continue
+        value = options[name]
+        kinds = (int,) if kind is int else (int, float)
+        ok = isinstance(value, kinds) and not isinstance(value, bool)
+        ok = ok and math.isfinite(value) and (value > 0 or not positive)
+        if not ok:
+            what = "an integer" if kind is int else "a finite number"
+            problems.append(f"{name} must be {what}{' > 0' if positive else ''} (got {value!r})")
+    return tuple(problems)
+
+
+def _motor_option_problems(options: Mapping[str, Any]) -> tuple[str, ...]:
+    return _number_problems(options, {"speed": (float, True), "position": (float, False)})
+
+
+def _stepper_option_problems(options: Mapping[str, Any]) -> tuple[str, ...]:
+    return _number_problems(
+        options,
+        {"steps_per_unit": (int, True), "pulse_rate": (float, True), "step": (int, False)},
+    )
+
+
 #: Checks of option values, by driver name: each returns the problems it finds.
 OPTION_CHECKS: Mapping[str, Callable[[Mapping[str, Any]], Sequence[str]]] = {
     "sim-twin": twin_option_problems,
+    "sim-motor": _motor_option_problems,
+    "sim-stepper": _stepper_option_problems,
 }
 
 #: Constructor parameters statectl supplies itself, never a config file.
@@ -414,7 +447,9 @@ def load_run_config(path: str | Path) -> RunConfig:
                 "D509",
                 line_of(fields["options"][1]),
                 f"device {device!r}: {text}",
-                "give seconds as numbers >= 0, e.g. {delay: 0.5, faults: {Moving: 0.4}}",
+                "give seconds as numbers >= 0, e.g. {delay: 0.5, faults: {Moving: 0.4}}"
+                if driver == "sim-twin"
+                else "see docs/drivers.md for the driver's options",
             )
         if bad:
             continue
