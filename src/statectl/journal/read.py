@@ -129,11 +129,13 @@ def _json(text: Any, what: str) -> Any:
         raise JournalError(f"{what} cannot be read: its data is not JSON ({exc})") from None
 
 
-def _datamodel(text: Any, what: str) -> dict[str, Any]:
-    """A ``devices`` row's datamodel: a JSON object, as every journal writes it."""
+def _datamodel(text: Any, what: str) -> dict[str, Any] | None:
+    """A ``devices`` row's datamodel: a JSON object or null, as journals write it."""
     data = _json(text, what)
-    if not isinstance(data, dict):
-        raise JournalError(f"{what} cannot be read: its data is not a JSON object ({text!r:.80})")
+    if data is not None and not isinstance(data, dict):
+        raise JournalError(
+            f"{what} cannot be read: its data is not a JSON object or null ({text!r:.80})"
+        )
     return data
 
 
