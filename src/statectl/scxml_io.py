@@ -154,6 +154,20 @@ def export_file(path: str | os.PathLike[str]) -> str:
     Raises :class:`DiagnosticError` if the device file does not build.
     """
     chart = load_chart(path)
+    spaced = [
+        Diagnostic(
+            "S624",
+            Severity.ERROR,
+            st.origin if st.origin.file else Location(str(path)),
+            f"state {st.name!r} holds whitespace, which an SCXML state id cannot: "
+            "the document would name another state, or none",
+            "rename the state without spaces (for instance with '_') to export it",
+        )
+        for st in chart.states
+        if any(c.isspace() for c in st.name)
+    ]
+    if spaced:
+        raise DiagnosticError(spaced)
     text = write_scxml(chart)
     tables, _ = load(path)
     if tables is None or not tables.recovery:
