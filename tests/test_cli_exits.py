@@ -54,6 +54,7 @@ CASES = [
     (["verify", str(BUGGY), "--traces", "{file}"], "", 1, "T110"),
     (["verify", str(CELL), "--export", "promela", "-o", "{file}/x.pml"], "", 1, "T110"),
     (["run", str(MOTOR), "--dashboard", "--port", "99999"], "", 2, "--port"),
+    (["run", str(CELL), "--walk", "-5"], "", 2, "--walk must be 0 or more"),
     (["journal", "export", "{tmp}/j.db", "-o", "{file}/x.jsonl"], "", 1, "is not a directory"),
     (["testgen", str(MOTOR), "--out", "{file}/x"], "", 1, "cannot write"),
     (["run", str(MOTOR)], "Movement {amount: \n", 1, "line 1:"),
