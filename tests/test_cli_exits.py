@@ -299,6 +299,40 @@ def test_missing_input_is_exit_2(argv: list[str], says: str, tmp_path: Path) -> 
     assert str(gone) in done.stderr, done.stderr
 
 
+OVERWRITES_INPUT = [
+    # (argv naming the input {in} again as the output)
+    ["render", "{in}", "--out", "{in}"],
+    ["render", "{in}", "--format", "svg", "--out", "./{in}"],
+    ["scxml", "export", "{in}", "--out", "{in}"],
+    ["tables", "{in}", "--to", "yaml", "--out", "{in}"],
+    ["tables", "{in}", "--to", "md", "--out", "{in}"],
+    ["verify", "{cell}", "--export", "promela", "-o", "{cell}"],
+    ["journal", "export", "{db}", "-o", "{db}"],
+]
+
+
+@pytest.mark.parametrize("argv", OVERWRITES_INPUT)
+def test_an_output_that_is_the_input_is_refused(argv: list[str], tmp_path: Path) -> None:
+    """--out naming the input file is a usage error (exit 2): the input stays as it was."""
+    device = tmp_path / "m.yaml"
+    device.write_text(MOTOR.read_text(encoding="utf-8"), encoding="utf-8")
+    cell = tmp_path / "c.yaml"
+    cell.write_text("cell: C\ndevices:\n  m: m.yaml\n", encoding="utf-8")
+    db = tmp_path / "j.db"
+    if "{db}" in argv:
+        statectl(["run", str(MOTOR), "--journal", str(db)], tmp_path, "Movement\n")
+    (tmp_path / "existing.txt").write_text("keep me\n", encoding="utf-8")  # as statectl() does
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()}
+    args = [
+        a.replace("{in}", "m.yaml").replace("{cell}", "c.yaml").replace("{db}", "j.db")
+        for a in argv
+    ]
+    done = statectl(args, tmp_path)
+    assert "Traceback" not in done.stderr, done.stderr
+    assert (done.returncode, "is an input of this command" in done.stderr) == (2, True), done.stderr
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()} == before
+
+
 def test_missing_input_table_covers_every_command() -> None:
     """Every command of the parser appears in the missing-input table (a new one must too)."""
     import argparse
