@@ -401,6 +401,20 @@ def test_save_into_a_missing_directory_is_t110(tmp_path: Path) -> None:
     assert list(tmp_path.iterdir()) == []
 
 
+def test_failed_write_removes_the_folders_it_made(tmp_path: Path) -> None:
+    """An output folder created for files that then cannot be written is removed again."""
+    from statectl.tables import write_files
+
+    contents: dict[Path, str | bytes] = {
+        tmp_path / "out" / "sub" / "a.txt": "a",
+        tmp_path / "out" / "sub" / ("b" * 300 + ".txt"): "b",  # longer than a file name may be
+    }
+    with pytest.raises(DiagnosticError) as info:
+        write_files(contents, make_dirs=True)
+    assert [d.code for d in info.value.diagnostics] == ["T110"]
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_unwritable_xlsx_text_writes_nothing(tmp_path: Path) -> None:
     """A control character a workbook cannot hold fails the save before any file exists."""
     tables, _ = load(Path(__file__).resolve().parent.parent / "examples" / "motor" / "motor.yaml")

@@ -72,6 +72,7 @@ def test_rules_are_read(tmp_path: Path) -> None:
     [
         (("devices:\n  left:", "devices:\n  le.ft:"), "V806"),
         ((f"right: {MOTOR}", "right: nowhere.yaml"), "V805"),
+        ((f"right: {MOTOR}", 'right: "motor\\0.yaml"'), "V805"),
         (("to: right, send: Movement}", "to: nobody, send: Movement}"), "V807"),
         (("enters: Moving", "enters: Flying"), "V808"),
         (("send: Movement}", "send: Jump}"), "V809"),

@@ -55,6 +55,7 @@ CASES = [
     (["verify", str(CELL), "--export", "promela", "-o", "{file}/x.pml"], "", 1, "T110"),
     (["run", str(MOTOR), "--dashboard", "--port", "99999"], "", 2, "--port"),
     (["run", str(MOTOR), "--opcua", "http://127.0.0.1:4840"], "", 2, "--opcua"),
+    (["run", str(CELL), "--walk", "-5"], "", 2, "--walk must be 0 or more"),
     (["journal", "export", "{tmp}/j.db", "-o", "{file}/x.jsonl"], "", 1, "is not a directory"),
     (["testgen", str(MOTOR), "--out", "{file}/x"], "", 1, "cannot write"),
     (["run", str(MOTOR)], "Movement {amount: \n", 1, "line 1:"),
@@ -83,6 +84,91 @@ def test_mistake_ends_cleanly(
     assert says in done.stderr, done.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["existing.txt"]
     assert (tmp_path / "existing.txt").read_text(encoding="utf-8") == "keep me\n"
+
+
+#: A device whose name is too long for a file name (codegen and testgen name files after it).
+LONG_NAMED = MOTOR.read_text(encoding="utf-8").replace("device: Motor", "device: " + "M" * 300)
+
+BAD_FILES = [
+    ("m.yaml", LONG_NAMED, ["codegen", "{input}", "--out", "out/cpp"], 1, "T110"),
+    ("m.yaml", LONG_NAMED, ["testgen", "{input}", "--out", "out/tests"], 1, "cannot write"),
+    # (name, content of an input file in tmp, argv naming it as {input}, exit code, stderr says)
+    ("t.json", "{\n", ["run", str(CELL), "--replay", "{input}"], 1, "t.json:2: T101"),
+    ("t.json", "steps: 3\n", ["run", str(CELL), "--replay", "{input}"], 1, "'steps:' (a list)"),
+    (
+        "t.json",
+        "steps: [{to: gripper, event: Grip, deliveries: 5}]\n",
+        ["run", str(CELL), "--replay", "{input}"],
+        1,
+        "step 1: 'deliveries' must be a list",
+    ),
+    (
+        "t.json",
+        "steps: [{to: gripper, event: Grip, source: link}]\n",
+        ["run", str(CELL), "--replay", "{input}"],
+        1,
+        "step 1: source must be one of",
+    ),
+]
+
+
+@pytest.mark.parametrize(("name", "content", "argv", "code", "says"), BAD_FILES)
+def test_bad_input_file_ends_cleanly(
+    name: str, content: str, argv: list[str], code: int, says: str, tmp_path: Path
+) -> None:
+    """A malformed input file is bad input: its message, exit 1, no traceback, nothing written."""
+    (tmp_path / name).write_text(content, encoding="utf-8")
+    done = statectl([a.replace("{input}", name) for a in argv], tmp_path)
+    assert "Traceback" not in done.stderr, done.stderr
+    assert (done.returncode, says in done.stderr) == (code, True), done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["existing.txt", name])
+
+
+NOT_REGULAR = [
+    # (argv naming {fifo}, a FIFO whose name has the suffix the command expects)
+    ["check", "{fifo}.yaml"],
+    ["check", "{fifo}.md"],
+    ["check", "{fifo}.xlsx"],
+    ["check", "{fifo}.states.csv"],
+    ["build", "{fifo}.yaml"],
+    ["codegen", "{fifo}.yaml", "--out", "{tmp}/out"],
+    ["testgen", "{fifo}.yaml", "--out", "{tmp}/out"],
+    ["verify", "{tmp}/cell.yaml"],
+    ["run", str(MOTOR), "--config", "{fifo}.yaml"],
+    ["coverage", "{fifo}.db", str(MOTOR)],
+    ["coverage", "{fifo}.json", str(MOTOR)],
+    ["scxml", "run", "{fifo}.scxml"],
+    ["scxml", "import", "{fifo}.scxml"],
+    ["scxml", "export", "{fifo}.yaml"],
+]
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs on this system")
+@pytest.mark.parametrize("argv", NOT_REGULAR)
+def test_a_fifo_for_an_input_file_is_refused_unread(argv: list[str], tmp_path: Path) -> None:
+    """A FIFO named like an input file is exit 1, 'not a regular file': no read that hangs."""
+    fifo = tmp_path / "f"
+    for arg in argv:
+        if "{fifo}" in arg:
+            os.mkfifo(arg.format(fifo=fifo, tmp=tmp_path))
+    (tmp_path / "f.events.csv").write_text("event,old,new\n", encoding="utf-8")
+    (tmp_path / "cell.yaml").write_text("cell: C\ndevices:\n  a: f.yaml\n", encoding="utf-8")
+    if "{tmp}/cell.yaml" in argv:
+        os.mkfifo(tmp_path / "f.yaml")
+    args = [a.format(fifo=fifo, tmp=tmp_path) for a in argv]
+    done = subprocess.run(
+        [sys.executable, "-m", "statectl", *args],
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        text=True,
+        timeout=60,  # without the check the read waits for a writer that never comes
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+    )
+    text = done.stdout + done.stderr
+    assert "Traceback" not in text, text
+    assert (done.returncode, "not a regular file" in text) == (1, True), text
+    assert not (tmp_path / "out").exists()
 
 
 def test_clean_run_exits_0(tmp_path: Path) -> None:
@@ -212,6 +298,40 @@ def test_missing_input_is_exit_2(argv: list[str], says: str, tmp_path: Path) -> 
     assert "Traceback" not in done.stderr, done.stderr
     assert (done.returncode, says in done.stderr) == (2, True), done.stderr
     assert str(gone) in done.stderr, done.stderr
+
+
+OVERWRITES_INPUT = [
+    # (argv naming the input {in} again as the output)
+    ["render", "{in}", "--out", "{in}"],
+    ["render", "{in}", "--format", "svg", "--out", "./{in}"],
+    ["scxml", "export", "{in}", "--out", "{in}"],
+    ["tables", "{in}", "--to", "yaml", "--out", "{in}"],
+    ["tables", "{in}", "--to", "md", "--out", "{in}"],
+    ["verify", "{cell}", "--export", "promela", "-o", "{cell}"],
+    ["journal", "export", "{db}", "-o", "{db}"],
+]
+
+
+@pytest.mark.parametrize("argv", OVERWRITES_INPUT)
+def test_an_output_that_is_the_input_is_refused(argv: list[str], tmp_path: Path) -> None:
+    """--out naming the input file is a usage error (exit 2): the input stays as it was."""
+    device = tmp_path / "m.yaml"
+    device.write_text(MOTOR.read_text(encoding="utf-8"), encoding="utf-8")
+    cell = tmp_path / "c.yaml"
+    cell.write_text("cell: C\ndevices:\n  m: m.yaml\n", encoding="utf-8")
+    db = tmp_path / "j.db"
+    if "{db}" in argv:
+        statectl(["run", str(MOTOR), "--journal", str(db)], tmp_path, "Movement\n")
+    (tmp_path / "existing.txt").write_text("keep me\n", encoding="utf-8")  # as statectl() does
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()}
+    args = [
+        a.replace("{in}", "m.yaml").replace("{cell}", "c.yaml").replace("{db}", "j.db")
+        for a in argv
+    ]
+    done = statectl(args, tmp_path)
+    assert "Traceback" not in done.stderr, done.stderr
+    assert (done.returncode, "is an input of this command" in done.stderr) == (2, True), done.stderr
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()} == before
 
 
 def test_missing_input_table_covers_every_command() -> None:

@@ -235,6 +235,21 @@ def test_replay_reproduces_the_counterexample(tmp_path: Path) -> None:
     assert "invariant belt-still-while-arm-reaches fails" in out.getvalue()
 
 
+def test_traces_of_a_long_property_name_are_written(tmp_path: Path) -> None:
+    """A 300-character invariant name still gives trace files (names stay under 255 bytes)."""
+    for source in PICK.glob("*.yaml"):
+        (tmp_path / source.name).write_text(source.read_text(encoding="utf-8"), encoding="utf-8")
+    buggy = tmp_path / "cell-buggy.yaml"
+    long_name = "n" * 300
+    buggy.write_text(
+        buggy.read_text(encoding="utf-8").replace("belt-still-while-arm-reaches", long_name),
+        encoding="utf-8",
+    )
+    written = write_traces(run(buggy), tmp_path / "traces")
+    assert len(written) == 6 and all(p.is_file() for p in written)
+    assert max(len(p.name.encode()) for p in written) < 255
+
+
 def test_runtime_walk_agrees_with_explorer() -> None:
     """A random walk on the runtime never reaches a state the explorer does not predict."""
     cell = load_cell_or_raise(PICK / "cell-buggy.yaml")

@@ -177,6 +177,56 @@ def test_every_command_refuses_a_damaged_journal(
     assert snapshot_of(db) == before
 
 
+# (fault, damage of the right SQL type that only decoding the row finds, what the message says)
+DECODE_FAULTS: list[tuple[str, Callable[[Path], None], str]] = [
+    (
+        "active not state names",
+        sql(f"UPDATE steps SET active = '[1, 2]' WHERE {LAST}"),
+        "active states are not a list of state names",
+    ),
+    (
+        "history not pairs",
+        sql(f"UPDATE steps SET history = '[[1]]' WHERE {LAST}"),
+        "history is not a list of [state, [states]]",
+    ),
+    (
+        "datamodel not an object",
+        sql("UPDATE devices SET data = '5'"),
+        "its data is not a JSON object",
+    ),
+]
+
+
+@pytest.mark.parametrize("argv", [["journal", "replay"], ["coverage"]])
+@pytest.mark.parametrize(
+    ("fault", "damage", "says"), DECODE_FAULTS, ids=[f[0] for f in DECODE_FAULTS]
+)
+def test_a_row_of_the_right_type_that_does_not_decode_is_refused(
+    good_journal: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    argv: list[str],
+    fault: str,
+    damage: Callable[[Path], None],
+    says: str,
+) -> None:
+    """Text columns holding JSON no journal writes: exit 1 naming the fault, not a
+    TypeError or KeyError from the replay or the coverage walk."""
+    db = damaged(good_journal, tmp_path, damage)
+    extra = [str(MOTOR)] if argv == ["coverage"] else []
+    code, _out, err = cli([*argv, str(db), *extra], monkeypatch)
+    assert (code, says in err) == (1, True), err
+
+
+def test_show_prints_a_wall_time_no_date_holds_as_it_is(
+    good_journal: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A step's wall time out of the date range is shown raw, not an OverflowError."""
+    db = damaged(good_journal, tmp_path, sql(f"UPDATE steps SET wall = 1e999 WHERE {LAST}"))
+    code, out, err = cli(command("show", db, tmp_path), monkeypatch)
+    assert (code, "(wall inf)" in out) == (0, True), err
+
+
 def test_a_bad_row_resume_does_not_read_is_refused_by_readers_only(
     good_journal: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

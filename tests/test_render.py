@@ -170,6 +170,17 @@ def test_mermaid_escapes_what_its_grammar_parses() -> None:
         assert _visible("mermaid", mermaid_writer.escape(name)) == name
 
 
+def test_markdown_tables_hold_no_raw_html_from_names() -> None:
+    """A name like '<script>' is text in the md page's tables, not a tag a viewer runs."""
+    states = (State("<script>alert(1)</script>"), State("a < b"))
+    transitions = (Transition(states[0].name, ("<img src=x>",), (states[1].name,)),)
+    page = render(Chart("<b>D</b>", states, transitions, initial=(states[0].name,)), "md")
+    assert (
+        re.search(r"<(?=[A-Za-z/!?])", page.split("```mermaid")[0] + page.split("```")[-1]) is None
+    )
+    assert "&lt;script>alert(1)&lt;/script>" in page and "a < b" in page
+
+
 def test_plantuml_quoted_labels_have_no_inner_quote() -> None:
     """PlantUML has no escape inside a quoted label, so a double quote becomes ``'``."""
     text = render(_awkward_chart(), "plantuml")

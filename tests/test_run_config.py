@@ -47,6 +47,32 @@ def test_both_sections_are_read(tmp_path: Path) -> None:
     assert load_driver_config(path) == {"Motor": ("sim-motor", {})}
 
 
+@pytest.mark.parametrize(
+    ("driver", "options", "says"),
+    [
+        ("sim-motor", "{speed: {}}", "speed must be a finite number > 0 (got {})"),
+        ("sim-motor", "{speed: .inf}", "speed must be a finite number > 0 (got inf)"),
+        ("sim-motor", "{position: [1]}", "position must be a finite number (got [1])"),
+        ("sim-motor", "{position: '3'}", "position must be a finite number (got '3')"),
+        ("sim-stepper", "{steps_per_unit: 1.5}", "steps_per_unit must be an integer > 0"),
+        ("sim-stepper", "{pulse_rate: [1]}", "pulse_rate must be a finite number > 0"),
+        ("sim-stepper", "{step: x}", "step must be an integer (got 'x')"),
+        ("sim-stepper", "{step: true}", "step must be an integer (got True)"),
+    ],
+)
+def test_a_simulated_drive_option_of_the_wrong_type_is_d509(
+    tmp_path: Path, driver: str, options: str, says: str
+) -> None:
+    """sim-motor and sim-stepper options of the wrong type are D509 at their line, not a
+    TypeError when the run creates the driver."""
+    path = write(tmp_path, f"devices:\n  Motor:\n    driver: {driver}\n    options: {options}\n")
+    with pytest.raises(DiagnosticError) as caught:
+        load_run_config(path)
+    found = [(d.code, d.where.line) for d in caught.value.diagnostics]
+    assert found == [("D509", 4)], found
+    assert says in caught.value.diagnostics[0].message
+
+
 def test_a_dashboard_only_file_leaves_the_drivers_open(tmp_path: Path) -> None:
     """Without 'devices' the drivers are None (the run's --driver or twins); the drivers loader
     refuses such a file with D503."""

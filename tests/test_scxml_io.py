@@ -152,6 +152,22 @@ def test_export_file_of_a_broken_device_raises(tmp_path: Path) -> None:
     assert {d.code for d in caught.value.diagnostics} >= {"B201", "B202"}
 
 
+def test_export_refuses_a_state_name_no_scxml_id_can_hold(tmp_path: Path) -> None:
+    """A state 'Half open' is S624 at its row: as an id it would read as two states."""
+    path = tmp_path / "valve.yaml"
+    path.write_text(
+        "device: Valve\nstates:\n  - {state: Shut, control: default}\n"
+        "  - {state: Half open, control: event trigger required}\n"
+        "events:\n  - {event: Open, old: Shut, new: Half open}\n",
+        encoding="utf-8",
+    )
+    with pytest.raises(DiagnosticError) as caught:
+        export_file(path)
+    found = [(d.code, d.where.line) for d in caught.value.diagnostics]
+    assert found == [("S624", 4)]
+    assert "'Half open'" in caught.value.diagnostics[0].message
+
+
 # --- random tables: export then import is the identity ------------------------------------
 
 SIMPLE = st.text("abcdefgh", min_size=1, max_size=4)

@@ -161,6 +161,20 @@ def test_scxml_run_timeout_bounds_wall_time(folder: Path, case: str) -> None:
     assert "Traceback" not in done.stderr
 
 
+@pytest.mark.parametrize("delay", ['delay="99999999999999999999999s"', "delayexpr=\"'600000h'\""])
+def test_a_delay_no_clock_can_wait_for_is_error_execution(folder: Path, delay: str) -> None:
+    """A send delayed past MAX_DELAY is error.execution on the wall clock, not a traceback."""
+    path = folder / "doc.scxml"
+    path.write_text(
+        f'{HEAD} datamodel="safe" initial="s"><state id="s">'
+        f'<onentry><send event="go" {delay}/></onentry>' + OUTCOME,
+        encoding="utf-8",
+    )
+    done = _cli(path)
+    assert "Traceback" not in done.stderr, done.stderr
+    assert (done.returncode, done.stdout) == (0, "final: refused\n"), done.stderr
+
+
 def test_scxml_run_watchdog_stops_trusted_code_no_check_reaches(folder: Path) -> None:
     """A python <script> looping forever is ended by the watchdog: message and exit 1."""
     path = folder / "doc.scxml"

@@ -5,6 +5,7 @@ from __future__ import annotations
 import ast
 import io
 import json
+import math
 import os
 import re
 import subprocess
@@ -137,6 +138,30 @@ def test_guard_over_data_gets_data_for_both_outcomes(tmp_path: Path) -> None:
     result = run_pytest(out)
     assert result.returncode == 0, result.stdout[-3000:]
     assert counts(result) == {"passed": made.tests}
+
+
+def test_a_nan_data_value_is_written_as_code(tmp_path: Path) -> None:
+    """Data that is nan is written as float('nan') (repr's nan is no literal): it imports."""
+    tables = tmp_path / "d.yaml"
+    tables.write_text(
+        "device: D\ndata:\n  x: .nan\nstates:\n  - {state: A, control: default}\n"
+        "  - {state: B, control: event trigger required}\nevents:\n"
+        "  - {event: go, old: A, new: B, guard: x == x}\n  - {event: back, old: B, new: A}\n",
+        encoding="utf-8",
+    )
+    made = generate(tables, "rows", tmp_path / "gen")
+    text = made.path.read_text(encoding="utf-8")
+    assert 'statectl_data(x=float("nan"))' in text
+    exec(compile(text, str(made.path), "exec"), {"__name__": "generated"})  # no NameError
+
+
+@pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf, 1.5, -0.0])
+def test_every_float_is_written_as_code_that_gives_it_back(value: float) -> None:
+    """The generated module's float values evaluate to the same float, also nan and inf."""
+    from statectl.testgen.writer import _lit
+
+    back = eval(_lit(value), {})  # the text the module holds, as Python reads it
+    assert repr(back) == repr(value)
 
 
 #: Seeded driver bugs: (name, conftest body, what a failure must say).

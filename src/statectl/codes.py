@@ -319,6 +319,7 @@ ALL: tuple[Code, ...] = (
     _c("S621", _E, "an encoding the document declares cannot be read", _SCXML),
     _c("S622", _E, "the DTD declares an entity: refused", _SCXML),
     _c("S623", _E, "a <statectl:recovery> element that is no valid Recovery row", _SCXML),
+    _c("S624", _E, "(export) a state name holds whitespace, which no SCXML id can", _SCXML),
     # -- J6xx: the Recovery table against its chart (statectl.recovery) -------------------
     _c(
         "J603",

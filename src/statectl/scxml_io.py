@@ -33,6 +33,7 @@ from statectl.model import Chart
 from statectl.scxml import read_scxml, write_scxml
 from statectl.scxml.reader import statectl_elements
 from statectl.tables import DeviceTables, load, save
+from statectl.tables.inputs import read_input
 from statectl.tables.schema import (
     RECOVERY_COLUMNS,
     RawRow,
@@ -127,7 +128,7 @@ def import_file(
     """
     source = Path(path)
     try:
-        content = source.read_bytes()  # decoded by the reader, as the prolog declares
+        content = read_input(source)  # decoded by the reader, as the prolog declares
     except OSError as exc:
         raise DiagnosticError(
             [
@@ -153,6 +154,20 @@ def export_file(path: str | os.PathLike[str]) -> str:
     Raises :class:`DiagnosticError` if the device file does not build.
     """
     chart = load_chart(path)
+    spaced = [
+        Diagnostic(
+            "S624",
+            Severity.ERROR,
+            st.origin if st.origin.file else Location(str(path)),
+            f"state {st.name!r} holds whitespace, which an SCXML state id cannot: "
+            "the document would name another state, or none",
+            "rename the state without spaces (for instance with '_') to export it",
+        )
+        for st in chart.states
+        if any(c.isspace() for c in st.name)
+    ]
+    if spaced:
+        raise DiagnosticError(spaced)
     text = write_scxml(chart)
     tables, _ = load(path)
     if tables is None or not tables.recovery:

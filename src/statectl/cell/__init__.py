@@ -59,6 +59,7 @@ from statectl.cell.values import (
     Trigger,
 )
 from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, has_errors
+from statectl.tables.inputs import read_input_text
 from statectl.tables.safeyaml import YamlRefused, compose
 
 __all__ = [
@@ -83,7 +84,7 @@ def load_cell(path: str | os.PathLike[str]) -> tuple[Cell | None, list[Diagnosti
     file = str(path)
     top = Location(file, 1)
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = read_input_text(path)
     except OSError as exc:
         return None, [_d("V801", top, f"cannot read the cell file: {exc.strerror or exc}")]
     except UnicodeDecodeError as exc:

@@ -125,6 +125,11 @@ def _load_devices(r: _Reader, node: yaml.Node | None, base: Path, at: Location) 
             file = r.text(value, f"device {name!r}")
         if file is None:
             continue
+        if "\x00" in file:  # no file system names one: resolve() would raise ValueError
+            r.diags.append(
+                _d("V805", where, f"device file {file!r} holds a NUL character", "name a file")
+            )
+            continue
         path = (base / file).resolve()
         if path not in loaded:
             if not path.exists():

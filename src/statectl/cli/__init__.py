@@ -288,6 +288,33 @@ def _missing_input(args: argparse.Namespace) -> str | None:
     return next((p for p in paths if not input_exists(Path(p))), None)
 
 
+def _overwritten_input(args: argparse.Namespace) -> str | None:
+    """The output file (``--out``/``-o``) that is one of the input files, if any (exit 2).
+
+    Writing there would replace the input with the command's output (a device file with
+    its SCXML or its diagram, a commented file with its regenerated form): data lost
+    without a word.
+    """
+    inputs: list[str] = []
+    for attr in ("file", "files", "cell", "config", "journal", "replay", "db"):
+        value = getattr(args, attr, None)
+        if isinstance(value, str):
+            inputs.append(value)
+        elif isinstance(value, list):
+            inputs.extend(v for v in value if isinstance(v, str))
+    for attr in ("out", "output"):
+        target = getattr(args, attr, None)
+        if not isinstance(target, str) or not os.path.isfile(target):
+            continue
+        for source in inputs:
+            try:
+                if os.path.isfile(source) and os.path.samefile(source, target):
+                    return target
+            except OSError:
+                continue
+    return None
+
+
 def main(
     argv: Sequence[str] | None = None, out: TextIO | None = None, err: TextIO | None = None
 ) -> int:
@@ -301,6 +328,13 @@ def main(
     missing = _missing_input(args)
     if missing is not None:
         err.write(f"statectl {_command(args)}: {missing}: no such file\n")
+        return USAGE
+    overwritten = _overwritten_input(args)
+    if overwritten is not None:
+        err.write(
+            f"statectl {_command(args)}: {overwritten} is an input of this command; writing "
+            "the output there would replace it: name another file\n"
+        )
         return USAGE
     try:
         code: int = args.func(args, out, err)

@@ -269,6 +269,9 @@ def cmd_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     from statectl.runner import is_cell
 
     if args.replay is not None or args.walk is not None:
+        if args.walk is not None and args.walk < 0:
+            err.write(f"statectl run: --walk must be 0 or more steps (got {args.walk})\n")
+            return USAGE
         if args.json or args.driver == "none":
             err.write(
                 "statectl run: --json and --driver none step event lines, not --walk/--replay\n"

@@ -14,7 +14,7 @@ import sqlite3
 import sys
 from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 from statectl.cli.commands import OK, PROBLEMS, USAGE
 from statectl.errors import DiagnosticError, StatectlError
@@ -110,6 +110,14 @@ def _reading(command: str, path: str, err: TextIO) -> Iterator[list[int]]:
         code[0] = PROBLEMS
 
 
+def _stamp(wall: Any) -> str:
+    """A row's wall-clock time as ISO text; the raw value if no date has it (a damaged row)."""
+    try:
+        return dt.datetime.fromtimestamp(wall).isoformat(timespec="milliseconds")
+    except (OverflowError, OSError, ValueError, TypeError):
+        return f"(wall {wall!r})"
+
+
 def journal_show(
     path: str,
     *,
@@ -148,8 +156,7 @@ def journal_show(
         # Both come in journal order, which is wall-clock order: merged as they stream, so
         # a journal of millions of rows is shown without being held in memory.
         for wall, _, text in heapq.merge(accepted(), steps(), key=lambda x: (x[0], x[1])):
-            stamp = dt.datetime.fromtimestamp(wall).isoformat(timespec="milliseconds")
-            out.write(f"{stamp}  {text}\n")
+            out.write(f"{_stamp(wall)}  {text}\n")
     return code[0]
 
 

@@ -20,6 +20,7 @@ from pathlib import Path
 from statectl.errors import Diagnostic, Location, Severity
 from statectl.runner.cells import is_cell
 from statectl.tables import safeyaml
+from statectl.tables.inputs import read_input_text
 
 __all__ = ["cell_given_to_check", "device_given_to_verify"]
 
@@ -29,7 +30,7 @@ _TABLE_FORMATS = (".csv", ".xlsx", ".md", ".markdown")
 def _line_of(path: str, key: str) -> int:
     """The line where the top-level ``key:`` starts (1 if it cannot be found)."""
     try:
-        lines = Path(path).read_text(encoding="utf-8").splitlines()
+        lines = read_input_text(path).splitlines()
     except (OSError, UnicodeDecodeError):
         return 1
     return next((n for n, text in enumerate(lines, 1) if text.startswith(f"{key}:")), 1)
@@ -61,7 +62,7 @@ def cell_given_to_check(path: str) -> Diagnostic | None:
 def _is_run_config(path: str) -> bool:
     """A ``devices:`` mapping whose every entry names a ``driver`` and no device ``file``."""
     try:
-        data = safeyaml.load_value(Path(path).read_text(encoding="utf-8"))
+        data = safeyaml.load_value(read_input_text(path))
     except (OSError, UnicodeDecodeError, safeyaml.YamlRefused):
         return False
     devices = data.get("devices") if isinstance(data, dict) else None
@@ -86,7 +87,7 @@ def device_given_to_verify(path: str) -> Diagnostic | None:
     line = 1
     if suffix in (".yaml", ".yml"):
         try:
-            data = safeyaml.load_value(Path(path).read_text(encoding="utf-8"))
+            data = safeyaml.load_value(read_input_text(path))
         except (OSError, UnicodeDecodeError, safeyaml.YamlRefused):
             return None  # the cell loader says what is wrong (V801)
         if not isinstance(data, dict) or is_cell(path):

@@ -33,8 +33,8 @@ def run_main(
         return PROBLEMS
     try:
         steps = load_replay(replay) if replay is not None else None
-    except StatectlError as exc:
+    except StatectlError as exc:  # a trace that is there but wrong is bad input: exit 1
         err.write(f"statectl run: {exc}\n")
-        return USAGE
+        return PROBLEMS
     result = run_cell(loaded, out.write, replay=steps, walk=walk, seed=seed)
     return PROBLEMS if result.divergences else OK

@@ -64,6 +64,7 @@ from statectl.devices.twin import SimTwin, twin_option_problems
 from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, StatectlError
 from statectl.model import Chart
 from statectl.tables import safeyaml
+from statectl.tables.inputs import read_input_text
 
 __all__ = [
     "DRIVERS",
@@ -103,6 +104,7 @@ BUS_LIBRARIES: Mapping[str, tuple[str, str]] = {
     "cia402-sim": ("canopen", "canopen"),
     "modbus": ("pymodbus", "modbus"),
 }
+
 
 #: Checks of option values, by driver name: each returns the problems it finds.
 OPTION_CHECKS: Mapping[str, Callable[[Mapping[str, Any]], Sequence[str]]] = {
@@ -313,7 +315,7 @@ def load_run_config(path: str | Path) -> RunConfig:
         diags.append(Diagnostic(code, Severity.ERROR, Location(file, line), message, hint))
 
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = read_input_text(path)
     except (OSError, UnicodeDecodeError) as exc:
         error("D501", None, f"cannot read driver config ({exc})", "check the path")
         raise DiagnosticError(diags) from None

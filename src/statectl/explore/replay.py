@@ -27,7 +27,6 @@ import random
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 from statectl.cell import Cell, InputKind, Link, Trigger
@@ -46,6 +45,7 @@ from statectl.runtime import (
 from statectl.runtime.records import taken
 from statectl.semantics import Unhandled
 from statectl.tables import safeyaml
+from statectl.tables.inputs import read_input_text
 
 __all__ = ["CellLinks", "CellRun", "ReplayStep", "fires", "link_data", "load_replay", "run_cell"]
 
@@ -63,7 +63,7 @@ class ReplayStep:
 def load_replay(path: str | os.PathLike[str]) -> list[ReplayStep]:
     """The stimuli of a trace file; raises :class:`StatectlError` saying what is wrong."""
     try:
-        doc: Any = safeyaml.load_value(Path(path).read_text(encoding="utf-8"))
+        doc: Any = safeyaml.load_value(read_input_text(path))
     except (OSError, UnicodeDecodeError) as exc:
         raise StatectlError(f"{path}: cannot read the trace: {exc}") from exc
     except safeyaml.YamlRefused as exc:
@@ -83,9 +83,12 @@ def load_replay(path: str | os.PathLike[str]) -> list[ReplayStep]:
         state = s.get("state") or {}
         pairs = state.items() if isinstance(state, dict) else ()
         expect = tuple((str(k), str(v)) for k, v in pairs)
+        deliveries = s.get("deliveries") or []
+        if not isinstance(deliveries, list):
+            raise StatectlError(f"{path}: step {i}: 'deliveries' must be a list of mappings")
         fates = tuple(
             (str(d.get("via", "")), str(d["fate"]))
-            for d in s.get("deliveries") or ()
+            for d in deliveries
             if isinstance(d, dict) and d.get("fate")
         )
         out.append(ReplayStep(kind, str(s["to"]), str(s["event"]), expect, fates))

@@ -36,20 +36,25 @@ def verify_cell(
     return explore(cell, max_states=max_states, progress=progress), diags
 
 
+#: Longest part of a trace file name taken from a property's name: file systems
+#: refuse names over 255 bytes, and the file's number keeps shortened names apart.
+MAX_SLUG = 60
+
+
 def _slug(text: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_" else "-" for c in text).strip("-") or "trace"
+    slug = "".join(c if c.isalnum() or c in "-_" else "-" for c in text).strip("-")
+    return slug[:MAX_SLUG].rstrip("-") or "trace"
 
 
 def write_traces(report: Report, directory: str | os.PathLike[str]) -> list[Path]:
-    """Per failing finding: ``.trace.json`` (replayable), ``.mmd`` and ``.puml`` diagrams."""
+    """Per failing finding: ``.trace.json`` (replayable), ``.mmd`` and ``.puml`` diagrams.
+
+    All or nothing: a folder this call creates is removed again if a file fails."""
     folder = Path(directory)
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        why = "it is a file, not a directory" if folder.is_file() else exc.strerror or str(exc)
+    if folder.exists() and not folder.is_dir():
         raise DiagnosticError(
-            [diag("T110", Location(str(folder)), f"cannot write: {why}")]
-        ) from None
+            [diag("T110", Location(str(folder)), "cannot write: it is a file, not a directory")]
+        )
     contents: dict[Path, str | bytes] = {}
     for i, f in enumerate(report.failures, 1):
         if f.trace is None:
@@ -63,5 +68,12 @@ def write_traces(report: Report, directory: str | os.PathLike[str]) -> list[Path
             (".puml", to_plantuml(f.trace, title)),
         ):
             contents[stem.with_name(stem.name + suffix)] = text
-    write_files(contents)  # all or nothing; T110 if it cannot be written
+    if not contents:
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise DiagnosticError(
+                [diag("T110", Location(str(folder)), f"cannot write: {exc.strerror or exc}")]
+            ) from None
+    write_files(contents, make_dirs=True)  # all or nothing; T110 if it cannot be written
     return list(contents)

@@ -103,6 +103,8 @@ def _file_problems(path: Path, *, reader: bool) -> list[str]:
     """Rule 2's first stage: the bytes on disk, before SQLite opens them."""
     if path.is_dir():
         return ["it is a directory, not a journal file"]
+    if path.exists() and not path.is_file():  # opening a FIFO would wait for a writer
+        return ["it is not a regular file (a FIFO, device or socket)"]
     try:
         size = path.stat().st_size
         with path.open("rb") as f:

@@ -105,8 +105,25 @@ def encode_snapshot(s: Snapshot) -> tuple[str, str, str | None]:
 
 
 def decode_snapshot(active: str, history: str, previous: str | None) -> Snapshot:
-    saved = tuple((str(h[0]), tuple(str(x) for x in h[1])) for h in json.loads(history))
-    return Snapshot(frozenset(json.loads(active)), saved, previous)
+    """The snapshot a step row holds; ``ValueError`` for columns no journal writes."""
+    states, saved = json.loads(active), json.loads(history)
+    if not (isinstance(states, list) and all(isinstance(x, str) for x in states)):
+        raise ValueError(f"active states are not a list of state names: {active[:80]!r}")
+    if not (
+        isinstance(saved, list)
+        and all(
+            isinstance(h, list)
+            and len(h) == 2
+            and isinstance(h[0], str)
+            and isinstance(h[1], list)
+            and all(isinstance(x, str) for x in h[1])
+            for h in saved
+        )
+    ):
+        raise ValueError(f"history is not a list of [state, [states]]: {history[:80]!r}")
+    if previous is not None and not isinstance(previous, str):
+        raise ValueError(f"previous state is not a name: {previous!r}")
+    return Snapshot(frozenset(states), tuple((h[0], tuple(h[1])) for h in saved), previous)
 
 
 def connect_db(

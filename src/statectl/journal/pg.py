@@ -28,7 +28,7 @@ from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
 
 from statectl.journal.format import JournalError
-from statectl.journal.read import DeviceRow, InboxRow, StepRow, _json, _step
+from statectl.journal.read import DeviceRow, InboxRow, StepRow, _datamodel, _json, _step
 
 if TYPE_CHECKING:
     import psycopg
@@ -284,7 +284,7 @@ class PgJournalReader:
             "ORDER BY name",
             [],
         )
-        return tuple(DeviceRow(n, c, f, _json(d, f"device {n}")) for n, c, f, d in rows)
+        return tuple(DeviceRow(n, c, f, _datamodel(d, f"device {n}")) for n, c, f, d in rows)
 
     def device(self, name: str) -> DeviceRow | None:
         return next((d for d in self.devices() if d.name == name), None)

@@ -129,6 +129,16 @@ def _json(text: Any, what: str) -> Any:
         raise JournalError(f"{what} cannot be read: its data is not JSON ({exc})") from None
 
 
+def _datamodel(text: Any, what: str) -> dict[str, Any] | None:
+    """A ``devices`` row's datamodel: a JSON object or null, as journals write it."""
+    data = _json(text, what)
+    if data is not None and not isinstance(data, dict):
+        raise JournalError(
+            f"{what} cannot be read: its data is not a JSON object or null ({text!r:.80})"
+        )
+    return data
+
+
 def _window(
     device: str | None, since: float | None, until: float | None, after: int | None, key: str
 ) -> tuple[str, list[Any]]:
@@ -206,7 +216,7 @@ class JournalReader:
 
     def devices(self) -> tuple[DeviceRow, ...]:
         rows = self._db.execute("SELECT name, chart, source, data FROM devices ORDER BY name")
-        return tuple(DeviceRow(n, c, s, _json(d, f"device {n}")) for n, c, s, d in rows)
+        return tuple(DeviceRow(n, c, s, _datamodel(d, f"device {n}")) for n, c, s, d in rows)
 
     def device(self, name: str) -> DeviceRow | None:
         """The ``devices`` row of ``name`` (its chart, file and datamodel), if it ran."""
@@ -215,7 +225,7 @@ class JournalReader:
         ).fetchone()
         if row is None:
             return None
-        return DeviceRow(row[0], row[1], row[2], _json(row[3], f"device {row[0]}"))
+        return DeviceRow(row[0], row[1], row[2], _datamodel(row[3], f"device {row[0]}"))
 
     def entering_step(
         self, device: str, state: str, upto: int | None = None

@@ -7,11 +7,13 @@ Rules:
    GitHub, GitLab and most documentation tools draw.
 3. A device with timeouts or deferred events gets ``timeout`` and ``defer`` columns in
    its State Definition table (others keep the paper's five columns).
-4. Table cells escape ``|`` and fold line breaks, so any name or prose fits one row.
+4. Table cells escape ``|`` and fold line breaks, so any name or prose fits one row,
+   and a ``<`` that would open raw HTML (``<script>``), so a name stays text.
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 
 from statectl.model import Chart, ControlKind, State
@@ -21,9 +23,14 @@ from statectl.render.diagram import Diagram, duration
 __all__ = ["cell", "table", "write"]
 
 
+#: A ``<`` that Markdown would open raw HTML with (a tag, a comment, a declaration).
+_HTML_OPEN = re.compile(r"<(?=[A-Za-z/!?])")
+
+
 def cell(text: str) -> str:
-    """``text`` safe in one Markdown table cell."""
-    return " ".join(text.split()).replace("\\", "\\\\").replace("|", "\\|")
+    """``text`` safe in one Markdown table cell: a name such as ``<script>`` stays text."""
+    text = " ".join(text.split()).replace("\\", "\\\\").replace("|", "\\|")
+    return _HTML_OPEN.sub("&lt;", text)
 
 
 def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:

@@ -15,6 +15,7 @@ from statectl.journal import (
 )
 from statectl.system import DeviceSetup
 from statectl.tables import safeyaml
+from statectl.tables.inputs import read_input_text
 
 
 def is_cell(path: str) -> bool:
@@ -22,7 +23,7 @@ def is_cell(path: str) -> bool:
     if Path(path).suffix.lower() not in (".yaml", ".yml"):
         return False
     try:
-        data = safeyaml.load_value(Path(path).read_text(encoding="utf-8"))
+        data = safeyaml.load_value(read_input_text(path))
     except (OSError, UnicodeDecodeError, safeyaml.YamlRefused):
         return False  # loaded as a device file, whose loader says what is wrong
     return isinstance(data, dict) and "devices" in data and "states" not in data

@@ -379,6 +379,9 @@ def read_scxml(
 def read_scxml_file(path: str) -> Chart:
     """Read a file; raise :class:`DiagnosticError` with every problem if it has errors."""
     try:
+        if Path(path).exists() and not Path(path).is_file() and not Path(path).is_dir():
+            # a FIFO would block the read forever, a device such as /dev/zero never end it
+            raise OSError(0, "not a regular file (a FIFO, device or socket); name a file")
         text = Path(path).read_bytes()
     except OSError as exc:
         raise DiagnosticError(

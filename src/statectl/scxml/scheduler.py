@@ -46,13 +46,23 @@ class SessionTimeout(StatectlError):
 _DELAY = re.compile(r"^\s*(\d+(?:\.\d*)?|\.\d+)\s*(ms|s|min|h)?\s*$")
 
 
+#: Longest ``<send>`` delay, in seconds: the longest timeout a device table takes
+#: (2**31 - 1 ms, about 24.8 days). A wall clock cannot wait for ``1e23s``.
+MAX_DELAY = (2**31 - 1) / 1000
+
+
 def parse_delay(text: str) -> float:
-    """A CSS2 time (``'2s'``, ``'500ms'``) in seconds."""
+    """A CSS2 time (``'2s'``, ``'500ms'``) in seconds, at most :data:`MAX_DELAY`."""
     match = _DELAY.match(text)
     if match is None:
         raise EvaluationError(f"delay {text!r} is not a time such as '1s' or '500ms'")
     unit = match.group(2) or "s"
-    return float(match.group(1)) * {"ms": 0.001, "s": 1.0, "min": 60.0, "h": 3600.0}[unit]
+    seconds = float(match.group(1)) * {"ms": 0.001, "s": 1.0, "min": 60.0, "h": 3600.0}[unit]
+    if not seconds <= MAX_DELAY:
+        raise EvaluationError(
+            f"delay {text.strip()[:40]!r} is longer than {MAX_DELAY:,.3f} s (about 24.8 days)"
+        )
+    return seconds
 
 
 @dataclass(eq=False, slots=True)

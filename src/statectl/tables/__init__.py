@@ -27,6 +27,7 @@ from pathlib import Path
 
 from statectl.errors import Diagnostic, DiagnosticError, Location
 from statectl.tables.csv_io import csv_paths, dump_csv, read_csv
+from statectl.tables.inputs import read_input
 from statectl.tables.md_io import dump_md, read_md
 from statectl.tables.schema import (
     CODES,
@@ -110,7 +111,7 @@ def _unknown_format(path: Path, fmt: str | None = None) -> Diagnostic:
 
 def _read_text(path: Path, diags: list[Diagnostic]) -> str | None:
     try:
-        return path.read_bytes().decode("utf-8-sig")
+        return read_input(path).decode("utf-8-sig")
     except FileNotFoundError:
         diags.append(diag("T110", Location(str(path)), "file not found"))
     except UnicodeDecodeError as exc:
@@ -156,7 +157,7 @@ def load(path: str | os.PathLike[str]) -> tuple[DeviceTables | None, list[Diagno
         return tables, [*diags, *more]
     if fmt is Format.XLSX:
         try:
-            content = p.read_bytes()
+            content = read_input(p)
         except FileNotFoundError:
             return None, [diag("T110", Location(str(p)), "file not found")]
         except OSError as exc:
@@ -216,24 +217,45 @@ def write_files(
     :class:`DiagnosticError` (T110) naming the file that could not be written and why.
     """
     target: Path | None = None
+    made: list[Path] = []  # folders this call created, removed again on failure
     try:
         for target in contents:
             if target.is_dir():
                 raise _NotWritable(target, "it is a directory; name a file in it")
             if make_dirs:
-                target.parent.mkdir(parents=True, exist_ok=True)
+                _make_dirs(target.parent, made)
             elif target.parent.exists() and not target.parent.is_dir():
                 raise _NotWritable(target, f"{target.parent} is a file, not a directory")
             elif not target.parent.is_dir():
                 raise _NotWritable(target, f"no such directory {target.parent}; create it first")
         _write_all(contents, stale)
     except _NotWritable as exc:
+        _remove_dirs(made)
         raise DiagnosticError([diag("T110", Location(str(exc.path)), exc.reason)]) from None
     except OSError as exc:
+        _remove_dirs(made)
         where = str(target) if target is not None else str(exc.filename)
         raise DiagnosticError(
             [diag("T110", Location(where), f"cannot write: {exc.strerror or exc}")]
         ) from exc
+
+
+def _make_dirs(folder: Path, made: list[Path]) -> None:
+    """``mkdir -p folder``, noting in ``made`` each folder it created, outermost first."""
+    missing: list[Path] = []
+    while not folder.exists() and folder != folder.parent:
+        missing.append(folder)
+        folder = folder.parent
+    for each in reversed(missing):
+        each.mkdir(exist_ok=True)
+        made.append(each)
+
+
+def _remove_dirs(made: list[Path]) -> None:
+    """Remove the folders a failed write created, innermost first, if still empty."""
+    for each in reversed(made):
+        with contextlib.suppress(OSError):
+            each.rmdir()
 
 
 class _NotWritable(Exception):

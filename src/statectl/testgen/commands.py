@@ -52,11 +52,12 @@ def cmd_testgen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
 def _is_cell(path: str) -> bool:
     """A YAML file with a ``devices`` section and no ``states`` table is a cell file."""
     from statectl.tables import safeyaml
+    from statectl.tables.inputs import read_input_text
 
     if Path(path).suffix.lower() not in (".yaml", ".yml"):
         return False
     try:
-        data = safeyaml.load_value(Path(path).read_text(encoding="utf-8"))
+        data = safeyaml.load_value(read_input_text(path))
     except (OSError, UnicodeDecodeError, safeyaml.YamlRefused):
         return False  # loaded as a device file, whose loader says what is wrong
     return isinstance(data, dict) and "devices" in data and "states" not in data

@@ -28,6 +28,7 @@ from statectl.render import dot
 from statectl.render.diagram import from_chart
 from statectl.render.svg import dot_to_svg
 from statectl.semantics import Snapshot, compiled, step
+from statectl.tables.inputs import read_input_text
 from statectl.testgen.cases import describe, where
 from statectl.testgen.paths import default_data, explore, leaves
 
@@ -147,7 +148,7 @@ class Tally:
 def load_tally(path: str | Path, chart: Chart) -> Coverage:
     """Coverage of ``chart`` from a ``--statectl-coverage`` JSON file of a pytest run."""
     try:
-        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+        doc = json.loads(read_input_text(path))
         entry = doc["charts"].get(chart.name)
         if entry is None:
             found = ", ".join(doc["charts"]) or "none"

@@ -9,6 +9,7 @@ conftest overrides ``statectl_driver``). Datamodel values a case starts with are
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import textwrap
@@ -65,6 +66,8 @@ def _lit(value: Any) -> str:
         )
     if isinstance(value, dict):
         return "{" + ", ".join(f"{_lit(k)}: {_lit(v)}" for k, v in value.items()) + "}"
+    if isinstance(value, float) and not math.isfinite(value):
+        return f'{"-" if value < 0 else ""}float("{abs(value)}")'  # repr 'nan' is no literal
     return repr(value)
 
 
