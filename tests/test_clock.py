@@ -134,6 +134,17 @@ def test_wall_clock_runs_timers_off_the_callers_thread() -> None:
     assert where and where[0] is not threading.current_thread()
 
 
+def test_wall_clock_waits_past_a_timer_further_than_the_os_can_wait() -> None:
+    """A timer due later than threading.TIMEOUT_MAX leaves the timer thread alive (its wait
+    raised OverflowError and killed it): a sooner timer added afterwards still fires."""
+    clock = WallClock()
+    clock.call_later(threading.TIMEOUT_MAX * 4, lambda: None)
+    done = threading.Event()
+    clock.call_later(0.0, done.set)
+    assert done.wait(5.0)
+    clock.stop()
+
+
 def test_wall_clock_survives_a_failing_callback() -> None:
     """A callback that raises goes to on_error; later timers still fire."""
     errors: list[BaseException] = []

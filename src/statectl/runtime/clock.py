@@ -192,7 +192,7 @@ class WallClock:
                         wait = self._heap[0][0] - self.now()
                         if wait <= 0:
                             break
-                        self._cond.wait(wait)
+                        self._cond.wait(min(wait, threading.TIMEOUT_MAX))  # larger: OverflowError
                     else:
                         self._cond.wait()
                 if self._stopped:
