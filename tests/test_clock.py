@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import pytest
 from hypothesis import given
@@ -139,6 +140,8 @@ def test_wall_clock_waits_past_a_timer_further_than_the_os_can_wait() -> None:
     raised OverflowError and killed it): a sooner timer added afterwards still fires."""
     clock = WallClock()
     clock.call_later(threading.TIMEOUT_MAX * 4, lambda: None)
+    time.sleep(0.2)  # time for the timer thread to start waiting for it
+    assert clock._thread is not None and clock._thread.is_alive()
     done = threading.Event()
     clock.call_later(0.0, done.set)
     assert done.wait(5.0)
