@@ -50,14 +50,18 @@ def test_both_sections_are_read(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("driver", "options", "says"),
     [
-        ("sim-motor", "{speed: {}}", "speed must be a finite number > 0 (got {})"),
-        ("sim-motor", "{speed: .inf}", "speed must be a finite number > 0 (got inf)"),
-        ("sim-motor", "{position: [1]}", "position must be a finite number (got [1])"),
-        ("sim-motor", "{position: '3'}", "position must be a finite number (got '3')"),
-        ("sim-stepper", "{steps_per_unit: 1.5}", "steps_per_unit must be an integer > 0"),
-        ("sim-stepper", "{pulse_rate: [1]}", "pulse_rate must be a finite number > 0"),
-        ("sim-stepper", "{step: x}", "step must be an integer (got 'x')"),
-        ("sim-stepper", "{step: true}", "step must be an integer (got True)"),
+        ("sim-motor", "{speed: {}}", "speed must be a number of units/s > 0 (got {})"),
+        ("sim-motor", "{speed: .inf}", "speed must be a number of units/s > 0 (got inf)"),
+        ("sim-motor", "{position: [1]}", "position must be a number of units (got [1])"),
+        ("sim-motor", "{position: '3'}", "position must be a number of units (got '3')"),
+        ("sim-stepper", "{steps_per_unit: 1.5}", "steps_per_unit must be an int > 0 (got 1.5)"),
+        (
+            "sim-stepper",
+            "{pulse_rate: [1]}",
+            "pulse_rate must be a number of steps/s > 0 (got [1])",
+        ),
+        ("sim-stepper", "{step: x}", "step must be an int, a step count (got 'x')"),
+        ("sim-stepper", "{step: true}", "step must be an int, a step count (got True)"),
     ],
 )
 def test_a_simulated_drive_option_of_the_wrong_type_is_d509(

@@ -181,7 +181,7 @@ def journal_export(
             f"statectl journal export: --out {to} is the journal itself (or its -wal/-shm "
             "file); writing there would destroy it: name another file\n"
         )
-        return PROBLEMS
+        return USAGE  # as any --out naming an input (cli/__init__.py)
     opened = _reader_in_window("export", path, since, until, err)
     if isinstance(opened, int):
         return opened
