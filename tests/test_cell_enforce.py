@@ -89,6 +89,34 @@ def test_a_when_is_judged_after_what_was_posted_before_it(tmp_path: Path, journa
         system.close()
 
 
+def test_a_when_judged_after_an_event_a_driver_refused_is_still_judged() -> None:
+    """The drain before a `when` is judged runs an earlier event whose observer raises:
+    that failure goes to on_failure (rule 7), as the live owner loop reports it, and
+    the command is judged and posted, not refused with the earlier event's error."""
+    from statectl.errors import StatectlError
+
+    class Refusing:  # refuses its first call (Start's), takes the later ones
+        refused = False
+
+        def update(self, notification: object) -> None:
+            if not self.refused:
+                self.refused = True
+                raise StatectlError("the belt drive refused")
+
+    system = _system(ROOT / "examples" / "pick-and-place" / "cell.yaml")
+    failures: list[str] = []
+    system.on_failure.append(lambda exc: failures.append(str(exc)))
+    system.subjects["conveyor"].attach(Refusing())
+    try:
+        system.post("conveyor", "Start")
+        system.post("sensor", "Part in")  # Start ran (and its driver failed) first
+        system.quiesce()
+        assert failures == ["the belt drive refused"]
+        assert _states(system)["sensor"] == "Detected"
+    finally:
+        system.close()
+
+
 @pytest.mark.parametrize("journalled", [False, True])
 def test_an_invariant_violation_is_reported_reacted_to_and_fails_the_run(
     tmp_path: Path, journalled: bool

@@ -332,8 +332,7 @@ class System:
         if self.rules is not None and self.rules.guarded(name, event):
             with self.owner:  # the global state once what came before has settled (rule 6)
                 if not self._draining:  # (a post from a step: the drain running is the owner)
-                    self._commit()  # accepted into the journal before it: delivered and run
-                    self._drain()  # posted before it: run, with the links they fire
+                    self._drain_past_failures(commit=True)  # what came before: run, links too
                 self.rules.admit(name, event)  # Refused when every 'when' is false
         bound = self.bound.get(name)
         if bound is not None:
@@ -470,12 +469,16 @@ class System:
         with self.owner:
             self._drain_past_failures()
 
-    def _drain_past_failures(self) -> None:
-        """As the owner: :meth:`_drain`, each driver failure reported (rule 7) and the rest
-        run; the journal's writer drains so under durable-first, where a failure used to
-        print a traceback on the writer's thread and count for nothing."""
+    def _drain_past_failures(self, *, commit: bool = False) -> None:
+        """As the owner: :meth:`_drain` (after :meth:`_commit`, the events accepted into the
+        journal, with ``commit``), each driver failure reported (rule 7) and the rest run.
+        The journal's writer drains so under durable-first, where a failure used to print
+        a traceback on the writer's thread and count for nothing; so does a command with a
+        ``when`` before it is judged, which must not fail for an earlier event's driver."""
         while True:  # each failure took its event off the queue: this ends
             try:
+                if commit:
+                    self._commit()
                 self._drain()
                 return
             except StatectlError as exc:
