@@ -276,15 +276,21 @@ def _command(args: argparse.Namespace) -> str:
     )
 
 
-def _missing_input(args: argparse.Namespace) -> str | None:
-    """The first input file named on the command line that does not exist (exit 2)."""
+def _paths(args: argparse.Namespace, attrs: Sequence[str]) -> list[str]:
+    """The paths the parsed command line holds under ``attrs`` (one each, or a list)."""
     paths: list[str] = []
-    for attr in ("file", "files", "cell", "config"):
+    for attr in attrs:
         value = getattr(args, attr, None)
         if isinstance(value, str):
             paths.append(value)
         elif isinstance(value, list):
             paths.extend(v for v in value if isinstance(v, str))
+    return paths
+
+
+def _missing_input(args: argparse.Namespace) -> str | None:
+    """The first input file named on the command line that does not exist (exit 2)."""
+    paths = _paths(args, ("file", "files", "cell", "config"))
     return next((p for p in paths if not input_exists(Path(p))), None)
 
 
@@ -295,16 +301,9 @@ def _overwritten_input(args: argparse.Namespace) -> str | None:
     its SCXML or its diagram, a commented file with its regenerated form): data lost
     without a word.
     """
-    inputs: list[str] = []
-    for attr in ("file", "files", "cell", "config", "journal", "replay", "db"):
-        value = getattr(args, attr, None)
-        if isinstance(value, str):
-            inputs.append(value)
-        elif isinstance(value, list):
-            inputs.extend(v for v in value if isinstance(v, str))
-    for attr in ("out", "output"):
-        target = getattr(args, attr, None)
-        if not isinstance(target, str) or not os.path.isfile(target):
+    inputs = _paths(args, ("file", "files", "cell", "config", "journal", "replay", "db"))
+    for target in _paths(args, ("out", "output")):
+        if not os.path.isfile(target):
             continue
         for source in inputs:
             try:

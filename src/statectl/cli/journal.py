@@ -25,7 +25,7 @@ from statectl.journal import (
     load_device,
     replay,
 )
-from statectl.journal.check import sqlite_problem
+from statectl.journal.check import journal_files, sqlite_problem
 from statectl.journal.pg import display_url
 from statectl.journal.read import JournalSource
 from statectl.model import Chart
@@ -219,8 +219,7 @@ def _is_the_journal(target: Path, journal: str) -> bool:
     """Whether ``target`` is the journal file (or one of SQLite's files beside it)."""
     if not target.exists():
         return False
-    for suffix in ("", "-wal", "-shm", "-journal"):
-        beside = Path(journal + suffix)
+    for beside in journal_files(journal):
         with contextlib.suppress(OSError):
             if beside.exists() and os.path.samefile(target, beside):
                 return True

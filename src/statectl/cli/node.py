@@ -206,6 +206,7 @@ def node_main(
 ) -> int:
     """The whole ``statectl node``; returns the exit code (0 ok, 1 problems, 2 usage)."""
     from statectl.cli import run as runcli
+    from statectl.cli.run_journal import new_journal, open_journal, undone_on_failure
     from statectl.devices import DashboardConfig, RunConfig, load_run_config
     from statectl.distributed import NodeSystem, Wire
     from statectl.journal import Guarantee, Sync
@@ -256,11 +257,11 @@ def node_main(
         store = None
         if journal is not None:
             read = (path, config, *(d.source for d in devices))
-            made = runcli._new_journal(journal, resume=resume, fresh=fresh)
-            store = runcli._open_journal(
+            made = new_journal(journal, resume=resume, fresh=fresh)
+            store = open_journal(
                 journal, Sync.NORMAL, promise, resume=resume, fresh=fresh, out=out, inputs=read
             )
-        with runcli._undone_on_failure(store, journal if store is not None and made else None):
+        with undone_on_failure(store, journal if store is not None and made else None):
             system = NodeSystem(setups, WallClock(), store, cell)
         wire = Wire(
             cell,

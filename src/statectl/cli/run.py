@@ -62,7 +62,7 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, TextIO
@@ -71,6 +71,7 @@ from urllib.parse import urlparse
 from statectl.cell import Cell, load_cell
 from statectl.cli.commands import PROBLEMS, USAGE, input_exists
 from statectl.cli.problems import Problems, verdict
+from statectl.cli.run_journal import new_journal, open_journal, undone_on_failure
 from statectl.cli.settle import unsettled_note
 from statectl.cli.steps import StepLog
 from statectl.devices import (
@@ -90,11 +91,9 @@ from statectl.explore.enforce import Refused
 from statectl.journal import (
     Guarantee,
     Journal,
-    JournalDamaged,
     JournalError,
     Sync,
     load_device,
-    set_aside,
 )
 from statectl.runner.cells import is_cell, load_setups, relevant_warnings
 from statectl.runner.events import parse_event_line
@@ -367,11 +366,11 @@ def run(
         store = None
         if journal is not None:
             read = (path, config, *(d.source for d in devices))
-            made = _new_journal(journal, resume=resume, fresh=fresh)
-            store = _open_journal(
+            made = new_journal(journal, resume=resume, fresh=fresh)
+            store = open_journal(
                 journal, mode, promise, resume=resume, fresh=fresh, out=info, inputs=read
             )
-        with _undone_on_failure(store, journal if store is not None and made else None):
+        with undone_on_failure(store, journal if store is not None and made else None):
             system = System(setups, clock, store, cell)
         if table.ship is not None:
             shipping = _start_shipping(table.ship, store, config, err)
@@ -493,82 +492,6 @@ def _feed_then_stop(
         return
     if stop_at_end:
         halt.set()
-
-
-def _open_journal(
-    path: str,
-    sync: Sync,
-    guarantee: Guarantee,
-    *,
-    resume: bool,
-    fresh: bool,
-    out: TextIO,
-    inputs: Sequence[str | None] = (),
-) -> Journal:
-    """The run's journal, checked before anything starts; ``--fresh`` sets the old one aside.
-
-    ``fresh`` without ``resume``: any existing journal is set aside. With
-    ``resume``: only one that cannot be trusted (:class:`JournalDamaged`). Without
-    ``fresh`` such a journal is refused, and the message says how to start over.
-    A journal path that is one of the run's ``inputs`` (its device, cell or config
-    file) is refused first: ``--fresh`` would move that file aside.
-    """
-    p = Path(path)
-    if not p.parent.is_dir():
-        raise StatectlError(
-            f"--journal {path}: the directory {p.parent} does not exist; nothing was started: "
-            "make it first, or give a journal path in a directory that exists"
-        )
-    for given in inputs:
-        with contextlib.suppress(OSError):
-            if given and p.exists() and os.path.samefile(p, given):
-                raise StatectlError(
-                    f"--journal {path} is the run's input file {given}, not a journal; "
-                    "nothing was started: name another file, e.g. --journal run.db"
-                )
-    if resume and p.is_file() and p.stat().st_size == 0:  # a new journal has its schema
-        damage: JournalDamaged | None = JournalDamaged(p, ["it is empty (0 bytes)"])
-    else:
-        damage = None
-    if fresh and not resume and p.exists() and p.stat().st_size > 0:
-        aside = set_aside(p)
-        out.write(f"journal {p} set aside as {aside}; starting a new journal\n")
-    try:
-        if damage is not None:
-            raise damage
-        return Journal(p, sync=sync, guarantee=guarantee)
-    except JournalDamaged as exc:
-        if not fresh:
-            raise JournalError(
-                f"{exc}. Nothing was started. To start over with a new journal and keep this "
-                f"one aside (renamed with a timestamp), run again with --fresh"
-            ) from None
-        aside = set_aside(p)
-        out.write(f"{exc}\njournal {p} set aside as {aside}; starting a new journal\n")
-        return Journal(p, sync=sync, guarantee=guarantee)
-
-
-def _new_journal(path: str, *, resume: bool, fresh: bool) -> bool:
-    """Whether opening ``path`` makes a new journal file (none there, or ``--fresh``)."""
-    return not Path(path).exists() or (fresh and not resume)
-
-
-@contextlib.contextmanager
-def _undone_on_failure(store: Journal | None, made: str | None) -> Iterator[None]:
-    """A run refused before it started (a driver that cannot drive its device, links a
-    journal cannot hold) closes the journal it opened, and removes it if this run made
-    it: nothing is left half-written (an unmerged ``-wal`` beside a new, empty file)."""
-    try:
-        yield
-    except BaseException:
-        if store is not None:
-            with contextlib.suppress(StatectlError, OSError):
-                store.close()
-        if made is not None:
-            for suffix in ("", "-wal", "-shm", "-journal"):
-                with contextlib.suppress(OSError):
-                    Path(made + suffix).unlink(missing_ok=True)
-        raise
 
 
 def _start_shipping(

@@ -43,6 +43,7 @@ __all__ = [
     "JournalDamaged",
     "check_journal",
     "connect_ro",
+    "journal_files",
     "set_aside",
     "sqlite_problem",
 ]
@@ -373,6 +374,13 @@ def _remove_empty(sides: list[Path]) -> None:
         return
     for side in sides:
         side.unlink(missing_ok=True)
+
+
+def journal_files(path: str | Path) -> tuple[Path, ...]:
+    """The journal file and the files SQLite may keep beside it (``-wal``, ``-shm``,
+    ``-journal``): what holds the journal, to protect or to remove as one."""
+    p = Path(path)
+    return (p, *(p.with_name(p.name + s) for s in ("-wal", "-shm", "-journal")))
 
 
 def set_aside(path: str | Path, now: dt.datetime | None = None) -> Path:
