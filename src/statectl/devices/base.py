@@ -25,6 +25,7 @@ Rules:
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any, ClassVar
@@ -37,7 +38,14 @@ from statectl.runtime.monitors import DEFAULT_PERIOD, Monitor, attach_monitors
 from statectl.runtime.records import ApiCall
 from statectl.runtime.subject import Subject
 
-__all__ = ["API_LOG_KEEP", "Driver", "check_serves", "connect", "requested_target"]
+__all__ = [
+    "API_LOG_KEEP",
+    "Driver",
+    "check_serves",
+    "connect",
+    "finite_number",
+    "requested_target",
+]
 
 #: The API calls a driver keeps in ``api_log``, the most recent; ``api_calls`` counts them
 #: all. A device that runs for days makes millions of calls: an unbounded log was memory
@@ -49,6 +57,12 @@ def _number(value: Any) -> bool:
     """An int or a float, not a bool (which Python counts as 1)."""
     kind = type(value)
     return kind is int or kind is float or (isinstance(value, int | float) and kind is not bool)
+
+
+def finite_number(value: Any) -> bool:
+    """A finite int or float: what a driver option or a setpoint must be. A bool is none
+    (YAML's ``yes`` would count as 1), nor are ``.nan`` and ``.inf``."""
+    return _number(value) and math.isfinite(value)
 
 
 def requested_target(position: float, data: Any) -> float:

@@ -22,14 +22,13 @@ Rules:
 from __future__ import annotations
 
 import logging
-import math
 import threading
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from statectl.devices.base import Driver
+from statectl.devices.base import Driver, finite_number
 from statectl.devices.protocol import Report
 from statectl.errors import StatectlError
 from statectl.observers import Notification
@@ -78,9 +77,7 @@ def modbus_option_problems(options: Mapping[str, Any]) -> Sequence[str]:
         problems.append(f"unit must be a Modbus device id 0-255 (got {unit!r})")
     for key in ("period", "timeout", "stale_after"):
         v = options.get(key, 1.0)
-        if not (
-            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) and v > 0
-        ):
+        if not (finite_number(v) and v > 0):
             problems.append(f"{key} must be seconds > 0 (got {v!r})")
     actions = options.get("actions", {})
     if not isinstance(actions, Mapping):

@@ -17,11 +17,10 @@ Rules:
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
-from statectl.devices.base import Driver, requested_target
+from statectl.devices.base import Driver, finite_number, requested_target
 from statectl.errors import StatectlError
 from statectl.observers import Notification
 from statectl.runtime.clock import Clock, Timer
@@ -34,19 +33,14 @@ _CALLS = frozenset({"Movement", "Initialization", "Error"})
 _EARLY = 1e-9
 
 
-def _number(value: Any) -> bool:
-    """A finite int or float; a bool (``yes``) is not a number of units."""
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
-
-
 def motor_option_problems(options: Mapping[str, Any]) -> tuple[str, ...]:
     """Every problem with SimMotor option values, so a config file shows them at its line."""
     problems: list[str] = []
     speed = options.get("speed", 10.0)
-    if not (_number(speed) and speed > 0):
+    if not (finite_number(speed) and speed > 0):
         problems.append(f"speed must be a number of units/s > 0 (got {speed!r})")
     position = options.get("position", 0.0)
-    if not _number(position):
+    if not finite_number(position):
         problems.append(f"position must be a number of units (got {position!r})")
     return tuple(problems)
 

@@ -13,12 +13,11 @@ Rules:
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from statectl.devices.base import Driver, requested_target
+from statectl.devices.base import Driver, finite_number, requested_target
 from statectl.errors import StatectlError
 from statectl.runtime.clock import Timer
 
@@ -36,12 +35,7 @@ def stepper_option_problems(options: Mapping[str, Any]) -> tuple[str, ...]:
     if not (_integer(per_unit) and per_unit > 0):
         problems.append(f"steps_per_unit must be an int > 0 (got {per_unit!r})")
     rate = options.get("pulse_rate", 1000.0)
-    if not (
-        isinstance(rate, int | float)
-        and not isinstance(rate, bool)
-        and math.isfinite(rate)
-        and rate > 0
-    ):
+    if not (finite_number(rate) and rate > 0):
         problems.append(f"pulse_rate must be a number of steps/s > 0 (got {rate!r})")
     step = options.get("step", 0)
     if not _integer(step):

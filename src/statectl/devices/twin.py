@@ -29,13 +29,12 @@ Rules:
 from __future__ import annotations
 
 import logging
-import math
 import random
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from statectl.devices.base import Driver
+from statectl.devices.base import Driver, finite_number
 from statectl.errors import StatectlError
 from statectl.model import Chart, ControlKind, EventKind, Notify, StateKind, Transition
 from statectl.observers import Notification
@@ -82,12 +81,7 @@ class _Work:
 
 
 def _seconds(value: Any) -> bool:
-    return (
-        isinstance(value, int | float)
-        and not isinstance(value, bool)
-        and math.isfinite(value)
-        and value >= 0
-    )
+    return finite_number(value) and value >= 0
 
 
 def _table_problems(name: str, value: Any) -> list[str]:

@@ -2,17 +2,13 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from statectl.devices.base import finite_number
+
 __all__ = ["cia402_option_problems"]
-
-
-def _number(v: Any) -> bool:
-    """A finite int or float: an infinite scale or timeout is no setting a bus can use."""
-    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
 
 
 def cia402_option_problems(options: Mapping[str, Any]) -> Sequence[str]:
@@ -32,7 +28,7 @@ def cia402_option_problems(options: Mapping[str, Any]) -> Sequence[str]:
         problems.append(f"bitrate must be bits per second, e.g. 500000 (got {bitrate!r})")
     for key in ("scale", "speed", "sdo_timeout", "heartbeat_timeout", "stale_after"):
         v = options.get(key, 1.0)
-        if not (_number(v) and v > 0):
+        if not (finite_number(v) and v > 0):  # an infinite scale or timeout neither
             problems.append(f"{key} must be a number > 0 (got {v!r})")
     window = options.get("window", 0)
     if not (isinstance(window, int) and not isinstance(window, bool) and window >= 0):
