@@ -602,6 +602,24 @@ def test_a_journal_path_that_is_the_device_file_is_refused(tmp_path: Path, fresh
     assert snapshot_of(device) == before
 
 
+@pytest.mark.parametrize("fresh", [False, True])
+def test_a_journal_path_that_is_a_directory_is_refused(tmp_path: Path, fresh: bool) -> None:
+    """`run motor.yaml --journal logs [--fresh]` where logs is a directory: exit 1 naming
+    it and what to do, the directory untouched; with --fresh it used to be renamed aside
+    (with everything in it) and a journal file written in its place."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    (logs / "keep.txt").write_text("mine")
+    out, err = io.StringIO(), io.StringIO()
+    code = run(
+        str(MOTOR), journal=str(logs), fresh=fresh, events=io.StringIO(), out=out, err=err
+    )
+    said = err.getvalue()
+    assert (code, f"--journal {logs} is a directory" in said) == (1, True), said
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["logs"]
+    assert (logs / "keep.txt").read_text() == "mine"
+
+
 GRIPPER = Path(__file__).parent.parent / "examples" / "pick-and-place" / "gripper.yaml"
 
 

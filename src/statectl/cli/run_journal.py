@@ -34,13 +34,18 @@ def open_journal(
     ``resume``: only one that cannot be trusted (:class:`JournalDamaged`). Without
     ``fresh`` such a journal is refused, and the message says how to start over.
     A journal path that is one of the run's ``inputs`` (its device, cell or config
-    file) is refused first: ``--fresh`` would move that file aside.
+    file) is refused first: ``--fresh`` would move that file aside; so is a directory.
     """
     p = Path(path)
     if not p.parent.is_dir():
         raise StatectlError(
             f"--journal {path}: the directory {p.parent} does not exist; nothing was started: "
             "make it first, or give a journal path in a directory that exists"
+        )
+    if p.exists() and not p.is_file():  # --fresh would move a whole directory aside
+        raise StatectlError(
+            f"--journal {path} is a directory, not a journal file; nothing was started: "
+            f"name a file, e.g. --journal {p / 'run.db'}"
         )
     for given in inputs:
         with contextlib.suppress(OSError):
