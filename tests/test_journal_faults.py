@@ -611,9 +611,7 @@ def test_a_journal_path_that_is_a_directory_is_refused(tmp_path: Path, fresh: bo
     logs.mkdir()
     (logs / "keep.txt").write_text("mine")
     out, err = io.StringIO(), io.StringIO()
-    code = run(
-        str(MOTOR), journal=str(logs), fresh=fresh, events=io.StringIO(), out=out, err=err
-    )
+    code = run(str(MOTOR), journal=str(logs), fresh=fresh, events=io.StringIO(), out=out, err=err)
     said = err.getvalue()
     assert (code, f"--journal {logs} is a directory" in said) == (1, True), said
     assert sorted(p.name for p in tmp_path.iterdir()) == ["logs"]
