@@ -61,3 +61,49 @@ def test_a_hostile_file_is_not_taken_for_a_cell(tmp_path: Path) -> None:
     path = tmp_path / "c.yaml"
     path.write_text(f"devices: {BOMB}\n")
     assert is_cell(str(path)) is False
+
+
+#: Plain scalars and what they read as: exponent floats as YAML 1.2 reads them (PyYAML's
+#: YAML 1.1 resolver made them text), everything else as before.
+EXPONENTS = [
+    ("1e3", 1000.0),
+    ("2.5e-3", 0.0025),
+    ("-1E+6", -1000000.0),
+    (".5e2", 50.0),
+    ("1_000e3", 1000000.0),
+    ("1.0e+3", 1000.0),  # YAML 1.1's own form: unchanged
+    ("10", 10),
+    ("0x1e3", 0x1E3),  # hex, not an exponent
+    ("1e", "1e"),
+    ("e3", "e3"),
+    ("1e3x", "1e3x"),
+    ("'1e3'", "1e3"),  # quoted: text
+]
+
+
+@pytest.mark.parametrize(("text", "value"), EXPONENTS, ids=[t for t, _ in EXPONENTS])
+@pytest.mark.parametrize("c_parser", [False, True], ids=["python", "libyaml"])
+def test_a_number_with_an_exponent_is_a_float(text: str, value: object, c_parser: bool) -> None:
+    """`1e3` in any YAML statectl reads is the float 1000.0 with either parser, and
+    texts that only look like it stay what they were."""
+    from statectl.tables import safeyaml
+
+    loader = safeyaml._Loader if c_parser else safeyaml._PyLoader
+    got = safeyaml.load_value(f"{{x: {text}}}", loader)
+    assert got == {"x": value} and type(got["x"]) is type(value)  # type: ignore[index]
+
+
+def test_a_driver_option_written_1e3_is_a_number(tmp_path: Path) -> None:
+    """`speed: 1e3` in a run config is the number 1000: it was the text '1e3' and refused
+    with 'speed must be a number'."""
+    path = tmp_path / "run.yaml"
+    path.write_text("devices:\n  Motor: {driver: sim-motor, options: {speed: 1e3}}\n")
+    config = load_run_config(path)
+    assert config.drivers == {"Motor": ("sim-motor", {"speed": 1000.0})}
+
+
+def test_event_data_written_1e2_is_a_number() -> None:
+    """`Movement {amount: 1e2}` sends the number 100.0, as `{amount: 100.0}` does."""
+    assert parse_event_line("Movement {amount: 1e2}") == parse_event_line(
+        "Movement {amount: 100.0}"
+    )

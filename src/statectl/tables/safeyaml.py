@@ -8,7 +8,8 @@ Rules:
    :data:`MAX_DEPTH` is refused (T116) before any recursive code sees it.
 2. The events come from libyaml (``yaml.CSafeLoader``) when PyYAML was built with
    it, from the pure-Python parser otherwise; the tags are resolved the same way,
-   so both give the very same nodes and the very same refusals.
+   so both give the very same nodes and the very same refusals. A number with an
+   exponent and no dot (``1e3``) is a float, as in YAML 1.2, not text.
 3. :func:`construct` turns a node into a plain value with the safe constructor;
    any failure (an unknown tag, a number with too many digits, a date that does
    not exist) is a :class:`YamlRefused` carrying a line, never another exception.
@@ -16,6 +17,7 @@ Rules:
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 import yaml
@@ -31,7 +33,21 @@ __all__ = [
 #: Deepest nesting of sequences and mappings a file or a cell may have (T116).
 MAX_DEPTH = 64
 
-_Loader: type[yaml.SafeLoader] = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+#: A float written with an exponent and no dot or exponent sign (``1e3``, ``2.5e-3``,
+#: ``-1E+6``): YAML 1.2 reads it as a number, PyYAML's YAML 1.1 resolver as text, which
+#: turned ``speed: 1e3`` into the text '1e3' and a "must be a number" refusal (rule 2).
+_EXPONENT = re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9][0-9_]*)[eE][-+]?[0-9]+$")
+
+
+def _with_exponent_floats(loader: type[yaml.SafeLoader]) -> type[yaml.SafeLoader]:
+    """``loader`` resolving :data:`_EXPONENT` as a float; its other tags are unchanged."""
+    made: type[yaml.SafeLoader] = type(f"Statectl{loader.__name__}", (loader,), {})
+    made.add_implicit_resolver("tag:yaml.org,2002:float", _EXPONENT, list("-+0123456789."))
+    return made
+
+
+_PyLoader = _with_exponent_floats(yaml.SafeLoader)
+_Loader = _with_exponent_floats(getattr(yaml, "CSafeLoader", yaml.SafeLoader))
 
 
 class YamlRefused(Exception):
@@ -61,9 +77,9 @@ def compose(
     try:
         return _compose_with(loader or _Loader, text, max_depth)
     except YamlRefused as refused:
-        if refused.code != "T101" or loader is not None or _Loader is yaml.SafeLoader:
+        if refused.code != "T101" or loader is not None or _Loader.__base__ is yaml.SafeLoader:
             raise
-    return _compose_with(yaml.SafeLoader, text, max_depth)
+    return _compose_with(_PyLoader, text, max_depth)
 
 
 def _compose_with(loader: type[yaml.SafeLoader], text: str, max_depth: int) -> yaml.Node | None:
