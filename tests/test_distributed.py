@@ -242,6 +242,11 @@ GOOD = {"line": 7451, "arm": 7452, "gripper": 7453}
         (lambda t: t.replace("devices: [gripper]", "devices: []"), ["V820"]),
         (lambda t: t.replace("  arm:\n    devices", "  arm-1:\n    devices"), ["V821", "V820"]),
         (lambda t: t.replace("tcp/127.0.0.1:7452]", "localhost]", 1), ["V822"]),
+        (lambda t: t.replace("tcp/127.0.0.1:7452]", "tcp/127.0.0.1:99999]", 1), ["V822"]),
+        (lambda t: t.replace("tcp/127.0.0.1:7452]", "tcp/127.0.0.1:port]", 1), ["V822"]),
+        (lambda t: t.replace("tcp/127.0.0.1:7452]", "tcp/127.0.0.1:0]", 1), []),  # any free port
+        (lambda t: t.replace("tcp/127.0.0.1:7452]", "'tcp/[::1]:7452#iface=lo']", 1), []),
+        (lambda t: t.replace("connect: [tcp/127.0.0.1:7451]", "connect: [udp/h:0]", 1), ["V822"]),
         (lambda t: t.replace("send: Movement}", "send: Movement, on_peer_down: lose}"), ["V823"]),
         (lambda t: t.replace("send: Movement}", "send: Movement, dropped: Stop}"), ["V824"]),
         (lambda t: t.replace("{conveyor: Stop}", "{arm: Stop}"), ["V825"]),

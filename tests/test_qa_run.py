@@ -105,6 +105,7 @@ USAGE_CASES = [
     (["node", str(NODES), "--node", "line", "--dashboard", "--port", "99999"], "--port must be"),
     (["dashboard", str(NODES), "--port", "99999"], "--port must be"),
     (["dashboard", str(NODES), "--connect", "bogus"], "is not a Zenoh endpoint"),
+    (["dashboard", str(NODES), "--connect", "tcp/127.0.0.1:99999"], "a port is a number"),
 ]
 
 

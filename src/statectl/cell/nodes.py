@@ -31,7 +31,16 @@ from statectl.cell.expressions import _d
 from statectl.errors import Diagnostic, Location, Severity
 from statectl.model import Chart
 
-__all__ = ["DEFAULT_LEASE", "LINK_KEYS", "NODE_KEYS", "LinkDelivery", "Node", "Nodes", "PeerDown"]
+__all__ = [
+    "DEFAULT_LEASE",
+    "LINK_KEYS",
+    "NODE_KEYS",
+    "LinkDelivery",
+    "Node",
+    "Nodes",
+    "PeerDown",
+    "endpoint_problem",
+]
 
 #: The keys a link may carry for distribution (the link reader accepts them).
 LINK_KEYS = ("on_peer_down", "dropped")
@@ -167,19 +176,41 @@ def _endpoints(r: Any, node: yaml.Node | None, what: str) -> tuple[str, ...]:
         text = r.text(item, what)
         if text is None:
             continue
-        proto, _, address = text.partition("/")
-        if not proto or not address or ":" not in address:
+        problem = endpoint_problem(text, connect=what.endswith("connect"))
+        if problem is not None:
             r.diags.append(
                 _d(
                     "V822",
                     r.at(item),
-                    f"{what}: {text!r} is not a Zenoh endpoint",
+                    f"{what}: {text!r} {problem}",
                     "write PROTOCOL/HOST:PORT, e.g. tcp/127.0.0.1:7447",
                 )
             )
             continue
         out.append(text)
     return tuple(out)
+
+
+#: Zenoh's protocols over IP, whose locators end in ``:PORT``.
+_IP_PROTOCOLS = frozenset({"tcp", "udp", "tls", "quic", "ws"})
+
+
+def endpoint_problem(text: str, *, connect: bool) -> str | None:
+    """What is wrong with a Zenoh endpoint ``PROTOCOL/ADDRESS``, or ``None``.
+
+    Over IP the port of ``HOST:PORT[?metadata][#config]`` is checked here, when the
+    file or the command line is read, rather than by Zenoh when the node opens.
+    """
+    proto, _, address = text.partition("/")
+    if not proto or not address or ":" not in address:
+        return "is not a Zenoh endpoint"
+    if proto not in _IP_PROTOCOLS:
+        return None
+    port = address.split("#", 1)[0].split("?", 1)[0].rpartition(":")[2]
+    lowest = 1 if connect else 0  # listening on port 0 takes any free port
+    if not port.isdigit() or not lowest <= int(port) <= 65535:
+        return f"has port {port!r}: a port is a number from {lowest} to 65535"
+    return None
 
 
 def _lease(r: Any, node: yaml.Node | None, name: str) -> float:

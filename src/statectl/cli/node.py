@@ -350,6 +350,7 @@ def node_main(
 
 def _bad_usage(command: str, port: int | None, connect: Sequence[str], err: TextIO) -> bool:
     """--port out of range, or a --connect that is no Zenoh endpoint: said as run says it."""
+    from statectl.cell.nodes import endpoint_problem
     from statectl.cli.run import MAX_PORT
 
     if port is not None and not 0 <= port <= MAX_PORT:
@@ -358,10 +359,10 @@ def _bad_usage(command: str, port: int | None, connect: Sequence[str], err: Text
         )
         return True
     for endpoint in connect:
-        proto, _, address = endpoint.partition("/")
-        if not proto or ":" not in address:
+        problem = endpoint_problem(endpoint, connect=True)
+        if problem is not None:
             err.write(
-                f"statectl {command}: --connect {endpoint!r} is not a Zenoh endpoint; "
+                f"statectl {command}: --connect {endpoint!r} {problem}; "
                 "write PROTOCOL/HOST:PORT, e.g. tcp/127.0.0.1:7447\n"
             )
             return True
