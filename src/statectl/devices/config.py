@@ -45,7 +45,6 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import inspect
-import urllib.parse
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -61,6 +60,7 @@ from statectl.devices.opcua_config import OpcuaConfig, parse_opcua
 from statectl.devices.protocol import DeviceDriver
 from statectl.devices.stepper import SimStepper, stepper_option_problems
 from statectl.devices.twin import SimTwin, twin_option_problems
+from statectl.devices.urls import url_problem
 from statectl.errors import Diagnostic, DiagnosticError, Location, Severity, StatectlError
 from statectl.model import Chart
 from statectl.tables import safeyaml
@@ -517,15 +517,6 @@ def _dashboard(
 _SHIP_KEYS = ("to", "source", "interval", "retry", "batch")
 
 
-def _not_a_url(url: str) -> str:
-    """Why ``url`` cannot be parsed (an unclosed ``[``, a port that is no number), or ''."""
-    try:
-        urllib.parse.urlsplit(url).port  # noqa: B018  # the port is checked when read
-    except ValueError as exc:
-        return str(exc)
-    return ""
-
-
 def _ship(
     node: yaml.Node,
     value: Callable[[yaml.Node], Any],
@@ -553,7 +544,7 @@ def _ship(
         ):
             shown = "a text that is not one" if isinstance(val, str) else repr(val)
             problem = f"ship: to must be a postgresql:// URL (got {shown})"  # may hold a password
-        elif name == "to" and (why := _not_a_url(val)):
+        elif name == "to" and (why := url_problem(val)) is not None:
             problem = f"ship: to is not a valid URL ({why})"  # the URL itself is not shown
         elif name == "source" and not (isinstance(val, str) and val):
             problem = f"ship: source must be a name (got {val!r})"

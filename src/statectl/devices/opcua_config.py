@@ -25,6 +25,8 @@ from typing import Any
 
 import yaml
 
+from statectl.devices.urls import url_problem
+
 __all__ = ["MIN_PASSWORD", "POLICIES", "OpcuaConfig", "endpoint_problem", "parse_opcua"]
 
 #: The security policies a config may list (OPC UA names).
@@ -56,12 +58,10 @@ def endpoint_problem(url: Any) -> str | None:
     """Why ``url`` is no ``opc.tcp://HOST:PORT`` endpoint a server can bind, or None."""
     if not (isinstance(url, str) and url.startswith("opc.tcp://")):
         return f"endpoint must be an opc.tcp:// URL (got {url!r})"
-    try:
-        parts = urllib.parse.urlsplit(url)
-        parts.port  # noqa: B018  # a port out of range or not a number raises here
-    except ValueError as exc:
-        return f"endpoint {url!r} is not an opc.tcp://HOST:PORT URL ({exc})"
-    if not parts.hostname:
+    problem = url_problem(url)
+    if problem is not None:
+        return f"endpoint {url!r} is not an opc.tcp://HOST:PORT URL ({problem})"
+    if not urllib.parse.urlsplit(url).hostname:
         return f"endpoint {url!r} names no host: write opc.tcp://HOST:PORT"
     return None
 

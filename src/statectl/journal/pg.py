@@ -27,6 +27,7 @@ import urllib.parse
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
 
+from statectl.devices.urls import url_problem as url_syntax
 from statectl.journal.format import JournalError
 from statectl.journal.read import DeviceRow, InboxRow, StepRow, _datamodel, _json, _step
 
@@ -113,12 +114,8 @@ def is_pg_url(text: str) -> bool:
 def url_problem(url: str) -> str | None:
     """What makes ``url`` no URL at all (an unclosed ``[`` of an IPv6 host), or None; the
     text never holds the URL, which may hold a password."""
-    try:
-        parts = urllib.parse.urlsplit(url)
-        parts.port  # noqa: B018  # a port that is not a number raises here
-    except ValueError as exc:
-        return f"it is not a valid URL ({exc})"
-    return None
+    problem = url_syntax(url)
+    return None if problem is None else f"it is not a valid URL ({problem})"
 
 
 def split_url(url: str) -> tuple[str, str | None]:
