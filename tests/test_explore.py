@@ -128,6 +128,21 @@ def test_max_states_makes_it_incomplete() -> None:
     assert "incomplete" in report.to_text()
 
 
+def test_verify_is_bounded_unless_told_otherwise(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`statectl verify` without --max-states stops at DEFAULT_MAX_STATES (exit 1, the
+    report says how to go further): a cell too big for memory used to run until the
+    machine ran out of it."""
+    import statectl.cli.verify as cli_verify
+
+    monkeypatch.setattr(cli_verify, "DEFAULT_MAX_STATES", 5)
+    out = io.StringIO()
+    assert verify_main(str(PICK / "cell.yaml"), out=out, err=io.StringIO()) == 1
+    said = out.getvalue()
+    assert "stopped at its bound of 5 states" in said and "0 for no bound" in said, said
+    out = io.StringIO()
+    assert verify_main(str(PICK / "cell.yaml"), max_states=0, out=out, err=io.StringIO()) == 0
+
+
 def test_recovery_failure(tmp_path: Path) -> None:
     """A state from which the named goal can never be reached fails recovery."""
     body = (
@@ -275,7 +290,8 @@ def test_json_report() -> None:
     ("args", "code"),
     [
         ({"cell": "/nonexistent.yaml"}, 2),
-        ({"cell": str(PICK / "cell.yaml"), "max_states": 0}, 2),
+        ({"cell": str(PICK / "cell.yaml"), "max_states": -1}, 2),
+        ({"cell": str(PICK / "cell.yaml"), "max_states": 0}, 0),  # no bound
         ({"cell": str(PICK / "cell.yaml"), "export": "nusmv"}, 2),
         ({"cell": str(PICK / "cell.yaml")}, 0),
         ({"cell": str(PICK / "cell-buggy.yaml")}, 1),

@@ -121,7 +121,11 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("verify", help="explore every reachable global state of a cell")
     s.add_argument("cell", metavar="CELL")
     s.add_argument("--json", action="store_true", help="one JSON report on standard output")
-    s.add_argument("--max-states", type=int, help="bound the search; the report says incomplete")
+    s.add_argument(
+        "--max-states",
+        type=int,
+        help="bound the search (default 20,000,000; 0: none); the report then says incomplete",
+    )
     s.add_argument("--export", choices=("promela",), help="write the composed model instead")
     s.add_argument("-o", "--output", help="where --export writes (default: standard output)")
     s.add_argument("--traces", metavar="DIR", help="write each counterexample (json, mmd, puml)")

@@ -22,7 +22,7 @@ from statectl.errors import Severity
 from statectl.explore.compose import Composed
 from statectl.explore.diagrams import to_mermaid, to_plantuml
 from statectl.explore.promela import export_promela
-from statectl.explore.search import explore
+from statectl.explore.search import DEFAULT_MAX_STATES, explore
 from statectl.explore.verify import write_traces
 from statectl.tables import write_files
 
@@ -45,6 +45,7 @@ def verify_main(
     ``export="promela"`` writes the composed model (to ``output`` or stdout) instead
     of exploring; ``traces`` names a folder for the failing traces and diagrams;
     ``diagrams`` ("mermaid" or "plantuml") prints each failing trace's diagram.
+    ``max_states`` bounds the search (``None``: :data:`DEFAULT_MAX_STATES`; 0: no bound).
     """
     if not Path(cell).is_file():
         err.write(f"statectl verify: {cell}: no such file\n")
@@ -52,9 +53,10 @@ def verify_main(
     if export not in (None, "promela") or diagrams not in (None, "mermaid", "plantuml"):
         err.write("statectl verify: --export takes promela; --diagrams mermaid or plantuml\n")
         return USAGE
-    if max_states is not None and max_states < 1:
-        err.write("statectl verify: --max-states must be at least 1\n")
+    if max_states is not None and max_states < 0:
+        err.write("statectl verify: --max-states must be 0 (no bound) or more\n")
         return USAGE
+    bound = DEFAULT_MAX_STATES if max_states is None else (max_states or None)
     from statectl.cli.kinds import device_given_to_verify
 
     other = device_given_to_verify(cell)  # C416: a device file, not a cell
@@ -72,7 +74,7 @@ def verify_main(
         return _export(loaded, output, out)
     show = err.isatty() if progress is None else progress
     printer = ProgressPrinter(err) if show else None
-    report = explore(loaded, max_states=max_states, progress=printer)
+    report = explore(loaded, max_states=bound, progress=printer)
     if printer is not None:
         printer.done()
     if as_json:

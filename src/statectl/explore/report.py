@@ -237,8 +237,9 @@ class Report:
         ]
         if not self.complete:
             out.append(
-                "incomplete: the --max-states bound was reached; properties not "
-                "violated so far are not proven"
+                f"incomplete: the search stopped at its bound of {self.states:,} states "
+                "(--max-states); properties not violated so far are not proven: give a "
+                "larger --max-states, or 0 for no bound"
             )
         for g in self.free_guards:
             parts = "; ".join(g.parts)
