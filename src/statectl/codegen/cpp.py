@@ -30,6 +30,7 @@ from pathlib import Path
 from statectl.codegen.cpp_header import (
     _header,
 )
+from statectl.codegen.cpp_rows import DENSE_CELLS
 from statectl.codegen.flatten import (
     FlatChart,
     flatten,
@@ -46,14 +47,18 @@ __all__ = ["RUNTIME_HEADERS", "generate", "render"]
 RUNTIME_HEADERS = ("contract.hpp", "observer.hpp", "runtime.hpp", "spsc_queue.hpp", "trace.hpp")
 
 
-def render(flat: FlatChart) -> dict[str, str]:
-    """The generated files (relative path -> text) of one flat chart."""
+def render(flat: FlatChart, dense_limit: int = DENSE_CELLS) -> dict[str, str]:
+    """The generated files (relative path -> text) of one flat chart.
+
+    ``dense_limit``: most cells written as the dense ``kCells`` table; a bigger chart
+    gets compact rows (:mod:`statectl.codegen.cpp_rows`). Tests lower it to compile
+    the compact form for small charts."""
     chart = flat.chart
     cls = identifiers([chart.name])[chart.name]
     ns = identifiers([chart.name], lower=True)[chart.name]
     base = ns
     return {
-        f"{base}.hpp": _header(flat, cls, ns),
+        f"{base}.hpp": _header(flat, cls, ns, dense_limit),
         f"{base}_check.cpp": _check(flat, cls, ns, base),
         "CMakeLists.txt": _cmake(cls, ns, base),
     }

@@ -61,6 +61,7 @@ from statectl.codegen.flat import (
     EffectKind,
     FlatChart,
     Outcome,
+    Row,
     RuntimeGuard,
     Tree,
 )
@@ -301,6 +302,55 @@ class _Flattener:
         visit([])
         return _build_tree(leaves, 0)
 
+    def offers(self, events: tuple[str, ...]) -> None:
+        """Index, per state, the events its own or its ancestors' transitions match and
+        the events it declares ignored, so a row steps the kernel only where it can act.
+
+        Matching is SCXML's (``machine.name_match``): a descriptor names an event
+        exactly, or a dot-prefix of it (``error`` or ``error.*`` match ``error.x``), or
+        ``*``; each descriptor is looked up in a map of every event's dot-prefixes, so
+        indexing is linear in transitions plus event names.
+        """
+        number = {e: i for i, e in enumerate(events)}
+        below: dict[str, list[int]] = {}  # "a" -> events "a.b", "a.b.c", ...
+        for i, e in enumerate(events):
+            for k, ch in enumerate(e):
+                if ch == ".":
+                    below.setdefault(e[:k], []).append(i)
+        every = frozenset(range(len(events)))
+        own: dict[str, frozenset[int]] = {}
+        for state, transitions in self.m.transitions_of.items():
+            found: set[int] = set()
+            for t in transitions:
+                for d in t.events:
+                    if d == "*":
+                        found |= every
+                        continue
+                    if d in number:
+                        found.add(number[d])
+                    found.update(below.get(d.removesuffix(".*"), ()))
+            own[state] = frozenset(found)
+        empty: frozenset[int] = frozenset()
+        self.reach = {
+            s: own.get(s, empty).union(*(own.get(a, empty) for a in self.m.ancestors[s]))
+            for s in self.order
+        }
+        ignored: dict[str, set[int]] = {}
+        for state, event in self.m.ignored:
+            if event in number:
+                ignored.setdefault(state, set()).add(number[event])
+        self.ignored_by = {s: frozenset(v) for s, v in ignored.items()}
+
+    def row(self, snap: Snapshot, events: tuple[str, ...]) -> Row:
+        """One configuration's row: the kernel's step for each event an active state
+        could take (rule 1), in event order so configurations are numbered as before;
+        every other event is unhandled and needs no step (:class:`~.flat.Row`)."""
+        active = snap.active
+        offered = sorted(frozenset().union(*(self.reach[s] for s in active)))
+        explicit = {e: self.decide(snap, events[e]) for e in offered}
+        ignored = frozenset().union(*(self.ignored_by.get(s, frozenset()) for s in active))
+        return Row(self.snapshots[snap], len(events), explicit, ignored - explicit.keys())
+
     def decide(self, source: Snapshot | None, event: str | None) -> Tree:
         """The semantics' own step where no guard was consulted, the oracle otherwise."""
         result = (
@@ -348,11 +398,11 @@ def flatten(chart: Chart) -> tuple[FlatChart | None, list[Diagnostic]]:
         return None, [*diags, *exc.diagnostics]
     events = chart.event_names
     try:
+        f.offers(events)
         start = f.decide(None, None)
-        rows: list[tuple[Tree, ...]] = []
+        rows: list[Row] = []
         while f.queue:
-            snap = f.queue.popleft()
-            rows.append(tuple(f.decide(snap, e) for e in events))
+            rows.append(f.row(f.queue.popleft(), events))
     except _TooMany as exc:
         diags.append(
             Diagnostic(
