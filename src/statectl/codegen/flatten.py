@@ -85,6 +85,7 @@ from statectl.semantics import (
     initial,
     step,
 )
+from statectl.semantics.offers import Offers
 
 __all__ = [
     "CODES",
@@ -160,6 +161,7 @@ class _Flattener:
         self.snapshots: dict[Snapshot, int] = {}
         self.queue: deque[Snapshot] = deque()
         self.assigns = AssignTable(self.fields, self.diags)
+        self.offers = Offers(self.m, chart.event_names)  # rows step only offered events
 
     # guards
 
@@ -302,54 +304,14 @@ class _Flattener:
         visit([])
         return _build_tree(leaves, 0)
 
-    def offers(self, events: tuple[str, ...]) -> None:
-        """Index, per state, the events its own or its ancestors' transitions match and
-        the events it declares ignored, so a row steps the kernel only where it can act.
-
-        Matching is SCXML's (``machine.name_match``): a descriptor names an event
-        exactly, or a dot-prefix of it (``error`` or ``error.*`` match ``error.x``), or
-        ``*``; each descriptor is looked up in a map of every event's dot-prefixes, so
-        indexing is linear in transitions plus event names.
-        """
-        number = {e: i for i, e in enumerate(events)}
-        below: dict[str, list[int]] = {}  # "a" -> events "a.b", "a.b.c", ...
-        for i, e in enumerate(events):
-            for k, ch in enumerate(e):
-                if ch == ".":
-                    below.setdefault(e[:k], []).append(i)
-        every = frozenset(range(len(events)))
-        own: dict[str, frozenset[int]] = {}
-        for state, transitions in self.m.transitions_of.items():
-            found: set[int] = set()
-            for t in transitions:
-                for d in t.events:
-                    if d == "*":
-                        found |= every
-                        continue
-                    if d in number:
-                        found.add(number[d])
-                    found.update(below.get(d.removesuffix(".*"), ()))
-            own[state] = frozenset(found)
-        empty: frozenset[int] = frozenset()
-        self.reach = {
-            s: own.get(s, empty).union(*(own.get(a, empty) for a in self.m.ancestors[s]))
-            for s in self.order
-        }
-        ignored: dict[str, set[int]] = {}
-        for state, event in self.m.ignored:
-            if event in number:
-                ignored.setdefault(state, set()).add(number[event])
-        self.ignored_by = {s: frozenset(v) for s, v in ignored.items()}
-
     def row(self, snap: Snapshot, events: tuple[str, ...]) -> Row:
         """One configuration's row: the kernel's step for each event an active state
         could take (rule 1), in event order so configurations are numbered as before;
         every other event is unhandled and needs no step (:class:`~.flat.Row`)."""
-        active = snap.active
-        offered = sorted(frozenset().union(*(self.reach[s] for s in active)))
+        offered = sorted(self.offers.offered(snap.active))
         explicit = {e: self.decide(snap, events[e]) for e in offered}
-        ignored = frozenset().union(*(self.ignored_by.get(s, frozenset()) for s in active))
-        return Row(self.snapshots[snap], len(events), explicit, ignored - explicit.keys())
+        ignored = self.offers.ignored(snap.active) - explicit.keys()
+        return Row(self.snapshots[snap], len(events), explicit, ignored)
 
     def decide(self, source: Snapshot | None, event: str | None) -> Tree:
         """The semantics' own step where no guard was consulted, the oracle otherwise."""
@@ -398,7 +360,6 @@ def flatten(chart: Chart) -> tuple[FlatChart | None, list[Diagnostic]]:
         return None, [*diags, *exc.diagnostics]
     events = chart.event_names
     try:
-        f.offers(events)
         start = f.decide(None, None)
         rows: list[Row] = []
         while f.queue:
