@@ -7,6 +7,7 @@ charts and on a generated ring, with the dense limit lowered so small charts use
 from __future__ import annotations
 
 import importlib
+import io
 import random
 from pathlib import Path
 
@@ -14,6 +15,8 @@ import pytest
 
 from codegen_support import CppDevice, assert_equivalent, needs_gxx
 from statectl.build import load_chart
+from statectl.cli import main
+from statectl.cli.progress import CountProgress
 from statectl.codegen.cpp import render
 from statectl.codegen.cpp_rows import DENSE_CELLS
 from statectl.codegen.flat import Decision
@@ -132,3 +135,29 @@ def test_random_charts_compact_trace_like_python(tmp_path: Path, seed: int) -> N
         for _ in range(12)
     ]
     assert_equivalent(device, runs)
+
+
+@pytest.mark.parametrize(
+    ("after", "shown"),
+    [(0.0, True), (3600.0, False)],
+)
+def test_progress_line_only_once_the_work_is_long(after: float, shown: bool) -> None:
+    """The codegen/testgen progress line stays quiet until the work has run ``after``
+    seconds, then names the counts; done() ends the line only if one was written."""
+    stream = io.StringIO()
+    printer = CountProgress("codegen", "configurations stepped", stream, after=after, interval=0)
+    printer(5, 12)
+    printer.done()
+    text = stream.getvalue()
+    assert ("codegen: 5 of 12 configurations stepped" in text) is shown, text
+    assert text.endswith("\n") is shown
+
+
+@pytest.mark.parametrize("command", ["codegen", "testgen"])
+def test_progress_option_is_accepted_and_quiet_on_a_quick_run(tmp_path: Path, command: str) -> None:
+    """``--progress`` is an option of codegen and testgen; a quick run prints no progress."""
+    tables = ring_yaml(10, tmp_path / "ring.yaml")
+    out, err = io.StringIO(), io.StringIO()
+    code = main([command, str(tables), "--out", str(tmp_path / "out"), "--progress"], out, err)
+    assert code == 0, err.getvalue()
+    assert "\r" not in err.getvalue()

@@ -24,6 +24,7 @@ Rules:
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from importlib.resources import files
 from pathlib import Path
 
@@ -148,12 +149,17 @@ def runtime_files() -> dict[str, str]:
     }
 
 
-def generate(chart: Chart, out_dir: str | os.PathLike[str]) -> tuple[list[Path], list[Diagnostic]]:
+def generate(
+    chart: Chart,
+    out_dir: str | os.PathLike[str],
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[list[Path], list[Diagnostic]]:
     """Write the device header, the runtime and a CMake target to ``out_dir``.
 
     Returns the written paths and every diagnostic; with an error nothing is written.
+    ``progress``: see :func:`~statectl.codegen.flatten.flatten`.
     """
-    flat, diags = flatten(chart)
+    flat, diags = flatten(chart, progress)
     if flat is None or has_errors(diags):
         return [], diags
     texts = {**render(flat), **runtime_files()}

@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import ast
 from collections import deque
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 from statectl.codegen.assign import AssignTable
@@ -334,8 +334,13 @@ def _build_tree(leaves: list[tuple[list[tuple[int, bool]], Outcome]], depth: int
     return Decision(gid, _build_tree(yes, depth + 1), _build_tree(no, depth + 1))
 
 
-def flatten(chart: Chart) -> tuple[FlatChart | None, list[Diagnostic]]:
-    """Explore ``chart`` into flat tables, or say why it cannot be (G7xx)."""
+def flatten(
+    chart: Chart, progress: Callable[[int, int], None] | None = None
+) -> tuple[FlatChart | None, list[Diagnostic]]:
+    """Explore ``chart`` into flat tables, or say why it cannot be (G7xx).
+
+    ``progress`` is called after each configuration's row with the rows done and the
+    configurations found so far (the CLI shows it on a long run)."""
     where = chart.origin
     diags: list[Diagnostic] = []
     if chart.datamodel != "safe":
@@ -364,6 +369,8 @@ def flatten(chart: Chart) -> tuple[FlatChart | None, list[Diagnostic]]:
         rows: list[Row] = []
         while f.queue:
             rows.append(f.row(f.queue.popleft(), events))
+            if progress is not None:
+                progress(len(rows), len(f.snapshots))
     except _TooMany as exc:
         diags.append(
             Diagnostic(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -79,7 +80,12 @@ def generate_hypothesis(file: str | Path, out_dir: str | Path) -> Path:
 
 
 def generate(
-    file: str | Path, criterion: str, out_dir: str | Path, *, max_nodes: int = MAX_NODES
+    file: str | Path,
+    criterion: str,
+    out_dir: str | Path,
+    *,
+    max_nodes: int = MAX_NODES,
+    progress: Callable[[int, int], None] | None = None,
 ) -> Generated:
     """Write the ``criterion`` test module of the device file ``file`` into ``out_dir``.
 
@@ -89,7 +95,7 @@ def generate(
         raise StatectlError(f"unknown criterion {criterion!r}; choose one of {', '.join(CRITERIA)}")
     source = Path(file)
     chart = load_chart(source)
-    suite = cases_for(explore(chart, max_nodes=max_nodes), criterion)
+    suite = cases_for(explore(chart, max_nodes=max_nodes, progress=progress), criterion)
     out = Path(out_dir)
     path = out / module_name(chart.name, criterion)
     write_atomic(path, module_text(suite, chart.name, source, out, str(file)))

@@ -25,7 +25,7 @@ from __future__ import annotations
 import ast
 import itertools
 from collections import deque
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -275,8 +275,16 @@ def candidate_event_data(chart: Chart) -> dict[str, tuple[Any, ...]]:
     return out
 
 
-def explore(chart: Chart, *, max_nodes: int = MAX_NODES) -> Graph:
-    """Breadth-first over every sendable event from the default state (rules 1-3)."""
+def explore(
+    chart: Chart,
+    *,
+    max_nodes: int = MAX_NODES,
+    progress: Callable[[int, int], None] | None = None,
+) -> Graph:
+    """Breadth-first over every sendable event from the default state (rules 1-4).
+
+    ``progress`` is called after each node is expanded, with the nodes expanded and
+    the nodes found so far (the CLI shows it on a long run)."""
     m = compiled(chart)
     datas = candidate_data(chart, m)
     sendable = sendable_events(chart)
@@ -304,6 +312,8 @@ def explore(chart: Chart, *, max_nodes: int = MAX_NODES) -> Graph:
         active = node.snapshot.active
         asked = sorted(offers.offered(active) | offers.ignored(active))
         stepped[node] = frozenset(sendable[i] for i in asked)
+        if progress is not None:
+            progress(len(stepped), len(parent))
         for event in (sendable[i] for i in asked):  # rule 4: the rest is no transition
             for sent in event_datas.get(event, (None,)):
                 decided = step(m, node.snapshot, event, values, sent)
