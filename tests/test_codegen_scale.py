@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from codegen_support import CppDevice, assert_equivalent, needs_gxx
+from codegen_support import CLANG, GXX, CppDevice, assert_equivalent, needs_gxx
 from statectl.build import load_chart
 from statectl.cli import main
 from statectl.cli.progress import CountProgress
@@ -25,6 +25,7 @@ from statectl.semantics import Machine, step
 from test_codegen_equivalence import random_chart
 
 flatten_module = importlib.import_module("statectl.codegen.flatten")
+needs_clang = pytest.mark.skipif(CLANG is None, reason="no clang++ on this machine")
 
 
 def ring_yaml(n: int, path: Path) -> Path:
@@ -93,20 +94,24 @@ def test_big_chart_header_has_compact_rows_linear_in_the_chart(tmp_path: Path) -
 
 
 def test_small_chart_keeps_the_dense_table(tmp_path: Path) -> None:
-    """A chart under the limit keeps kCells, and a limit below its cells switches it."""
+    """A chart under the limit keeps kCells, and a limit below its cells switches it
+    (dispatch's comment says which form it reads)."""
     flat, _ = flatten(_ring(12, tmp_path))
     assert flat is not None
-    assert "kCells[" in render(flat)["ring.hpp"]
+    dense = render(flat)["ring.hpp"]
+    assert "kCells[" in dense and "one load from kCells" in dense
     compact = render(flat, dense_limit=0)["ring.hpp"]
-    assert "kCells[" not in compact and "kRowCells[" in compact
+    assert "kCells" not in compact and "kRowCells[" in compact
+    assert "binary search of the event's row" in compact
 
 
 @needs_gxx
-def test_compact_ring_traces_like_python(tmp_path: Path) -> None:
-    """A 300-state ring in the compact form runs round the ring, with ignored and
-    unhandled events on the way, exactly as the Python runtime does."""
+@pytest.mark.parametrize("compiler", [GXX, pytest.param(CLANG, marks=needs_clang)])
+def test_compact_ring_traces_like_python(tmp_path: Path, compiler: str | None) -> None:
+    """A 300-state ring in the compact form (g++ and clang++, -Werror) runs round the
+    ring, with ignored and unhandled events on the way, exactly as the Python runtime."""
     n = 300
-    device = CppDevice(_ring(n, tmp_path), tmp_path, dense_limit=0)
+    device = CppDevice(_ring(n, tmp_path), tmp_path, compiler, dense_limit=0)
     rnd = random.Random(7)
     walk = [f"E{i}" for i in range(n)] + ["E0", "E1"]
     runs: list[tuple[dict[str, int], list[str]]] = [({}, walk)]

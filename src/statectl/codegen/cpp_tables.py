@@ -341,6 +341,19 @@ _COMPACT_DISPATCH = """\
     }"""
 
 
+_DENSE_NOTE = """\
+  /// One bound check, one load from kCells, one indexed jump. The bound check is every
+  /// contract of the hot path at once: an event out of range (101), a busy device (102,
+  /// bit 31 of the state word) or one not started (103, bit 30) gives a cell past the
+  /// table, and the cold fault() names the contract."""
+
+_COMPACT_NOTE = """\
+  /// Two range checks, a binary search of the event's row in kRowCells, one indexed
+  /// jump. The range checks are every contract of the hot path at once: an event out
+  /// of range (101), a busy device (102, bit 31 of the state word) or one not started
+  /// (103, bit 30) fails them, and the cold fault() names the contract."""
+
+
 _NO_EVENTS = """\
     fault(static_cast<std::size_t>(event));  // the chart has no events: always 101"""
 
@@ -358,6 +371,8 @@ def _device_class(
     dispatch = _COMPACT_DISPATCH if compact else _DISPATCH  # codegen.cpp_rows rules 1, 2
     body = dispatch.replace("@CASES@", cases) if has_cells else _NO_EVENTS
     device = _DEVICE
+    if compact:  # the dense form's comment describes kCells (codegen.cpp_rows rule 2)
+        device = device.replace(_DENSE_NOTE, _COMPACT_NOTE)
     for place, text in parts.items():  # per-state timeouts (cpp_timers), empty without
         device = device.replace(place, text)
     return (
