@@ -192,6 +192,8 @@ def module_text(
         head = _marker(t.data) + f"def {t.name}(statectl_device):\n" + _doc(t.doc)
         parts.append(loop_table(t, events, _lit, given(_items(t.given, t.given_data)), head))
     body = "".join(parts)
+    if "pytest." not in body:  # no marker nor skip: the import would be unused (F401)
+        text = text.replace("import pytest\n\n", "", 1)
     return text + preamble(events, tree, _lit) + "\n\n" + body.rstrip("\n") + "\n"
 
 
