@@ -18,6 +18,7 @@ from typing import Any
 import pytest
 
 from statectl.codegen.cpp import render, runtime_files
+from statectl.codegen.cpp_rows import DENSE_CELLS
 from statectl.codegen.flatten import flatten, identifiers
 from statectl.errors import Diagnostic, Severity, has_errors
 from statectl.model import Chart
@@ -211,12 +212,18 @@ class CppDevice:
     tell a refusal (a diagnostic) from a crash (any other exception).
     """
 
-    def __init__(self, chart: Chart, workdir: Path, compiler: str | None = None) -> None:
+    def __init__(
+        self,
+        chart: Chart,
+        workdir: Path,
+        compiler: str | None = None,
+        dense_limit: int = DENSE_CELLS,
+    ) -> None:
         self.chart = chart
         flat, diags = flatten(chart)  # once: generating re-flattens otherwise
         if flat is None or has_errors(diags):
             raise Refused([d for d in diags if d.severity is Severity.ERROR])
-        for rel, text in {**render(flat), **runtime_files()}.items():
+        for rel, text in {**render(flat, dense_limit), **runtime_files()}.items():
             path = workdir / rel
             path.parent.mkdir(parents=True, exist_ok=True)
             path.write_text(text, encoding="utf-8")

@@ -501,7 +501,7 @@ def run_suite(suite: Suite, chart: Chart) -> int:
     ]
     for t in suite.tables:
         given = sent(t.given, t.given_data)
-        checks += [(t.data, given, e, None, Expect(t.states, (), r)) for e, r in t.rows]
+        checks += [(t.data, given, e, None, Expect(t.states, (), r)) for e, r in t.all_rows()]
     for data, steps, event, event_data, expect in checks:
         try:
             d = DeviceUnderTest(chart, data=dict(data) or None)

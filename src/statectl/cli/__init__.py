@@ -116,6 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("file", metavar="FILE")
     s.add_argument("--target", default="cpp", help="code generation target (cpp)")
     s.add_argument("--out", required=True, help="output directory")
+    s.add_argument("--progress", action="store_true", help="show progress even when piped")
     s.set_defaults(func=cmd_codegen)
 
     s = sub.add_parser("verify", help="explore every reachable global state of a cell")

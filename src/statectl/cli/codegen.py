@@ -7,11 +7,14 @@ from __future__ import annotations
 
 from typing import TextIO
 
+from statectl.cli.progress import CountProgress
 from statectl.codegen.cpp import generate
 from statectl.errors import DiagnosticError, Severity
 
 
-def run_codegen(path: str, out_dir: str, target: str, out: TextIO, err: TextIO) -> int:
+def run_codegen(
+    path: str, out_dir: str, target: str, out: TextIO, err: TextIO, progress: bool | None = None
+) -> int:
     """``statectl codegen FILE --target cpp --out DIR``: 0 written, 1 diagnostics, 2 usage."""
     if target != "cpp":
         err.write(f"statectl codegen: unknown target {target!r} (available: cpp)\n")
@@ -31,7 +34,11 @@ def run_codegen(path: str, out_dir: str, target: str, out: TextIO, err: TextIO) 
         for d in cell_instead(path, diags):  # C415: a cell file given for a device file
             err.write(f"{d}\n")
         return 1
-    written, gen_diags = generate(chart, out_dir)
+    show = err.isatty() if progress is None else progress  # as verify --progress
+    printer = CountProgress("codegen", "configurations stepped", err) if show else None
+    written, gen_diags = generate(chart, out_dir, printer)
+    if printer is not None:
+        printer.done()
     for d in (*diags, *gen_diags):
         if d.severity is not Severity.INFO:
             err.write(f"{d}\n")

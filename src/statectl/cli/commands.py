@@ -244,7 +244,8 @@ def cmd_scxml_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
 def cmd_codegen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     from statectl.cli.codegen import run_codegen
 
-    return run_codegen(args.file, args.out, args.target, out, err)
+    progress = True if args.progress else None
+    return run_codegen(args.file, args.out, args.target, out, err, progress)
 
 
 def cmd_verify(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:

@@ -1,4 +1,4 @@
-"""The progress display of long commands (verify): one line on a terminal, rewritten in place.
+"""Progress of long commands (verify, codegen, testgen): one line on a terminal, rewritten.
 
 The explorer reports :class:`~statectl.explore.Progress` records to a callback and
 prints nothing itself; showing them is the command line's concern.
@@ -10,8 +10,9 @@ import sys
 from typing import TextIO
 
 from statectl.explore import Progress
+from statectl.explore.progress import CountProgress
 
-__all__ = ["ProgressPrinter"]
+__all__ = ["CountProgress", "ProgressPrinter"]
 
 
 class ProgressPrinter:

@@ -24,12 +24,14 @@ Rules:
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from importlib.resources import files
 from pathlib import Path
 
 from statectl.codegen.cpp_header import (
     _header,
 )
+from statectl.codegen.cpp_rows import DENSE_CELLS
 from statectl.codegen.flatten import (
     FlatChart,
     flatten,
@@ -46,14 +48,18 @@ __all__ = ["RUNTIME_HEADERS", "generate", "render"]
 RUNTIME_HEADERS = ("contract.hpp", "observer.hpp", "runtime.hpp", "spsc_queue.hpp", "trace.hpp")
 
 
-def render(flat: FlatChart) -> dict[str, str]:
-    """The generated files (relative path -> text) of one flat chart."""
+def render(flat: FlatChart, dense_limit: int = DENSE_CELLS) -> dict[str, str]:
+    """The generated files (relative path -> text) of one flat chart.
+
+    ``dense_limit``: most cells written as the dense ``kCells`` table; a bigger chart
+    gets compact rows (:mod:`statectl.codegen.cpp_rows`). Tests lower it to compile
+    the compact form for small charts."""
     chart = flat.chart
     cls = identifiers([chart.name])[chart.name]
     ns = identifiers([chart.name], lower=True)[chart.name]
     base = ns
     return {
-        f"{base}.hpp": _header(flat, cls, ns),
+        f"{base}.hpp": _header(flat, cls, ns, dense_limit),
         f"{base}_check.cpp": _check(flat, cls, ns, base),
         "CMakeLists.txt": _cmake(cls, ns, base),
     }
@@ -143,12 +149,17 @@ def runtime_files() -> dict[str, str]:
     }
 
 
-def generate(chart: Chart, out_dir: str | os.PathLike[str]) -> tuple[list[Path], list[Diagnostic]]:
+def generate(
+    chart: Chart,
+    out_dir: str | os.PathLike[str],
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[list[Path], list[Diagnostic]]:
     """Write the device header, the runtime and a CMake target to ``out_dir``.
 
     Returns the written paths and every diagnostic; with an error nothing is written.
+    ``progress``: see :func:`~statectl.codegen.flatten.flatten`.
     """
-    flat, diags = flatten(chart)
+    flat, diags = flatten(chart, progress)
     if flat is None or has_errors(diags):
         return [], diags
     texts = {**render(flat), **runtime_files()}

@@ -9,12 +9,12 @@ from __future__ import annotations
 import os
 
 from statectl.codegen.cpp_assign import assign_functions
+from statectl.codegen.cpp_rows import DENSE_CELLS, build, compact_lines, dense_lines
 from statectl.codegen.cpp_tables import (
     _OPS,
     REASONS,
     _c,
     _cases,
-    _cells,
     _comment,
     _depth,
     _device_class,
@@ -28,7 +28,7 @@ from statectl.codegen.flatten import (
 )
 
 
-def _header(flat: FlatChart, cls: str, ns: str) -> str:
+def _header(flat: FlatChart, cls: str, ns: str, dense_limit: int = DENSE_CELLS) -> str:
     chart = flat.chart
     st = identifiers(flat.states)
     ev = identifiers(flat.events)
@@ -37,7 +37,7 @@ def _header(flat: FlatChart, cls: str, ns: str) -> str:
     methods = identifiers([i.method for i in invokes])
     tables = _Tables(flat)
     start = tables.code(flat.start)
-    dispatch = [[tables.code(t) for t in row] for row in flat.dispatch]
+    cells = build(tables, flat, dense_limit)
     n_states, n_events, n_configs = len(flat.states), len(flat.events), len(flat.configurations)
     words = max(1, (n_states + 63) // 64)
     n_invokes = max(1, max((i.number for i in invokes), default=0) + 1)
@@ -250,34 +250,7 @@ def _header(flat: FlatChart, cls: str, ns: str) -> str:
     add(f"inline constexpr int kMaxDepth = {depth};  // most guards one step evaluates")
     add(f"inline constexpr std::int16_t kStart = {start};  // entering the initial configuration")
     add("")
-    cases, cells = _cells(dispatch, n_configs, n_events)
-    add("// Dispatch cells, event-major: kCells[event * kConfigurationCount + configuration] is")
-    add("// the case of dispatch()'s switch that runs the step (one row per event, columns are")
-    add("// the configurations 0.., see kActive). Cells past the table are contract faults.")
-    add(f"inline constexpr std::size_t kCellCount = {len(cells)};")
-    add(f"inline constexpr std::size_t kCaseCount = {len(cases)};")
-    ctype = "std::uint8_t" if len(cases) <= 256 else "std::uint16_t"
-    add(f"inline constexpr {ctype} kCells[{max(1, len(cells))}] = {{")
-    cw = _width(cells)
-    for e, name in enumerate(flat.events):
-        row = cells[e * n_configs : (e + 1) * n_configs]
-        for k in range(0, len(row), 24):
-            body = ", ".join(f"{x:>{cw}}" for x in row[k : k + 24])
-            note = f"  // {e}: {_comment(name)}" if k == 0 else ""
-            add(f"    {body},{note}")
-    if not cells:
-        add("    0,  // unused: the chart has no events")
-    add("};")
-    add("")
-    add("constexpr bool cells_name_cases() noexcept {")
-    add("  for (std::size_t i = 0; i < sizeof kCells / sizeof kCells[0]; ++i) {")
-    add("    if (kCellCount != 0 && kCells[i] >= kCaseCount) {")
-    add("      return false;")
-    add("    }")
-    add("  }")
-    add("  return true;")
-    add("}")
-    add('static_assert(cells_name_cases(), "every cell names a case of dispatch()");')
+    w.extend(dense_lines(flat, cells) if cells.dense else compact_lines(flat, cells))
     add("")
     add(f"inline constexpr std::uint64_t kActive[kConfigurationCount][{words}] = {{")
     order = {s: i for i, s in enumerate(flat.states)}
@@ -291,7 +264,9 @@ def _header(flat: FlatChart, cls: str, ns: str) -> str:
     w.extend(timer_tables(flat) + defer_tables(flat))
     add("}  // namespace detail")
     add("")
-    add(_device_class(cls, start, _cases(tables, cases), bool(cells), device_parts(flat)))
+    body = _cases(tables, list(cells.cases))
+    has_cells = bool(flat.events) and bool(flat.configurations)
+    add(_device_class(cls, start, body, has_cells, device_parts(flat), compact=not cells.dense))
     add("")
     add(f"}}  // namespace {ns}")
     add("")

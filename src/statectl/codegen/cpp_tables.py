@@ -124,8 +124,8 @@ def _depth(flat: FlatChart) -> int:
             return 1 + max(depth(t.if_true), depth(t.if_false))
         return 0
 
-    trees = [flat.start, *(t for row in flat.dispatch for t in row)]
-    return max(depth(t) for t in trees)
+    trees = [flat.start, *(t for row in flat.dispatch for t in row.explicit.values())]
+    return max(depth(t) for t in trees)  # an unhandled cell (not explicit) has depth 0
 
 
 _DEVICE = """\
@@ -300,21 +300,6 @@ class Basic@CLS@ : public statectl::Subject<Invoke, kInvokeCount> {
 using @CLS@ = Basic@CLS@<>;"""
 
 
-def _cells(dispatch: list[list[int]], n_configs: int, n_events: int) -> tuple[list[int], list[int]]:
-    """The switch's cases (distinct codes, first use) and the event-major cells naming them."""
-    cases: list[int] = []
-    index: dict[int, int] = {}
-    cells: list[int] = []
-    for e in range(n_events):
-        for c in range(n_configs):
-            code = dispatch[c][e]
-            if code not in index:
-                index[code] = len(cases)
-                cases.append(code)
-            cells.append(index[code])
-    return cases, cells
-
-
 def _cases(tables: _Tables, cases: list[int]) -> str:
     """One case per distinct cell code: an outcome's effects or a guard-decision tree."""
     out: list[str] = []
@@ -343,16 +328,51 @@ _DISPATCH = """\
     }"""
 
 
+#: dispatch() over compact rows: the range checks, then the row's binary search.
+_COMPACT_DISPATCH = """\
+    const auto e = static_cast<std::size_t>(event);
+    if (STATECTL_UNLIKELY(e >= kEventCount || state_ >= kConfigurationCount)) {
+      fault(e);
+    }
+    switch (detail::cell_case(e, state_)) {
+@CASES@
+      default:
+        STATECTL_UNREACHABLE();  // every row names a case (static_assert on kRowCells)
+    }"""
+
+
+_DENSE_NOTE = """\
+  /// One bound check, one load from kCells, one indexed jump. The bound check is every
+  /// contract of the hot path at once: an event out of range (101), a busy device (102,
+  /// bit 31 of the state word) or one not started (103, bit 30) gives a cell past the
+  /// table, and the cold fault() names the contract."""
+
+_COMPACT_NOTE = """\
+  /// Two range checks, a binary search of the event's row in kRowCells, one indexed
+  /// jump. The range checks are every contract of the hot path at once: an event out
+  /// of range (101), a busy device (102, bit 31 of the state word) or one not started
+  /// (103, bit 30) fails them, and the cold fault() names the contract."""
+
+
 _NO_EVENTS = """\
     fault(static_cast<std::size_t>(event));  // the chart has no events: always 101"""
 
 
 def _device_class(
-    cls: str, start: int, cases: str, has_cells: bool, parts: Mapping[str, str]
+    cls: str,
+    start: int,
+    cases: str,
+    has_cells: bool,
+    parts: Mapping[str, str],
+    *,
+    compact: bool = False,
 ) -> str:
     macro = f"STATECTL_{cls.upper()}_QUEUE_CAPACITY"
-    body = _DISPATCH.replace("@CASES@", cases) if has_cells else _NO_EVENTS
+    dispatch = _COMPACT_DISPATCH if compact else _DISPATCH  # codegen.cpp_rows rules 1, 2
+    body = dispatch.replace("@CASES@", cases) if has_cells else _NO_EVENTS
     device = _DEVICE
+    if compact:  # the dense form's comment describes kCells (codegen.cpp_rows rule 2)
+        device = device.replace(_DENSE_NOTE, _COMPACT_NOTE)
     for place, text in parts.items():  # per-state timeouts (cpp_timers), empty without
         device = device.replace(place, text)
     return (

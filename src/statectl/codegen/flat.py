@@ -6,7 +6,9 @@ the C++ writer reads the values without the explorer that finds them.
 from __future__ import annotations
 
 import enum
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
+from typing import overload
 
 from statectl.model import (
     Chart,
@@ -70,6 +72,51 @@ class Configuration:
         return text
 
 
+class Row(Sequence[Tree]):
+    """One configuration's dispatch row, sparse: the kernel's tree for every event some
+    active state could take, and the unhandled outcome, computed without a kernel step,
+    for every other event (declared ignored or deferred in ``ignored``, else no transition).
+
+    Indexing gives each event's tree as before (``row[event]``); generators that must
+    stay linear in the chart read ``explicit`` and ``ignored`` instead of every cell.
+    """
+
+    __slots__ = ("explicit", "ignored", "size", "source")
+
+    def __init__(
+        self, source: int, size: int, explicit: Mapping[int, Tree], ignored: frozenset[int]
+    ) -> None:
+        self.source = source  # this configuration's index
+        self.size = size  # the chart's external events
+        self.explicit = explicit  # event index -> the kernel's tree, ascending events
+        self.ignored = ignored  # event indices declared ignored here, none in explicit
+
+    def unhandled(self, event: int) -> Outcome:
+        """The outcome of an event no active state has a transition for."""
+        reason = Unhandled.DECLARED_IGNORED if event in self.ignored else Unhandled.NO_TRANSITION
+        return Outcome(False, self.source, (), reason)
+
+    @overload
+    def __getitem__(self, index: int) -> Tree: ...
+    @overload
+    def __getitem__(self, index: slice) -> Sequence[Tree]: ...
+    def __getitem__(self, index: int | slice) -> Tree | Sequence[Tree]:
+        if isinstance(index, slice):
+            return [self[i] for i in range(self.size)[index]]
+        if index < 0:
+            index += self.size
+        if not 0 <= index < self.size:
+            raise IndexError(index)
+        found = self.explicit.get(index)
+        return found if found is not None else self.unhandled(index)
+
+    def __len__(self) -> int:
+        return self.size
+
+    def __iter__(self) -> Iterator[Tree]:
+        return (self[i] for i in range(self.size))
+
+
 @dataclass(frozen=True, slots=True)
 class RuntimeGuard:
     """A guard specialised to where it is evaluated; ``cpp`` is its C++ expression."""
@@ -95,7 +142,7 @@ class FlatChart:
     transitions: tuple[Transition, ...]
     configurations: tuple[Configuration, ...]
     start: Tree
-    dispatch: tuple[tuple[Tree, ...], ...]  # [configuration][event]
+    dispatch: tuple[Row, ...]  # [configuration][event]
     guards: tuple[RuntimeGuard, ...]
     context: tuple[ContextField, ...]
     assignments: tuple[Assignments, ...] = ()  # the ASSIGN effects' groups

@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import ast
 from collections import deque
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 from statectl.codegen.assign import AssignTable
@@ -61,6 +61,7 @@ from statectl.codegen.flat import (
     EffectKind,
     FlatChart,
     Outcome,
+    Row,
     RuntimeGuard,
     Tree,
 )
@@ -84,6 +85,7 @@ from statectl.semantics import (
     initial,
     step,
 )
+from statectl.semantics.offers import Offers
 
 __all__ = [
     "CODES",
@@ -159,6 +161,7 @@ class _Flattener:
         self.snapshots: dict[Snapshot, int] = {}
         self.queue: deque[Snapshot] = deque()
         self.assigns = AssignTable(self.fields, self.diags)
+        self.offers = Offers(self.m, chart.event_names)  # rows step only offered events
 
     # guards
 
@@ -301,6 +304,15 @@ class _Flattener:
         visit([])
         return _build_tree(leaves, 0)
 
+    def row(self, snap: Snapshot, events: tuple[str, ...]) -> Row:
+        """One configuration's row: the kernel's step for each event an active state
+        could take (rule 1), in event order so configurations are numbered as before;
+        every other event is unhandled and needs no step (:class:`~.flat.Row`)."""
+        offered = sorted(self.offers.offered(snap.active))
+        explicit = {e: self.decide(snap, events[e]) for e in offered}
+        ignored = self.offers.ignored(snap.active) - explicit.keys()
+        return Row(self.snapshots[snap], len(events), explicit, ignored)
+
     def decide(self, source: Snapshot | None, event: str | None) -> Tree:
         """The semantics' own step where no guard was consulted, the oracle otherwise."""
         result = (
@@ -322,8 +334,13 @@ def _build_tree(leaves: list[tuple[list[tuple[int, bool]], Outcome]], depth: int
     return Decision(gid, _build_tree(yes, depth + 1), _build_tree(no, depth + 1))
 
 
-def flatten(chart: Chart) -> tuple[FlatChart | None, list[Diagnostic]]:
-    """Explore ``chart`` into flat tables, or say why it cannot be (G7xx)."""
+def flatten(
+    chart: Chart, progress: Callable[[int, int], None] | None = None
+) -> tuple[FlatChart | None, list[Diagnostic]]:
+    """Explore ``chart`` into flat tables, or say why it cannot be (G7xx).
+
+    ``progress`` is called after each configuration's row with the rows done and the
+    configurations found so far (the CLI shows it on a long run)."""
     where = chart.origin
     diags: list[Diagnostic] = []
     if chart.datamodel != "safe":
@@ -349,10 +366,11 @@ def flatten(chart: Chart) -> tuple[FlatChart | None, list[Diagnostic]]:
     events = chart.event_names
     try:
         start = f.decide(None, None)
-        rows: list[tuple[Tree, ...]] = []
+        rows: list[Row] = []
         while f.queue:
-            snap = f.queue.popleft()
-            rows.append(tuple(f.decide(snap, e) for e in events))
+            rows.append(f.row(f.queue.popleft(), events))
+            if progress is not None:
+                progress(len(rows), len(f.snapshots))
     except _TooMany as exc:
         diags.append(
             Diagnostic(

@@ -25,12 +25,14 @@ from typing import Any
 
 from statectl.errors import StatectlError
 from statectl.model import Chart, Transition
-from statectl.semantics import Step
+from statectl.semantics import Step, Unhandled
 from statectl.testgen.paths import Edge, Graph, Node, leaves, notifies
 
 __all__ = ["CRITERIA", "Case", "Expect", "Suite", "Table", "cases_for"]
 
 CRITERIA = ("rows", "transitions", "states", "pairs")
+#: The reason of a quiet event (paths rule 4), as the kernel gives it.
+NO_TRANSITION = Unhandled.NO_TRANSITION.value
 
 
 @dataclass(frozen=True, slots=True)
@@ -60,15 +62,41 @@ class Case:
 
 @dataclass(frozen=True, slots=True)
 class Table:
-    """The unhandled events of one configuration: one parametrised test."""
+    """The unhandled events of one configuration: one parametrised test, or one test
+    that loops over them when the suite's tables are big (:mod:`~.writer` rule)."""
 
     name: str
     doc: str
     data: tuple[tuple[str, Any], ...]
     given: tuple[str, ...]
     states: tuple[str, ...]
-    rows: tuple[tuple[str, str], ...]  # (event, reason)
+    rows: tuple[tuple[str, str], ...]  # (event, reason) the kernel was asked about
     given_data: tuple[Any, ...] = ()
+    #: with ``stepped``: every event a test can send (the graph's ``sendable``, shared);
+    #: those not in ``stepped`` have no transition here and are not in ``rows`` (paths
+    #: rule 4). Empty: ``rows`` is the whole table.
+    events: tuple[str, ...] = ()
+    stepped: frozenset[str] = frozenset()  # the events the kernel was asked about here
+
+    @property
+    def count(self) -> int:
+        """How many events the table sends."""
+        return len(self.rows) + len(self.events) - len(self.stepped)
+
+    def skipped(self) -> frozenset[str]:
+        """Events of ``events`` the table does not send (handled here, or refused)."""
+        return self.stepped - {e for e, _ in self.rows}
+
+    def all_rows(self) -> tuple[tuple[str, str], ...]:
+        """Every (event, reason), those with no transition included, in table order."""
+        if not self.events:
+            return self.rows
+        reasons = dict(self.rows)
+        return tuple(
+            (e, reasons.get(e, NO_TRANSITION))
+            for e in self.events
+            if e in reasons or e not in self.stepped
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -173,7 +201,9 @@ def _tables(g: Graph, names: _Names) -> list[Table]:
             for e in by_source.get(node, ())
             if e.step.unhandled is not None and e.data is None
         )
-        if not pairs:
+        stepped = g.stepped.get(node)
+        quiet = stepped is not None and len(stepped) < len(g.sendable)
+        if not pairs and not quiet:
             continue
         shown = ", ".join(key)
         given, given_data = _sent(g.path(node))
@@ -187,6 +217,8 @@ def _tables(g: Graph, names: _Names) -> list[Table]:
                 key,
                 pairs,
                 given_data,
+                g.sendable if quiet else (),
+                stepped if quiet and stepped is not None else frozenset(),
             )
         )
     return out

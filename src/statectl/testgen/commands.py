@@ -39,7 +39,13 @@ def cmd_testgen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     if args.hypothesis:
         out.write(f"wrote {generate_hypothesis(args.file, args.out)}\n")
         return OK
-    made = generate(args.file, args.criterion, args.out)
+    from statectl.explore.progress import CountProgress
+
+    show = err.isatty() if not args.progress else True  # as verify --progress
+    printer = CountProgress("testgen", "nodes explored", err) if show else None
+    made = generate(args.file, args.criterion, args.out, progress=printer)
+    if printer is not None:
+        printer.done()
     out.write(
         f"wrote {made.path}: {made.tests} tests ({len(made.suite.cases)} cases, "
         f"{len(made.suite.tables)} unhandled-event tables), {made.steps} events sent\n"
@@ -128,6 +134,7 @@ def register(sub: Any) -> None:
         help="device file, or cell file (each device's module plus the links' module)",
     )
     s.add_argument("--criterion", default="rows", choices=CRITERIA)
+    s.add_argument("--progress", action="store_true", help="show progress even when piped")
     s.add_argument("--out", required=True, metavar="DIR", help="directory to write into")
     what = s.add_mutually_exclusive_group()
     what.add_argument(

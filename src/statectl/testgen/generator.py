@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -10,9 +11,10 @@ from statectl.build import load_chart
 from statectl.errors import DiagnosticError, StatectlError
 from statectl.tables import write_files
 from statectl.testgen.cases import CRITERIA, Suite, cases_for, count_steps
+from statectl.testgen.compact import is_big
 from statectl.testgen.graphwalker import graphwalker_model
 from statectl.testgen.paths import MAX_NODES, explore
-from statectl.testgen.writer import hypothesis_text, module_text
+from statectl.testgen.writer import hypothesis_text, module_text, tests_in
 from statectl.testgen.xstate import xstate_config
 
 __all__ = [
@@ -78,7 +80,12 @@ def generate_hypothesis(file: str | Path, out_dir: str | Path) -> Path:
 
 
 def generate(
-    file: str | Path, criterion: str, out_dir: str | Path, *, max_nodes: int = MAX_NODES
+    file: str | Path,
+    criterion: str,
+    out_dir: str | Path,
+    *,
+    max_nodes: int = MAX_NODES,
+    progress: Callable[[int, int], None] | None = None,
 ) -> Generated:
     """Write the ``criterion`` test module of the device file ``file`` into ``out_dir``.
 
@@ -88,10 +95,13 @@ def generate(
         raise StatectlError(f"unknown criterion {criterion!r}; choose one of {', '.join(CRITERIA)}")
     source = Path(file)
     chart = load_chart(source)
-    suite = cases_for(explore(chart, max_nodes=max_nodes), criterion)
+    suite = cases_for(explore(chart, max_nodes=max_nodes, progress=progress), criterion)
     out = Path(out_dir)
     path = out / module_name(chart.name, criterion)
     write_atomic(path, module_text(suite, chart.name, source, out, str(file)))
-    tests = len(suite.cases) + sum(len(t.rows) for t in suite.tables)
-    steps = count_steps(suite.cases) + sum((len(t.given) + 1) * len(t.rows) for t in suite.tables)
+    big = is_big(suite)
+    tests = tests_in(suite, big)
+    steps = count_steps(suite.cases) + sum(
+        len(t.given) + t.count if big else (len(t.given) + 1) * t.count for t in suite.tables
+    )
     return Generated(path, suite, tests, steps)

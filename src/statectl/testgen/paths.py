@@ -14,6 +14,10 @@ Rules:
 3. A node is ``(data, snapshot)``; the search visits at most ``max_nodes`` of them
    and the first edge found that takes a row is its shortest path (ties: the
    chart's default data first, then events in table order).
+4. The kernel is asked only about events an active state has a transition for or
+   declares ignored (:class:`~statectl.semantics.offers.Offers`); every other event
+   is ``no transition`` in that node without a step, and gets no edge
+   (``Graph.stepped`` says which were asked), so exploring a big sparse chart stays linear.
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ from __future__ import annotations
 import ast
 import itertools
 from collections import deque
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -40,6 +44,7 @@ from statectl.semantics import (
     step,
 )
 from statectl.semantics.eventview import field_accepts
+from statectl.semantics.offers import Offers
 
 __all__ = ["MAX_DATA", "MAX_NODES", "Edge", "Graph", "Node", "explore"]
 
@@ -85,6 +90,9 @@ class Graph:
     complete: bool  # False when max_nodes stopped the search
     #: per event whose guards read its data, the data tried (``None``: none sent)
     event_datas: Mapping[str, tuple[Any, ...]] = field(default_factory=dict)
+    #: per expanded node, the sendable events the kernel was asked about (rule 4); each
+    #: other one has no edge: no transition, nothing taken, the node unchanged
+    stepped: Mapping[Node, frozenset[str]] = field(default_factory=dict)
 
     def path(self, node: Node) -> tuple[Edge, ...]:
         """The shortest sequence of edges from the start to ``node``."""
@@ -267,8 +275,16 @@ def candidate_event_data(chart: Chart) -> dict[str, tuple[Any, ...]]:
     return out
 
 
-def explore(chart: Chart, *, max_nodes: int = MAX_NODES) -> Graph:
-    """Breadth-first over every sendable event from the default state (rules 1-3)."""
+def explore(
+    chart: Chart,
+    *,
+    max_nodes: int = MAX_NODES,
+    progress: Callable[[int, int], None] | None = None,
+) -> Graph:
+    """Breadth-first over every sendable event from the default state (rules 1-4).
+
+    ``progress`` is called after each node is expanded, with the nodes expanded and
+    the nodes found so far (the CLI shows it on a long run)."""
     m = compiled(chart)
     datas = candidate_data(chart, m)
     sendable = sendable_events(chart)
@@ -288,10 +304,17 @@ def explore(chart: Chart, *, max_nodes: int = MAX_NODES) -> Graph:
                 queue.append(node)
     edges: list[Edge] = []
     complete = True
+    offers = Offers(m, sendable)
+    stepped: dict[Node, frozenset[str]] = {}
     while queue:
         node = queue.popleft()
         values = dict(datas[node.data])
-        for event in sendable:
+        active = node.snapshot.active
+        asked = sorted(offers.offered(active) | offers.ignored(active))
+        stepped[node] = frozenset(sendable[i] for i in asked)
+        if progress is not None:
+            progress(len(stepped), len(parent))
+        for event in (sendable[i] for i in asked):  # rule 4: the rest is no transition
             for sent in event_datas.get(event, (None,)):
                 decided = step(m, node.snapshot, event, values, sent)
                 if decided.unhandled is Unhandled.GUARD_ERROR:
@@ -318,6 +341,7 @@ def explore(chart: Chart, *, max_nodes: int = MAX_NODES) -> Graph:
         tuple(edges),
         complete,
         event_datas,
+        stepped,
     )
 
 

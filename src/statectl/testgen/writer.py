@@ -13,11 +13,21 @@ import math
 import os
 import re
 import textwrap
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from statectl.model import Chart
 from statectl.testgen.cases import Case, Expect, Suite, Table
+from statectl.testgen.compact import (
+    LOOP_ROWS,
+    PathTree,
+    is_big,
+    loop_table,
+    module_events,
+    preamble,
+    tree_given,
+)
 from statectl.testgen.paths import sendable_events
 from statectl.testgen.timing import timing_body
 
@@ -78,20 +88,6 @@ def _marker(data: tuple[tuple[str, Any], ...]) -> str:
     return f"@pytest.mark.statectl_data({args})\n"
 
 
-def _given(given: tuple[str, ...], data: tuple[Any, ...] = ()) -> str:
-    """``d.given(...)``: each event, or ``[event, data]`` when it is sent with data."""
-    if not given:
-        return ""
-    sent = [
-        _lit(e) if i >= len(data) or data[i] is None else _lit([e, data[i]])
-        for i, e in enumerate(given)
-    ]
-    line = f"    d.given({', '.join(sent)})\n"
-    if len(line) <= 101:
-        return line
-    return "    d.given(\n" + "".join(f"        {a},\n" for a in sent) + "    )\n"
-
-
 def _expect(e: Expect) -> str:
     args = [f"states={_lit(list(e.states))}"]
     if e.unhandled is not None:
@@ -105,7 +101,26 @@ def _expect(e: Expect) -> str:
     return f"    d.expect(\n{inner}    )\n"
 
 
-def _case(c: Case) -> str:
+Given = Callable[[list[Any]], str]
+
+
+def _items(given: tuple[str, ...], data: tuple[Any, ...]) -> list[Any]:
+    """Each event given, or ``[event, data]`` when it is sent with data."""
+    return [e if i >= len(data) or data[i] is None else [e, data[i]] for i, e in enumerate(given)]
+
+
+def _spelled(items: list[Any]) -> str:
+    """``d.given(...)`` with every event spelled out (the small form)."""
+    if not items:
+        return ""
+    sent = [_lit(i) for i in items]
+    line = f"    d.given({', '.join(sent)})\n"
+    if len(line) <= 101:
+        return line
+    return "    d.given(\n" + "".join(f"        {a},\n" for a in sent) + "    )\n"
+
+
+def _case(c: Case, given: Given = _spelled) -> str:
     out = ""
     if c.skip:
         out += f"@pytest.mark.skip(reason={_lit(c.skip)})\n"
@@ -113,7 +128,7 @@ def _case(c: Case) -> str:
     out += f"def {c.name}(statectl_device):\n" + _doc(c.doc)
     if c.skip:
         return out + "\n\n"
-    out += "    d = statectl_device\n" + _given(c.given, c.given_data)
+    out += "    d = statectl_device\n" + given(_items(c.given, c.given_data))
     if c.wait or c.kept:
         return out + timing_body(c) + _expect(c.expect) + "\n\n"
     if c.event is not None and c.event_data is not None:
@@ -124,23 +139,39 @@ def _case(c: Case) -> str:
 
 
 def _table(t: Table) -> str:
-    rows = "".join(f"        ({_lit(e)}, {_lit(r)}),\n" for e, r in t.rows)
+    rows = "".join(f"        ({_lit(e)}, {_lit(r)}),\n" for e, r in t.all_rows())
     out = f'@pytest.mark.parametrize(\n    ("event", "reason"),\n    [\n{rows}    ],\n)\n'
     out += _marker(t.data)
     out += f"def {t.name}(statectl_device, event, reason):\n" + _doc(t.doc)
-    out += "    d = statectl_device\n" + _given(t.given, t.given_data)
+    out += "    d = statectl_device\n" + _spelled(_items(t.given, t.given_data))
     out += "    d.send(event)\n"
     out += f"    d.expect(states={_lit(list(t.states))}, unhandled=reason)\n\n\n"
     return out
 
 
-def module_text(suite: Suite, device: str, source: Path, out_dir: Path, shown: str) -> str:
-    """The module's text; ``shown`` is the tables path as the user gave it."""
+def module_text(
+    suite: Suite,
+    device: str,
+    source: Path,
+    out_dir: Path,
+    shown: str,
+    *,
+    loop_rows: int = LOOP_ROWS,
+) -> str:
+    """The module's text; ``shown`` is the tables path as the user gave it.
+
+    A big suite (:mod:`~statectl.testgen.compact` rule 1) is written compactly."""
     tables = Path(os.path.relpath(source.resolve(), out_dir.resolve())).as_posix()
-    n = len(suite.cases) + sum(len(t.rows) for t in suite.tables)
+    big = is_big(suite, loop_rows)
+    n = tests_in(suite, big)
     counts = f"{len(suite.cases)} cases and {len(suite.tables)} tables of unhandled events."
     counts += f" {n} tests in all."
     notes = "".join(f"\n\nNote: {n_}." for n_ in suite.notes)
+    if big:
+        notes += (
+            "\n\nA big chart: each table of unhandled events is one test over its events,\n"
+            "and the paths are written once in _TREE (docs/testing.md)."
+        )
     text = _HEADER.format(
         device=device,
         criterion=suite.criterion,
@@ -150,8 +181,25 @@ def module_text(suite: Suite, device: str, source: Path, out_dir: Path, shown: s
         tables=_lit(tables),
         out=out_dir.as_posix(),
     )
-    body = "".join(_case(c) for c in suite.cases) + "".join(_table(t) for t in suite.tables)
-    return text + "\n\n" + body.rstrip("\n") + "\n"
+    if not big:
+        body = "".join(_case(c) for c in suite.cases) + "".join(_table(t) for t in suite.tables)
+        return text + "\n\n" + body.rstrip("\n") + "\n"
+    tree = PathTree()
+    given = tree_given(tree, _lit)
+    events = module_events(suite)
+    parts = [_case(c, given) for c in suite.cases]
+    for t in suite.tables:
+        head = _marker(t.data) + f"def {t.name}(statectl_device):\n" + _doc(t.doc)
+        parts.append(loop_table(t, events, _lit, given(_items(t.given, t.given_data)), head))
+    body = "".join(parts)
+    if "pytest." not in body:  # no marker nor skip: the import would be unused (F401)
+        text = text.replace("import pytest\n\n", "", 1)
+    return text + preamble(events, tree, _lit) + "\n\n" + body.rstrip("\n") + "\n"
+
+
+def tests_in(suite: Suite, big: bool) -> int:
+    """Tests in the module: a case each, and a row each of a table (one per table if big)."""
+    return len(suite.cases) + (len(suite.tables) if big else sum(t.count for t in suite.tables))
 
 
 _HYPOTHESIS = '''"""{device} against its tables under random event sequences (statectl testgen).
