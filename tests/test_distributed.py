@@ -244,6 +244,11 @@ GOOD = {"line": 7451, "arm": 7452, "gripper": 7453}
         (lambda t: t.replace("tcp/127.0.0.1:7452]", "localhost]", 1), ["V822"]),
         (lambda t: t.replace("tcp/127.0.0.1:7452]", "tcp/127.0.0.1:99999]", 1), ["V822"]),
         (lambda t: t.replace("tcp/127.0.0.1:7452]", "tcp/127.0.0.1:port]", 1), ["V822"]),
+        (
+            lambda t: t.replace("tcp/127.0.0.1:7452]", "tcp/127.0.0.1:" + "9" * 5000 + "]", 1),
+            ["V822"],
+        ),
+        (lambda t: t.replace("7452]", "\uff17\uff14\uff15\uff12]", 1), ["V822"]),  # fullwidth
         (lambda t: t.replace("tcp/127.0.0.1:7452]", "tcp/127.0.0.1:0]", 1), []),  # any free port
         (lambda t: t.replace("tcp/127.0.0.1:7452]", "'tcp/[::1]:7452#iface=lo']", 1), []),
         (lambda t: t.replace("connect: [tcp/127.0.0.1:7451]", "connect: [udp/h:0]", 1), ["V822"]),

@@ -208,7 +208,10 @@ def endpoint_problem(text: str, *, connect: bool) -> str | None:
         return None
     port = address.split("#", 1)[0].split("?", 1)[0].rpartition(":")[2]
     lowest = 1 if connect else 0  # listening on port 0 takes any free port
-    if not port.isdigit() or not lowest <= int(port) <= 65535:
+    if (
+        not (port.isascii() and port.isdigit() and len(port) <= 5)
+        or not lowest <= int(port) <= 65535
+    ):
         return f"has port {port!r}: a port is a number from {lowest} to 65535"
     return None
 
