@@ -47,7 +47,8 @@ def _with_exponent_floats(loader: type[yaml.SafeLoader]) -> type[yaml.SafeLoader
 
 
 _PyLoader = _with_exponent_floats(yaml.SafeLoader)
-_Loader = _with_exponent_floats(getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+_CLoader: type[yaml.SafeLoader] | None = getattr(yaml, "CSafeLoader", None)  # libyaml's
+_Loader = _PyLoader if _CLoader is None else _with_exponent_floats(_CLoader)
 
 
 class YamlRefused(Exception):
@@ -77,7 +78,7 @@ def compose(
     try:
         return _compose_with(loader or _Loader, text, max_depth)
     except YamlRefused as refused:
-        if refused.code != "T101" or loader is not None or _Loader.__base__ is yaml.SafeLoader:
+        if refused.code != "T101" or loader is not None or _Loader is _PyLoader:
             raise
     return _compose_with(_PyLoader, text, max_depth)
 
