@@ -53,19 +53,26 @@ def build(tables: _Tables, flat: FlatChart, dense_limit: int = DENSE_CELLS) -> C
     return _compact(tables, flat)
 
 
+class _Cases:
+    """The switch's cases: each distinct outcome/decision code numbered at first use."""
+
+    def __init__(self) -> None:
+        self.codes: list[int] = []
+        self.index: dict[int, int] = {}
+
+    def __call__(self, code: int) -> int:
+        found = self.index.get(code)
+        if found is None:
+            found = self.index[code] = len(self.codes)
+            self.codes.append(code)
+        return found
+
+
 def _dense(tables: _Tables, flat: FlatChart) -> Cells:
     dispatch = [[tables.code(t) for t in row] for row in flat.dispatch]
-    cases: list[int] = []
-    index: dict[int, int] = {}
-    cells: list[int] = []
-    for e in range(len(flat.events)):
-        for row in dispatch:
-            code = row[e]
-            if code not in index:
-                index[code] = len(cases)
-                cases.append(code)
-            cells.append(index[code])
-    return Cells(True, tuple(cases), tuple(cells))
+    case = _Cases()
+    cells = [case(row[e]) for e in range(len(flat.events)) for row in dispatch]
+    return Cells(True, tuple(case.codes), tuple(cells))
 
 
 def _compact(tables: _Tables, flat: FlatChart) -> Cells:
@@ -83,15 +90,7 @@ def _compact(tables: _Tables, flat: FlatChart) -> Cells:
             by_event[e][row.source] = tables.code(tree)
         for e in sorted(row.ignored):
             by_event[e][row.source] = unhandled(Unhandled.DECLARED_IGNORED)
-    cases: list[int] = []
-    index: dict[int, int] = {}
-
-    def case(code: int) -> int:
-        if code not in index:
-            index[code] = len(cases)
-            cases.append(code)
-        return index[code]
-
+    case = _Cases()
     defaults: list[int] = []
     first: list[int] = [0]
     exceptions: list[tuple[int, int]] = []
@@ -109,7 +108,7 @@ def _compact(tables: _Tables, flat: FlatChart) -> Cells:
         defaults.append(case(default))
         exceptions += [(c, case(code)) for c, code in sorted(cells.items()) if code != default]
         first.append(len(exceptions))
-    return Cells(False, tuple(cases), (), tuple(defaults), tuple(first), tuple(exceptions))
+    return Cells(False, tuple(case.codes), (), tuple(defaults), tuple(first), tuple(exceptions))
 
 
 def dense_lines(flat: FlatChart, cells: Cells) -> list[str]:
