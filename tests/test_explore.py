@@ -330,3 +330,23 @@ def test_fast_successors_match_branches(name: str) -> None:
                     seen.add(h)
                     frontier.append(h)
     assert len(seen) > 10 and compared > 100
+
+
+def test_verify_progress_line_is_rewritten_in_place_and_ended_once() -> None:
+    """verify's progress: each report rewrites one line (\\r), done() ends it with one
+    newline, and a run that showed nothing writes nothing."""
+    from statectl.cli.progress import ProgressPrinter
+    from statectl.explore import Progress
+
+    stream = io.StringIO()
+    printer = ProgressPrinter(stream)
+    printer(Progress(states=1500, expanded=700, depth=4, seconds=0.5))
+    printer(Progress(states=3000, expanded=1400, depth=5, seconds=1.0))
+    printer.done()
+    assert stream.getvalue() == (
+        "\rexploring: 1,500 states, 700 expanded, depth 4, 3,000 states/s "
+        "\rexploring: 3,000 states, 1,400 expanded, depth 5, 3,000 states/s \n"
+    )
+    quiet = io.StringIO()
+    ProgressPrinter(quiet).done()
+    assert quiet.getvalue() == ""
