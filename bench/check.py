@@ -32,13 +32,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
-from statectl.build import build
-from statectl.scxml import read_scxml
-from statectl.tables import load
+from statectl.front.builder.build import build
+from statectl.front.tables import load
+from statectl.out.scxml import read_scxml
 
-# ``statectl.check`` is ``statectl.rules`` where the facade's check() took the name
+# ``statectl.check`` is ``statectl.front.rules`` where the facade's check() took the name
 check_chart = importlib.import_module(
-    "statectl.rules" if importlib.util.find_spec("statectl.rules") else "statectl.check"
+    "statectl.front.rules" if importlib.util.find_spec("statectl.front.rules") else "statectl.check"
 ).check_chart
 
 
@@ -92,7 +92,7 @@ def bench_device(path: Path) -> tuple[float, float, float, int]:
 
 def bench_scxml(path: Path) -> tuple[float, float]:
     """Seconds to read ``path`` and to start a session on it (to its first stable state)."""
-    from statectl.scxml import Scheduler, Session, SimulatedClock
+    from statectl.out.scxml import Scheduler, Session, SimulatedClock
 
     text = path.read_text(encoding="utf-8")
     t_read, got = timed(lambda: read_scxml(text, str(path), str(path.parent)))
@@ -126,8 +126,8 @@ def bench_flat(path: Path) -> tuple[float, float, float]:
     """Load (tables + build) and compile (the kernel's Machine, a started Subject), wall
     seconds; and the CPU seconds of both (on a shared machine, wall time also counts
     the other processes)."""
-    from statectl.build import load_chart
-    from statectl.runtime import SimClock, Subject
+    from statectl.front.builder.build import load_chart
+    from statectl.run.runtime import SimClock, Subject
 
     cpu = time.process_time()
     t_load, chart = timed(lambda: load_chart(path))

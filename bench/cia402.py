@@ -29,11 +29,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "src"))
 
 import can
 
-from statectl.devices.cia402 import Cia402SimDriver
-from statectl.devices.cia402.profile import PowerState, decode
-from statectl.devices.modbus import ModbusIO
-from statectl.observers import Notification
-from statectl.runtime import WallClock
+from statectl.front.observers import Notification
+from statectl.run.devices.cia402 import Cia402SimDriver
+from statectl.run.devices.cia402.profile import PowerState, decode
+from statectl.run.devices.modbus import ModbusIO
+from statectl.run.runtime import WallClock
 
 _PDO = struct.Struct("<Hi")
 

@@ -92,9 +92,9 @@ def hist_percentile(hist: list[int], q: float) -> float:
 
 
 def serve(args: argparse.Namespace) -> dict[str, Any]:
-    from statectl.demo import motor_chart
-    from statectl.runtime import Subject, WallClock
-    from statectl.web import Dashboard, Limits
+    from statectl.channels.cli.demo import motor_chart
+    from statectl.channels.web import Dashboard, Limits
+    from statectl.run.runtime import Subject, WallClock
 
     raise_file_limit()
     clock = WallClock()

@@ -35,10 +35,10 @@ CYCLE = (
 
 def motor(dashboard: bool) -> tuple[Any, Any]:
     """A started Motor wired as the demo, with a Dashboard on it or not."""
-    from statectl.build import load_chart
-    from statectl.devices import connect, make_driver
-    from statectl.runtime import SimClock, Subject
-    from statectl.web.server import Dashboard
+    from statectl.channels.web.server import Dashboard
+    from statectl.front.builder.build import load_chart
+    from statectl.run.devices import connect, make_driver
+    from statectl.run.runtime import SimClock, Subject
 
     chart = load_chart(ROOT / "examples" / "motor" / "motor.yaml")
     subject = Subject(chart, clock=SimClock())

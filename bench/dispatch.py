@@ -56,14 +56,14 @@ from typing import Any
 # benchmark the working tree, not whatever copy happens to be installed
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
-from statectl.build import load_chart
-from statectl.devices import connect, make_driver
-from statectl.journal import Journal
-from statectl.journal.device import JournalledDevice
-from statectl.model import Chart, State, StateKind, Transition
-from statectl.runtime import SimClock, StepRecord, Subject, TraceWriter
-from statectl.runtime.monitors import attach_monitors
-from statectl.system import DeviceSetup, System
+from statectl.front.builder.build import load_chart
+from statectl.kernel.model import Chart, State, StateKind, Transition
+from statectl.run.devices import connect, make_driver
+from statectl.run.journal import Journal
+from statectl.run.journal.device import JournalledDevice
+from statectl.run.runtime import SimClock, StepRecord, Subject, TraceWriter
+from statectl.run.runtime.monitors import attach_monitors
+from statectl.run.system import DeviceSetup, System
 
 MOTOR_YAML = Path(__file__).resolve().parents[1] / "examples" / "motor" / "motor.yaml"
 MOTOR_CYCLE = (
@@ -212,7 +212,7 @@ def _motor_subject(wiring: str) -> tuple[Subject, JournalledDevice | None]:
         elif wiring == "trace-records":  # the trace writer as a listen() listener
             subject.listen(TraceWriter(io.StringIO(), device_width=len(subject.name)))
         elif wiring == "dashboard":  # the owner's side: noted steps wait for a loop
-            from statectl.web.server import Dashboard
+            from statectl.channels.web.server import Dashboard
 
             Dashboard([subject])
         elif wiring == "journal":

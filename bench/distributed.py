@@ -42,10 +42,10 @@ from typing import Any
 
 import zenoh
 
-from statectl.cell import load_cell
-from statectl.distributed import NodeSystem, Wire
-from statectl.runner.cells import cell_setups
-from statectl.runtime import WallClock
+from statectl.cell.model import load_cell
+from statectl.channels.distributed import NodeSystem, Wire
+from statectl.run.runner.cells import cell_setups
+from statectl.run.runtime import WallClock
 
 PING = """device: Ping
 states:

@@ -24,8 +24,8 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "src"))
 
-from statectl.errors import Location
-from statectl.expr.compiler import compile_expression
+from statectl.kernel.errors import Location
+from statectl.kernel.expr.compiler import compile_expression
 
 #: (guard, what it shows): the first has no bounded operation, the others do.
 GUARDS = (

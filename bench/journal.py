@@ -19,13 +19,13 @@ import threading
 import time
 from pathlib import Path
 
-from statectl.demo import motor_chart
-from statectl.devices import make_driver
-from statectl.journal import Guarantee, Journal, JournalReader, StepKind, Sync
-from statectl.observers import Notification
-from statectl.runtime import SimClock, WallClock
-from statectl.semantics import Snapshot
-from statectl.system import DeviceSetup, System
+from statectl.channels.cli.demo import motor_chart
+from statectl.front.observers import Notification
+from statectl.kernel.semantics import Snapshot
+from statectl.run.devices import make_driver
+from statectl.run.journal import Guarantee, Journal, JournalReader, StepKind, Sync
+from statectl.run.runtime import SimClock, WallClock
+from statectl.run.system import DeviceSetup, System
 
 #: The paper's whole cycle, the guarded Initialization included (seven events).
 CYCLE = (

@@ -41,10 +41,10 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from asyncua import Client, Server, ua  # noqa: E402
 
-from statectl.model import Chart, EventDef, State, Transition  # noqa: E402
-from statectl.opcua.server import OpcuaServer, OpcuaSettings  # noqa: E402
-from statectl.runtime import WallClock  # noqa: E402
-from statectl.system import DeviceSetup, System  # noqa: E402
+from statectl.channels.opcua.server import OpcuaServer, OpcuaSettings  # noqa: E402
+from statectl.kernel.model import Chart, EventDef, State, Transition  # noqa: E402
+from statectl.run.runtime import WallClock  # noqa: E402
+from statectl.run.system import DeviceSetup, System  # noqa: E402
 
 USER, PASSWORD = "bench", "bench-password-long"
 

@@ -33,8 +33,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def ns_per_event(cycle: tuple[str, ...], events: int, rounds: int) -> float:
-    from statectl.build import load_chart
-    from statectl.runtime import SimClock, Subject
+    from statectl.front.builder.build import load_chart
+    from statectl.run.runtime import SimClock, Subject
 
     subject = Subject(load_chart(ROOT / "examples" / "motor" / "motor.yaml"), clock=SimClock())
     subject.start()

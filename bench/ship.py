@@ -36,9 +36,9 @@ sys.path[:0] = [str(ROOT / "src"), str(ROOT / "tests")]
 import psycopg  # noqa: E402
 
 import pgserver  # noqa: E402
-from statectl.journal import Journal, StepKind  # noqa: E402
-from statectl.journal.ship import Shipper, ShipThread  # noqa: E402
-from statectl.semantics import Snapshot  # noqa: E402
+from statectl.kernel.semantics import Snapshot  # noqa: E402
+from statectl.run.journal import Journal, StepKind  # noqa: E402
+from statectl.run.journal.ship import Shipper, ShipThread  # noqa: E402
 
 IDLE = Snapshot(frozenset({"Idle"}), (), None)
 BUSY = Snapshot(frozenset({"Busy"}), (), "Idle")

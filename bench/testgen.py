@@ -27,8 +27,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from statectl.testgen import CRITERIA, generate  # noqa: E402  # src/ first on the path
-from statectl.testgen.cellgen import (  # noqa: E402
+from statectl.out.testgen import CRITERIA, generate  # noqa: E402  # src/ first on the path
+from statectl.out.testgen.cellgen import (  # noqa: E402
     generate_cell,
     generate_cell_hypothesis,
 )
@@ -44,7 +44,7 @@ EXAMPLES = {
 }
 
 
-PLUGIN = ("-p", "statectl.testgen.plugin", "-p", "no:cacheprovider")
+PLUGIN = ("-p", "statectl.out.testgen.plugin", "-p", "no:cacheprovider")
 
 
 def ring(states: int) -> str:

@@ -21,9 +21,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from statectl.cell import load_cell
-from statectl.cli.progress import ProgressPrinter
-from statectl.explore import Composed, explore, export_promela
+from statectl.cell.explore import Composed, explore, export_promela
+from statectl.cell.model import load_cell
+from statectl.channels.cli.progress import ProgressPrinter
 
 STATION = """\
 device: Station

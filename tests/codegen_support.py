@@ -17,14 +17,14 @@ from typing import Any
 
 import pytest
 
-from statectl.codegen.cpp import render, runtime_files
-from statectl.codegen.cpp_rows import DENSE_CELLS
-from statectl.codegen.flatten import flatten, identifiers
-from statectl.errors import Diagnostic, Severity, has_errors
-from statectl.model import Chart
-from statectl.observers import Notification
-from statectl.runtime import SimClock, Subject
-from statectl.runtime.records import (
+from statectl.front.observers import Notification
+from statectl.kernel.errors import Diagnostic, Severity, has_errors
+from statectl.kernel.model import Chart
+from statectl.out.codegen.cpp import render, runtime_files
+from statectl.out.codegen.cpp_rows import DENSE_CELLS
+from statectl.out.codegen.flatten import flatten, identifiers
+from statectl.run.runtime import SimClock, Subject
+from statectl.run.runtime.records import (
     EventIgnored,
     EventReceived,
     Finished,

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from statectl.build import load_chart
-from statectl.model import Chart
+from statectl.front.builder.build import load_chart
+from statectl.kernel.model import Chart
 from support import MOTOR, W3C_PACK, W3C_SKIPPED, W3C_VARIABLE
 
 

@@ -6,10 +6,10 @@ import os
 from pathlib import Path
 from typing import Any
 
-from statectl.devices import connect, make_driver
-from statectl.observers import Notification
-from statectl.runtime import Subject, attach_monitors
-from statectl.runtime.records import fields_of
+from statectl.front.observers import Notification
+from statectl.run.devices import connect, make_driver
+from statectl.run.runtime import Subject, attach_monitors
+from statectl.run.runtime.records import fields_of
 
 ROOT = Path(__file__).resolve().parents[1]
 MOTOR = ROOT / "examples" / "motor" / "motor.yaml"

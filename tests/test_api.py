@@ -81,7 +81,7 @@ def test_docs_example_runs(page: str, block: str, monkeypatch: pytest.MonkeyPatc
 )
 def test_check_reports_what_statectl_check_prints(path: str, codes: list[str]) -> None:
     """``statectl.check`` gives the command's diagnostics: C415 for a cell or run config."""
-    from statectl.cli import main
+    from statectl.channels.cli import main
 
     out = io.StringIO()
     main(["check", "--json", "-v", str(ROOT / path)], out, io.StringIO())

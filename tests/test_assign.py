@@ -8,15 +8,15 @@ from typing import Any
 
 import pytest
 
-from statectl.build import build, chart_to_tables, strip_origins
-from statectl.cli.run import run
-from statectl.errors import Diagnostic, Severity
-from statectl.model import Assign, Chart, Notify
-from statectl.runtime import Subject
-from statectl.runtime.clock import SimClock
-from statectl.runtime.eventdata import AssignError
-from statectl.scxml import read_scxml, write_scxml
-from statectl.tables.yaml_io import read_yaml
+from statectl.channels.cli.run import run
+from statectl.front.builder.build import build, chart_to_tables, strip_origins
+from statectl.front.tables.yaml_io import read_yaml
+from statectl.kernel.errors import Diagnostic, Severity
+from statectl.kernel.model import Assign, Chart, Notify
+from statectl.out.scxml import read_scxml, write_scxml
+from statectl.run.runtime import Subject
+from statectl.run.runtime.clock import SimClock
+from statectl.run.runtime.eventdata import AssignError
 from support import Recorder
 
 INDEXER = """\
@@ -176,8 +176,8 @@ def test_scxml_export_writes_assign_and_import_gives_the_tables_back() -> None:
 
 def test_the_exported_document_runs_the_assignments_in_a_session() -> None:
     """Any SCXML processor performs the exported <assign>: statectl's session does."""
-    from statectl.scxml import Scheduler, Session, SimulatedClock
-    from statectl.semantics import Event
+    from statectl.kernel.semantics import Event
+    from statectl.out.scxml import Scheduler, Session, SimulatedClock
 
     chart = _indexer('"indexed = indexed + 1"')
     doc, diags = read_scxml(write_scxml(chart), "indexer.scxml")
@@ -241,8 +241,8 @@ def _counter(assign_swap: str = "count = other; other = count") -> Chart:
 
 def test_codegen_turns_assignments_into_assign_effects() -> None:
     """Each transition's assignments become one ASSIGN effect, first in its step."""
-    from statectl.codegen.flat import EffectKind, Outcome
-    from statectl.codegen.flatten import flatten
+    from statectl.out.codegen.flat import EffectKind, Outcome
+    from statectl.out.codegen.flatten import flatten
 
     flat, diags = flatten(_counter())
     assert flat is not None and not diags, diags
@@ -267,7 +267,7 @@ def test_codegen_turns_assignments_into_assign_effects() -> None:
 )
 def test_codegen_refuses_an_assignment_it_cannot_perform(swap: str, word: str) -> None:
     """An assignment C++ cannot perform is G713 at the row, not dropped."""
-    from statectl.codegen.flatten import flatten
+    from statectl.out.codegen.flatten import flatten
 
     _, diags = flatten(_counter(swap))
     g713 = [d for d in diags if d.code == "G713"]
@@ -312,8 +312,8 @@ events:
 
 
 def _verify(tmp_path: Path, device: str) -> object:
-    from statectl.cell import load_cell_or_raise
-    from statectl.explore import explore
+    from statectl.cell.explore import explore
+    from statectl.cell.model import load_cell_or_raise
 
     (tmp_path / "d.yaml").write_text(device)
     cell = tmp_path / "cell.yaml"
@@ -326,7 +326,7 @@ def _verify(tmp_path: Path, device: str) -> object:
 
 def test_verify_tracks_assigned_data_as_the_runtime_runs_it(tmp_path: Path) -> None:
     """A counter's values are local states: Full is reached only after three Adds."""
-    from statectl.explore import LocalSpace
+    from statectl.cell.explore import LocalSpace
 
     chart = _chart_of(BATCH)
     space = LocalSpace("d", chart)
@@ -341,7 +341,7 @@ def test_verify_tracks_assigned_data_as_the_runtime_runs_it(tmp_path: Path) -> N
 
 def test_verify_refuses_data_that_grows_without_bound(tmp_path: Path) -> None:
     """A counter no guard stops is C412 naming the assignment, not an endless search."""
-    from statectl.errors import DiagnosticError
+    from statectl.kernel.errors import DiagnosticError
 
     endless = BATCH.replace("guard: count < limit, ", "").replace(
         "  - {event: Add, guard: count >= limit, old: Idle, new: Full, api: Add}\n", ""
@@ -355,7 +355,7 @@ def test_verify_refuses_data_that_grows_without_bound(tmp_path: Path) -> None:
 
 def test_data_assigned_from_event_data_is_a_free_choice(tmp_path: Path) -> None:
     """An item assigned from _event is untracked: guards over it are chosen both ways."""
-    from statectl.explore import LocalSpace
+    from statectl.cell.explore import LocalSpace
 
     text = BATCH.replace('assign: "count = count + 1"', 'assign: "count = _event.data.n"')
     text = text.replace(
@@ -379,8 +379,8 @@ def _chart_of(text: str) -> Chart:
 
 
 def _journalled(db: Path, chart: Chart) -> object:
-    from statectl.journal import Journal
-    from statectl.runner import DeviceSetup, System
+    from statectl.run.journal import Journal
+    from statectl.run.runner import DeviceSetup, System
 
     return System((DeviceSetup("Indexer", chart),), SimClock(), Journal(db))
 
@@ -413,9 +413,9 @@ def test_a_journal_refuses_bad_data_before_it_accepts_the_event(
     tmp_path: Path, guarantee: str
 ) -> None:
     """Data that does not fit is refused before the journal's inbox holds the event."""
-    from statectl.journal import Guarantee, Journal, JournalReader
-    from statectl.runner import DeviceSetup, System
-    from statectl.runtime.eventdata import EventDataError
+    from statectl.run.journal import Guarantee, Journal, JournalReader
+    from statectl.run.runner import DeviceSetup, System
+    from statectl.run.runtime.eventdata import EventDataError
 
     db = tmp_path / "j.db"
     journal = Journal(db, guarantee=Guarantee(guarantee))

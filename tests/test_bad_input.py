@@ -10,9 +10,9 @@ from pathlib import Path
 import openpyxl
 import pytest
 
-from statectl.build import load_and_build
-from statectl.errors import DiagnosticError, Severity
-from statectl.tables import load, save
+from statectl.front.builder.build import load_and_build
+from statectl.front.tables import load, save
+from statectl.kernel.errors import DiagnosticError, Severity
 
 GOOD = """\
 device: D
@@ -403,7 +403,7 @@ def test_save_into_a_missing_directory_is_t110(tmp_path: Path) -> None:
 
 def test_failed_write_removes_the_folders_it_made(tmp_path: Path) -> None:
     """An output folder created for files that then cannot be written is removed again."""
-    from statectl.tables import write_files
+    from statectl.front.tables import write_files
 
     contents: dict[Path, str | bytes] = {
         tmp_path / "out" / "sub" / "a.txt": "a",
@@ -430,7 +430,7 @@ def test_unwritable_xlsx_text_writes_nothing(tmp_path: Path) -> None:
 
 def test_load_errors_do_not_hide_build_errors(tmp_path: Path) -> None:
     """One check run reports cell errors (T1xx) and the build's own (B2xx, X30x) together."""
-    from statectl.build import load_and_build
+    from statectl.front.builder.build import load_and_build
 
     path = tmp_path / "dev.yaml"
     path.write_text(

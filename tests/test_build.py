@@ -6,11 +6,11 @@ from pathlib import Path
 
 import pytest
 
-from statectl.build import build, load_and_build, load_chart
-from statectl.errors import DiagnosticError, Severity
-from statectl.model import Chart, ControlKind, EventKind, Invoke, Notify, StateKind
-from statectl.tables import DeviceTables
-from statectl.tables.yaml_io import read_yaml
+from statectl.front.builder.build import build, load_and_build, load_chart
+from statectl.front.tables import DeviceTables
+from statectl.front.tables.yaml_io import read_yaml
+from statectl.kernel.errors import DiagnosticError, Severity
+from statectl.kernel.model import Chart, ControlKind, EventKind, Invoke, Notify, StateKind
 
 MOTOR_YAML = Path(__file__).resolve().parent.parent / "examples" / "motor" / "motor.yaml"
 

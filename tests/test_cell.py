@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from statectl.cell import CODES, InputKind, Trigger, load_cell, load_cell_or_raise
-from statectl.errors import DiagnosticError, Severity
+from statectl.cell.model import CODES, InputKind, Trigger, load_cell, load_cell_or_raise
+from statectl.kernel.errors import DiagnosticError, Severity
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 PICK = EXAMPLES / "pick-and-place"

@@ -13,10 +13,10 @@ from typing import cast
 
 import pytest
 
-from statectl.cell import Cell, InputKind, load_cell_or_raise
-from statectl.explore import Composed, Kind, explore, export_promela, write_traces
-from statectl.explore.promela import STEP_MARK
-from statectl.explore.replay import load_replay, run_cell
+from statectl.cell.explore import Composed, Kind, explore, export_promela, write_traces
+from statectl.cell.explore.promela import STEP_MARK
+from statectl.cell.explore.replay import load_replay, run_cell
+from statectl.cell.model import Cell, InputKind, load_cell_or_raise
 
 ROOT = Path(__file__).resolve().parents[1]
 PICK = ROOT / "examples" / "pick-and-place"

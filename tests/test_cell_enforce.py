@@ -8,14 +8,14 @@ from pathlib import Path
 
 import pytest
 
-from statectl.cell import InputKind, load_cell, load_cell_or_raise
-from statectl.cli.run import run
-from statectl.explore import Composed, Kind, explore
-from statectl.explore.enforce import Refused
-from statectl.explore.replay import ReplayStep, run_cell
-from statectl.journal import Journal
-from statectl.runtime import SimClock
-from statectl.system import DeviceSetup, System
+from statectl.cell.explore import Composed, Kind, explore
+from statectl.cell.explore.enforce import Refused
+from statectl.cell.explore.replay import ReplayStep, run_cell
+from statectl.cell.model import InputKind, load_cell, load_cell_or_raise
+from statectl.channels.cli.run import run
+from statectl.run.journal import Journal
+from statectl.run.runtime import SimClock
+from statectl.run.system import DeviceSetup, System
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKML = ROOT / "examples" / "packml"
@@ -93,7 +93,7 @@ def test_a_when_judged_after_an_event_a_driver_refused_is_still_judged() -> None
     """The drain before a `when` is judged runs an earlier event whose observer raises:
     that failure goes to on_failure (rule 7), as the live owner loop reports it, and
     the command is judged and posted, not refused with the earlier event's error."""
-    from statectl.errors import StatectlError
+    from statectl.kernel.errors import StatectlError
 
     class Refusing:  # refuses its first call (Start's), takes the later ones
         refused = False

@@ -9,8 +9,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from statectl.errors import Location, Severity
-from statectl.model import (
+from statectl.front.recovery import CODES as RECOVERY_CODES
+from statectl.front.rules import CODES, check_chart, check_paths, guards_exclusive
+from statectl.kernel.errors import Location, Severity
+from statectl.kernel.model import (
     Chart,
     ControlKind,
     EventDef,
@@ -19,8 +21,6 @@ from statectl.model import (
     StateKind,
     Transition,
 )
-from statectl.recovery import CODES as RECOVERY_CODES
-from statectl.rules import CODES, check_chart, check_paths, guards_exclusive
 
 MOTOR = Path(__file__).resolve().parent.parent / "examples" / "motor" / "motor.yaml"
 
@@ -455,7 +455,7 @@ def test_cli_check_shows_j606_only_when_verbose(
     """`statectl check` passes a Motor without a rule; -v shows the J606 info."""
     import io
 
-    from statectl.cli import main
+    from statectl.channels.cli import main
 
     path = tmp_path / "motor.yaml"
     path.write_text(MOTOR_TABLES, encoding="utf-8")

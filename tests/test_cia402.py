@@ -14,18 +14,18 @@ import pytest
 pytest.importorskip("canopen")
 import can
 
-from statectl.demo import motor_chart
-from statectl.devices import connect, load_driver_config
-from statectl.devices.cia402 import Cia402Driver, Cia402SimDriver
-from statectl.devices.cia402.profile import (
+from statectl.channels.cli.demo import motor_chart
+from statectl.kernel.errors import DiagnosticError, StatectlError
+from statectl.run.devices import connect, load_driver_config
+from statectl.run.devices.cia402 import Cia402Driver, Cia402SimDriver
+from statectl.run.devices.cia402.profile import (
     PowerState,
     decode,
     drive_step,
     next_command,
     statusword,
 )
-from statectl.errors import DiagnosticError, StatectlError
-from statectl.runtime import EventReceived, Record, Subject, WallClock
+from statectl.run.runtime import EventReceived, Record, Subject, WallClock
 
 P = PowerState
 
@@ -240,7 +240,7 @@ def test_bus_fault_during_moving_raises_the_states_fault_event(
     detail saying what happened, and one warning on the driver's logger."""
     r = Run(heartbeat_timeout=0.2, stale_after=0.2, speed=200.0)  # a slow move: time to fail
     try:
-        with caplog.at_level(logging.WARNING, logger="statectl.devices.cia402"):
+        with caplog.at_level(logging.WARNING, logger="statectl.run.devices.cia402"):
             r.subject.post("Movement", {"amount": 5})
             r.subject.run_until_idle()
             time.sleep(0.05)
@@ -334,7 +334,7 @@ def test_demo_runs_the_motor_scenario_on_the_simulated_drive() -> None:
     import io
     import re
 
-    from statectl.demo import run_demo
+    from statectl.channels.cli.demo import run_demo
 
     out = io.StringIO()
     subject = run_demo(out, driver="cia402-sim")
@@ -360,7 +360,7 @@ def test_a_bus_driver_runs_on_wall_time_only(realtime: bool, code: int, moved: b
     Movement runs."""
     import io
 
-    from statectl.cli.run import run
+    from statectl.channels.cli.run import run
 
     motor = Path(__file__).parent.parent / "examples" / "motor" / "motor.yaml"
     out, err = io.StringIO(), io.StringIO()

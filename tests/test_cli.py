@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from statectl.cli import main
+from statectl.channels.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 MOTOR = str(ROOT / "examples" / "motor" / "motor.yaml")
@@ -108,7 +108,7 @@ def test_render_writes_file_atomically(tmp_path: Path) -> None:
 
 def test_tables_converts_and_reloads(tmp_path: Path) -> None:
     """tables --to md prints Markdown that loads back into an equal chart."""
-    from statectl.build import load_chart
+    from statectl.front.builder.build import load_chart
 
     code, out, _ = cli("tables", MOTOR, "--to", "md")
     assert code == 0
@@ -192,7 +192,7 @@ def test_cell_commands(argv: list[str], code: int, needle: str) -> None:
 
 def test_scxml_export_then_import_gives_the_same_chart(tmp_path: Path) -> None:
     """A device file exported to SCXML and imported back builds the same transitions."""
-    from statectl.build import load_chart, strip_origins
+    from statectl.front.builder.build import load_chart, strip_origins
 
     doc, back = tmp_path / "motor.scxml", tmp_path / "motor.yaml"
     assert cli("scxml", "export", MOTOR, "--out", str(doc))[0] == 0

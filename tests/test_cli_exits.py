@@ -14,11 +14,11 @@ from pathlib import Path
 
 import pytest
 
-from statectl.build import load_and_build
-from statectl.devices import make_driver
-from statectl.devices.config import load_run_config
-from statectl.errors import StatectlError
-from statectl.runtime import SimClock, Subject
+from statectl.front.builder.build import load_and_build
+from statectl.kernel.errors import StatectlError
+from statectl.run.devices import make_driver
+from statectl.run.devices.config import load_run_config
+from statectl.run.runtime import SimClock, Subject
 
 ROOT = Path(__file__).resolve().parents[1]
 MOTOR = ROOT / "examples" / "motor" / "motor.yaml"
@@ -246,7 +246,7 @@ def test_shipped_drivers_serve_their_charts(device: Path, driver: str, config: P
         assert drivers is not None
         name, options = drivers[subject.name]
         assert name == driver
-    from statectl.devices.base import check_serves
+    from statectl.run.devices.base import check_serves
 
     made = make_driver(driver, options, chart=subject.chart)
     check_serves(subject, made)  # raises when a method is missing
@@ -255,7 +255,7 @@ def test_shipped_drivers_serve_their_charts(device: Path, driver: str, config: P
 
 def test_check_serves_names_missing_and_available() -> None:
     """The bind-time check names the missing methods and the ones the driver has."""
-    from statectl.devices.base import check_serves
+    from statectl.run.devices.base import check_serves
 
     subject = _subject(GRIPPER)
     with pytest.raises(StatectlError, match=r"Grip\(\), Release\(\).*available: Error\(\)"):
@@ -338,7 +338,7 @@ def test_missing_input_table_covers_every_command() -> None:
     """Every command of the parser appears in the missing-input table (a new one must too)."""
     import argparse
 
-    from statectl.cli import build_parser
+    from statectl.channels.cli import build_parser
 
     def commands(parser: argparse.ArgumentParser, prefix: tuple[str, ...]) -> set[tuple[str, ...]]:
         found: set[tuple[str, ...]] = set()
@@ -392,7 +392,7 @@ def test_a_file_of_the_other_kind_says_which_command_takes_it(
 VALVE = """\
 from typing import ClassVar
 
-from statectl.devices import Driver
+from statectl.run.devices import Driver
 
 
 class Valve(Driver):
@@ -438,7 +438,7 @@ def test_a_driver_module_found_nowhere_says_what_to_do(tmp_path: Path) -> None:
 
 
 FAILS_MADE = """\
-from statectl.devices import Driver
+from statectl.run.devices import Driver
 
 
 class Valve(Driver):

@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from statectl.errors import StatectlError
-from statectl.runtime.clock import SimClock, WallClock
+from statectl.kernel.errors import StatectlError
+from statectl.run.runtime.clock import SimClock, WallClock
 
 
 @pytest.mark.parametrize(

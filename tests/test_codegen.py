@@ -11,13 +11,11 @@ from pathlib import Path
 import pytest
 
 from codegen_support import CLANG, FLAGS, GXX, needs_gxx
-from statectl.build import load_chart
-from statectl.cli.codegen import run_codegen
-from statectl.codegen import flatten, generate
-from statectl.codegen.flatten import Decision, Outcome, Unhandled, identifiers
-from statectl.demo import run_demo
-from statectl.errors import Severity
-from statectl.model import (
+from statectl.channels.cli.codegen import run_codegen
+from statectl.channels.cli.demo import run_demo
+from statectl.front.builder.build import load_chart
+from statectl.kernel.errors import Severity
+from statectl.kernel.model import (
     Assign,
     Chart,
     DataItem,
@@ -29,6 +27,8 @@ from statectl.model import (
     State,
     Transition,
 )
+from statectl.out.codegen import flatten, generate
+from statectl.out.codegen.flatten import Decision, Outcome, Unhandled, identifiers
 
 ROOT = Path(__file__).resolve().parent.parent
 MOTOR = ROOT / "examples" / "motor" / "motor.yaml"

@@ -23,10 +23,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from codegen_support import CppDevice, Refused, assert_equivalent, needs_gxx
-from statectl.build import load_chart
-from statectl.codegen.cpp import generate
-from statectl.codegen.flatten import CODES
-from statectl.model import (
+from statectl.front.builder.build import load_chart
+from statectl.kernel.model import (
     Action,
     Chart,
     DataItem,
@@ -38,6 +36,8 @@ from statectl.model import (
     StateKind,
     Transition,
 )
+from statectl.out.codegen.cpp import generate
+from statectl.out.codegen.flatten import CODES
 
 ROOT = Path(__file__).resolve().parent.parent
 MOTOR = ROOT / "examples" / "motor" / "motor.yaml"

@@ -14,17 +14,17 @@ from pathlib import Path
 import pytest
 
 from codegen_support import CLANG, GXX, CppDevice, assert_equivalent, needs_gxx
-from statectl.build import load_chart
-from statectl.cli import main
-from statectl.cli.progress import CountProgress
-from statectl.codegen.cpp import render
-from statectl.codegen.cpp_rows import DENSE_CELLS
-from statectl.codegen.flat import Decision
-from statectl.codegen.flatten import flatten
-from statectl.semantics import Machine, step
+from statectl.channels.cli import main
+from statectl.channels.cli.progress import CountProgress
+from statectl.front.builder.build import load_chart
+from statectl.kernel.semantics import Machine, step
+from statectl.out.codegen.cpp import render
+from statectl.out.codegen.cpp_rows import DENSE_CELLS
+from statectl.out.codegen.flat import Decision
+from statectl.out.codegen.flatten import flatten
 from test_codegen_equivalence import random_chart
 
-flatten_module = importlib.import_module("statectl.codegen.flatten")
+flatten_module = importlib.import_module("statectl.out.codegen.flatten")
 needs_clang = pytest.mark.skipif(CLANG is None, reason="no clang++ on this machine")
 
 

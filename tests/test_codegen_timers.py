@@ -21,12 +21,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from codegen_support import FLAGS, GXX, _Recorder, canonical, driver_source, needs_gxx
-from statectl.build import load_chart
-from statectl.codegen.cpp import generate, render, runtime_files
-from statectl.codegen.flatten import flatten
-from statectl.errors import Severity, has_errors
-from statectl.model import Chart, StateKind, Timeout
-from statectl.runtime import SimClock, Subject
+from statectl.front.builder.build import load_chart
+from statectl.kernel.errors import Severity, has_errors
+from statectl.kernel.model import Chart, StateKind, Timeout
+from statectl.out.codegen.cpp import generate, render, runtime_files
+from statectl.out.codegen.flatten import flatten
+from statectl.run.runtime import SimClock, Subject
 from test_codegen_equivalence import random_chart
 
 ROOT = Path(__file__).resolve().parent.parent

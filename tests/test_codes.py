@@ -11,9 +11,9 @@ from pathlib import Path
 import pytest
 
 import statectl
-from statectl import codes
-from statectl.codes import ALL, REGISTRY, UnknownCodeError, explain, family, lookup
-from statectl.errors import Severity, StatectlError
+from statectl.kernel import codes
+from statectl.kernel.codes import ALL, REGISTRY, UnknownCodeError, explain, family, lookup
+from statectl.kernel.errors import Severity, StatectlError
 
 SRC = Path(statectl.__file__).parent
 ROOT = SRC.parents[1]
@@ -205,15 +205,15 @@ def test_slug_is_githubs_anchor(heading: str, anchor: str) -> None:
 # -- the modules' CODES views ---------------------------------------------------------------
 
 VIEWS = [
-    ("statectl.tables", "T1"),
-    ("statectl.tables.schema", "T1"),
-    ("statectl.build", "B2"),
-    ("statectl.rules", "C4"),
-    ("statectl.recovery", "J6"),
-    ("statectl.journal", "J6"),
-    ("statectl.codegen", "G7"),
-    ("statectl.codegen.flatten", "G7"),
-    ("statectl.cell", "V8"),
+    ("statectl.front.tables", "T1"),
+    ("statectl.front.tables.schema", "T1"),
+    ("statectl.front.builder.build", "B2"),
+    ("statectl.front.rules", "C4"),
+    ("statectl.front.recovery", "J6"),
+    ("statectl.run.journal", "J6"),
+    ("statectl.out.codegen", "G7"),
+    ("statectl.out.codegen.flatten", "G7"),
+    ("statectl.cell.model", "V8"),
 ]
 
 
@@ -297,7 +297,7 @@ def test_check_explain_on_the_command_line(
     """`statectl check --explain CODE` prints the registry's entry; unknown is a usage error."""
     import io
 
-    from statectl.cli import main
+    from statectl.channels.cli import main
 
     out, err = io.StringIO(), io.StringIO()
     assert main(argv, out, err) == status

@@ -6,15 +6,15 @@ from pathlib import Path
 
 import pytest
 
-from statectl.build import load_and_build, load_chart
-from statectl.codegen.cpp import render
-from statectl.codegen.flatten import flatten
-from statectl.errors import Severity
-from statectl.explore import verify_cell
-from statectl.model import MAX_DEFERRED, Chart, State, StateKind, Transition
-from statectl.rules import check_chart, check_paths
-from statectl.runtime import SimClock, Subject
-from statectl.runtime.records import EventReceived, EventRejected, MicrostepTaken, Record
+from statectl.cell.explore import verify_cell
+from statectl.front.builder.build import load_and_build, load_chart
+from statectl.front.rules import check_chart, check_paths
+from statectl.kernel.errors import Severity
+from statectl.kernel.model import MAX_DEFERRED, Chart, State, StateKind, Transition
+from statectl.out.codegen.cpp import render
+from statectl.out.codegen.flatten import flatten
+from statectl.run.runtime import SimClock, Subject
+from statectl.run.runtime.records import EventReceived, EventRejected, MicrostepTaken, Record
 
 ROOT = Path(__file__).resolve().parents[1]
 CLAMP = ROOT / "examples" / "clamp" / "clamp.yaml"

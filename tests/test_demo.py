@@ -10,8 +10,8 @@ from typing import Any
 import pytest
 
 import statectl
-from statectl.demo import FAULT, run_demo
-from statectl.runtime import Record, Subject, Taken
+from statectl.channels.cli.demo import FAULT, run_demo
+from statectl.run.runtime import Record, Subject, Taken
 from support import record_keys
 
 ROOT = Path(__file__).parent.parent

@@ -8,8 +8,10 @@ from typing import Any, ClassVar
 
 import pytest
 
-from statectl.build import load_chart
-from statectl.devices import (
+from statectl.front.builder.build import load_chart
+from statectl.front.observers import Notification
+from statectl.kernel.errors import DiagnosticError, StatectlError
+from statectl.run.devices import (
     DeviceDriver,
     Driver,
     SimMotor,
@@ -19,10 +21,8 @@ from statectl.devices import (
     make_driver,
     requested_target,
 )
-from statectl.errors import DiagnosticError, StatectlError
-from statectl.observers import Notification
-from statectl.runtime import ObserverCalled, Record, SimClock, Subject
-from statectl.runtime.records import EventIgnored, EventReceived, MicrostepTaken
+from statectl.run.runtime import ObserverCalled, Record, SimClock, Subject
+from statectl.run.runtime.records import EventIgnored, EventReceived, MicrostepTaken
 
 EXAMPLES = Path(__file__).parent.parent / "examples" / "motor"
 MOTOR = EXAMPLES / "motor.yaml"
@@ -199,7 +199,7 @@ def test_example_driver_configs_load(file: str, expected: tuple[str, dict[str, A
         ("devices: {Motor: {options: {}}}", ["D504"]),
         ("devices: {Motor: {driver: warp-drive}}", ["D505"]),
         ("devices: {Motor: {driver: 'no.such.module:X'}}", ["D505"]),
-        ("devices: {Motor: {driver: 'statectl.errors:Location'}}", ["D505"]),
+        ("devices: {Motor: {driver: 'statectl.kernel.errors:Location'}}", ["D505"]),
         ("devices: {Motor: {driver: sim-motor, options: [1]}}", ["D506"]),
         ("devices: {Motor: {driver: sim-motor, colour: red}}", ["D507"]),
         ("devices: {Motor: {driver: sim-motor, options: {sped: 3}}}", ["D508"]),
@@ -231,7 +231,7 @@ def test_missing_config_file_is_a_diagnostic(tmp_path: Path) -> None:
     ("name", "options", "kind"),
     [
         ("sim-motor", {"speed": 2}, SimMotor),
-        ("statectl.devices.stepper:SimStepper", {}, SimStepper),
+        ("statectl.run.devices.stepper:SimStepper", {}, SimStepper),
     ],
 )
 def test_make_driver_by_name_or_entry(name: str, options: dict[str, Any], kind: type) -> None:

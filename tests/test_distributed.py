@@ -20,9 +20,9 @@ from pathlib import Path
 
 import pytest
 
-from statectl.cell import load_cell
+from statectl.cell.model import load_cell
 from statectl.cell.nodes import PeerDown
-from statectl.distributed.streams import Inbound, Outbound, Verdict
+from statectl.channels.distributed.streams import Inbound, Outbound, Verdict
 
 zenoh = pytest.importorskip("zenoh")
 
@@ -163,7 +163,7 @@ def cluster(tmp_path: Path) -> Iterator[Callable[..., Cluster]]:
 
 
 def open_view(c: Cluster) -> object:
-    from statectl.distributed.view import CellView
+    from statectl.channels.distributed.view import CellView
 
     cell, diags = load_cell(c.cell)
     assert cell is not None, diags
@@ -185,7 +185,7 @@ def wait_states(view: object, expected: Mapping[str, str], timeout: float = WAIT
 
 def one_process(cell: Path, lines: list[str]) -> dict[str, str]:
     """The global state `statectl run CELL` reaches on ``lines`` (one process, batch)."""
-    from statectl.cli.run import run
+    from statectl.channels.cli.run import run
 
     out = io.StringIO()
     code = run(str(cell), events=io.StringIO("\n".join(lines) + "\n"), out=out, err=io.StringIO())
@@ -517,7 +517,7 @@ def test_operator_station_shows_and_drives_the_whole_cell(
     pytest.importorskip("aiohttp")
     import threading
 
-    from statectl.distributed.dashboard import station
+    from statectl.channels.distributed.dashboard import station
 
     c = cluster()
     view = start_all(c)
@@ -576,7 +576,7 @@ def test_node_usage_errors(
     tmp_path: Path, args: list[str], code: int, says: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """A wrong flag is a one-line message and exit 2; nothing starts."""
-    from statectl.cli import main
+    from statectl.channels.cli import main
 
     cell = tmp_path / "cell.yaml"
     cell.write_text(cell_text(dict(zip(("line", "arm", "gripper"), free_ports(3), strict=True))))
@@ -587,7 +587,7 @@ def test_node_usage_errors(
 
 def test_node_of_a_cell_without_nodes_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
     """`statectl node` on a one-process cell says it needs a nodes: section (exit 1)."""
-    from statectl.cli import main
+    from statectl.channels.cli import main
 
     assert main(["node", str(ONE_CELL), "--node", "line"]) == 1
     assert "has no nodes: section" in capsys.readouterr().err
@@ -597,7 +597,7 @@ def test_node_whose_port_is_taken_says_so(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """A listen endpoint another process holds is reported by Zenoh, exit 1, no traceback."""
-    from statectl.cli import main
+    from statectl.channels.cli import main
 
     ports = dict(zip(("line", "arm", "gripper"), free_ports(3), strict=True))
     cell = tmp_path / "cell.yaml"
@@ -643,10 +643,10 @@ class _Node:
     """One node's system and wire in this process (as `statectl node` makes them)."""
 
     def __init__(self, cell_path: Path, name: str) -> None:
-        from statectl.distributed.system import NodeSystem
-        from statectl.distributed.wire import Wire
-        from statectl.runner.cells import load_setups
-        from statectl.runtime import WallClock
+        from statectl.channels.distributed.system import NodeSystem
+        from statectl.channels.distributed.wire import Wire
+        from statectl.run.runner.cells import load_setups
+        from statectl.run.runtime import WallClock
 
         cell, _ = load_cell(str(cell_path))
         assert cell is not None and cell.nodes is not None

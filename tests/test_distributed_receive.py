@@ -1,6 +1,6 @@
 """A node's receiving side of link streams, in one process, without a Zenoh session.
 
-The wire's per-stream receiver (statectl.distributed.wire) is fed samples as Zenoh
+The wire's per-stream receiver (statectl.channels.distributed.wire) is fed samples as Zenoh
 would hand them: it must apply each link event once and in order, run the device
 on the calling thread only when nobody owns the devices (else leave it to the
 owner), and drop a payload it cannot read.
@@ -17,11 +17,11 @@ from typing import Any
 
 import pytest
 
-from statectl.cell import load_cell
-from statectl.distributed import NodeSystem, Wire
-from statectl.errors import StatectlError
-from statectl.runner.cells import cell_setups
-from statectl.runtime import SimClock
+from statectl.cell.model import load_cell
+from statectl.channels.distributed import NodeSystem, Wire
+from statectl.kernel.errors import StatectlError
+from statectl.run.runner.cells import cell_setups
+from statectl.run.runtime import SimClock
 
 PING = """device: Ping
 states:
@@ -326,7 +326,7 @@ def test_a_stream_on_two_threads_never_lets_a_later_number_overtake(tmp_path: Pa
 def test_link_data_json_cannot_carry_is_refused_not_sent_as_null(data: Any, refused: bool) -> None:
     """A NaN or infinity in link data is refused with the event named (msgspec would send
     null); finite numbers and strings pass."""
-    from statectl.distributed.messages import refuse_non_finite as _refuse_non_finite
+    from statectl.channels.distributed.messages import refuse_non_finite as _refuse_non_finite
 
     if refused:
         with pytest.raises(ValueError, match=r"'Hit' to 'pong'.*cannot carry"):

@@ -90,7 +90,7 @@ def python(args: list[str], cwd: Path, timeout: float = 240) -> subprocess.Compl
 
 
 def pytest_args(path: Path) -> list[str]:
-    plugin = ["-p", "no:cacheprovider", "-p", "statectl.testgen.plugin"]
+    plugin = ["-p", "no:cacheprovider", "-p", "statectl.out.testgen.plugin"]
     return ["-m", "pytest", "-q", *plugin, str(path)]
 
 
@@ -140,7 +140,7 @@ def test_python_example_runs(block: Block, tmp_path: Path) -> None:
 
 def test_every_cell_code_has_its_own_entry() -> None:
     """Each V8xx code has a heading of its own in docs/cells.md with a fix, as C4xx codes do."""
-    from statectl.codes import REGISTRY
+    from statectl.kernel.codes import REGISTRY
 
     text = (ROOT / "docs" / "cells.md").read_text(encoding="utf-8")
     entries = dict(re.findall(r"^### (V8\d\d) — .*?\n(.*?)(?=^#)", text, re.MULTILINE | re.DOTALL))

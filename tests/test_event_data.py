@@ -7,17 +7,17 @@ from typing import Any
 
 import pytest
 
-from statectl.build import build, load_and_build
-from statectl.errors import Diagnostic, Severity, StatectlError
-from statectl.model import Chart
-from statectl.runtime import Subject
-from statectl.runtime.clock import SimClock
-from statectl.runtime.eventdata import EventDataError
-from statectl.runtime.records import EventRejected
-from statectl.semantics import Unhandled
-from statectl.semantics.eventview import GuardError
-from statectl.tables import load, save, strip_locations
-from statectl.tables.yaml_io import read_yaml
+from statectl.front.builder.build import build, load_and_build
+from statectl.front.tables import load, save, strip_locations
+from statectl.front.tables.yaml_io import read_yaml
+from statectl.kernel.errors import Diagnostic, Severity, StatectlError
+from statectl.kernel.model import Chart
+from statectl.kernel.semantics import Unhandled
+from statectl.kernel.semantics.eventview import GuardError
+from statectl.run.runtime import Subject
+from statectl.run.runtime.clock import SimClock
+from statectl.run.runtime.eventdata import EventDataError
+from statectl.run.runtime.records import EventRejected
 
 PRESS = """\
 device: Press
@@ -272,7 +272,7 @@ def test_event_data_errors_are_statectl_errors() -> None:
 )
 def test_recovery_data_must_fit_the_events_declared_fields(data: str, word: str | None) -> None:
     """A Recovery rule whose data its event would refuse on resume is C413."""
-    from statectl.recovery import check_recovery
+    from statectl.front.recovery import check_recovery
 
     text = (
         "device: M\nstates:\n  - {state: Idle, control: default}\n"
@@ -303,8 +303,8 @@ def test_a_guard_over_data_of_an_event_sent_without_data_says_so() -> None:
 
 def test_codegen_refuses_a_guard_that_fails_when_evaluated() -> None:
     """A guard that raises at generation time is G714, not a silent 'guard false' table."""
-    from statectl.codegen.flatten import flatten
-    from statectl.model import ControlKind, State, Transition
+    from statectl.kernel.model import ControlKind, State, Transition
+    from statectl.out.codegen.flatten import flatten
 
     chart = Chart(
         "D",
@@ -338,7 +338,7 @@ def test_a_guard_or_assignment_that_fails_counts_once_either_way(
     or without --json, counted once (the trace run exited 0: no record reached its count)."""
     import io
 
-    from statectl.cli.run import run
+    from statectl.channels.cli.run import run
 
     device = tmp_path / "press.yaml"
     device.write_text(ASSIGNS.format(guard=f'"{GOOD_GUARD}"'), encoding="utf-8")

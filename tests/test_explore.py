@@ -8,11 +8,11 @@ from pathlib import Path
 
 import pytest
 
-from statectl.cell import load_cell_or_raise
-from statectl.cli.replay import run_main
-from statectl.cli.verify import verify_main
-from statectl.explore import Kind, Report, explore, to_mermaid, to_plantuml, write_traces
-from statectl.explore.replay import run_cell
+from statectl.cell.explore import Kind, Report, explore, to_mermaid, to_plantuml, write_traces
+from statectl.cell.explore.replay import run_cell
+from statectl.cell.model import load_cell_or_raise
+from statectl.channels.cli.replay import run_main
+from statectl.channels.cli.verify import verify_main
 
 PICK = Path(__file__).resolve().parents[1] / "examples" / "pick-and-place"
 
@@ -132,7 +132,7 @@ def test_verify_is_bounded_unless_told_otherwise(monkeypatch: pytest.MonkeyPatch
     """`statectl verify` without --max-states stops at DEFAULT_MAX_STATES (exit 1, the
     report says how to go further): a cell too big for memory used to run until the
     machine ran out of it."""
-    import statectl.cli.verify as cli_verify
+    import statectl.channels.cli.verify as cli_verify
 
     monkeypatch.setattr(cli_verify, "DEFAULT_MAX_STATES", 5)
     out = io.StringIO()
@@ -315,7 +315,7 @@ def test_bad_cell_prints_diagnostics(tmp_path: Path) -> None:
 @pytest.mark.parametrize("name", ["cell.yaml", "cell-buggy.yaml"])
 def test_fast_successors_match_branches(name: str) -> None:
     """The search's fast successors give the same ways, in order, as the detailed branches."""
-    from statectl.explore import Composed
+    from statectl.cell.explore import Composed
 
     model = Composed(load_cell_or_raise(PICK / name))
     seen, frontier, compared = set(model.initial), list(model.initial), 0
@@ -335,8 +335,8 @@ def test_fast_successors_match_branches(name: str) -> None:
 def test_verify_progress_line_is_rewritten_in_place_and_ended_once() -> None:
     """verify's progress: each report rewrites one line (\\r), done() ends it with one
     newline, and a run that showed nothing writes nothing."""
-    from statectl.cli.progress import ProgressPrinter
-    from statectl.explore import Progress
+    from statectl.cell.explore import Progress
+    from statectl.channels.cli.progress import ProgressPrinter
 
     stream = io.StringIO()
     printer = ProgressPrinter(stream)

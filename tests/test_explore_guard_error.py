@@ -12,12 +12,12 @@ from typing import Any
 import pytest
 
 from statectl import SimClock, Subject, load
-from statectl.cell import load_cell_or_raise
-from statectl.explore import Composed, Kind, explore, export_promela
-from statectl.explore.local import LocalSpace
-from statectl.model import Transition
-from statectl.semantics import Machine, Run, Unhandled, initial, step
-from statectl.semantics.eventview import GuardError
+from statectl.cell.explore import Composed, Kind, explore, export_promela
+from statectl.cell.explore.local import LocalSpace
+from statectl.cell.model import load_cell_or_raise
+from statectl.kernel.model import Transition
+from statectl.kernel.semantics import Machine, Run, Unhandled, initial, step
+from statectl.kernel.semantics.eventview import GuardError
 
 # Go takes Fast when its guard holds, else Slow (the row below); GUARD is replaced.
 GATE = """\

@@ -6,8 +6,8 @@ import re
 
 import pytest
 
-from statectl.errors import Location
-from statectl.expr import (
+from statectl.kernel.errors import Location
+from statectl.kernel.expr import (
     MAX_DEPTH,
     MAX_SIZE,
     MAX_SOURCE,

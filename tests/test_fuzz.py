@@ -29,19 +29,19 @@ from typing import Any
 import openpyxl
 import pytest
 
-from statectl.build import chart_to_tables, load_and_build
-from statectl.cell import load_cell
-from statectl.errors import StatectlError
-from statectl.scxml import read_scxml, write_scxml
-from statectl.tables import load, save
+from statectl.cell.model import load_cell
+from statectl.front.builder.build import chart_to_tables, load_and_build
+from statectl.front.tables import load, save
+from statectl.kernel.errors import StatectlError
+from statectl.out.scxml import read_scxml, write_scxml
 from support import W3C_PACK, W3C_SKIPPED
 
 ROOT = Path(__file__).resolve().parents[1]
 
-#: The checker's module: ``statectl.check``, named ``statectl.rules`` on branches where it was
+#: The checker's module: ``statectl.check``, named ``statectl.front.rules`` on branches where it was
 #: renamed (the facade's ``check()`` function took the name).
 RULES: Any = importlib.import_module(
-    "statectl.rules" if importlib.util.find_spec("statectl.rules") else "statectl.check"
+    "statectl.front.rules" if importlib.util.find_spec("statectl.front.rules") else "statectl.check"
 )
 EXAMPLES = ROOT / "examples"
 PACK = W3C_PACK  # $STATECTL_W3C_DIR, else ../shared/conformance/w3c-scxml

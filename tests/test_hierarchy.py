@@ -6,14 +6,14 @@ from pathlib import Path
 
 import pytest
 
-from statectl.build import build, load_chart
-from statectl.errors import Severity
-from statectl.model import ControlKind, EventKind, StateKind
-from statectl.observers import Notification
-from statectl.rules import check_paths
-from statectl.runtime import SimClock, Subject
-from statectl.semantics import Machine, initial, step
-from statectl.tables import DeviceTables, EventRow, StateRow, load, save, strip_locations
+from statectl.front.builder.build import build, load_chart
+from statectl.front.observers import Notification
+from statectl.front.rules import check_paths
+from statectl.front.tables import DeviceTables, EventRow, StateRow, load, save, strip_locations
+from statectl.kernel.errors import Severity
+from statectl.kernel.model import ControlKind, EventKind, StateKind
+from statectl.kernel.semantics import Machine, initial, step
+from statectl.run.runtime import SimClock, Subject
 
 ROOT = Path(__file__).resolve().parent.parent
 GANTRY = ROOT / "examples" / "gantry" / "gantry.yaml"

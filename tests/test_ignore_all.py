@@ -8,10 +8,18 @@ from typing import Any
 
 import pytest
 
-from statectl.build import chart_to_tables, load_and_build
-from statectl.errors import Diagnostic, Severity
-from statectl.model import Chart, ControlKind, EventDef, EventKind, State, StateKind, Transition
-from statectl.rules import check_chart, check_paths
+from statectl.front.builder.build import chart_to_tables, load_and_build
+from statectl.front.rules import check_chart, check_paths
+from statectl.kernel.errors import Diagnostic, Severity
+from statectl.kernel.model import (
+    Chart,
+    ControlKind,
+    EventDef,
+    EventKind,
+    State,
+    StateKind,
+    Transition,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = [

@@ -11,12 +11,13 @@ from pathlib import Path
 
 import pytest
 
-from statectl.cli.journal import journal_export, journal_replay, journal_show
-from statectl.cli.run import run
-from statectl.demo import motor_chart
-from statectl.devices import SimMotor
-from statectl.errors import DiagnosticError
-from statectl.journal import (
+from statectl.channels.cli.demo import motor_chart
+from statectl.channels.cli.journal import journal_export, journal_replay, journal_show
+from statectl.channels.cli.run import run
+from statectl.front.tables import load
+from statectl.kernel.errors import DiagnosticError
+from statectl.run.devices import SimMotor
+from statectl.run.journal import (
     Guarantee,
     Journal,
     JournalError,
@@ -28,9 +29,8 @@ from statectl.journal import (
     load_device,
     replay,
 )
-from statectl.runner import DeviceSetup, System, parse_event_line
-from statectl.runtime import SimClock
-from statectl.tables import load
+from statectl.run.runner import DeviceSetup, System, parse_event_line
+from statectl.run.runtime import SimClock
 
 MOTOR = Path(__file__).parent.parent / "examples" / "motor" / "motor.yaml"
 #: The Motor's text without its Recovery table (the paper's two tables only).

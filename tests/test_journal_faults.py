@@ -24,9 +24,10 @@ from pathlib import Path
 
 import pytest
 
-from statectl.cli import BROKEN_PIPE, main
-from statectl.cli.run import run
-from statectl.journal import (
+from statectl.channels.cli import BROKEN_PIPE, main
+from statectl.channels.cli.run import run
+from statectl.kernel.semantics import Snapshot
+from statectl.run.journal import (
     Journal,
     JournalDamaged,
     JournalError,
@@ -36,9 +37,8 @@ from statectl.journal import (
     load_device,
     replay,
 )
-from statectl.runner import DeviceSetup, System
-from statectl.runtime import SimClock
-from statectl.semantics import Snapshot
+from statectl.run.runner import DeviceSetup, System
+from statectl.run.runtime import SimClock
 
 MOTOR = Path(__file__).parent.parent / "examples" / "motor" / "motor.yaml"
 SRC = Path(__file__).parent.parent / "src"
@@ -399,12 +399,12 @@ def test_a_broken_pipe_elsewhere_is_an_error(
     monkeypatch: pytest.MonkeyPatch, reader_open: bool, code: int
 ) -> None:
     """Only a closed standard output ends quietly; a broken pipe of another kind is reported."""
-    import statectl.cli
+    import statectl.channels.cli
 
     def broken(*_: object) -> int:
         raise BrokenPipeError(32, "Broken pipe")
 
-    monkeypatch.setattr(statectl.cli, "cmd_journal", broken)
+    monkeypatch.setattr(statectl.channels.cli, "cmd_journal", broken)
     read, write = os.pipe()
     if not reader_open:
         os.close(read)

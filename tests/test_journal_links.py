@@ -23,10 +23,10 @@ from typing import Any
 
 import pytest
 
-from statectl.cell import load_cell_or_raise
-from statectl.journal import Guarantee, Journal, JournalReader, StepKind, replay
-from statectl.runner import System, cell_setups
-from statectl.runtime import SimClock
+from statectl.cell.model import load_cell_or_raise
+from statectl.run.journal import Guarantee, Journal, JournalReader, StepKind, replay
+from statectl.run.runner import System, cell_setups
+from statectl.run.runtime import SimClock
 
 MOTOR = (Path(__file__).resolve().parents[1] / "examples" / "motor" / "motor.yaml").as_posix()
 CELL = f"""\
@@ -114,10 +114,10 @@ def test_links_fired_while_resuming_are_sent(tmp_path: Path) -> None:
 
 CHILD = r"""
 import json, random, sys, time
-from statectl.cell import load_cell_or_raise
-from statectl.journal import Journal, JournalReader
-from statectl.runner import System, cell_setups
-from statectl.runtime import SimClock
+from statectl.cell.model import load_cell_or_raise
+from statectl.run.journal import Journal, JournalReader
+from statectl.run.runner import System, cell_setups
+from statectl.run.runtime import SimClock
 
 db, path, seed, guarantee = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4]
 EVENTS = json.loads(sys.argv[5])

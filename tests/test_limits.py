@@ -17,19 +17,19 @@ import openpyxl
 import pytest
 import yaml
 
-from statectl.build import MAX_STATE_DEPTH, load_and_build
-from statectl.cell import load_cell
-from statectl.cli import main
-from statectl.errors import Severity
-from statectl.scxml.reader import MAX_SRC_BYTES, MAX_XML_DEPTH, read_scxml
-from statectl.tables.safeyaml import MAX_DEPTH, YamlRefused, compose, load_value
+from statectl.cell.model import load_cell
+from statectl.channels.cli import main
+from statectl.front.builder.build import MAX_STATE_DEPTH, load_and_build
+from statectl.front.tables.safeyaml import MAX_DEPTH, YamlRefused, compose, load_value
+from statectl.kernel.errors import Severity
+from statectl.out.scxml.reader import MAX_SRC_BYTES, MAX_XML_DEPTH, read_scxml
 
 ROOT = Path(__file__).resolve().parents[1]
 
-#: The checker's module: ``statectl.check``, named ``statectl.rules`` on branches where it was
+#: The checker's module: ``statectl.check``, named ``statectl.front.rules`` on branches where it was
 #: renamed (the facade's ``check()`` function took the name).
 RULES: Any = importlib.import_module(
-    "statectl.rules" if importlib.util.find_spec("statectl.rules") else "statectl.check"
+    "statectl.front.rules" if importlib.util.find_spec("statectl.front.rules") else "statectl.check"
 )
 
 #: 7 levels of 9 aliases: 9**7 (4.8 million) strings once expanded, from 222 bytes.
@@ -253,7 +253,7 @@ def zip_bomb() -> bytes:
     """A valid workbook plus one part of zeros that unpacks past the limit (~70 KiB packed)."""
     import zipfile
 
-    from statectl.tables.xlsx_io import MAX_UNPACKED_BYTES
+    from statectl.front.tables.xlsx_io import MAX_UNPACKED_BYTES
 
     out = io.BytesIO(workbook(None, None))
     with zipfile.ZipFile(out, "a", compression=zipfile.ZIP_DEFLATED) as archive:
@@ -565,7 +565,7 @@ DESCRIPTORS = [*EVENTS, "error.*", "error.execution.*", "a", "a.*", ".*", "x.", 
 def test_descriptor_index_agrees_with_name_match() -> None:
     """The descriptors check looks up for an event are exactly those name_match accepts."""
     _matching = RULES._matching
-    from statectl.semantics import name_match
+    from statectl.kernel.semantics import name_match
 
     disagree = [
         (d, e) for d in DESCRIPTORS for e in EVENTS if name_match([d], e) != (d in _matching(e))
@@ -592,7 +592,7 @@ def test_c403_compares_at_most_the_row_limit(tmp_path: Path) -> None:
 
 def test_guard_too_deep_to_walk_is_not_proven() -> None:
     """A guard nested past the recursion limit is "not proven" exclusive, not a crash."""
-    from statectl.guards import guards_exclusive
+    from statectl.front.rules.guards import guards_exclusive
 
     assert guards_exclusive("not " * 5000 + "x", "x") is False
     assert guards_exclusive("x == 1", "x == 2") is True
@@ -648,7 +648,7 @@ def test_scxml_unknown_target_hint_stays_short() -> None:
 
 def test_default_loader_is_libyaml_when_present() -> None:
     """With PyYAML built on libyaml, files are parsed by the C parser (issue 10)."""
-    from statectl.tables import safeyaml
+    from statectl.front.tables import safeyaml
 
     want = yaml.CSafeLoader if getattr(yaml, "__with_libyaml__", False) else yaml.SafeLoader
     assert safeyaml._Loader.__base__ is want  # with YAML 1.2 exponent floats added
@@ -659,7 +659,7 @@ def test_gc_paused_restores_the_collector(was_on: bool) -> None:
     """A load pauses the cyclic collector and leaves it as it found it, also on error."""
     import gc
 
-    from statectl.tables.bulk import gc_paused
+    from statectl.front.tables.bulk import gc_paused
 
     before = gc.isenabled()
     (gc.enable if was_on else gc.disable)()

@@ -21,11 +21,11 @@ from pymodbus.datastore import (
 )
 from pymodbus.server import ModbusTcpServer
 
-from statectl.devices import load_driver_config
-from statectl.devices.modbus import ModbusIO
-from statectl.errors import DiagnosticError
-from statectl.observers import Notification
-from statectl.runtime import WallClock
+from statectl.front.observers import Notification
+from statectl.kernel.errors import DiagnosticError
+from statectl.run.devices import load_driver_config
+from statectl.run.devices.modbus import ModbusIO
+from statectl.run.runtime import WallClock
 
 ROOT = Path(__file__).parent.parent
 COILS = {"close_valve": 0, "open_valve": 1}
@@ -181,7 +181,7 @@ def test_link_faults_are_one_fault_detail_and_a_log_line(
 ) -> None:
     """A refused or reset connection and a stale input each become a poll_fault detail
     saying what happened and a warning on the driver's logger; nothing raises."""
-    with caplog.at_level(logging.WARNING, logger="statectl.devices.modbus"):
+    with caplog.at_level(logging.WARNING, logger="statectl.run.devices.modbus"):
         g = Gripper(port(server), stale_after=0.15)
         try:
             time.sleep(0.05)
@@ -219,9 +219,9 @@ def test_the_example_gripper_runs_on_modbus_and_a_reset_link_is_its_slip(
     """The pick-and-place Gripper, configured by its example run config (port changed),
     closes on Grip by the sensor, and a connection reset while Closed (monitored) is its
     declared fault event Slip."""
-    from statectl.build import load_chart
-    from statectl.devices import connect, make_driver
-    from statectl.runtime import EventReceived, Subject
+    from statectl.front.builder.build import load_chart
+    from statectl.run.devices import connect, make_driver
+    from statectl.run.runtime import EventReceived, Subject
 
     example = ROOT / "examples" / "pick-and-place"
     text = (example / "gripper-modbus.yaml").read_text().replace("5020", str(server.port))

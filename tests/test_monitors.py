@@ -6,10 +6,10 @@ from pathlib import Path
 
 import pytest
 
-from statectl.errors import StatectlError
-from statectl.model import Chart, ControlKind, EventDef, EventKind, State, Transition
-from statectl.observers import MonitorSpec
-from statectl.runtime import (
+from statectl.front.observers import MonitorSpec
+from statectl.kernel.errors import StatectlError
+from statectl.kernel.model import Chart, ControlKind, EventDef, EventKind, State, Transition
+from statectl.run.runtime import (
     EventReceived,
     FaultDetected,
     MonitorStarted,
@@ -19,7 +19,7 @@ from statectl.runtime import (
     Subject,
     attach_monitors,
 )
-from statectl.runtime.monitors import Monitor
+from statectl.run.runtime.monitors import Monitor
 
 MOTOR = Path(__file__).parent.parent / "examples" / "motor" / "motor.yaml"
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from statectl.model import EventKind
-from statectl.observers import EventSpec, derive_invokes
+from statectl.front.observers import EventSpec, derive_invokes
+from statectl.kernel.model import EventKind
 
 C, D, F = EventKind.COMMAND, EventKind.COMPLETION, EventKind.FAULT
 

@@ -22,10 +22,10 @@ from typing import Any
 
 import pytest
 
-from statectl.devices import load_run_config
-from statectl.errors import DiagnosticError
-from statectl.journal import load_device
-from statectl.opcua import layout
+from statectl.channels.opcua import layout
+from statectl.kernel.errors import DiagnosticError
+from statectl.run.devices import load_run_config
+from statectl.run.journal import load_device
 from support import MOTOR, ROOT
 
 pytest.importorskip("asyncua")
@@ -347,9 +347,9 @@ def test_the_gantry_has_sub_state_machines_and_sibling_regions() -> None:
 
 def test_the_gantry_serves_sub_state_machines_in_process() -> None:
     """Over the wire, HasSubStateMachine leads from Cycle to its two region machines."""
-    from statectl.opcua.server import OpcuaServer, OpcuaSettings
-    from statectl.runtime import SimClock
-    from statectl.system import DeviceSetup, System
+    from statectl.channels.opcua.server import OpcuaServer, OpcuaSettings
+    from statectl.run.runtime import SimClock
+    from statectl.run.system import DeviceSetup, System
 
     chart = load_device(str(GANTRY)).chart
     system = System((DeviceSetup(chart.name, chart),), SimClock())
@@ -427,10 +427,10 @@ def test_a_good_opcua_section_reads_and_never_shows_the_password(tmp_path: Path)
 
 def test_a_journalled_run_answers_a_call_once_the_step_ran(tmp_path: Path) -> None:
     """With a journal the call goes through it and returns the step's outcome."""
-    from statectl.journal import Journal
-    from statectl.opcua.server import OpcuaServer, OpcuaSettings
-    from statectl.runtime import SimClock
-    from statectl.system import DeviceSetup, System
+    from statectl.channels.opcua.server import OpcuaServer, OpcuaSettings
+    from statectl.run.journal import Journal
+    from statectl.run.runtime import SimClock
+    from statectl.run.system import DeviceSetup, System
 
     chart = load_device(str(MOTOR)).chart
     system = System((DeviceSetup(chart.name, chart),), SimClock(), Journal(tmp_path / "j.db"))
@@ -485,7 +485,7 @@ def test_a_bad_opcua_setting_fails_the_run_with_a_message(
     opc.tcp:// URL (a usage error, as --port's)."""
     import io
 
-    from statectl.cli.run import run as run_cli
+    from statectl.channels.cli.run import run as run_cli
 
     for name in ("STATECTL_OPCUA_USER", "STATECTL_OPCUA_PASSWORD"):
         monkeypatch.delenv(name, raising=False)
@@ -514,9 +514,9 @@ def test_a_bad_opcua_setting_fails_the_run_with_a_message(
 
 def test_the_stored_certificate_is_reused_by_the_next_run(motor: Served) -> None:
     """A second server on the same directory keeps the first run's certificate and key."""
-    from statectl.opcua.server import OpcuaServer, OpcuaSettings
-    from statectl.runtime import SimClock
-    from statectl.system import DeviceSetup, System
+    from statectl.channels.opcua.server import OpcuaServer, OpcuaSettings
+    from statectl.run.runtime import SimClock
+    from statectl.run.system import DeviceSetup, System
 
     files = [motor.certs / "server-cert.der", motor.certs / "server-key.pem"]
     before = [f.read_bytes() for f in files]

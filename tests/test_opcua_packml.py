@@ -17,11 +17,11 @@ pytest.importorskip("asyncua")
 
 from asyncua import Client, ua
 
-from statectl.build import build
-from statectl.cli import main
-from statectl.opcua import layout
-from statectl.opcua.packml import PACKML_URI, naming, status_of
-from statectl.profiles import find, profile_tables
+from statectl.channels.cli import main
+from statectl.channels.opcua import layout
+from statectl.channels.opcua.packml import PACKML_URI, naming, status_of
+from statectl.front.builder.build import build
+from statectl.front.profiles import find, profile_tables
 from test_opcua import PASSWORD, USER, Served, connect, run, serve
 
 

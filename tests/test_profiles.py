@@ -10,15 +10,15 @@ from typing import Any
 
 import pytest
 
-from statectl.build import build
-from statectl.devices.cia402.profile import STATUS_MASKS, PowerState, drive_step
-from statectl.errors import Severity
-from statectl.model import Chart, StateKind
-from statectl.profiles import PROFILES, find, profile_tables
-from statectl.render import render
-from statectl.rules import check_chart, check_paths
-from statectl.semantics import Machine, Snapshot, step
-from statectl.tables import load, strip_locations
+from statectl.front.builder.build import build
+from statectl.front.profiles import PROFILES, find, profile_tables
+from statectl.front.rules import check_chart, check_paths
+from statectl.front.tables import load, strip_locations
+from statectl.kernel.errors import Severity
+from statectl.kernel.model import Chart, StateKind
+from statectl.kernel.semantics import Machine, Snapshot, step
+from statectl.out.render import render
+from statectl.run.devices.cia402.profile import STATUS_MASKS, PowerState, drive_step
 
 NAMES = [p.name for p in PROFILES]
 
@@ -233,7 +233,7 @@ def test_docs_show_the_current_listing() -> None:
     """docs/profiles.md shows `statectl profiles` as it prints now."""
     import io
 
-    from statectl.cli import main
+    from statectl.channels.cli import main
 
     out = io.StringIO()
     assert main(["profiles"], out, io.StringIO()) == 0
@@ -244,7 +244,7 @@ def test_a_monitored_child_inherits_its_superstates_fault_row() -> None:
     """Moving 'monitoring required' from CiA 402's Fault free to one of its children
     still checks clean: the superstate's fault row leaves the child (no C407), and the
     child's monitor raises it for the superstate (no C408)."""
-    from statectl.model import ControlKind
+    from statectl.kernel.model import ControlKind
 
     tables = profile_tables(find("cia402"))  # type: ignore[arg-type]
 

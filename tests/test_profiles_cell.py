@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from statectl.cli import main
-from statectl.profiles import find, profile_tables
-from statectl.tables import load, strip_locations
+from statectl.channels.cli import main
+from statectl.front.profiles import find, profile_tables
+from statectl.front.tables import load, strip_locations
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "axis-drive"

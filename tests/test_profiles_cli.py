@@ -10,12 +10,12 @@ from pathlib import Path
 
 import pytest
 
-from statectl.build import build
-from statectl.cli import main
-from statectl.errors import Severity
-from statectl.profiles import PROFILES, find, profile_tables
-from statectl.rules import check_chart, check_paths
-from statectl.tables import load, save, strip_locations
+from statectl.channels.cli import main
+from statectl.front.builder.build import build
+from statectl.front.profiles import PROFILES, find, profile_tables
+from statectl.front.rules import check_chart, check_paths
+from statectl.front.tables import load, save, strip_locations
+from statectl.kernel.errors import Severity
 
 
 def run(*argv: str) -> tuple[int, str, str]:
@@ -204,7 +204,7 @@ def test_huge_hex_data_is_refused(tmp_path: Path, digits: int, refused: bool) ->
 def test_numbers_and_profile_survive_scxml(tmp_path: Path, name: str) -> None:
     """Exporting a profile to SCXML and importing it back gives the same tables: state
     numbers and the profile travel as statectl:number and statectl:profile."""
-    from statectl.scxml_io import export_file, import_file
+    from statectl.out.scxml.tables_io import export_file, import_file
 
     source = tmp_path / f"{name}.yaml"
     assert main(["new", name, "--profile", name, "--out", str(tmp_path)]) == 0

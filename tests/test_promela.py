@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from statectl.cell import load_cell_or_raise
-from statectl.explore import Composed, Kind, explore, export_promela
-from statectl.explore.promela import STEP_MARK
+from statectl.cell.explore import Composed, Kind, explore, export_promela
+from statectl.cell.explore.promela import STEP_MARK
+from statectl.cell.model import load_cell_or_raise
 
 PICK = Path(__file__).resolve().parents[1] / "examples" / "pick-and-place"
 HAVE_SPIN = shutil.which("spin") is not None and shutil.which("gcc") is not None

@@ -149,7 +149,7 @@ def test_a_plus_line_too_long_to_wait_is_a_bad_line_in_a_live_run() -> None:
     import io
     import threading
 
-    from statectl.cli.run import run
+    from statectl.channels.cli.run import run
 
     motor = ROOT / "examples" / "motor" / "motor.yaml"
     out, err = io.StringIO(), io.StringIO()

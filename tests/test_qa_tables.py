@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from statectl.cli import main
-from statectl.tables import load
+from statectl.channels.cli import main
+from statectl.front.tables import load
 from support import ROOT
 
 CLAMP = ROOT / "examples" / "clamp" / "clamp.yaml"

@@ -23,7 +23,7 @@ from typing import Any
 
 import pytest
 
-from statectl.journal import Guarantee, JournalReader, StepKind, load_device, replay
+from statectl.run.journal import Guarantee, JournalReader, StepKind, load_device, replay
 
 MOTOR = Path(__file__).parent.parent / "examples" / "motor" / "motor.yaml"
 KILLS = 10  # per guarantee: the file stays well under 30 s
@@ -31,10 +31,10 @@ DEVICES = ("M0", "M1", "M2")
 
 CHILD = r"""
 import json, random, sys, time
-from statectl.devices import SimMotor
-from statectl.journal import Journal, load_device
-from statectl.runner import DeviceSetup, System
-from statectl.runtime import SimClock
+from statectl.run.devices import SimMotor
+from statectl.run.journal import Journal, load_device
+from statectl.run.runner import DeviceSetup, System
+from statectl.run.runtime import SimClock
 
 db, path, seed, guarantee = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4]
 DEVICES = ("M0", "M1", "M2")
@@ -44,7 +44,7 @@ system = System(setups, SimClock(), Journal(db, guarantee=guarantee))
 system.start(resume=True)
 system.journal.flush()
 states = {n: sorted(s.configuration) for n, s in system.subjects.items()}
-from statectl.journal import JournalReader
+from statectl.run.journal import JournalReader
 with JournalReader(db) as r:
     last = r.last_id()
     inbox = max((x.seq for x in r.inbox()), default=0)

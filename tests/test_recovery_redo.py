@@ -13,17 +13,17 @@ from pathlib import Path
 
 import pytest
 
-from statectl.build import load_chart
-from statectl.devices import SimMotor, SimTwin
-from statectl.journal import REDO, Journal, JournalReader, StepKind, load_device, replay
-from statectl.model import Notify
-from statectl.observers import Notification
-from statectl.recovery import check_recovery
-from statectl.runner import DeviceSetup, System
-from statectl.runtime import SimClock, Subject
-from statectl.runtime.records import EventReceived, InvokeIssued, ObserverCalled, Record
-from statectl.semantics import step
-from statectl.tables import load
+from statectl.front.builder.build import load_chart
+from statectl.front.observers import Notification
+from statectl.front.recovery import check_recovery
+from statectl.front.tables import load
+from statectl.kernel.model import Notify
+from statectl.kernel.semantics import step
+from statectl.run.devices import SimMotor, SimTwin
+from statectl.run.journal import REDO, Journal, JournalReader, StepKind, load_device, replay
+from statectl.run.runner import DeviceSetup, System
+from statectl.run.runtime import SimClock, Subject
+from statectl.run.runtime.records import EventReceived, InvokeIssued, ObserverCalled, Record
 from support import PARALLEL_PRESS
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -9,13 +9,21 @@ from pathlib import Path
 
 import pytest
 
-from statectl.errors import StatectlError
-from statectl.model import Chart, ControlKind, EventDef, EventKind, State, StateKind, Transition
-from statectl.render import FORMATS, from_chart, render
-from statectl.render import dot as dot_writer
-from statectl.render import mermaid as mermaid_writer
-from statectl.render.diagram import NodeKind, edge_label, safe_id
-from statectl.render.svg import MISSING_DOT
+from statectl.kernel.errors import StatectlError
+from statectl.kernel.model import (
+    Chart,
+    ControlKind,
+    EventDef,
+    EventKind,
+    State,
+    StateKind,
+    Transition,
+)
+from statectl.out.render import FORMATS, from_chart, render
+from statectl.out.render import dot as dot_writer
+from statectl.out.render import mermaid as mermaid_writer
+from statectl.out.render.diagram import NodeKind, edge_label, safe_id
+from statectl.out.render.svg import MISSING_DOT
 
 MOTOR = Path(__file__).resolve().parent.parent / "examples" / "motor" / "motor.yaml"
 HAS_DOT = shutil.which("dot") is not None

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from statectl.build import load_chart
-from statectl.model import Chart, State, Timeout
-from statectl.render import FORMATS, from_chart, render
-from statectl.render.diagram import duration, state_details
+from statectl.front.builder.build import load_chart
+from statectl.kernel.model import Chart, State, Timeout
+from statectl.out.render import FORMATS, from_chart, render
+from statectl.out.render.diagram import duration, state_details
 
 CLAMP = Path(__file__).resolve().parent.parent / "examples" / "clamp" / "clamp.yaml"
 NEEDS_DOT = pytest.mark.skipif(shutil.which("dot") is None, reason="Graphviz 'dot' is absent")

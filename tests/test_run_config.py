@@ -12,10 +12,10 @@ from typing import Any
 
 import pytest
 
-from statectl.cli.run import TOKEN_VARIABLE, run
-from statectl.devices import DashboardConfig, load_driver_config, load_run_config
-from statectl.errors import DiagnosticError
-from statectl.runner import System
+from statectl.channels.cli.run import TOKEN_VARIABLE, run
+from statectl.kernel.errors import DiagnosticError
+from statectl.run.devices import DashboardConfig, load_driver_config, load_run_config
+from statectl.run.runner import System
 
 MOTOR = Path(__file__).parent.parent / "examples" / "motor" / "motor.yaml"
 SECRET = "config-token-0123456789"

@@ -16,7 +16,7 @@ from typing import Any
 
 import pytest
 
-from statectl.cli.run import run
+from statectl.channels.cli.run import run
 
 ROOT = Path(__file__).resolve().parents[1]
 MOTOR = ROOT / "examples" / "motor" / "motor.yaml"

@@ -14,8 +14,8 @@ from typing import Any
 
 import pytest
 
-from statectl.cli.run import run
-from statectl.runner import System
+from statectl.channels.cli.run import run
+from statectl.run.runner import System
 
 CELL = Path(__file__).parent.parent / "examples" / "pick-and-place" / "cell.yaml"
 DEVICES = ("conveyor", "arm", "gripper", "sensor")

@@ -11,10 +11,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from statectl.build import load_chart
-from statectl.errors import StatectlError, UnhandledEventError
-from statectl.model import Chart, State, StateKind, Transition
-from statectl.runtime import (
+from statectl.front.builder.build import load_chart
+from statectl.kernel.errors import StatectlError, UnhandledEventError
+from statectl.kernel.model import Chart, State, StateKind, Transition
+from statectl.kernel.semantics import Machine, initial, step
+from statectl.run.runtime import (
     EventIgnored,
     EventReceived,
     EventRejected,
@@ -28,7 +29,6 @@ from statectl.runtime import (
     Taken,
     WallClock,
 )
-from statectl.semantics import Machine, initial, step
 from support import Recorder, record_keys
 
 MOTOR = Path(__file__).parent.parent / "examples" / "motor" / "motor.yaml"
@@ -243,8 +243,8 @@ def test_no_records_are_built_when_nobody_listens(
     motor: Chart, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The hot path builds no record without a listener."""
-    import statectl.runtime.perform as perform
-    import statectl.runtime.subject as mod
+    import statectl.run.runtime.perform as perform
+    import statectl.run.runtime.subject as mod
 
     def refuse(*args: object) -> None:
         raise AssertionError("record built")

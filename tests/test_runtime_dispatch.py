@@ -13,12 +13,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from statectl.build import load_chart
-from statectl.devices import SimMotor
-from statectl.errors import StatectlError, UnhandledEventError
-from statectl.model import Chart, State, Transition
-from statectl.runtime import Record, SimClock, Subject
-from statectl.semantics import Machine, Snapshot, compiled, initial, step
+from statectl.front.builder.build import load_chart
+from statectl.kernel.errors import StatectlError, UnhandledEventError
+from statectl.kernel.model import Chart, State, Transition
+from statectl.kernel.semantics import Machine, Snapshot, compiled, initial, step
+from statectl.run.devices import SimMotor
+from statectl.run.runtime import Record, SimClock, Subject
 from support import Recorder
 
 MOTOR = Path(__file__).parent.parent / "examples" / "motor" / "motor.yaml"

@@ -11,12 +11,12 @@ from typing import Any
 
 import pytest
 
-import statectl.runtime.subject as subject_module
-from statectl.devices import connect, make_driver
-from statectl.journal import Journal
-from statectl.journal.device import JournalledDevice
-from statectl.model import Chart
-from statectl.runtime import SimClock, Subject, attach_monitors
+import statectl.run.runtime.subject as subject_module
+from statectl.kernel.model import Chart
+from statectl.run.devices import connect, make_driver
+from statectl.run.journal import Journal
+from statectl.run.journal.device import JournalledDevice
+from statectl.run.runtime import SimClock, Subject, attach_monitors
 from support import QuietFaults, Recorder
 
 #: The paper's cycle without its guarded event: every step is plannable today.

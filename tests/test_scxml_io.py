@@ -8,13 +8,13 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from statectl.build import build, chart_to_tables, load_chart, strip_origins
-from statectl.errors import DiagnosticError, Severity
-from statectl.model import Chart, ControlKind, EventKind, StateKind
-from statectl.scxml import read_scxml, write_scxml
-from statectl.scxml.reader import SCXML_NS
-from statectl.scxml_io import export_file, import_file, import_text
-from statectl.tables import DeviceTables, EventRow, StateRow
+from statectl.front.builder.build import build, chart_to_tables, load_chart, strip_origins
+from statectl.front.tables import DeviceTables, EventRow, StateRow
+from statectl.kernel.errors import DiagnosticError, Severity
+from statectl.kernel.model import Chart, ControlKind, EventKind, StateKind
+from statectl.out.scxml import read_scxml, write_scxml
+from statectl.out.scxml.reader import SCXML_NS
+from statectl.out.scxml.tables_io import export_file, import_file, import_text
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = [

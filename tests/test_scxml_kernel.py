@@ -6,8 +6,8 @@ from typing import Any
 
 import pytest
 
-from statectl.model import Action, Chart, Log, Raise, State, StateKind, Transition
-from statectl.semantics import (
+from statectl.kernel.model import Action, Chart, Log, Raise, State, StateKind, Transition
+from statectl.kernel.semantics import (
     Event,
     Machine,
     Run,

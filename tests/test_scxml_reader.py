@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from statectl.model import Block, If, Raise, Send, StateKind
-from statectl.scxml import read_scxml
-from statectl.scxml.reader import SCXML_NS
-from statectl.scxml.writer import write_scxml
+from statectl.kernel.model import Block, If, Raise, Send, StateKind
+from statectl.out.scxml import read_scxml
+from statectl.out.scxml.reader import SCXML_NS
+from statectl.out.scxml.writer import write_scxml
 
 HEAD = f'<scxml xmlns="{SCXML_NS}" version="1.0" datamodel="python"'
 

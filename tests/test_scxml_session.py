@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from statectl.scxml import Scheduler, Session, SimulatedClock, read_scxml
-from statectl.scxml.reader import SCXML_NS
-from statectl.semantics import Event
+from statectl.kernel.semantics import Event
+from statectl.out.scxml import Scheduler, Session, SimulatedClock, read_scxml
+from statectl.out.scxml.reader import SCXML_NS
 
 #: A wrapper state that logs the name of every event no inner state handles.
 LOGGER = '<transition event="*"><log expr="_event.name"/></transition>'
@@ -234,7 +234,7 @@ TIMED = (
 
 def test_a_document_and_a_device_timer_share_the_runtimes_simclock() -> None:
     """On the runtime's SimClock a document's timers and a device's fire in time order."""
-    from statectl.runtime import SimClock
+    from statectl.run.runtime import SimClock
 
     clock = SimClock()
     fired: list[tuple[str, float]] = []
@@ -249,7 +249,7 @@ def test_a_document_and_a_device_timer_share_the_runtimes_simclock() -> None:
 
 def test_a_document_on_the_wall_clock_really_waits() -> None:
     """On a WallClock a delayed send fires on the clock's thread; the scheduler delivers it."""
-    from statectl.runtime import WallClock
+    from statectl.run.runtime import WallClock
 
     clock = WallClock()
     body = TIMED.replace('delay="2s"', 'delay="50ms"')

@@ -6,9 +6,9 @@ import dataclasses
 
 import pytest
 
-from statectl.errors import Location
-from statectl.model import Chart, ControlKind, Log, Notify, State, StateKind, Transition
-from statectl.scxml import read_scxml, write_scxml
+from statectl.kernel.errors import Location
+from statectl.kernel.model import Chart, ControlKind, Log, Notify, State, StateKind, Transition
+from statectl.out.scxml import read_scxml, write_scxml
 
 MOTOR = Chart(
     name="Motor",

@@ -17,9 +17,9 @@ from typing import Any
 
 import pytest
 
-from statectl.errors import Location, StatectlError
-from statectl.expr import MAX_DEPTH, MAX_SOURCE, ExpressionRefused, compile_expression
-from statectl.scxml import RealClock, Scheduler, Session, SessionTimeout, read_scxml
+from statectl.kernel.errors import Location, StatectlError
+from statectl.kernel.expr import MAX_DEPTH, MAX_SOURCE, ExpressionRefused, compile_expression
+from statectl.out.scxml import RealClock, Scheduler, Session, SessionTimeout, read_scxml
 
 CORPUS = Path(__file__).parent / "security"
 HERE = Location("corpus", 1)

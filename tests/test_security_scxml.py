@@ -11,11 +11,11 @@ from pathlib import Path
 
 import pytest
 
-from statectl.cli import main
-from statectl.scxml import Scheduler, Session, SimulatedClock, read_scxml
-from statectl.scxml.datamodel import EvaluationError, SafeDatamodel
-from statectl.scxml.reader import SCXML_NS
-from statectl.scxml.session import MAX_INVOKE_DEPTH, MAX_SRC_BYTES
+from statectl.channels.cli import main
+from statectl.out.scxml import Scheduler, Session, SimulatedClock, read_scxml
+from statectl.out.scxml.datamodel import EvaluationError, SafeDatamodel
+from statectl.out.scxml.reader import SCXML_NS
+from statectl.out.scxml.session import MAX_INVOKE_DEPTH, MAX_SRC_BYTES
 
 HEAD = f'<scxml xmlns="{SCXML_NS}" version="1.0"'
 OUTCOME = (

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from statectl.model import Chart, EventDef, Notify, Raise, State, StateKind, Transition
-from statectl.semantics import (
+from statectl.kernel.model import Chart, EventDef, Notify, Raise, State, StateKind, Transition
+from statectl.kernel.semantics import (
     LivelockError,
     Machine,
     Snapshot,
@@ -330,7 +330,7 @@ def test_a_history_without_default_enters_what_its_parent_enters(
 
 def data_chart() -> Chart:
     """Blocked moves on Go when ``speed > 3``, else Idle handles it; ``_event`` picks Fast."""
-    from statectl.model import DataItem
+    from statectl.kernel.model import DataItem
 
     rows = """
         Blocked + Go [speed > 3] = Moving
@@ -417,7 +417,7 @@ def test_the_unhandled_reason_is_the_kernels() -> None:
 
 def test_entry_set_enters_every_region_of_a_parallel_target() -> None:
     """The kernel's entry set of a transition into a parallel state holds each region's default."""
-    from statectl.semantics import entry_set
+    from statectl.kernel.semantics import entry_set
 
     states = [
         State("Idle"),

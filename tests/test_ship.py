@@ -22,15 +22,15 @@ from typing import Any
 import pytest
 
 import pgserver
-from statectl.cli.journal import journal_export, journal_replay, journal_show
-from statectl.cli.run import run
-from statectl.cli.ship import journal_ship
-from statectl.devices.config import ShipConfig, load_run_config
-from statectl.errors import DiagnosticError
-from statectl.journal import Journal, JournalError, JournalReader, StepKind
-from statectl.journal.pg import PgJournalReader, display_url, split_url
-from statectl.journal.ship import Shipper, ShipRefused, ShipThread
-from statectl.semantics import Snapshot
+from statectl.channels.cli.journal import journal_export, journal_replay, journal_show
+from statectl.channels.cli.run import run
+from statectl.channels.cli.ship import journal_ship
+from statectl.kernel.errors import DiagnosticError
+from statectl.kernel.semantics import Snapshot
+from statectl.run.devices.config import ShipConfig, load_run_config
+from statectl.run.journal import Journal, JournalError, JournalReader, StepKind
+from statectl.run.journal.pg import PgJournalReader, display_url, split_url
+from statectl.run.journal.ship import Shipper, ShipRefused, ShipThread
 
 psycopg = pytest.importorskip("psycopg")
 

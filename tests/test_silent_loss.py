@@ -10,15 +10,15 @@ from pathlib import Path
 import openpyxl
 import pytest
 
-from statectl.build import build, load_and_build
-from statectl.cli import main
-from statectl.cli.run import run
-from statectl.devices.twin import SimTwin
-from statectl.errors import Severity
-from statectl.runtime import SimClock
-from statectl.system import DeviceSetup, System
-from statectl.tables import load
-from statectl.tables.yaml_io import read_yaml
+from statectl.channels.cli import main
+from statectl.channels.cli.run import run
+from statectl.front.builder.build import build, load_and_build
+from statectl.front.tables import load
+from statectl.front.tables.yaml_io import read_yaml
+from statectl.kernel.errors import Severity
+from statectl.run.devices.twin import SimTwin
+from statectl.run.runtime import SimClock
+from statectl.run.system import DeviceSetup, System
 
 ROOT = Path(__file__).resolve().parents[1]
 MOTOR = ROOT / "examples" / "motor" / "motor.yaml"
@@ -217,8 +217,8 @@ def test_load_and_build_of_the_motor_is_clean() -> None:
 
 def test_scxml_export_carries_the_motors_recovery_table(tmp_path: Path) -> None:
     """Export then import keeps the Motor's Recovery rules and its chart."""
-    from statectl.build import load_chart, strip_origins
-    from statectl.tables import strip_locations
+    from statectl.front.builder.build import load_chart, strip_origins
+    from statectl.front.tables import strip_locations
 
     doc, back = tmp_path / "motor.scxml", tmp_path / "motor.yaml"
     out, err = io.StringIO(), io.StringIO()
@@ -244,8 +244,8 @@ def test_scxml_export_carries_the_motors_recovery_table(tmp_path: Path) -> None:
 )
 def test_a_bad_recovery_element_is_refused_on_import(element: str, word: str) -> None:
     """A <statectl:recovery> that is no valid Recovery row is S623, with its line."""
-    from statectl.errors import DiagnosticError
-    from statectl.scxml_io import export_file, import_text
+    from statectl.kernel.errors import DiagnosticError
+    from statectl.out.scxml.tables_io import export_file, import_text
 
     text = export_file(MOTOR)
     lines = [ln for ln in text.split("\n") if "<statectl:recovery " not in ln]

@@ -15,13 +15,13 @@ from typing import Any
 
 import pytest
 
-from statectl.cell import load_cell_or_raise
-from statectl.cli.problems import Problems as ProblemCounter  # statectl run's counter
-from statectl.errors import UnhandledEventError
-from statectl.explore.replay import CellLinks
-from statectl.model import Chart
-from statectl.runner.cells import load_setups
-from statectl.runtime import (
+from statectl.cell.explore.replay import CellLinks
+from statectl.cell.model import load_cell_or_raise
+from statectl.channels.cli.problems import Problems as ProblemCounter  # statectl run's counter
+from statectl.kernel.errors import UnhandledEventError
+from statectl.kernel.model import Chart
+from statectl.run.runner.cells import load_setups
+from statectl.run.runtime import (
     MonitorStarted,
     MonitorStopped,
     ObserverCalled,
@@ -31,7 +31,7 @@ from statectl.runtime import (
     Subject,
     TraceWriter,
 )
-from statectl.runtime.trace import format_data
+from statectl.run.runtime.trace import format_data
 from support import PAPER_CYCLE, wire_motor
 
 EVENTS = (
@@ -151,8 +151,8 @@ def test_cell_links_fire_the_same_by_step_as_by_record() -> None:
 def test_the_trace_writes_each_event_with_its_own_data_however_often_it_repeats() -> None:
     """Event lines are kept per event and data: data that compares equal but prints
     differently (1 and True, 1 and 1.5) or cannot be a key still prints as format_record."""
-    from statectl.runtime import EventReceived
-    from statectl.runtime.trace import format_record
+    from statectl.run.runtime import EventReceived
+    from statectl.run.runtime.trace import format_record
 
     datas: list[Any] = [
         None,

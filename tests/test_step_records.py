@@ -13,10 +13,11 @@ from typing import Any
 
 import pytest
 
-from statectl.errors import UnhandledEventError
-from statectl.model import Chart, Invoke, Notify, State, StateKind, Transition
-from statectl.observers import Notification
-from statectl.runtime import (
+from statectl.front.observers import Notification
+from statectl.kernel.errors import UnhandledEventError
+from statectl.kernel.model import Chart, Invoke, Notify, State, StateKind, Transition
+from statectl.kernel.semantics import Unhandled
+from statectl.run.runtime import (
     ApiCall,
     EventIgnored,
     MonitorStarted,
@@ -26,7 +27,6 @@ from statectl.runtime import (
     StepRecord,
     Subject,
 )
-from statectl.semantics import Unhandled
 from support import PAPER_CYCLE, Recorder, record_keys, wire_motor
 
 STRAYS = (("Movement completion", None), ("No such event", None), ("Movement", {"amount": 1}))
@@ -234,7 +234,7 @@ def test_records_of_repeated_steps_are_listens_however_observers_log(
 ) -> None:
     """A step seen again builds its records from compiled code: still listen()'s records,
     with every notification's observer calls in place (none, one, or each logged call)."""
-    from statectl.runtime import TraceWriter
+    from statectl.run.runtime import TraceWriter
 
     chart = _rig()
     events = (("go", None), ("stop", None)) * 4 + (("go", {"speed": 2}),)

@@ -9,8 +9,8 @@ import time
 import pytest
 
 from statectl import MicrostepTaken, QueueFull, SimClock, StatectlError, System, WallClock
-from statectl.model import Chart
-from statectl.system import DeviceSetup
+from statectl.kernel.model import Chart
+from statectl.run.system import DeviceSetup
 from support import Recorder
 
 WAIT = 10.0  # a bound on the owner loop's work, not a measurement
@@ -68,7 +68,7 @@ def test_a_driver_that_refuses_an_events_data_fails_that_event_only(
     data ({amount: abc}) goes to on_failure and the loop goes on: the device's next event
     and the other devices run (the error used to leave serve() and end a --realtime or
     --dashboard run)."""
-    from statectl.devices import SimMotor
+    from statectl.run.devices import SimMotor
 
     setups = (DeviceSetup("A", motor, driver=SimMotor()), DeviceSetup("B", motor))
     system = System(setups, SimClock())
@@ -214,7 +214,7 @@ def test_send_refuses_a_journalled_system(motor: Chart, tmp_path: object) -> Non
     """A journalled System accepts through its journal: send() says to use post()."""
     from pathlib import Path
 
-    from statectl.journal import Journal
+    from statectl.run.journal import Journal
 
     system = System((DeviceSetup("M0", motor),), SimClock(), Journal(Path(str(tmp_path)) / "j.db"))
     system.start()
@@ -228,7 +228,7 @@ def test_a_driver_given_where_the_rules_go_is_refused(motor: Chart) -> None:
 
     Otherwise the driver lands in ``rules`` and the device runs with no driver at all.
     """
-    from statectl.devices import SimMotor
+    from statectl.run.devices import SimMotor
 
     with pytest.raises(TypeError, match="give a driver as driver="):
         DeviceSetup("M", motor, SimMotor())  # type: ignore[arg-type]  # the mistake tested
@@ -241,7 +241,7 @@ def test_a_realtime_run_goes_on_past_a_driver_refusing_a_line_and_exits_1() -> N
     import io
     from pathlib import Path
 
-    from statectl.cli.run import run
+    from statectl.channels.cli.run import run
 
     motor = Path(__file__).parent.parent / "examples" / "motor" / "motor.yaml"
     out, err = io.StringIO(), io.StringIO()
@@ -264,8 +264,8 @@ def test_a_driver_failure_on_the_journal_writers_drain_is_reported(
     print a traceback on the writer's thread and count for nothing)."""
     from pathlib import Path
 
-    from statectl.devices import SimMotor
-    from statectl.journal import Journal
+    from statectl.run.devices import SimMotor
+    from statectl.run.journal import Journal
 
     journal = Journal(Path(str(tmp_path)) / "j.db", guarantee="durable-first")
     system = System((DeviceSetup("A", motor, driver=SimMotor()),), SimClock(), journal)

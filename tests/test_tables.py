@@ -6,10 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from statectl.build import build
-from statectl.errors import Location
-from statectl.model import ControlKind, EventKind
-from statectl.tables import (
+from statectl.front.builder.build import build
+from statectl.front.tables import (
     DeviceTables,
     Format,
     RecoveryRow,
@@ -20,8 +18,10 @@ from statectl.tables import (
     save,
     strip_locations,
 )
-from statectl.tables.md_io import escape, split_row, unescape
-from statectl.tables.schema import format_literal, parse_literal
+from statectl.front.tables.md_io import escape, split_row, unescape
+from statectl.front.tables.schema import format_literal, parse_literal
+from statectl.kernel.errors import Location
+from statectl.kernel.model import ControlKind, EventKind
 
 MOTOR = Path(__file__).resolve().parent.parent / "examples" / "motor"
 MOTOR_YAML = MOTOR / "motor.yaml"
@@ -153,7 +153,7 @@ def test_xlsx_rows_name_sheet_and_row() -> None:
 
 def test_md_rows_point_at_their_line() -> None:
     """Markdown locations are the line of the table row."""
-    from statectl.tables.md_io import read_md
+    from statectl.front.tables.md_io import read_md
 
     text = dump(motor(), "md")
     assert isinstance(text, str)
@@ -344,8 +344,8 @@ def test_docs_recovery_example_is_the_motors(tmp_path: Path) -> None:
 
 def test_docs_list_every_code() -> None:
     """Every T1xx and B2xx code the code defines is documented in docs/tables.md."""
-    from statectl.build import CODES as BUILD_CODES
-    from statectl.tables import CODES as TABLE_CODES
+    from statectl.front.builder.build import CODES as BUILD_CODES
+    from statectl.front.tables import CODES as TABLE_CODES
 
     text = DOCS.read_text(encoding="utf-8")
     assert [c for c in (*TABLE_CODES, *BUILD_CODES) if f"| {c} |" not in text] == []

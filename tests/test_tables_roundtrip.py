@@ -8,10 +8,9 @@ from pathlib import Path
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from statectl.build import build
-from statectl.model import ControlKind, EventKind, Notify, StateKind
-from statectl.observers import DRIVING_KINDS
-from statectl.tables import (
+from statectl.front.builder.build import build
+from statectl.front.observers import DRIVING_KINDS
+from statectl.front.tables import (
     DeviceTables,
     EventRow,
     RecoveryRow,
@@ -20,11 +19,12 @@ from statectl.tables import (
     save,
     strip_locations,
 )
-from statectl.tables.csv_io import dump_csv, read_csv
-from statectl.tables.md_io import dump_md, read_md
-from statectl.tables.timeouts import format_timeout
-from statectl.tables.xlsx_io import dump_xlsx, read_xlsx
-from statectl.tables.yaml_io import dump_yaml, read_yaml
+from statectl.front.tables.csv_io import dump_csv, read_csv
+from statectl.front.tables.md_io import dump_md, read_md
+from statectl.front.tables.timeouts import format_timeout
+from statectl.front.tables.xlsx_io import dump_xlsx, read_xlsx
+from statectl.front.tables.yaml_io import dump_yaml, read_yaml
+from statectl.kernel.model import ControlKind, EventKind, Notify, StateKind
 
 # Names: letters and digits of any script, plus punctuation people put in names.
 # No commas (they separate list cells), no line breaks, no control characters.

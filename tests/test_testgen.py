@@ -18,9 +18,9 @@ from pathlib import Path
 import pytest
 
 import statectl
-from statectl.cli import main
-from statectl.model import Chart, Notify, StateKind
-from statectl.testgen import Expect, Suite, generate
+from statectl.channels.cli import main
+from statectl.kernel.model import Chart, Notify, StateKind
+from statectl.out.testgen import Expect, Suite, generate
 from support import MOTOR, ROOT
 
 EXAMPLES = ROOT / "examples"
@@ -44,7 +44,7 @@ events:
 """
 
 
-PLUGIN = ("-p", "statectl.testgen.plugin", "-p", "no:cacheprovider")
+PLUGIN = ("-p", "statectl.out.testgen.plugin", "-p", "no:cacheprovider")
 
 
 def run_pytest(directory: Path, *args: str) -> subprocess.CompletedProcess[str]:
@@ -158,7 +158,7 @@ def test_a_nan_data_value_is_written_as_code(tmp_path: Path) -> None:
 @pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf, 1.5, -0.0])
 def test_every_float_is_written_as_code_that_gives_it_back(value: float) -> None:
     """The generated module's float values evaluate to the same float, also nan and inf."""
-    from statectl.testgen.writer import _lit
+    from statectl.out.testgen.writer import _lit
 
     back = eval(_lit(value), {})  # the text the module holds, as Python reads it
     assert repr(back) == repr(value)
@@ -205,7 +205,7 @@ def test_generated_tests_fail_against_a_broken_driver(
 ) -> None:
     """The Motor's rows tests, unchanged, fail when a conftest supplies a driver with a bug."""
     generate(MOTOR, "rows", tmp_path)
-    conftest = "import pytest\nfrom statectl.devices import SimTwin\n"
+    conftest = "import pytest\nfrom statectl.run.devices import SimTwin\n"
     conftest += textwrap.dedent(body)
     conftest += (
         "\n\n@pytest.fixture\ndef statectl_driver(statectl_chart):\n"
@@ -246,7 +246,7 @@ def test_rows_tests_catch_a_wrong_api_for_every_method(
     """A driver serving one observer method with another's API fails the rows module."""
     generate(file, "rows", tmp_path)
     (tmp_path / "conftest.py").write_text(
-        "import pytest\nfrom statectl.devices import SimTwin\n\n\n"
+        "import pytest\nfrom statectl.run.devices import SimTwin\n\n\n"
         "class Broken(SimTwin):\n"
         "    def log_call(self, function, *args):\n"
         f"        super().log_call('Wrong' if function == {method!r} else function, *args)\n"
@@ -277,7 +277,7 @@ def test_pyproject_registers_the_plugin() -> None:
     """The pytest11 entry point names the plugin module by its own name (so -p is a no-op)."""
     project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
     points = project["project"]["entry-points"]["pytest11"]
-    assert points == {"statectl.testgen.plugin": "statectl.testgen.plugin"}
+    assert points == {"statectl.out.testgen.plugin": "statectl.out.testgen.plugin"}
 
 
 # -- the commands ----------------------------------------------------------------------------
@@ -378,7 +378,7 @@ def test_hypothesis_module_shrinks_to_the_failing_event(tmp_path: Path) -> None:
     """Against a driver with a wrong API for Error, Hypothesis fails with Movement, Error."""
     cli("testgen", str(MOTOR), "--hypothesis", "--out", str(tmp_path))
     (tmp_path / "conftest.py").write_text(
-        "import pytest\nfrom statectl.devices import SimTwin\n\n\n"
+        "import pytest\nfrom statectl.run.devices import SimTwin\n\n\n"
         "class Broken(SimTwin):\n"
         "    def log_call(self, function, *args):\n"
         "        super().log_call('Wrong' if function == 'Error' else function, *args)\n"
@@ -465,8 +465,8 @@ def test_the_docs_hand_written_module_runs(tmp_path: Path) -> None:
 
 def test_strict_fails_an_event_the_tables_neither_handle_nor_ignore(tmp_path: Path) -> None:
     """With strict, a missed state x event pair fails naming both; without, it is ignored."""
-    from statectl.build import load_chart
-    from statectl.testgen import DeviceUnderTest
+    from statectl.front.builder.build import load_chart
+    from statectl.out.testgen import DeviceUnderTest
 
     tables = tmp_path / "motor.yaml"
     text = MOTOR.read_text(encoding="utf-8")
@@ -487,7 +487,7 @@ def test_strict_fails_an_event_the_tables_neither_handle_nor_ignore(tmp_path: Pa
 
 def run_suite(suite: Suite, chart: Chart) -> int:
     """How many of the suite's tests fail on a device running ``chart`` (the twin)."""
-    from statectl.testgen import DeviceUnderTest
+    from statectl.out.testgen import DeviceUnderTest
 
     failed = 0
 
@@ -539,7 +539,7 @@ def behaviour(chart: Chart) -> set[tuple[object, ...]]:
     A mutant with the same behaviour as the original is equivalent (entering Traversing
     enters the whole parallel Cycle, as entering Cycle does): no test can tell them apart.
     """
-    from statectl.testgen.paths import explore, leaves, notifies
+    from statectl.out.testgen.paths import explore, leaves, notifies
 
     g = explore(chart)
     return {
@@ -571,8 +571,8 @@ def test_generated_set_fails_for_every_seeded_wrong_transition(
     file: Path, criterion: str, missed: list[str]
 ) -> None:
     """Generated from the right tables, the set fails on every non-equivalent mutant."""
-    from statectl.build import load_chart
-    from statectl.testgen import cases_for, explore
+    from statectl.front.builder.build import load_chart
+    from statectl.out.testgen import cases_for, explore
 
     chart = load_chart(file)
     suite = cases_for(explore(chart), criterion)
@@ -654,8 +654,8 @@ def test_coverage_file_of_other_tables_is_refused(tmp_path: Path) -> None:
 
 
 def test_public_names_resolve() -> None:
-    """Every name in statectl.testgen.__all__ is importable through the lazy package."""
-    import statectl.testgen as tg
+    """Every name in statectl.out.testgen.__all__ is importable through the lazy package."""
+    import statectl.out.testgen as tg
 
     assert [n for n in tg.__all__ if getattr(tg, n, None) is None] == []
     with pytest.raises(AttributeError, match="no attribute 'nope'"):
@@ -665,7 +665,7 @@ def test_public_names_resolve() -> None:
 CIA402_CONFTEST = '''
 import pytest
 
-from statectl.devices import make_driver
+from statectl.run.devices import make_driver
 
 
 @pytest.fixture

@@ -13,11 +13,11 @@ from pathlib import Path
 
 import pytest
 
-from statectl.build import load_chart
-from statectl.cell import load_cell_or_raise
-from statectl.testgen import generate
-from statectl.testgen.cellharness import CellUnderTest, holds
-from statectl.testgen.harness import DeviceUnderTest
+from statectl.cell.model import load_cell_or_raise
+from statectl.front.builder.build import load_chart
+from statectl.out.testgen import generate
+from statectl.out.testgen.cellharness import CellUnderTest, holds
+from statectl.out.testgen.harness import DeviceUnderTest
 from support import MOTOR
 from test_testgen import (  # noqa: F401  # journal: a fixture used below
     cli,

@@ -12,14 +12,14 @@ from pathlib import Path
 
 import pytest
 
-from statectl.testgen import generate
-from statectl.testgen.paths import explore
+from statectl.out.testgen import generate
+from statectl.out.testgen.paths import explore
 from test_codegen_scale import ring_yaml
 
 SRC = Path(__file__).resolve().parent.parent / "src"
-PLUGIN = ("-p", "statectl.testgen.plugin", "-p", "no:cacheprovider")
+PLUGIN = ("-p", "statectl.out.testgen.plugin", "-p", "no:cacheprovider")
 
-paths_module = importlib.import_module("statectl.testgen.paths")
+paths_module = importlib.import_module("statectl.out.testgen.paths")
 
 
 def _module(n: int, tmp_path: Path) -> Path:
@@ -45,7 +45,7 @@ def test_explore_steps_the_kernel_only_for_offered_or_ignored_events(
     """Exploring a 200-state ring asks the kernel about each node's offered and ignored
     events only, and every node still lists what it was asked (the rest is quiet)."""
     tables = ring_yaml(200, tmp_path / "ring.yaml")
-    from statectl.build import load_chart
+    from statectl.front.builder.build import load_chart
 
     chart = load_chart(tables)
     calls = []

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from statectl.build import load_chart
-from statectl.testgen import generate
-from statectl.testgen.harness import DeviceUnderTest
+from statectl.front.builder.build import load_chart
+from statectl.out.testgen import generate
+from statectl.out.testgen.harness import DeviceUnderTest
 from support import ROOT
 from test_testgen import counts, functions, run_pytest
 

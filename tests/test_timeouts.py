@@ -7,19 +7,25 @@ from pathlib import Path
 
 import pytest
 
-from statectl.build import build, chart_to_tables, load_and_build, load_chart, strip_origins
-from statectl.errors import Severity
-from statectl.explore import verify_cell
-from statectl.model import Chart, Timeout
-from statectl.rules import check_paths
-from statectl.runtime import SimClock, Subject
-from statectl.runtime.clock import WallClock
-from statectl.runtime.records import EventReceived, Record
-from statectl.scxml import Scheduler, Session, SimulatedClock
-from statectl.scxml_io import read_scxml, write_scxml
-from statectl.semantics import Event
-from statectl.tables import load, save, strip_locations
-from statectl.tables.timeouts import format_timeout, parse_timeout
+from statectl.cell.explore import verify_cell
+from statectl.front.builder.build import (
+    build,
+    chart_to_tables,
+    load_and_build,
+    load_chart,
+    strip_origins,
+)
+from statectl.front.rules import check_paths
+from statectl.front.tables import load, save, strip_locations
+from statectl.front.tables.timeouts import format_timeout, parse_timeout
+from statectl.kernel.errors import Severity
+from statectl.kernel.model import Chart, Timeout
+from statectl.kernel.semantics import Event
+from statectl.out.scxml import Scheduler, Session, SimulatedClock
+from statectl.out.scxml.tables_io import read_scxml, write_scxml
+from statectl.run.runtime import SimClock, Subject
+from statectl.run.runtime.clock import WallClock
+from statectl.run.runtime.records import EventReceived, Record
 
 ROOT = Path(__file__).resolve().parents[1]
 CLAMP = ROOT / "examples" / "clamp" / "clamp.yaml"
@@ -574,7 +580,7 @@ def test_a_system_settles_through_a_timeout(
     tmp_path: Path, limit: float, expected: set[str]
 ) -> None:
     """System.settle() waits for a timeout as for work in flight, within its limit."""
-    from statectl.system import DeviceSetup, System
+    from statectl.run.system import DeviceSetup, System
 
     system = System((DeviceSetup("D", door_chart(tmp_path)),), SimClock())
     system.start()

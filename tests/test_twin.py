@@ -9,16 +9,16 @@ from typing import Any
 
 import pytest
 
-from statectl.build import load_chart
-from statectl.cli.run import run
-from statectl.demo import run_demo
-from statectl.devices import SimMotor, SimTwin, connect, load_driver_config, make_driver
-from statectl.devices.base import Driver
-from statectl.errors import DiagnosticError, StatectlError
-from statectl.model import Chart
-from statectl.observers import Notification
-from statectl.runtime import Record, SimClock, Subject
-from statectl.runtime.records import MicrostepTaken
+from statectl.channels.cli.demo import run_demo
+from statectl.channels.cli.run import run
+from statectl.front.builder.build import load_chart
+from statectl.front.observers import Notification
+from statectl.kernel.errors import DiagnosticError, StatectlError
+from statectl.kernel.model import Chart
+from statectl.run.devices import SimMotor, SimTwin, connect, load_driver_config, make_driver
+from statectl.run.devices.base import Driver
+from statectl.run.runtime import Record, SimClock, Subject
+from statectl.run.runtime.records import MicrostepTaken
 from support import PARALLEL_PRESS
 
 ROOT = Path(__file__).parent.parent
@@ -317,7 +317,7 @@ class _FiresAtOnce:
     def call_later(self, delay: float, fn: Any, *, background: bool = False) -> Any:
         import threading
 
-        from statectl.runtime.clock import Timer
+        from statectl.run.runtime.clock import Timer
 
         def run() -> None:
             try:
@@ -354,7 +354,7 @@ def test_eight_threads_notifying_a_twin_on_a_wall_clock_lose_no_completion() -> 
     import threading
     import time
 
-    from statectl.runtime import WallClock
+    from statectl.run.runtime import WallClock
 
     chart = load_chart(MOTOR)
     errors: list[BaseException] = []

@@ -9,12 +9,12 @@ from dataclasses import dataclass
 
 import pytest
 
-from statectl.demo import motor_chart
-from statectl.devices import SimMotor
-from statectl.render.diagram import from_chart
-from statectl.runner import DeviceSetup, System
-from statectl.runtime import SimClock
-from statectl.web import Dashboard, fallback_svg
+from statectl.channels.cli.demo import motor_chart
+from statectl.channels.web import Dashboard, fallback_svg
+from statectl.out.render.diagram import from_chart
+from statectl.run.devices import SimMotor
+from statectl.run.runner import DeviceSetup, System
+from statectl.run.runtime import SimClock
 
 TOKEN = "test-token"
 

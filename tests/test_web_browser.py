@@ -14,11 +14,11 @@ from pathlib import Path
 
 import pytest
 
-from statectl.demo import motor_chart
-from statectl.devices import SimMotor
-from statectl.runner import DeviceSetup, System
-from statectl.runtime import SimClock
-from statectl.web import Dashboard
+from statectl.channels.cli.demo import motor_chart
+from statectl.channels.web import Dashboard
+from statectl.run.devices import SimMotor
+from statectl.run.runner import DeviceSetup, System
+from statectl.run.runtime import SimClock
 
 sync_api = pytest.importorskip("playwright.sync_api")
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
@@ -118,7 +118,7 @@ MIN_SCALE = 0.6
 
 def diagram_sizes(chart_path: Path | None, width: int) -> tuple[float, float, float, float]:
     """Drawn width, natural width, card width, and drawn width after a click, in CSS px."""
-    from statectl.build import load_chart
+    from statectl.front.builder.build import load_chart
 
     chart = motor_chart() if chart_path is None else load_chart(chart_path)
     system = System((DeviceSetup(chart.name, chart),), SimClock())

@@ -19,11 +19,11 @@ from dataclasses import dataclass
 
 import pytest
 
-from statectl.demo import motor_chart
-from statectl.devices import SimMotor
-from statectl.runner import DeviceSetup, System
-from statectl.runtime import SimClock
-from statectl.web import Dashboard, Limits
+from statectl.channels.cli.demo import motor_chart
+from statectl.channels.web import Dashboard, Limits
+from statectl.run.devices import SimMotor
+from statectl.run.runner import DeviceSetup, System
+from statectl.run.runtime import SimClock
 
 TOKEN = "limits-test-token"
 SMALL = Limits(
@@ -445,7 +445,7 @@ def test_publishing_never_waits_for_a_stalled_loop_and_an_overrun_drops_every_st
 
     A page that stayed would miss messages, so none stays: it reconnects to a snapshot.
     """
-    from statectl.web.server import PENDING_MAX
+    from statectl.channels.web.server import PENDING_MAX
 
     reply = server.stream()
     deadline = time.monotonic() + 5

@@ -11,10 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from statectl.devices import load_run_config
-from statectl.errors import DiagnosticError, StatectlError
-from statectl.explore.replay import load_replay
-from statectl.runner import is_cell, parse_event_line
+from statectl.cell.explore.replay import load_replay
+from statectl.kernel.errors import DiagnosticError, StatectlError
+from statectl.run.devices import load_run_config
+from statectl.run.runner import is_cell, parse_event_line
 
 #: A small alias bomb: nine references per level, seven levels (4.7 million leaves).
 BOMB = (
@@ -86,7 +86,7 @@ EXPONENTS = [
 def test_a_number_with_an_exponent_is_a_float(text: str, value: object, c_parser: bool) -> None:
     """`1e3` in any YAML statectl reads is the float 1000.0 with either parser, and
     texts that only look like it stay what they were."""
-    from statectl.tables import safeyaml
+    from statectl.front.tables import safeyaml
 
     loader = safeyaml._Loader if c_parser else safeyaml._PyLoader
     got = safeyaml.load_value(f"{{x: {text}}}", loader)

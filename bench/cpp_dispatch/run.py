@@ -101,8 +101,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     sys.path.insert(0, str(ROOT / "src"))
-    from statectl.build import load_chart
-    from statectl.codegen import generate
+    from statectl.front.builder.build import load_chart
+    from statectl.out.codegen import generate
 
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp)

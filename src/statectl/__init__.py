@@ -13,7 +13,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from statectl.errors import (
+from statectl.kernel.errors import (
     Diagnostic,
     DiagnosticError,
     Location,
@@ -21,13 +21,13 @@ from statectl.errors import (
     StatectlError,
     UnhandledEventError,
 )
-from statectl.model import Chart, ControlKind, EventKind, State, StateKind, Transition
+from statectl.kernel.model import Chart, ControlKind, EventKind, State, StateKind, Transition
 
 if TYPE_CHECKING:
     from statectl.api import check, load
-    from statectl.devices import DeviceDriver, connect, make_driver
-    from statectl.observers import Notification, Observer
-    from statectl.runtime import (
+    from statectl.front.observers import Notification, Observer
+    from statectl.run.devices import DeviceDriver, connect, make_driver
+    from statectl.run.runtime import (
         EventIgnored,
         EventReceived,
         EventRejected,
@@ -47,7 +47,7 @@ if TYPE_CHECKING:
         Taken,
         WallClock,
     )
-    from statectl.system import DeviceSetup, QueueFull, System
+    from statectl.run.system import DeviceSetup, QueueFull, System
 
 __version__ = "0.1.0"
 
@@ -55,14 +55,14 @@ __version__ = "0.1.0"
 _LAZY = {
     "check": "statectl.api",
     "load": "statectl.api",
-    "DeviceDriver": "statectl.devices",
-    "connect": "statectl.devices",
-    "make_driver": "statectl.devices",
-    "Notification": "statectl.observers",
-    "Observer": "statectl.observers",
-    "System": "statectl.system",
-    "DeviceSetup": "statectl.system",
-    "QueueFull": "statectl.system",
+    "DeviceDriver": "statectl.run.devices",
+    "connect": "statectl.run.devices",
+    "make_driver": "statectl.run.devices",
+    "Notification": "statectl.front.observers",
+    "Observer": "statectl.front.observers",
+    "System": "statectl.run.system",
+    "DeviceSetup": "statectl.run.system",
+    "QueueFull": "statectl.run.system",
     **dict.fromkeys(
         (
             "EventIgnored",
@@ -84,7 +84,7 @@ _LAZY = {
             "Taken",
             "WallClock",
         ),
-        "statectl.runtime",
+        "statectl.run.runtime",
     ),
 }
 

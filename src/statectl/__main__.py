@@ -2,6 +2,6 @@
 
 import sys
 
-from statectl.cli import main
+from statectl.channels.cli import main
 
 sys.exit(main())

@@ -1,7 +1,7 @@
 """The two verbs of the stable API that are not classes: ``load`` and ``check``.
 
 Both take paths, as the command line does, and speak the project's diagnostics:
-``load`` raises :class:`~statectl.errors.DiagnosticError` carrying every problem
+``load`` raises :class:`~statectl.kernel.errors.DiagnosticError` carrying every problem
 (a missing file is T110 for a device file, S607 for an SCXML document), ``check``
 returns them all (errors, warnings and info) and never raises for a broken file.
 """
@@ -11,8 +11,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from statectl.errors import Diagnostic
-from statectl.model import Chart
+from statectl.kernel.errors import Diagnostic
+from statectl.kernel.model import Chart
 
 __all__ = ["check", "load"]
 
@@ -22,10 +22,10 @@ _SCXML = (".scxml", ".xml")
 def load(path: str | os.PathLike[str]) -> Chart:
     """The chart of a device file (YAML, CSV pair, XLSX, Markdown) or an SCXML document."""
     if Path(path).suffix.lower() in _SCXML:
-        from statectl.scxml import read_scxml_file
+        from statectl.out.scxml import read_scxml_file
 
         return read_scxml_file(os.fspath(path))
-    from statectl.build import load_chart
+    from statectl.front.builder.build import load_chart
 
     return load_chart(path)
 
@@ -36,8 +36,8 @@ def check(*paths: str | os.PathLike[str]) -> list[Diagnostic]:
     A cell file or a run config is C415 (use verify, or run --config), as on the
     command line, not the device loader's T102.
     """
-    from statectl.cli.kinds import cell_given_to_check
-    from statectl.rules import check_paths
+    from statectl.channels.cli.kinds import cell_given_to_check
+    from statectl.front.rules import check_paths
 
     found: list[Diagnostic] = []
     for given in paths:

@@ -1,4 +1,4 @@
-"""Global expressions (rule 4 of :mod:`statectl.cell`): the safe expression language
+"""Global expressions (rule 4 of :mod:`statectl.cell.model`): the safe expression language
 restricted to ``In('device.State')``, ``and``, ``or``, ``not``, ``True`` and ``False``,
 checked against the cell's devices (V807, V808, V810, V811). Its own module because
 every host of a cell (the explorer, SPIN) relies on this one check.
@@ -10,9 +10,9 @@ import ast
 from collections.abc import Mapping
 
 from statectl.cell.values import GlobalExpr
-from statectl.errors import Diagnostic, Location, Severity
-from statectl.expr import compile_expression
-from statectl.model import Chart
+from statectl.kernel.errors import Diagnostic, Location, Severity
+from statectl.kernel.expr import compile_expression
+from statectl.kernel.model import Chart
 
 
 def _d(code: str, where: Location, message: str, hint: str = "") -> Diagnostic:

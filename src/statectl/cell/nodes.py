@@ -13,7 +13,7 @@ Rules:
    sent to the link's source device instead).
 3. Without ``nodes`` nothing changes: one process. ``on_peer_down``/``dropped``
    there are checked but have no effect (V826, a warning).
-4. This module only reads; :mod:`statectl.distributed` runs nodes. The values are
+4. This module only reads; :mod:`statectl.channels.distributed` runs nodes. The values are
    frozen and aligned with ``Cell.links`` (``Nodes.delivery[i]`` is link ``i``'s),
    so ``verify`` can read them as well.
 """
@@ -28,8 +28,8 @@ from typing import Any
 import yaml
 
 from statectl.cell.expressions import _d
-from statectl.errors import Diagnostic, Location, Severity
-from statectl.model import Chart
+from statectl.kernel.errors import Diagnostic, Location, Severity
+from statectl.kernel.model import Chart
 
 __all__ = [
     "DEFAULT_LEASE",

@@ -27,9 +27,9 @@ from typing import Any
 import yaml
 
 from statectl.cell.expressions import _d
-from statectl.errors import Diagnostic, Location
-from statectl.model import Chart
-from statectl.tables import safeyaml
+from statectl.front.tables import safeyaml
+from statectl.kernel.errors import Diagnostic, Location
+from statectl.kernel.model import Chart
 
 __all__ = [
     "LINK_OPTION_KEYS",

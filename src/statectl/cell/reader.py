@@ -1,6 +1,6 @@
 """Reading a cell file's sections from YAML nodes: devices (V805, V806, V815), links
 (V813), environment inputs (V812), invariants and recovery goals (V814), each problem
-a V8xx diagnostic with its line. Split from :func:`statectl.cell.load_cell`, which
+a V8xx diagnostic with its line. Split from :func:`statectl.cell.model.load_cell`, which
 parses the file and puts the sections together.
 """
 
@@ -11,13 +11,13 @@ from pathlib import Path
 
 import yaml
 
-from statectl.build import load_and_build
 from statectl.cell.expressions import _d, parse_global
 from statectl.cell.nodes import LINK_KEYS
 from statectl.cell.options import LINK_OPTION_KEYS, link_options, send_and_data
 from statectl.cell.values import DeviceRef, EnvInput, GlobalExpr, InputKind, Link, Trigger
-from statectl.errors import Diagnostic, Location, Severity, has_errors
-from statectl.model import Chart, ControlKind, EventKind
+from statectl.front.builder.build import load_and_build
+from statectl.kernel.errors import Diagnostic, Location, Severity, has_errors
+from statectl.kernel.model import Chart, ControlKind, EventKind
 
 # -- YAML reading ---------------------------------------------------------------------------
 

@@ -10,14 +10,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from statectl.codes import family
-from statectl.errors import Location
-from statectl.model import Chart
+from statectl.kernel.codes import family
+from statectl.kernel.errors import Location
+from statectl.kernel.model import Chart
 
 if TYPE_CHECKING:
     from statectl.cell.nodes import Nodes
 
-#: Code -> one-line summary of every V8xx code (a view of statectl.codes.REGISTRY).
+#: Code -> one-line summary of every V8xx code (a view of statectl.kernel.codes.REGISTRY).
 CODES: Mapping[str, str] = family("V8")
 
 TOP_KEYS = (

@@ -1,0 +1,509 @@
+"""Breadth-first search of a cell's global states, and the checks made over it.
+
+Rules:
+1. States are explored in breadth-first order from the initial global states,
+   so the first time a property fails is at a shortest trace; each state keeps
+   only its parent's number, and traces are rebuilt by re-running the one
+   stimulus that links parent to child.
+2. A stimulus whose every outcome fires no link and that has no ``when`` is a
+   precomputed xor on the packed state; the rest run the cascade of
+   :meth:`Composed.branches`.
+3. A deadlock is a global state in which no stimulus happens (rule 3 of
+   :mod:`statectl.cell.explore.compose`): every input would be ignored or refused.
+4. Recovery is checked over the explored graph: a backward search from the goal
+   states; a state where ``from`` holds that the search does not reach fails.
+   With ``--max-states`` reached, deadlocks and recovery are not judged.
+5. A step the kernel refuses because a guard raised (``Unhandled.GUARD_ERROR``,
+   as the runtime refuses it) is a failure, whether a stimulus or a link delivers
+   the event: never read as the guard being false.
+6. ``max_states`` bounds the stored states; the report then says incomplete.
+   ``statectl verify`` bounds it by :data:`DEFAULT_MAX_STATES` unless told otherwise,
+   so a cell whose product is too big for memory ends with a report, not the OOM killer.
+"""
+
+from __future__ import annotations
+
+import resource
+import time
+from array import array
+from collections.abc import Callable
+from dataclasses import dataclass
+from itertools import pairwise
+
+from statectl.cell.explore.compose import Branch, Composed, Predicate, Stimulus
+from statectl.cell.explore.report import Finding, Kind, Report, Trace, TraceStep, Unanticipated
+from statectl.cell.model import Cell, InputKind
+from statectl.kernel.semantics import Unhandled
+
+__all__ = ["DEFAULT_MAX_STATES", "Progress", "explore", "trace_to"]
+
+#: The states ``statectl verify`` stores unless ``--max-states`` says otherwise: about
+#: 2 GiB at some 110 bytes a state (a 12-Motor cell has 6**12, far past any memory).
+DEFAULT_MAX_STATES = 20_000_000
+
+
+@dataclass(frozen=True, slots=True)
+class Progress:
+    states: int
+    expanded: int
+    depth: int
+    seconds: float
+
+
+def _peak_bytes() -> int:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+
+class _Tables:
+    """Per device and local id: xor deltas, liveness, cascading and unanticipated stimuli."""
+
+    def __init__(self, model: Composed) -> None:
+        self.simple: list[tuple[tuple[int, ...], ...]] = []
+        self.live: list[tuple[bool, ...]] = []
+        self.complex: list[tuple[tuple[tuple[int, Stimulus], ...], ...]] = []
+        self.unant: list[tuple[tuple[tuple[int, Stimulus], ...], ...]] = []
+        # per device and local id: the stimuli some of whose outcomes are guard errors
+        self.errors: list[tuple[tuple[Stimulus, ...], ...]] = []
+        for d, space in enumerate(model.spaces):
+            mine = [(i, s) for i, s in enumerate(model.stimuli) if s.device == d]
+            simple: list[tuple[int, ...]] = []
+            live: list[bool] = []
+            cx: list[tuple[tuple[int, Stimulus], ...]] = []
+            un: list[tuple[tuple[int, Stimulus], ...]] = []
+            errs: list[tuple[Stimulus, ...]] = []
+            for lid in range(model.mask[d] + 1):
+                deltas: list[int] = []
+                alive = False
+                cxs: list[tuple[int, Stimulus]] = []
+                uns: list[tuple[int, Stimulus]] = []
+                err: list[Stimulus] = []
+                if lid < len(space.snapshots):
+                    for i, s in mine:
+                        if not model.enabled_locally(s, lid):
+                            continue
+                        outs = space.outcomes(lid, s.event)
+                        if any(o.unhandled is Unhandled.GUARD_ERROR for o in outs):
+                            err.append(s)
+                        handled = [o for o in outs if o.handled]
+                        if not handled:
+                            if outs and all(o.unhandled is Unhandled.NO_TRANSITION for o in outs):
+                                uns.append((i, s))
+                            continue
+                        if (
+                            s.when >= 0
+                            or any(model.fires(d, o) for o in handled)
+                            or any(model.condition(d, o) is not None for o in outs)
+                        ):
+                            cxs.append((i, s))
+                            continue
+                        alive = True
+                        for o in handled:
+                            if o.target != lid:
+                                deltas.append((lid ^ o.target) << model.shift[d])
+                simple.append(tuple(dict.fromkeys(deltas)))
+                live.append(alive)
+                cx.append(tuple(cxs))
+                un.append(tuple(uns))
+                errs.append(tuple(err))
+            self.simple.append(tuple(simple))
+            self.live.append(tuple(live))
+            self.complex.append(tuple(cx))
+            self.unant.append(tuple(un))
+            self.errors.append(tuple(errs))
+
+
+def trace_to(
+    model: Composed,
+    parent: array[int],
+    states: list[int],
+    i: int,
+    last: Stimulus | None = None,
+    match: Callable[[object], bool] | None = None,
+) -> Trace:
+    """The trace from the initial state to state ``i`` (then ``last``, if given)."""
+    path: list[int] = []
+    while i >= 0:
+        path.append(i)
+        i = parent[i]
+    path.reverse()
+    steps: list[TraceStep] = []
+    for a, b in pairwise(path):
+        g, h = states[a], states[b]
+        steps.append(_step_between(model, g, lambda br, h=h: br.state == h))
+    if last is not None:
+        g = states[path[-1]]
+        steps.append(_step_between(model, g, match or (lambda br: True), last))
+    return Trace(model.names, model.labels(states[path[0]]), tuple(steps))
+
+
+def _step_between(
+    model: Composed, g: int, ok: Callable[..., bool], only: Stimulus | None = None
+) -> TraceStep:
+    for s in model.enabled(g) if only is None else [only]:
+        for br in model.branches(g, s, detail=True):
+            if ok(br):
+                return TraceStep(
+                    s.kind, model.names[s.device], s.event, br.deliveries, model.labels(br.state)
+                )
+    raise AssertionError("no stimulus links two states of the explored graph")
+
+
+def explore(
+    cell: Cell,
+    *,
+    max_states: int | None = None,
+    progress: Callable[[Progress], None] | None = None,
+    model: Composed | None = None,
+) -> Report:
+    """Explore every reachable global state of ``cell`` and check its properties."""
+    t0 = time.perf_counter()
+    model = model or Composed(cell)
+    tables = _Tables(model)
+    invariants: list[tuple[str, Predicate]] = [
+        (inv.name, model.predicate(inv.expr)) for inv in cell.invariants
+    ]
+    keep_edges = bool(cell.recovery)
+    index: dict[int, int] = {}
+    states: list[int] = []
+    parent: array[int] = array("q")
+    violated: dict[str, int] = {}
+    violations: dict[str, int] = {}
+
+    def add(h: int, p: int) -> None:
+        index[h] = len(states)
+        states.append(h)
+        parent.append(p)
+        for name, fn in invariants:
+            if not fn(h):
+                violations[name] = violations.get(name, 0) + 1
+                violated.setdefault(name, len(states) - 1)
+
+    for g0 in model.initial:
+        if g0 not in index:
+            add(g0, -1)
+    n = len(model.names)
+    shifts, masks = model.shift, model.mask
+    simple, live, cx, unant = tables.simple, tables.live, tables.complex, tables.unant
+    deadlocks: list[int] = []
+    unhandled: dict[tuple[int, str, str], tuple[int, Stimulus, int]] = {}
+    unhandled_count: dict[tuple[int, str, str], int] = {}
+    livelocks: dict[int, tuple[int, Stimulus]] = {}
+    # (device, local state label, event) -> first (state, stimulus, target or -1,
+    # local id, link or -1)
+    errors: dict[tuple[int, str, str], tuple[int, Stimulus, int, int, int]] = {}
+    error_count: dict[tuple[int, str, str], int] = {}
+    guard_errors = tables.errors
+    unant_first: dict[tuple[int, int, str, InputKind], int] = {}
+    unant_count: dict[tuple[int, int, str, InputKind], int] = {}
+    unant_states = 0
+    src: array[int] = array("q")
+    dst: array[int] = array("q")
+    transitions = 0
+    head = 0
+    depth = 0
+    level_end = len(states)
+    complete = True
+    limit = max_states if max_states is not None else -1
+    last_report = t0
+    while head < len(states):
+        if head == level_end:
+            depth += 1
+            level_end = len(states)
+        if progress is not None and head & 0x3FFF == 0:
+            now = time.perf_counter()
+            if now - last_report >= 0.5:
+                progress(Progress(len(states), head, depth, now - t0))
+                last_report = now
+        g = states[head]
+        alive = False
+        flagged = False
+        for d in range(n):
+            lid = (g >> shifts[d]) & masks[d]
+            if live[d][lid]:
+                alive = True
+            for delta in simple[d][lid]:
+                h = g ^ delta
+                transitions += 1
+                if h not in index:
+                    if len(states) == limit:
+                        complete = False
+                        break
+                    add(h, head)
+                if keep_edges:
+                    src.append(head)
+                    dst.append(index[h])
+            for i, s in cx[d][lid]:
+                if s.when >= 0:
+                    when = model.when[s.when]
+                    if when is not None and not when(g):
+                        continue
+                for h, bad, livelock in model.successors(g, s):
+                    alive = True
+                    for t, tlid, event, link in bad:
+                        key = (t, model.spaces[t].state_of(tlid), event)
+                        if link < 0:  # the delivery's guard raised (compose._bad)
+                            error_count[key] = error_count.get(key, 0) + 1
+                            errors.setdefault(key, (head, s, h, tlid, ~link))
+                            continue
+                        unhandled_count[key] = unhandled_count.get(key, 0) + 1
+                        if key not in unhandled:
+                            unhandled[key] = (head, s, h)
+                    if livelock and i not in livelocks:
+                        livelocks[i] = (head, s)
+                    if h == g:
+                        continue
+                    transitions += 1
+                    if h not in index:
+                        if len(states) == limit:
+                            complete = False
+                            break
+                        add(h, head)
+                    if keep_edges:
+                        src.append(head)
+                        dst.append(index[h])
+            for _i, s in unant[d][lid]:
+                if s.when >= 0:
+                    when = model.when[s.when]
+                    if when is not None and not when(g):
+                        continue
+                key2 = (d, lid, s.event, s.kind)
+                unant_count[key2] = unant_count.get(key2, 0) + 1
+                unant_first.setdefault(key2, head)
+                flagged = True
+            for s in guard_errors[d][lid]:
+                if not model.offered(s, g):
+                    continue
+                key = (d, model.spaces[d].state_of(lid), s.event)
+                error_count[key] = error_count.get(key, 0) + 1
+                errors.setdefault(key, (head, s, -1, lid, -1))
+            if not complete:
+                break
+        if not complete:
+            break
+        if flagged:
+            unant_states += 1
+        if not alive:
+            deadlocks.append(head)
+        head += 1
+    seconds = time.perf_counter() - t0
+
+    findings: list[Finding] = []
+    properties: list[tuple[str, str]] = []
+
+    def verdict(failed: bool, judged: bool = True) -> str:
+        if failed:
+            return "fails"
+        return "holds" if complete and judged else "unknown"
+
+    properties.append(("no deadlock", verdict(bool(deadlocks))))
+    if deadlocks:
+        first = deadlocks[0]
+        findings.append(
+            Finding(
+                Kind.DEADLOCK,
+                "deadlock",
+                f"no input can change {model.describe(states[first])}",
+                trace_to(model, parent, states, first),
+                len(deadlocks),
+            )
+        )
+    for inv in cell.invariants:
+        properties.append(
+            (f"invariant {inv.name}: {inv.expr.source}", verdict(inv.name in violated))
+        )
+        if inv.name in violated:
+            at = violated[inv.name]
+            findings.append(
+                Finding(
+                    Kind.INVARIANT,
+                    inv.name,
+                    f"{inv.expr.source} is false in {model.describe(states[at])}",
+                    trace_to(model, parent, states, at),
+                    violations[inv.name],
+                )
+            )
+    properties.append(
+        ("every link-delivered event is handled or ignored", verdict(bool(unhandled)))
+    )
+    for key, (at, s, target) in unhandled.items():
+        t, label, event = key
+        name = model.names[t]
+        findings.append(
+            Finding(
+                Kind.UNHANDLED,
+                f"{name}.{event}",
+                f"a link delivers {event!r} to {name} in {label}, which neither handles nor "
+                "ignores it (a missed transition that shows only in interaction)",
+                trace_to(model, parent, states, at, s, _shows(model, key, target)),
+                unhandled_count[key],
+            )
+        )
+    properties.append(("no guard raises", verdict(bool(errors))))
+    findings.extend(_guard_errors(model, parent, states, errors, error_count))
+    properties.append(("no link livelock", verdict(bool(livelocks))))
+    for at, s in livelocks.values():
+        findings.append(
+            Finding(
+                Kind.LIVELOCK,
+                s.label(model.names),
+                f"links keep delivering events after {s.label(model.names)}; "
+                "more than 256 deliveries in one step",
+                trace_to(model, parent, states, at),
+            )
+        )
+    for rec in cell.recovery:
+        failed_at, count = (-1, 0)
+        if complete:
+            failed_at, count = _recovery(
+                model,
+                model.predicate(rec.target),
+                model.predicate(rec.source) if rec.source else None,
+                states,
+                src,
+                dst,
+            )
+        text = f"recovery {rec.name}: always able to reach {rec.target.source}"
+        if rec.source is not None:
+            text += f" from {rec.source.source}"
+        properties.append((text, verdict(failed_at >= 0)))
+        if failed_at >= 0:
+            findings.append(
+                Finding(
+                    Kind.RECOVERY,
+                    rec.name,
+                    f"from {model.describe(states[failed_at])} no sequence of inputs reaches "
+                    f"{rec.target.source}",
+                    trace_to(model, parent, states, failed_at),
+                    count,
+                )
+            )
+    reached: list[set[int]] = [set() for _ in range(n)]
+    for g in states:
+        for d in range(n):
+            reached[d].add((g >> shifts[d]) & masks[d])
+    for d, space in enumerate(model.spaces):
+        seen = {s for lid in reached[d] for s in space.active(lid)}
+        for st in space.chart.states:
+            if st.name not in seen:
+                findings.append(
+                    Finding(
+                        Kind.UNREACHED,
+                        f"{model.names[d]}.{st.name}",
+                        f"device {model.names[d]} never enters {st.name} in this cell"
+                        + ("" if complete else " (within the bound)"),
+                    )
+                )
+    unants = tuple(
+        Unanticipated(
+            model.names[d],
+            model.spaces[d].state_of(lid),
+            event,
+            kind,
+            unant_count[(d, lid, event, kind)],
+            trace_to(model, parent, states, first),
+        )
+        for (d, lid, event, kind), first in unant_first.items()
+    )
+    return Report(
+        cell=cell.name,
+        path=cell.path,
+        devices=tuple(
+            (nm, len(sp.snapshots)) for nm, sp in zip(model.names, model.spaces, strict=True)
+        ),
+        states=len(states),
+        transitions=transitions,
+        depth=depth,
+        complete=complete,
+        seconds=seconds,
+        peak_bytes=_peak_bytes(),
+        findings=tuple(findings),
+        unanticipated=unants,
+        unanticipated_states=unant_states,
+        free_guards=tuple(g for sp in model.spaces for g in sp.free_guards),
+        properties=tuple(properties),
+    )
+
+
+def _shows(model: Composed, key: tuple[int, str, str], target: int) -> Callable[[object], bool]:
+    """Match the branch that reaches ``target`` delivering the unhandled event ``key``."""
+
+    def match(br: object) -> bool:
+        assert isinstance(br, Branch)
+        return br.state == target and any(
+            (u[0], model.spaces[u[0]].state_of(u[1]), u[2]) == key for u in br.unhandled
+        )
+
+    return match
+
+
+def _guard_errors(
+    model: Composed,
+    parent: array[int],
+    states: list[int],
+    errors: dict[tuple[int, str, str], tuple[int, Stimulus, int, int, int]],
+    count: dict[tuple[int, str, str], int],
+) -> list[Finding]:
+    """Rule 5: each device, state and event whose guard raised, with its shortest trace.
+
+    A stimulus refused outright ends the trace in the state it was offered in (no
+    branch shows a refused stimulus); a link delivery ends with the step that made it.
+    """
+    out: list[Finding] = []
+    for key, (at, s, target, lid, link) in errors.items():
+        t, label, event = key
+        name = model.names[t]
+        bad = next((o for o in model.outcomes(t, lid, event, link) if o.failure), None)
+        why = bad.failure if bad is not None else f"a guard of {event!r} raised"
+        if bad is not None and bad.choices:
+            why += " when " + " and ".join(f"{p} is {v}" for p, v in bad.choices)
+        if target < 0:
+            trace = trace_to(model, parent, states, at)
+            how = s.kind.value
+        else:
+            trace = trace_to(model, parent, states, at, s, _shows(model, key, target))
+            how = f"from a link, after {s.label(model.names)}"
+        out.append(
+            Finding(
+                Kind.GUARD_ERROR,
+                f"{name}.{event}",
+                f"{name} in {label} gets {event!r} ({how}): {why}; the runtime refuses "
+                "the event (guard error), the explorer never reads it as false",
+                trace,
+                count[key],
+            )
+        )
+    return out
+
+
+def _recovery(
+    model: Composed,
+    target: Predicate,
+    source: Predicate | None,
+    states: list[int],
+    src: array[int],
+    dst: array[int],
+) -> tuple[int, int]:
+    """First state (BFS order) where ``source`` holds and no path reaches ``target``; count."""
+    n = len(states)
+    count_in = array("q", bytes(8 * (n + 1)))
+    for j in dst:
+        count_in[j + 1] += 1
+    for k in range(n):
+        count_in[k + 1] += count_in[k]
+    preds = array("q", bytes(8 * len(src)))
+    fill = array("q", count_in)
+    for a, b in zip(src, dst, strict=True):
+        preds[fill[b]] = a
+        fill[b] += 1
+    good = bytearray(n)
+    stack = [k for k in range(n) if target(states[k])]
+    for k in stack:
+        good[k] = 1
+    while stack:
+        k = stack.pop()
+        for p in preds[count_in[k] : count_in[k + 1]]:
+            if not good[p]:
+                good[p] = 1
+                stack.append(p)
+    bad = [k for k in range(n) if not good[k] and (source is None or source(states[k]))]
+    return (bad[0], len(bad)) if bad else (-1, 0)

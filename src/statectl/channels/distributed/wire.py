@@ -1,0 +1,600 @@
+"""One node on Zenoh: link streams, acknowledgements, presence, published states.
+
+Rules:
+1. A node opens one Zenoh session in peer mode with multicast scouting off: it
+   listens on its ``listen`` endpoints and connects to its ``connect`` ones, and
+   nothing else (no router, no discovery outside the endpoints given). Its lease
+   is the node's ``lease``: how soon the others notice it is cut off.
+2. Presence is a liveliness token ``statectl/<cell>/node/<node>``. A node sees a
+   peer come (its token appears) and go (disappears: the process ended, was
+   killed, or its lease ran out); when a peer goes, each device of this node
+   listed in ``peer_lost`` that a link joins to a device on that peer gets its
+   declared event. Every change is printed: ``peers: a, b``. A lost peer's token is
+   asked for once a lease: one that stalled (SIGSTOP) may keep its session and
+   never put its token again.
+3. Link events go once and in order per stream (statectl.channels.distributed.streams),
+   as a JSON array ``[e, n, ev, d]`` (epoch, number, event, data); a node has one
+   subscriber per stream it may receive (each other node, each device of its
+   own), so a link event's callback reads only its payload. Link events are
+   numbered, kept until acknowledged, resent after the peer comes back (a
+   ``hello`` asks the receiver how far it got) or when nothing was acknowledged
+   for :data:`RESEND_AFTER`. A ``queue`` link keeps its events while the peer is
+   down; a ``drop`` link never sends them (statectl.channels.distributed.system rule 4).
+4. The receiver acknowledges an event once it is applied: with a journal, once
+   its inbox row (and the stream's position, in the same commit) is committed;
+   without one, once the device ran it on the receiving thread (nobody owned the
+   devices: statectl.channels.distributed.system rule 7) or it was queued for the owner.
+   Acknowledgements are cumulative and sent by one thread, so a burst of events
+   costs few of them.
+5. Each device's state is put on ``statectl/<cell>/state/<device>`` after every
+   step that changed it while a subscriber somewhere takes it in (Zenoh's matching
+   status; the current state is put when one appears), and answered to queries on
+   that key, so a node's rules (the mirror), a dashboard and an operator station see
+   the whole cell.
+6. A node resumed from its journal keeps its epoch and stream positions (the
+   journal's ``meta`` rows ``link-epoch`` and ``link-in/<node>/<device>``) and
+   sends again what its journal holds and the receiver has not acknowledged.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+import uuid
+from collections import deque
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, TextIO
+
+import msgspec
+
+from statectl.cell.explore.enforce import Refused
+from statectl.cell.model import Cell, Link
+from statectl.channels.distributed.keys import Keys
+from statectl.channels.distributed.messages import (
+    decode_link,
+    encode_link,
+    parse_snapshot,
+    refuse_non_finite,
+    session_config,
+    snapshot_payload,
+)
+from statectl.channels.distributed.resume import EPOCH_KEY, INBOUND_KEY, read_links
+from statectl.channels.distributed.streams import Inbound, Outbound, Verdict
+from statectl.channels.distributed.system import NodeSystem
+from statectl.kernel.errors import StatectlError
+from statectl.kernel.semantics import Snapshot
+from statectl.run.journal.format import Guarantee
+
+__all__ = ["RESEND_AFTER", "Wire"]
+
+#: Seconds without an acknowledgement after which a stream asks again (rule 3).
+RESEND_AFTER = 0.5
+_TICK = 0.05
+_ACK_PAUSE = 0.002  # seconds between two rounds of acknowledgements, at least
+_ENC = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
+#: one JSON value at an index of a text: json.loads without its per-call checks (acks)
+_scan: Callable[[str, int], tuple[Any, int]] = getattr(json.JSONDecoder(), "scan_once")  # noqa: B009
+
+
+class Wire:
+    """One node's side of the cell on Zenoh (rules 1-6)."""
+
+    def __init__(
+        self,
+        cell: Cell,
+        node: str,
+        system: NodeSystem,
+        *,
+        out: TextIO,
+        journal: Path | None = None,
+        resume: bool = False,
+    ) -> None:
+        if cell.nodes is None:
+            raise StatectlError(f"{cell.path}: the cell has no nodes: section")
+        self.cell = cell
+        self.nodes = cell.nodes
+        try:
+            self.me = self.nodes.node(node)
+        except KeyError:
+            names = ", ".join(n.name for n in self.nodes.nodes)
+            raise StatectlError(f"the cell has no node {node!r}; nodes: {names}") from None
+        self.system = system
+        self.out = out
+        self.keys = Keys(cell.name)
+        self.local = set(self.me.devices)
+        self.up: set[str] = set()
+        self.mirror: dict[str, int] = {}
+        self.inbound = Inbound()
+        self.outbound: dict[str, Outbound] = {}
+        self._acks: deque[tuple[int, str, str, str, int]] = deque()  # seq, node, device, e, n
+        self._ack_due: dict[tuple[str, str], tuple[str, int, bool]] = {}
+        self._hello_due: set[str] = set()
+        self._resend_due: set[str] = set()
+        self._due = threading.Lock()  # guards the three above: callbacks add, the thread takes
+        self._states: dict[str, Snapshot] = {}  # "state/<device>" -> newest snapshot to put
+        self._watched: dict[str, bool] = {}  # "state/<device>" -> does anyone subscribe?
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self._print = threading.Lock()
+        self._pubs: dict[str, Any] = {}
+        self._decls: list[Any] = []
+        self._session: Any = None
+        self._thread: threading.Thread | None = None
+        self._mirrored = False  # whether other nodes' states are taken in (open())
+        self.lost_at: dict[str, float] = {}  # node -> monotonic time it was noticed gone
+        self._asked = 0.0  # when lost peers' tokens were last asked for (rule 2)
+        self.on_state: list[Callable[[str, Snapshot, float], None]] = []
+        #: called with each forwarded environment command this node refused (its 'when')
+        self.on_refused: list[Callable[[Exception], None]] = []
+        epoch, backlog = self._from_journal(journal, resume)
+        self.epoch = epoch
+        for d in cell.devices:
+            if d.name not in self.local:
+                stream = Outbound(d.name, self.nodes.node_of(d.name), epoch)
+                for event, data in backlog.get(d.name, ()):
+                    stream.add(event, data)
+                self.outbound[d.name] = stream
+        system.attach(self, self.mirror)
+        if system.journal is not None:
+            system.journal.after_commit(self._committed)
+
+    # -- the journal (rule 6) -----------------------------------------------------------------
+
+    def _from_journal(
+        self, path: Path | None, resume: bool
+    ) -> tuple[str, dict[str, list[tuple[str, Any]]]]:
+        """The epoch and, on resume, each stream's events the journal holds; the inbound state."""
+        remote = [d.name for d in self.cell.devices if d.name not in self.local]
+        found = read_links(path, resume, remote)
+        self.inbound.last.update(found.last)
+        if found.epoch is not None:
+            return found.epoch, found.backlog
+        epoch = uuid.uuid4().hex[:12]
+        journal = self.system.journal
+        if journal is not None:
+            journal.note(EPOCH_KEY, f"{epoch} {found.top}")
+        return epoch, {}
+
+    def _committed(self) -> None:
+        """On the journal's writer after a commit: acknowledge what is durable now (rule 4)."""
+        journal = self.system.journal
+        acks = self._acks
+        if journal is None or not acks:
+            return
+        durable = journal.durable_seq
+        woke = False
+        with self.inbound.lock:
+            while acks and acks[0][0] <= durable:
+                _, node, device, e, n = acks.popleft()
+                self._ack(node, device, e, n, False)
+                woke = True
+        if woke:
+            self._wake.set()
+
+    # -- opening and closing -----------------------------------------------------------------
+
+    def open(self, *, states: bool = False) -> None:
+        """Rule 1-2, 5: the session, the publishers, the mirror; before the System starts.
+
+        Other nodes' states are taken in when a guard here reads them, or ``states``
+        (a dashboard of the whole cell).
+        """
+        import zenoh
+
+        self._session = s = zenoh.open(session_config(self.me))
+        root = self.keys.root
+        block = zenoh.CongestionControl.BLOCK
+        for name, stream in self.outbound.items():
+            self._pubs[name] = s.declare_publisher(
+                self.keys.link(self.me.name, name), congestion_control=block
+            )
+            del stream
+        for name in self.local:
+            pub = self._pubs["state/" + name] = s.declare_publisher(
+                self.keys.state(name), congestion_control=block
+            )
+            self.system.subjects[name].on_step(self._stepped(name))
+            self._watch_matching(pub, "state/" + name)
+        self._decls += [
+            s.declare_subscriber(f"{root}/ack/{self.me.name}/*", self._on_ack),
+            s.declare_queryable(f"{root}/state/*", self._on_query),
+        ]
+        self._mirrored = states or self._guards_read_others() or self.system.reads_remote()
+        if self._mirrored:
+            self._decls.append(
+                s.declare_subscriber(
+                    f"{root}/state/*", self._on_state, allowed_origin=zenoh.Locality.REMOTE
+                )
+            )
+        self._decls.append(s.liveliness().declare_token(self.keys.node(self.me.name)))
+
+    def _watch_matching(self, pub: Any, key: str) -> None:
+        """Rule 5: put a device's states only while a subscriber somewhere takes them in
+        (Zenoh's matching status); when one appears, put the current state at once."""
+        try:
+            self._watched[key] = bool(pub.matching_status.matching)
+            listener = pub.declare_matching_listener(
+                lambda status, key=key: self._matching(key, bool(status.matching))
+            )
+        except (AttributeError, TypeError):  # a Zenoh without matching status: always put
+            self._watched.pop(key, None)
+            return
+        self._decls.append(listener)
+
+    def _matching(self, key: str, matching: bool) -> None:
+        self._watched[key] = matching
+        if matching:
+            snap = self.system.subjects[key.removeprefix("state/")].snapshot
+            if snap is not None:
+                self._states[key] = snap
+                self._wake.set()
+
+    def refresh(self) -> None:
+        """Ask every node for its devices' states now (a dashboard that starts late)."""
+        if self._session is not None:
+            self._session.get(f"{self.keys.root}/state/*", self._on_reply)
+
+    def _guards_read_others(self) -> bool:
+        """Whether a guard of a link that starts here reads a device of another node."""
+        return any(
+            k.guard is not None and any(d not in self.local for d, _ in k.guard.refs)
+            for k in self.cell.links
+            if k.source in self.local
+        )
+
+    @property
+    def session(self) -> Any:
+        """The open Zenoh session (after :meth:`open`), for a host's own keys."""
+        if self._session is None:
+            raise StatectlError("the wire is not open")
+        return self._session
+
+    def listen(self) -> None:
+        """After the System started (resumed): take link events, posts and presence."""
+        s = self._session
+        root = self.keys.root
+        others = [n.name for n in self.nodes.nodes if n.name != self.me.name]
+        for name in sorted(self.local):
+            self._decls += [
+                s.declare_subscriber(self.keys.link(node, name), self._receiver(node, name))
+                for node in others
+            ]
+            self._decls += [
+                s.declare_subscriber(f"{root}/hello/*/{name}", self._on_hello),
+                s.declare_subscriber(self.keys.post(name), self._on_post),
+            ]
+        self._decls.append(
+            s.liveliness().declare_subscriber(f"{root}/node/*", self._on_presence, history=True)
+        )
+        if self._mirrored:
+            s.get(f"{root}/state/*", self._on_reply)
+        for name in self.local:  # started or resumed: say where each device is now
+            snap = self.system.subjects[name].snapshot
+            if snap is not None:
+                self._states["state/" + name] = snap
+        self._thread = threading.Thread(target=self._run, name="statectl-wire", daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        self._wake.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join()
+        if self._session is not None:
+            session, self._session = self._session, None
+            session.close()
+
+    # -- the System's side -------------------------------------------------------------------
+
+    def down(self, link: Link) -> bool:
+        stream = self.outbound.get(link.target)
+        node = stream.node if stream is not None else self.nodes.node_of(link.target)
+        return node not in self.up
+
+    def send(self, device: str, event: str, data: Any) -> None:
+        """Number, keep and (if the peer is up) put a link event (rule 3)."""
+        stream = self.outbound[device]
+        if data is not None:
+            refuse_non_finite(data, device, event)
+        with stream.lock:
+            n = stream.add(event, data)
+            if stream.node in self.up and self._session is not None:
+                self._pubs[device].put(encode_link(stream.epoch, n, event, data))
+
+    def forward(self, device: str, event: str, data: Any) -> None:
+        if self._session is not None:
+            self._session.put(self.keys.post(device), _ENC.encode({"ev": event, "d": data}))
+
+    def _stepped(self, name: str) -> Callable[[str, Any, str], None]:
+        """Rule 5: put the device's state after a step that changed it."""
+        subject = self.system.subjects[name]
+        key = "state/" + name
+        last: list[Snapshot | None] = [None]
+
+        states = self._states
+        wake = self._wake
+
+        watched = self._watched
+
+        def put(event: str, data: Any, outcome: str) -> None:
+            if not watched.get(key, True):  # nobody takes this device's states in
+                return
+            snap = subject.snapshot
+            if snap is None or snap == last[0]:
+                return
+            last[0] = snap
+            states[key] = snap  # the wire's thread puts the newest one
+            if not wake.is_set():
+                wake.set()
+
+        return put
+
+    # -- Zenoh callbacks ---------------------------------------------------------------------
+
+    def _receiver(self, node: str, device: str) -> Callable[[Any], None]:
+        """The subscriber of one stream (``node`` -> ``device``, rules 3-4).
+
+        The hot path of a link event, so everything per stream is looked up once
+        here: the key is known (only the payload is parsed), the device, its
+        journal binding, the stream's inbound note.
+        """
+        decode = decode_link
+        inbound = self.inbound
+        lock = inbound.lock
+        offer = inbound.offer
+        system = self.system
+        subject = system.subjects[device]
+        bound = system.bound.get(device)
+        note = f"{INBOUND_KEY}{node}/{device}"
+        ack = self._ack
+        wake = self._wake
+        run_devices = self._run_devices
+        run_now = system.run_now
+
+        def on_link(sample: Any) -> None:
+            try:
+                msg = decode(sample.payload.to_bytes())
+            except (msgspec.DecodeError, AttributeError):
+                return
+            e, n, event = msg.e, msg.n, msg.ev
+            run = True
+            with lock:
+                verdict, last = offer(node, device, e, n)
+                if verdict is not Verdict.APPLY:
+                    ack(node, device, e, last, verdict is Verdict.GAP)
+                    wake.set()
+                    return
+                try:  # under the lock: the stream's next event waits until this one ran
+                    if bound is not None:  # acknowledged once committed (_committed)
+                        ticket = bound.post(event, msg.d, note=(note, f"{e} {n}"))
+                        self._acks.append((ticket.seq, node, device, e, n))
+                        run = bound.journal.guarantee is Guarantee.PROMPT
+                    elif run_now(device, event, msg.d):  # nobody owned the devices: ran here
+                        run = False
+                    else:  # the owner's thread runs it
+                        subject.post(event, msg.d)
+                except StatectlError as exc:
+                    self._say(f"link event {event!r} from {node} to {device}: {exc}")
+            if run:
+                run_devices()  # before waking the wire's thread: the device first
+            if bound is None:
+                ack(node, device, e, n, False)
+                if not wake.is_set():
+                    wake.set()
+
+        return on_link
+
+    def _ack(self, node: str, device: str, e: str, n: int, again: bool) -> None:
+        """Note an acknowledgement for the wire's thread to send (rule 4)."""
+        with self._due:
+            self._ack_due[node, device] = (e, n, again)
+
+    def _run_devices(self) -> None:
+        """Run the event now on this thread if nobody owns the devices (one thread hop less);
+        else wake the owner."""
+        system = self.system
+        if system.owner.acquire(blocking=False):
+            try:
+                system._drain()
+            finally:
+                system.owner.release()
+        else:
+            system.wake.set()
+
+    def _on_ack(self, sample: Any) -> None:
+        _, device = Keys.last(sample.key_expr)
+        stream = self.outbound.get(device)
+        try:
+            msg = _scan(sample.payload.to_string(), 0)[0]
+            e, n, again = str(msg["e"]), int(msg["n"]), bool(msg.get("r"))
+        except (ValueError, KeyError, TypeError, StopIteration, AttributeError):
+            return
+        if stream is None or e != stream.epoch:
+            return
+        with stream.lock:
+            stream.ack(n)
+        if again:
+            with self._due:
+                self._resend_due.add(device)
+            self._wake.set()
+
+    def _on_hello(self, sample: Any) -> None:
+        node, device = Keys.last(sample.key_expr)
+        try:
+            e = str(json.loads(sample.payload.to_bytes())["e"])
+        except (ValueError, KeyError, TypeError):
+            return
+        with self.inbound.lock:
+            applied = self.inbound.applied(node, device, e)
+            if applied is not None and self.system.journal is not None:
+                # an event still waiting for its commit is acknowledged by _committed
+                pending = [a[4] for a in self._acks if a[1] == node and a[2] == device]
+                if pending:
+                    applied = pending[0] - 1
+        self._ack(node, device, e, applied or 0, True)
+        self._wake.set()
+
+    def _on_post(self, sample: Any) -> None:
+        _, device = Keys.last(sample.key_expr)
+        try:
+            msg = json.loads(sample.payload.to_bytes())
+            self.system.post(device, str(msg["ev"]), msg.get("d"))
+        except (ValueError, KeyError, TypeError, StatectlError) as exc:
+            self._say(f"event for {device} from another node refused: {exc}")
+            if isinstance(exc, Refused):
+                for callback in self.on_refused:
+                    callback(exc)
+
+    def _on_state(self, sample: Any) -> None:
+        _, device = Keys.last(sample.key_expr)
+        try:
+            snap, t = parse_snapshot(sample.payload.to_bytes())
+        except (ValueError, KeyError, TypeError):
+            return
+        if device not in self.local:
+            links = self.system.links
+            if links is not None and device in links.model.position:
+                d = links.model.position[device]
+                lid = links.model.spaces[d].lookup(snap)
+                if lid is not None and self.mirror.get(device) != lid:
+                    self.mirror[device] = lid
+                    self.system.recheck()  # invariants over what this node sees
+        for callback in self.on_state:
+            callback(device, snap, t)
+
+    def _on_reply(self, reply: Any) -> None:
+        if reply.ok is not None:
+            self._on_state(reply.ok)
+
+    def _on_query(self, query: Any) -> None:
+        for name in sorted(self.local):
+            if query.key_expr.intersects(self.keys.state(name)):
+                subject = self.system.subjects[name]
+                snap = subject.snapshot
+                if snap is not None:
+                    query.reply(self.keys.state(name), snapshot_payload(snap))
+
+    def _on_presence(self, sample: Any) -> None:
+        import zenoh
+
+        _, node = Keys.last(sample.key_expr)
+        if node == self.me.name or node not in {n.name for n in self.nodes.nodes}:
+            return
+        if sample.kind == zenoh.SampleKind.PUT:
+            if node in self.up:
+                return
+            self.up.add(node)
+            self._say(f"peer {node} up; peers: {', '.join(sorted(self.up))}")
+            if self._mirrored:
+                self.refresh()  # where its devices are now
+            for name, stream in self.outbound.items():
+                if stream.node == node:
+                    with self._due:
+                        self._hello_due.add(name)
+            self._wake.set()
+            return
+        if node not in self.up:
+            return
+        self.up.discard(node)
+        self.lost_at[node] = time.monotonic()
+        self._say(f"peer {node} lost; peers: {', '.join(sorted(self.up)) or 'none'}")
+        for device, event in self.peer_lost_events(node):
+            try:
+                self.system.post(device, event)
+            except StatectlError as exc:
+                self._say(f"peer_lost event {event!r} to {device}: {exc}")
+
+    def peer_lost_events(self, node: str) -> list[tuple[str, str]]:
+        """Rule 2: the (device, event) pairs of this node's peer_lost that ``node`` concerns."""
+        there = set(self.nodes.node(node).devices)
+        out = []
+        for device, event in self.me.peer_lost:
+            if any(
+                (k.source == device and k.target in there)
+                or (k.target == device and k.source in there)
+                for k in self.cell.links
+            ):
+                out.append((device, event))
+        return out
+
+    def _say(self, text: str) -> None:
+        with self._print:
+            self.out.write(f"node {self.me.name}: {text}\n")
+            self.out.flush()
+
+    # -- the wire's thread (rules 3-4) -------------------------------------------------------
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self._wake.wait(_TICK)
+            self._wake.clear()
+            session = self._session
+            if session is None:
+                return
+            try:
+                self._put_states()
+                self._ask_lost(session)
+                acked = self._send_acks(session)
+                self._resend(session)
+                if acked:
+                    time.sleep(_ACK_PAUSE)  # let a burst's acknowledgements gather (rule 4)
+            except Exception as exc:  # the session closed under us: stop quietly
+                if not self._stop.is_set():
+                    self._say(f"wire: {exc}")
+
+    def _ask_lost(self, session: Any) -> None:
+        """Rule 2: while a peer is lost, ask for its token once a lease; a reply brings it up."""
+        now = time.monotonic()
+        if now >= self._asked + self.me.lease and any(n not in self.up for n in self.lost_at):
+            self._asked = now
+            session.liveliness().get(f"{self.keys.root}/node/*", self._on_alive)
+
+    def _on_alive(self, reply: Any) -> None:
+        if getattr(reply, "ok", None) is not None:
+            self._on_presence(reply.ok)  # a PUT: only a node not up yet is said
+
+    def _put_states(self) -> None:
+        """Rule 5: put each device's newest snapshot (a burst of steps costs one put)."""
+        states = self._states
+        while states:  # popitem is atomic: the owner may add meanwhile, never iterated
+            try:
+                key, snap = states.popitem()
+            except KeyError:
+                return
+            self._pubs[key].put(snapshot_payload(snap))
+
+    def _send_acks(self, session: Any) -> bool:
+        with self._due:
+            due, self._ack_due = self._ack_due, {}
+        for (node, device), (e, n, again) in due.items():
+            session.put(self.keys.ack(node, device), _ENC.encode({"e": e, "n": n, "r": again}))
+        return bool(due)
+
+    def _resend(self, session: Any) -> None:
+        now = time.monotonic()
+        with self._due:
+            hello, self._hello_due = self._hello_due, set()
+            again, self._resend_due = self._resend_due, set()
+        for name, stream in self.outbound.items():
+            if stream.node not in self.up:
+                continue
+            with stream.lock:
+                if name in again:
+                    self._put_all(stream)
+                elif stream.unacked and now - stream.last_send > RESEND_AFTER:
+                    hello.add(name)
+                    stream.last_send = now
+            if name in hello:
+                session.put(self.keys.hello(self.me.name, name), _ENC.encode({"e": stream.epoch}))
+
+    def _put_all(self, stream: Outbound) -> None:
+        """Under the stream's lock: put every unacknowledged event again, in order."""
+        pub = self._pubs[stream.device]
+        for n, event, data in list(stream.unacked):
+            pub.put(encode_link(stream.epoch, n, event, data))
+        stream.last_send = time.monotonic()
+
+    def peers(self) -> Sequence[str]:
+        return sorted(self.up)

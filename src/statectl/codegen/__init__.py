@@ -1,6 +1,0 @@
-"""Code generation: chart -> flat tables (:mod:`.flatten`) -> plain C++17 (:mod:`.cpp`)."""
-
-from statectl.codegen.cpp import generate
-from statectl.codegen.flatten import CODES, FlatChart, flatten
-
-__all__ = ["CODES", "FlatChart", "flatten", "generate"]

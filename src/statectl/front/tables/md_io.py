@@ -1,0 +1,229 @@
+"""Device tables as Markdown: a heading and pipe tables a person can read and review.
+
+Rules:
+1. ``# Device: NAME`` names the device (else the file name); ``## States``,
+   ``## Events`` and optional ``## Data`` and ``## Recovery`` each introduce the
+   first pipe table after them. Other text is ignored.
+2. A table is a header row, a ``---`` separator row, then rows; columns are
+   matched by name as in every format.
+3. In a cell, ``\\|`` is a pipe, ``\\\\`` a backslash, ``\\n`` a line break and
+   ``\\r`` a carriage return, so any text survives a round trip.
+4. Locations are the 1-based line of the row.
+"""
+
+from __future__ import annotations
+
+import re
+
+from statectl.front.tables.eventdata import event_cells, event_columns
+from statectl.front.tables.schema import (
+    DATA_COLUMNS,
+    FLAT_EVENT_COLUMNS,
+    DeviceTables,
+    RawRow,
+    RawTable,
+    check_header,
+    diag,
+    format_literal,
+    make_tables,
+    parse_literal,
+    recovery_cells,
+    recovery_columns,
+    state_cells,
+    state_columns,
+)
+from statectl.kernel.errors import Diagnostic, Location
+
+__all__ = ["dump_md", "escape", "read_md", "unescape"]
+
+DEVICE = re.compile(r"^#\s+device\s*:\s*(.*)$", re.IGNORECASE)
+SECTION = re.compile(r"^##\s+(states|events|data|recovery)\s*$", re.IGNORECASE)
+SEPARATOR = re.compile(r"^:?-+:?$")
+PROFILE = re.compile(r"^profile\s*:\s*(.*)$", re.IGNORECASE)
+UNESCAPE = {"|": "|", "\\": "\\", "n": "\n", "r": "\r"}
+
+
+def escape(text: str) -> str:
+    return text.replace("\\", "\\\\").replace("|", "\\|").replace("\n", "\\n").replace("\r", "\\r")
+
+
+def unescape(text: str) -> str:
+    out: list[str] = []
+    i = 0
+    while i < len(text):
+        ch = text[i]
+        if ch == "\\" and i + 1 < len(text) and text[i + 1] in UNESCAPE:
+            out.append(UNESCAPE[text[i + 1]])
+            i += 2
+        else:
+            out.append(ch)
+            i += 1
+    return "".join(out)
+
+
+def split_row(line: str) -> list[str]:
+    """The raw (still escaped) cells of a ``| a | b |`` line."""
+    body = line.strip()
+    if body.startswith("|"):
+        body = body[1:]
+    cells: list[str] = []
+    buf: list[str] = []
+    i = 0
+    while i < len(body):
+        ch = body[i]
+        if ch == "\\" and i + 1 < len(body):
+            buf.append(body[i : i + 2])
+            i += 2
+            continue
+        if ch == "|":
+            cells.append("".join(buf))
+            buf = []
+        else:
+            buf.append(ch)
+        i += 1
+    if "".join(buf).strip():
+        cells.append("".join(buf))
+    return [c.strip() for c in cells]
+
+
+def _parse_table(
+    table: str, block: list[tuple[int, str]], file: str, diags: list[Diagnostic]
+) -> RawTable | None:
+    header_line, header_text = block[0]
+    where = Location(file, header_line)
+    if len(block) < 2 or not all(SEPARATOR.match(c) for c in split_row(block[1][1])):
+        diags.append(
+            diag(
+                "T101",
+                Location(file, block[1][0] if len(block) > 1 else header_line),
+                f"the {table} table has no '|---|' separator under its header",
+            )
+        )
+        return None
+    header = [(unescape(c), where) for c in split_row(header_text)]
+    columns = check_header(table, header, where, diags)
+    if columns is None:
+        return None
+    rows: list[RawRow] = []
+    for line, text in block[2:]:
+        cells = split_row(text)
+        at = Location(file, line)
+        if len(cells) > len(columns):
+            diags.append(
+                diag(
+                    "T101",
+                    at,
+                    f"the row has {len(cells)} cells but the header names {len(columns)}",
+                    "write a pipe inside a cell as \\|",
+                )
+            )
+            continue
+        raw = {
+            name: (unescape(cell), Location(file, line, column=name))
+            for name, cell in zip(columns, cells, strict=False)
+            if name is not None
+        }
+        rows.append(RawRow(at, raw))
+    return RawTable(table, where, tuple(rows))
+
+
+def read_md(text: str, file: str, stem: str) -> tuple[DeviceTables | None, list[Diagnostic]]:
+    """Read a Markdown device file; ``stem`` names the device without a heading."""
+    diags: list[Diagnostic] = []
+    device: str | None = None
+    profile: str | None = None
+    section: str | None = None
+    blocks: dict[str, list[tuple[int, str]]] = {}
+    closed: set[str] = set()
+    for number, raw_line in enumerate(text.split("\n"), start=1):
+        line = raw_line.rstrip("\r").strip()
+        if line.startswith("#"):
+            m = DEVICE.match(line)
+            s = SECTION.match(line)
+            if m and device is None:
+                device = m.group(1).strip()
+            if section is not None and section in blocks:
+                closed.add(section)
+            section = s.group(1).lower() if s else None
+            continue
+        if section is None and profile is None and (p := PROFILE.match(line)):
+            profile = p.group(1).strip()  # a 'Profile: NAME' line before the first table
+        if section is None or section in closed:
+            continue
+        if line.startswith("|"):
+            blocks.setdefault(section, []).append((number, line))
+        elif section in blocks:
+            closed.add(section)
+    if "states" not in blocks and "events" not in blocks:
+        return None, [
+            diag(
+                "T102",
+                Location(file, 1),
+                "not a device file: no '## States' or '## Events' table",
+                "write '# Device: NAME', then '## States' and '## Events' pipe tables",
+            )
+        ]
+    tables: dict[str, RawTable | None] = {}
+    for table in ("states", "events", "data", "recovery"):
+        if table in blocks:
+            tables[table] = _parse_table(table, blocks[table], file, diags)
+        else:
+            tables[table] = None
+            if table in ("states", "events"):
+                diags.append(
+                    diag("T104", Location(file, 1), f"no '## {table.title()}' table in the file")
+                )
+    entries: list[tuple[str, object, Location]] = []
+    data = tables["data"]
+    for row in data.rows if data is not None else ():
+        name = row.cells.get("name", ("", row.where))[0]
+        value, at = row.cells.get("value", ("", row.where))
+        assert isinstance(name, str) and isinstance(value, str)  # Markdown cells are text
+        entries.append((name.strip(), parse_literal(value, at, diags), row.where))
+    result = make_tables(
+        device if device is not None else stem,
+        tables["states"],
+        tables["events"],
+        entries,
+        Location(file, 1),
+        diags,
+        tables["recovery"],
+        profile or "",
+    )
+    return result, diags
+
+
+def _table(header: tuple[str, ...], rows: list[list[str]]) -> list[str]:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    for row in rows:
+        lines.append("| " + " | ".join(escape(c) for c in row) + " |")
+    return lines
+
+
+def dump_md(tables: DeviceTables) -> str:
+    """The tables as Markdown that :func:`read_md` reads back unchanged."""
+    columns = state_columns(tables)
+    lines = [f"# Device: {tables.device}", ""]
+    if tables.profile:
+        lines += [f"Profile: {tables.profile}", ""]
+    lines += ["## States", ""]
+    lines += _table(
+        columns,
+        [state_cells(s, columns) for s in tables.states],
+    )
+    lines += ["", "## Events", ""]
+    ecols = event_columns(tables.events, FLAT_EVENT_COLUMNS)
+    lines += _table(
+        ecols,
+        [event_cells(e, ecols) for e in tables.events],
+    )
+    if tables.data:
+        lines += ["", "## Data", ""]
+        lines += _table(
+            DATA_COLUMNS, [[name, format_literal(value)] for name, value in tables.data]
+        )
+    if tables.recovery:
+        lines += ["", "## Recovery", ""]
+        rcols = recovery_columns(tables)
+        lines += _table(rcols, [recovery_cells(r, rcols) for r in tables.recovery])
+    return "\n".join(lines) + "\n"

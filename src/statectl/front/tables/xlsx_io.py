@@ -1,0 +1,247 @@
+"""Device tables as an Excel workbook (openpyxl).
+
+Rules:
+1. Sheets ``States`` and ``Events`` (and optional ``Data`` with ``name, value``
+   and ``Recovery`` with ``state, event, data, redo``) each have their header in row 1;
+   sheet names are matched without regard to case.
+2. The device name is cell B1 of a sheet ``Device`` whose A1 reads ``device``;
+   without that sheet it is the file's name without ``.xlsx``.
+3. Cells are read as text: numbers as written, booleans as ``true``/``false``;
+   a date or time where text is expected is T108. Data values are YAML literal
+   text (a number cell is taken as that number).
+4. Locations name the sheet and the spreadsheet row (1-based, as Excel shows it).
+5. The writer stores every cell as a string, so text like ``=x`` never turns
+   into a formula.
+"""
+
+from __future__ import annotations
+
+import datetime
+import io
+import zipfile
+from collections.abc import Iterable
+from typing import Any
+
+# openpyxl ships no type information; types-openpyxl is not a dev dependency (yet).
+import openpyxl  # type: ignore[import-untyped, unused-ignore]
+from openpyxl.styles import Font  # type: ignore[import-untyped, unused-ignore]
+from openpyxl.worksheet.worksheet import (  # type: ignore[import-untyped, unused-ignore]
+    Worksheet,
+)
+
+from statectl.front.tables.eventdata import event_cells, event_columns
+from statectl.front.tables.schema import (
+    DATA_COLUMNS,
+    FLAT_EVENT_COLUMNS,
+    Bad,
+    Cell,
+    DeviceTables,
+    RawRow,
+    RawTable,
+    check_header,
+    diag,
+    format_literal,
+    make_tables,
+    parse_literal,
+    recovery_cells,
+    recovery_columns,
+    state_cells,
+    state_columns,
+)
+from statectl.front.tables.xlsx_formulas import uncached_formulas
+from statectl.kernel.errors import Diagnostic, Location
+
+__all__ = ["dump_xlsx", "read_xlsx"]
+
+SHEETS = {
+    "states": "States",
+    "events": "Events",
+    "data": "Data",
+    "recovery": "Recovery",
+    "device": "Device",
+}
+
+
+def _cell(value: Any) -> Cell:
+    if value is None:
+        return ""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return str(int(value)) if value.is_integer() else repr(value)
+    if isinstance(value, str):
+        return value
+    if isinstance(value, datetime.date | datetime.time | datetime.timedelta):
+        return Bad(f"a {type(value).__name__} ({value})")
+    return Bad(f"a {type(value).__name__}")
+
+
+def _rows(ws: Any) -> Iterable[tuple[int, tuple[Any, ...]]]:
+    for number, values in enumerate(ws.iter_rows(values_only=True), start=1):
+        yield number, tuple(values)
+
+
+def _table(table: str, ws: Any, file: str, diags: list[Diagnostic]) -> RawTable | None:
+    sheet = str(ws.title)
+    rows = [(n, v) for n, v in _rows(ws) if any(c is not None and str(c).strip() for c in v)]
+    where = Location(file, 1, sheet=sheet)
+    if not rows or rows[0][0] != 1:
+        diags.append(diag("T105", where, f"sheet {sheet!r} has no header in row 1"))
+        return None
+    header = [(str(_cell(h)) if isinstance(_cell(h), str) else "", where) for h in rows[0][1]]
+    columns = check_header(table, header, where, diags)
+    if columns is None:
+        return None
+    raw: list[RawRow] = []
+    for number, values in rows[1:]:
+        at = Location(file, number, sheet=sheet)
+        cells: dict[str, tuple[Cell, Location]] = {}
+        for name, value in zip(columns, values, strict=False):
+            if name is not None:
+                cells[name] = (_cell(value), Location(file, number, sheet=sheet, column=name))
+        raw.append(RawRow(at, cells))
+    return RawTable(table, where, tuple(raw))
+
+
+#: Largest total a workbook's parts may unpack to (T117): a zip bomb stops here.
+MAX_UNPACKED_BYTES = 64 << 20
+
+
+def _unpacked_size(content: bytes) -> int:
+    """What the workbook's zip says its parts unpack to (0 if it is no zip: T101 follows).
+
+    Python's zip reader never returns more than a part's declared size, so the
+    declared total bounds what openpyxl can read.
+    """
+    try:
+        with zipfile.ZipFile(io.BytesIO(content)) as archive:
+            return sum(info.file_size for info in archive.infolist())
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError):
+        return 0
+
+
+def read_xlsx(content: bytes, file: str, stem: str) -> tuple[DeviceTables | None, list[Diagnostic]]:
+    """Read a workbook's bytes; ``stem`` names the device when there is no Device sheet."""
+    diags: list[Diagnostic] = []
+    source = Location(file)
+    unpacked = _unpacked_size(content)
+    if unpacked > MAX_UNPACKED_BYTES:
+        return None, [
+            diag(
+                "T117",
+                source,
+                f"the workbook unpacks to {unpacked:,} bytes, more than the limit of "
+                f"{MAX_UNPACKED_BYTES:,}",
+                "a device workbook is small; see docs/limits.md",
+            )
+        ]
+    try:
+        wb = openpyxl.load_workbook(io.BytesIO(content), read_only=True, data_only=True)
+    except Exception as exc:  # openpyxl raises many kinds for a damaged workbook
+        return None, [diag("T101", source, f"not a readable XLSX workbook: {exc}")]
+    try:
+        sheets = {str(name).strip().lower(): wb[name] for name in wb.sheetnames}
+        formulas = uncached_formulas(content, file, wb)
+        if formulas:
+            return None, formulas
+        if "states" not in sheets and "events" not in sheets:
+            return None, [
+                diag(
+                    "T102",
+                    source,
+                    "not a device workbook: no 'States' or 'Events' sheet",
+                    "sheets found: " + ", ".join(wb.sheetnames),
+                )
+            ]
+        tables: dict[str, RawTable | None] = {}
+        for table in ("states", "events"):
+            if table not in sheets:
+                diags.append(diag("T104", source, f"the workbook has no {SHEETS[table]!r} sheet"))
+                tables[table] = None
+            else:
+                tables[table] = _table(table, sheets[table], file, diags)
+        entries: list[tuple[str, object, Location]] = []
+        if "data" in sheets:
+            data = _table("data", sheets["data"], file, diags)
+            for row in data.rows if data is not None else ():
+                name = row.cells.get("name", ("", row.where))[0]
+                value, at = row.cells.get("value", ("", row.where))
+                literal: object = (
+                    parse_literal(value, at, diags) if isinstance(value, str) else value
+                )
+                entries.append((name if isinstance(name, str) else "", literal, row.where))
+        recovery = None
+        if "recovery" in sheets:
+            recovery = _table("recovery", sheets["recovery"], file, diags)
+        device = stem
+        profile = ""
+        if "device" in sheets:
+            for _, values in _rows(sheets["device"]):
+                if len(values) >= 2 and str(values[0] or "").strip().lower() == "device":
+                    device = str(_cell(values[1])) if isinstance(_cell(values[1]), str) else stem
+                    break
+            # an optional 'profile' row below it (docs/profiles.md)
+            for _, values in _rows(sheets["device"]):
+                if len(values) >= 2 and str(values[0] or "").strip().lower() == "profile":
+                    profile = str(_cell(values[1])) if isinstance(_cell(values[1]), str) else ""
+                    break
+    except Exception as exc:  # a workbook can fail lazily while its sheets are read
+        return None, [*diags, diag("T101", source, f"not a readable XLSX workbook: {exc}")]
+    finally:
+        wb.close()
+    result = make_tables(
+        device, tables["states"], tables["events"], entries, source, diags, recovery, profile
+    )
+    return result, diags
+
+
+def _fill(ws: Worksheet, header: tuple[str, ...], rows: Iterable[list[str]]) -> None:
+    for col, text in enumerate(header, start=1):
+        cell = ws.cell(row=1, column=col, value=text)
+        cell.data_type = "s"
+        cell.font = Font(bold=True)
+    for number, row in enumerate(rows, start=2):
+        for col, text in enumerate(row, start=1):
+            if text:
+                cell = ws.cell(row=number, column=col, value=text)
+                cell.data_type = "s"  # never a formula, whatever the text starts with
+    ws.freeze_panes = "A2"
+
+
+def dump_xlsx(tables: DeviceTables) -> bytes:
+    """The tables as workbook bytes (States, Events, Data and Recovery if any, Device)."""
+    columns = state_columns(tables)
+    wb = openpyxl.Workbook()
+    states = wb.active
+    assert isinstance(states, Worksheet)
+    states.title = SHEETS["states"]
+    _fill(
+        states,
+        columns,
+        (state_cells(s, columns) for s in tables.states),
+    )
+    ecols = event_columns(tables.events, FLAT_EVENT_COLUMNS)
+    _fill(
+        wb.create_sheet(SHEETS["events"]),
+        ecols,
+        (event_cells(e, ecols) for e in tables.events),
+    )
+    if tables.data:
+        _fill(
+            wb.create_sheet(SHEETS["data"]),
+            DATA_COLUMNS,
+            ([name, format_literal(value)] for name, value in tables.data),
+        )
+    if tables.recovery:
+        _fill(
+            wb.create_sheet(SHEETS["recovery"]),
+            recovery_columns(tables),
+            (recovery_cells(r, recovery_columns(tables)) for r in tables.recovery),
+        )
+    profile = [["profile", tables.profile]] if tables.profile else []
+    _fill(wb.create_sheet(SHEETS["device"]), ("device", tables.device), profile)
+    out = io.BytesIO()
+    wb.save(out)
+    return out.getvalue()

@@ -1,0 +1,107 @@
+"""``statectl testgen``: tables -> explored graph -> cases -> a pytest module on disk."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from statectl.front.builder.build import load_chart
+from statectl.front.tables import write_files
+from statectl.kernel.errors import DiagnosticError, StatectlError
+from statectl.out.testgen.cases import CRITERIA, Suite, cases_for, count_steps
+from statectl.out.testgen.compact import is_big
+from statectl.out.testgen.graphwalker import graphwalker_model
+from statectl.out.testgen.paths import MAX_NODES, explore
+from statectl.out.testgen.writer import hypothesis_text, module_text, tests_in
+from statectl.out.testgen.xstate import xstate_config
+
+__all__ = [
+    "Generated",
+    "export_graphwalker",
+    "export_xstate",
+    "generate",
+    "generate_hypothesis",
+    "write_atomic",
+]
+
+
+@dataclass(frozen=True, slots=True)
+class Generated:
+    path: Path
+    suite: Suite
+    tests: int  # test functions plus the rows of the parametrised tables
+    steps: int  # events sent by all tests together
+
+
+def module_name(device: str, criterion: str) -> str:
+    slug = re.sub(r"[^0-9a-z]+", "_", device.lower()).strip("_") or "device"
+    return f"test_{slug}_{criterion}.py"
+
+
+def write_atomic(path: Path, text: str) -> None:
+    """Write ``path`` whole or not at all, as every command writes (tables.write_files)."""
+    try:
+        write_files({path: text}, make_dirs=True)
+    except DiagnosticError as exc:
+        why = "; ".join(d.message.removeprefix("cannot write: ") for d in exc.diagnostics)
+        raise StatectlError(
+            f"cannot write {path}: {why}; give --out a writable directory"
+        ) from None
+
+
+def export_graphwalker(file: str | Path, out_dir: str | Path) -> Path:
+    """Write ``DEVICE.graphwalker.json``: the state graph as a GraphWalker model."""
+    chart = load_chart(Path(file))
+    slug = re.sub(r"[^0-9a-z]+", "_", chart.name.lower()).strip("_") or "device"
+    path = Path(out_dir) / f"{slug}.graphwalker.json"
+    write_atomic(path, graphwalker_model(explore(chart)))
+    return path
+
+
+def export_xstate(file: str | Path, out_dir: str | Path) -> Path:
+    """Write ``DEVICE.xstate.json``: the chart as an XState machine config."""
+    chart = load_chart(Path(file))
+    slug = re.sub(r"[^0-9a-z]+", "_", chart.name.lower()).strip("_") or "device"
+    path = Path(out_dir) / f"{slug}.xstate.json"
+    write_atomic(path, xstate_config(chart))
+    return path
+
+
+def generate_hypothesis(file: str | Path, out_dir: str | Path) -> Path:
+    """Write ``test_DEVICE_hypothesis.py``: a RuleBasedStateMachine over the chart's events."""
+    source = Path(file)
+    chart = load_chart(source)
+    out = Path(out_dir)
+    path = out / module_name(chart.name, "hypothesis")
+    write_atomic(path, hypothesis_text(chart, source, out, str(file)))
+    return path
+
+
+def generate(
+    file: str | Path,
+    criterion: str,
+    out_dir: str | Path,
+    *,
+    max_nodes: int = MAX_NODES,
+    progress: Callable[[int, int], None] | None = None,
+) -> Generated:
+    """Write the ``criterion`` test module of the device file ``file`` into ``out_dir``.
+
+    Written whole or not at all (:func:`write_atomic`).
+    """
+    if criterion not in CRITERIA:
+        raise StatectlError(f"unknown criterion {criterion!r}; choose one of {', '.join(CRITERIA)}")
+    source = Path(file)
+    chart = load_chart(source)
+    suite = cases_for(explore(chart, max_nodes=max_nodes, progress=progress), criterion)
+    out = Path(out_dir)
+    path = out / module_name(chart.name, criterion)
+    write_atomic(path, module_text(suite, chart.name, source, out, str(file)))
+    big = is_big(suite)
+    tests = tests_in(suite, big)
+    steps = count_steps(suite.cases) + sum(
+        len(t.given) + t.count if big else (len(t.given) + 1) * t.count for t in suite.tables
+    )
+    return Generated(path, suite, tests, steps)

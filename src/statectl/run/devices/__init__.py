@@ -1,0 +1,42 @@
+"""Device drivers: the protocol, the base class, simulated twins and driver configuration."""
+
+from statectl.run.devices.base import Driver, connect, requested_target
+from statectl.run.devices.config import (
+    DRIVERS,
+    MIN_TOKEN,
+    DashboardConfig,
+    DriverConfig,
+    OpcuaConfig,
+    RunConfig,
+    load_driver_config,
+    load_run_config,
+    make_driver,
+    resolve_driver,
+)
+from statectl.run.devices.motor import SimMotor
+from statectl.run.devices.protocol import ApiCall, DeviceDriver, Report
+from statectl.run.devices.stepper import SimStepper
+from statectl.run.devices.twin import SimTwin, TwinNote
+
+__all__ = [
+    "DRIVERS",
+    "MIN_TOKEN",
+    "ApiCall",
+    "DashboardConfig",
+    "DeviceDriver",
+    "Driver",
+    "DriverConfig",
+    "OpcuaConfig",
+    "Report",
+    "RunConfig",
+    "SimMotor",
+    "SimStepper",
+    "SimTwin",
+    "TwinNote",
+    "connect",
+    "load_driver_config",
+    "load_run_config",
+    "make_driver",
+    "requested_target",
+    "resolve_driver",
+]

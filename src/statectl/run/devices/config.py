@@ -1,0 +1,564 @@
+"""Which driver runs which device: configuration, so a hardware change touches no model file.
+
+Rules:
+1. A driver is named by a registry name (:data:`DRIVERS`: ``sim-motor``,
+   ``sim-stepper``, ``sim-twin``; the bus drivers ``cia402``, ``cia402-sim``,
+   ``modbus``, docs/drivers.md) or by an entry string ``package.module:Class``.
+2. A driver config file is YAML::
+
+       devices:
+         Motor: {driver: sim-motor, options: {speed: 10}}
+
+   :func:`load_driver_config` reports every problem at once as diagnostics
+   D501-D510 with the file and line, raising one
+   :class:`~statectl.kernel.errors.DiagnosticError` if any is an error.
+3. Options are checked against the driver's constructor when the file loads,
+   so a misspelt option is a diagnostic, not a ``TypeError`` at start-up; a
+   driver with a ``check_options(options) -> problems`` attribute (``sim-twin``)
+   has its option values checked too (D509); a bus driver's option values are
+   D511, and a bus driver whose library is not installed is D512.
+4. A driver whose constructor takes ``chart`` is given the device's chart by
+   :func:`make_driver` (a twin derives itself from the tables); ``chart`` is
+   never an option a config file sets.
+5. The same file may carry the live dashboard's settings, so a token need not
+   be typed on a command line (where ``ps`` shows it)::
+
+       dashboard: {host: 127.0.0.1, port: 8765, token: <16 or more characters>, streams: 1000}
+
+   :func:`load_run_config` reads both sections; a file with only ``dashboard``
+   leaves the drivers to ``--driver`` or the twins. Problems there are D510.
+6. An ``opcua:`` section configures ``statectl run --opcua`` (parsed by
+   :mod:`statectl.run.devices.opcua_config`; problems there are D520).
+7. A ``ship:`` section ships the run's journal to PostgreSQL as it is
+   committed (docs/journal.md, "Shipping to PostgreSQL")::
+
+       ship: {to: postgresql://statectl@db.plant/cell, source: cell-a, interval: 0.5}
+
+   ``to`` is required; ``source`` (default ``host:path``), ``interval`` (seconds
+   between looks when nothing wakes the shipper), ``retry`` (seconds between
+   attempts while the server is down) and ``batch`` (rows per transaction) are
+   optional. Problems there are D530; a password in ``to`` is never echoed.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import inspect
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from statectl.front.tables import safeyaml
+from statectl.front.tables.inputs import read_input_text
+from statectl.kernel.errors import Diagnostic, DiagnosticError, Location, Severity, StatectlError
+from statectl.kernel.model import Chart
+from statectl.run.devices.cia402 import Cia402Driver, Cia402SimDriver
+from statectl.run.devices.cia402.options import cia402_option_problems
+from statectl.run.devices.modbus import ModbusIO, modbus_option_problems
+from statectl.run.devices.motor import SimMotor, motor_option_problems
+from statectl.run.devices.opcua_config import OpcuaConfig, parse_opcua
+from statectl.run.devices.protocol import DeviceDriver
+from statectl.run.devices.stepper import SimStepper, stepper_option_problems
+from statectl.run.devices.twin import SimTwin, twin_option_problems
+from statectl.run.devices.urls import url_problem
+
+__all__ = [
+    "DRIVERS",
+    "MIN_TOKEN",
+    "OPTION_CHECKS",
+    "DashboardConfig",
+    "DriverConfig",
+    "OpcuaConfig",
+    "RunConfig",
+    "ShipConfig",
+    "load_driver_config",
+    "load_run_config",
+    "make_driver",
+    "resolve_driver",
+]
+
+#: The drivers statectl ships, by the name a config file uses.
+DRIVERS: Mapping[str, Callable[..., DeviceDriver]] = {
+    "sim-motor": SimMotor,
+    "sim-stepper": SimStepper,
+    "sim-twin": SimTwin,
+    "cia402": Cia402Driver,
+    "cia402-sim": Cia402SimDriver,
+    "modbus": ModbusIO,
+}
+
+#: Checks of a bus driver's option values (D511), by driver name.
+BUS_OPTION_CHECKS: Mapping[str, Callable[[Mapping[str, Any]], Sequence[str]]] = {
+    "cia402": cia402_option_problems,
+    "cia402-sim": cia402_option_problems,
+    "modbus": modbus_option_problems,
+}
+
+#: The library each bus driver needs, by driver name: (module, extra) for D512.
+BUS_LIBRARIES: Mapping[str, tuple[str, str]] = {
+    "cia402": ("canopen", "canopen"),
+    "cia402-sim": ("canopen", "canopen"),
+    "modbus": ("pymodbus", "modbus"),
+}
+
+
+#: Checks of option values, by driver name: each returns the problems it finds.
+OPTION_CHECKS: Mapping[str, Callable[[Mapping[str, Any]], Sequence[str]]] = {
+    "sim-twin": twin_option_problems,
+    "sim-motor": motor_option_problems,
+    "sim-stepper": stepper_option_problems,
+}
+
+#: What to do about a D509, by driver name.
+OPTION_HINTS: Mapping[str, str] = {
+    "sim-twin": "give seconds as numbers >= 0, e.g. {delay: 0.5, faults: {Moving: 0.4}}",
+    "sim-motor": "give numbers, e.g. {speed: 10, position: 0}",
+    "sim-stepper": "give numbers, e.g. {steps_per_unit: 100, pulse_rate: 1000, step: 0}",
+}
+
+#: Constructor parameters statectl supplies itself, never a config file.
+SUPPLIED = ("chart",)
+
+#: device -> (driver name, options)
+DriverConfig = dict[str, tuple[str, dict[str, Any]]]
+
+_DEVICE_KEYS = ("driver", "options")
+_DASHBOARD_KEYS = ("host", "port", "token", "streams")
+#: The most event streams a config file may allow (each holds a socket and a buffer).
+MAX_STREAMS = 100_000
+
+#: The shortest dashboard token a config file may set: a short one can be guessed.
+MIN_TOKEN = 16
+
+
+@dataclass(frozen=True, slots=True)
+class DashboardConfig:
+    """The ``dashboard:`` section: each field None where the file says nothing."""
+
+    host: str | None = None
+    port: int | None = None
+    token: str | None = None
+    streams: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class ShipConfig:
+    """The ``ship:`` section (rule 6): where the journal goes, and how often."""
+
+    to: str
+    source: str | None = None
+    interval: float = 0.5
+    retry: float = 5.0
+    batch: int = 5000
+
+
+@dataclass(frozen=True, slots=True)
+class RunConfig:
+    """A run's configuration file: drivers per device (None: no ``devices`` section)."""
+
+    drivers: DriverConfig | None
+    dashboard: DashboardConfig
+    #: the ``opcua:`` section (devices/opcua_config.py)
+    opcua: OpcuaConfig = field(default_factory=OpcuaConfig)
+    #: the ``ship:`` section: the run's journal shipped to PostgreSQL
+    ship: ShipConfig | None = None
+
+
+def _available() -> str:
+    return ", ".join(DRIVERS) + ", or an entry 'package.module:Class'"
+
+
+def resolve_driver(name: str) -> Callable[..., DeviceDriver]:
+    """The driver class a registry name or ``package.module:Class`` entry names."""
+    if name in DRIVERS:
+        return DRIVERS[name]
+    module_name, sep, attr = name.partition(":")
+    if not sep or not module_name or not attr:
+        raise StatectlError(f"unknown driver {name!r}; available: {_available()}")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        top = module_name.split(".")[0]
+        raise StatectlError(
+            f"driver {name!r}: cannot import {module_name!r} ({exc}); put {top}.py (or the "
+            f"package {top}/) beside the model file, or add the directory that holds it to "
+            "PYTHONPATH"
+        ) from None
+    except SyntaxError as exc:
+        raise StatectlError(
+            f"{exc.filename}:{exc.lineno}: driver {name!r}: {module_name!r} is not valid "
+            f"Python ({exc.msg}); fix the module"
+        ) from None
+    except Exception as exc:  # the module's own code failed: say where, not a traceback
+        raise StatectlError(
+            f"{_where(exc)}driver {name!r}: importing {module_name!r} failed: "
+            f"{type(exc).__name__}: {exc}; fix the module"
+        ) from None
+    obj = module
+    for part in attr.split("."):
+        if not hasattr(obj, part):
+            raise StatectlError(f"driver {name!r}: {module_name!r} has no {attr!r}")
+        obj = getattr(obj, part)
+    if not (
+        isinstance(obj, type)
+        and all(callable(getattr(obj, m, None)) for m in ("update", "bind", "poll_fault"))
+    ):
+        raise StatectlError(
+            f"driver {name!r} is not a device driver class "
+            "(needs update(), bind() and poll_fault(); see statectl.run.devices.DeviceDriver)"
+        )
+    factory: Callable[..., DeviceDriver] = obj
+    return factory
+
+
+def make_driver(
+    name: str, options: Mapping[str, Any] | None = None, *, chart: Chart | None = None
+) -> DeviceDriver:
+    """Create the driver ``name`` with keyword ``options``; ``chart`` if it takes one (rule 4)."""
+    factory = resolve_driver(name)
+    kwargs = dict(options or {})
+    problem = _option_problem(factory, kwargs) or "; ".join(_value_problems(name, kwargs))
+    if problem:
+        raise StatectlError(f"driver {name!r}: {problem}")
+    if _takes_chart(factory):
+        if chart is None:
+            raise StatectlError(f"driver {name!r} is derived from the device's chart; pass chart=")
+        kwargs["chart"] = chart
+    if name in DRIVERS:
+        return factory(**kwargs)
+    try:
+        return factory(**kwargs)
+    except StatectlError:
+        raise
+    except Exception as exc:  # a driver of the user's own failed: say where, not a traceback
+        raise StatectlError(
+            f"{_where(exc)}driver {name!r} failed while it was made: "
+            f"{type(exc).__name__}: {exc}; fix the driver or its options"
+        ) from None
+
+
+def _where(exc: BaseException) -> str:
+    """``file:line: `` of the innermost frame that raised ``exc`` (empty if unknown)."""
+    tb = exc.__traceback__
+    if tb is None:
+        return ""
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    return f"{tb.tb_frame.f_code.co_filename}:{tb.tb_lineno}: "
+
+
+def _takes_chart(factory: Callable[..., Any]) -> bool:
+    try:
+        return "chart" in inspect.signature(factory).parameters
+    except (TypeError, ValueError):
+        return False
+
+
+def _value_problems(name: str, options: Mapping[str, Any]) -> Sequence[str]:
+    check = OPTION_CHECKS.get(name) or BUS_OPTION_CHECKS.get(name)
+    return check(options) if check is not None else ()
+
+
+def _missing_library(name: str) -> str | None:
+    """The ``pip install`` a bus driver still needs, or None (D512)."""
+    need = BUS_LIBRARIES.get(name)
+    if need is None or importlib.util.find_spec(need[0]) is not None:
+        return None
+    return f"pip install 'statectl[{need[1]}]'"
+
+
+def _option_problem(factory: Callable[..., Any], options: Mapping[str, Any]) -> str | None:
+    try:
+        signature = inspect.signature(factory)
+    except (TypeError, ValueError):  # no signature to check against: let the call decide
+        return None
+    params = signature.parameters.values()
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
+        return None
+    accepted = [
+        p.name
+        for p in params
+        if p.kind in (inspect.Parameter.KEYWORD_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+        and p.name not in SUPPLIED
+    ]
+    unknown = [k for k in options if k not in accepted]
+    if unknown:
+        return f"unknown option(s) {unknown}; it accepts {accepted or 'none'}"
+    return None
+
+
+def load_driver_config(path: str | Path) -> DriverConfig:
+    """Read a driver config file; every problem becomes a D5xx diagnostic."""
+    config = load_run_config(path)
+    if config.drivers is None:
+        diag = Diagnostic(
+            "D503",
+            Severity.ERROR,
+            Location(str(path), 1),
+            "no 'devices' mapping",
+            "add 'devices:' with one entry per device",
+        )
+        raise DiagnosticError([diag])
+    return config.drivers
+
+
+def load_run_config(path: str | Path) -> RunConfig:
+    """Read a run's config file (drivers, dashboard); every problem becomes a D5xx diagnostic."""
+    file = str(path)
+    diags: list[Diagnostic] = []
+
+    def error(code: str, line: int | None, message: str, hint: str = "") -> None:
+        diags.append(Diagnostic(code, Severity.ERROR, Location(file, line), message, hint))
+
+    try:
+        text = read_input_text(path)
+    except (OSError, UnicodeDecodeError) as exc:
+        error("D501", None, f"cannot read driver config ({exc})", "check the path")
+        raise DiagnosticError(diags) from None
+    try:  # no aliases, bounded depth: a config file may come from elsewhere too
+        root = safeyaml.compose(text)
+    except safeyaml.YamlRefused as exc:
+        error("D502", exc.line, f"not valid YAML here ({exc.message})", exc.hint)
+        raise DiagnosticError(diags) from None
+
+    def line_of(node: yaml.Node) -> int:
+        return int(node.start_mark.line) + 1
+
+    def value(node: yaml.Node) -> Any:
+        return safeyaml.construct(node)
+
+    result: DriverConfig = {}
+    devices_node: yaml.Node | None = None
+    dashboard_node: yaml.Node | None = None
+    opcua_node: yaml.Node | None = None
+    ship_node: yaml.Node | None = None
+    if not isinstance(root, yaml.MappingNode):
+        error(
+            "D503",
+            line_of(root) if root is not None else 1,
+            "a driver config must be a mapping with a 'devices' key",
+            "write 'devices: {Motor: {driver: sim-motor}}'",
+        )
+    else:
+        for key, val in root.value:
+            if value(key) == "devices":
+                devices_node = val
+            elif value(key) == "dashboard":
+                dashboard_node = val
+            elif value(key) == "opcua":
+                opcua_node = val
+            elif value(key) == "ship":
+                ship_node = val
+            else:
+                error(
+                    "D507",
+                    line_of(key),
+                    f"unknown key {value(key)!r}",
+                    "a run config has 'devices', 'dashboard', 'opcua' and 'ship'",
+                )
+        if (
+            devices_node is None
+            and dashboard_node is None
+            and opcua_node is None
+            and ship_node is None
+        ):
+            error(
+                "D503",
+                line_of(root),
+                "no 'devices' mapping",
+                "add 'devices:' with one entry per device",
+            )
+        elif devices_node is not None and not isinstance(devices_node, yaml.MappingNode):
+            error("D503", line_of(devices_node), "'devices' must map device names to entries")
+            devices_node = None
+    for key, entry in devices_node.value if devices_node is not None else ():
+        device = str(value(key))
+        here = line_of(key)
+        if not isinstance(entry, yaml.MappingNode):
+            error(
+                "D504",
+                here,
+                f"device {device!r}: entry must be a mapping (got {value(entry)!r})",
+                "write '{driver: <name>, options: {...}}'",
+            )
+            continue
+        fields = {str(value(k)): (k, v) for k, v in entry.value}
+        for name, (k, _) in fields.items():
+            if name not in _DEVICE_KEYS:
+                error(
+                    "D507",
+                    line_of(k),
+                    f"device {device!r}: unknown key {name!r}",
+                    f"an entry has {', '.join(_DEVICE_KEYS)}",
+                )
+        if "driver" not in fields:
+            error("D504", here, f"device {device!r}: no 'driver'", f"name one of: {_available()}")
+            continue
+        dnode = fields["driver"][1]
+        driver = value(dnode)
+        options: dict[str, Any] = {}
+        if "options" in fields:
+            onode = fields["options"][1]
+            raw = value(onode)
+            if raw is None:
+                raw = {}
+            if not isinstance(raw, dict) or not all(isinstance(k, str) for k in raw):
+                error(
+                    "D506",
+                    line_of(onode),
+                    f"device {device!r}: options must be a mapping of names to values "
+                    f"(got {raw!r})",
+                )
+                continue
+            options = raw
+        if not isinstance(driver, str):
+            error(
+                "D505", line_of(dnode), f"device {device!r}: driver must be a name (got {driver!r})"
+            )
+            continue
+        try:
+            factory = resolve_driver(driver)
+        except StatectlError as exc:
+            error("D505", line_of(dnode), f"device {device!r}: {exc}")
+            continue
+        problem = _option_problem(factory, options)
+        if problem:
+            error("D508", line_of(fields["options"][1]), f"device {device!r}: {problem}")
+            continue
+        missing = _missing_library(driver)
+        if missing is not None:
+            error(
+                "D512",
+                line_of(dnode),
+                f"device {device!r}: driver {driver!r} needs a library that is not installed",
+                missing,
+            )
+            continue
+        if driver in BUS_OPTION_CHECKS:
+            bad = _value_problems(driver, options)
+            for text in bad:
+                error(
+                    "D511",
+                    line_of(fields["options"][1]),
+                    f"device {device!r}: {text}",
+                    "see docs/drivers.md for the driver's options",
+                )
+            if bad:
+                continue
+        bad = _value_problems(driver, options)
+        for text in bad:
+            error(
+                "D509",
+                line_of(fields["options"][1]),
+                f"device {device!r}: {text}",
+                OPTION_HINTS.get(driver, ""),
+            )
+        if bad:
+            continue
+        result[device] = (driver, options)
+    dashboard = DashboardConfig()
+    if dashboard_node is not None:
+        dashboard = _dashboard(dashboard_node, value, line_of, error)
+    opcua = OpcuaConfig() if opcua_node is None else parse_opcua(opcua_node, value, line_of, error)
+    ship = None if ship_node is None else _ship(ship_node, value, line_of, error)
+    if diags:
+        raise DiagnosticError(diags)
+    return RunConfig(result if devices_node is not None else None, dashboard, opcua, ship)
+
+
+def _dashboard(
+    node: yaml.Node,
+    value: Callable[[yaml.Node], Any],
+    line_of: Callable[[yaml.Node], int],
+    error: Callable[[str, int | None, str, str], None],
+) -> DashboardConfig:
+    """The ``dashboard:`` section (rule 5); every problem is a D510 error."""
+    if not isinstance(node, yaml.MappingNode):
+        error("D510", line_of(node), "'dashboard' must be a mapping",
+              "write 'dashboard: {port: 8765, token: ...}'")  # fmt: skip
+        return DashboardConfig()
+    fields: dict[str, Any] = {}
+    for k, v in node.value:
+        name, val, line = value(k), value(v), line_of(v)
+        if name not in _DASHBOARD_KEYS:
+            error("D510", line_of(k), f"dashboard: unknown key {name!r}",
+                  f"the dashboard has {', '.join(_DASHBOARD_KEYS)}")  # fmt: skip
+        elif name == "host" and not (isinstance(val, str) and val):
+            error("D510", line, f"dashboard: host must be an address (got {val!r})",
+                  "write 'host: 127.0.0.1' (the default, loopback only)")  # fmt: skip
+        elif name == "port" and not (
+            isinstance(val, int) and not isinstance(val, bool) and 0 <= val <= 65535
+        ):
+            error("D510", line, f"dashboard: port must be a number 0-65535 (got {val!r})",
+                  "0 takes any free port")  # fmt: skip
+        elif name == "streams" and not (
+            isinstance(val, int) and not isinstance(val, bool) and 1 <= val <= MAX_STREAMS
+        ):
+            error("D510", line,
+                  f"dashboard: streams must be a number 1-{MAX_STREAMS} (got {val!r})",
+                  "the most pages that may follow the run at once; 1000 by default")  # fmt: skip
+        elif name == "token" and not (isinstance(val, str) and len(val) >= MIN_TOKEN):
+            shown = "a shorter text" if isinstance(val, str) else repr(val)  # never echo a secret
+            error(
+                "D510",
+                line,
+                f"dashboard: token must be text of {MIN_TOKEN} characters or more (got {shown})",
+                "make one: python -c 'import secrets; print(secrets.token_urlsafe(18))'",
+            )
+        else:
+            fields[name] = val
+    return DashboardConfig(**fields)
+
+
+_SHIP_KEYS = ("to", "source", "interval", "retry", "batch")
+
+
+def _ship(
+    node: yaml.Node,
+    value: Callable[[yaml.Node], Any],
+    line_of: Callable[[yaml.Node], int],
+    error: Callable[[str, int | None, str, str], None],
+) -> ShipConfig | None:
+    """The ``ship:`` section (rule 7); every problem is a D530 error."""
+    example = "write 'ship: {to: postgresql://user@host/db}'"
+    if not isinstance(node, yaml.MappingNode):
+        error("D530", line_of(node), "'ship' must be a mapping", example)
+        return None
+    fields: dict[str, Any] = {}
+    bad = False
+    for k, v in node.value:
+        name, val, line = value(k), value(v), line_of(v)
+        number = isinstance(val, int | float) and not isinstance(val, bool)
+        problem = ""
+        if name not in _SHIP_KEYS:
+            error("D530", line_of(k), f"ship: unknown key {name!r}",
+                  f"the ship section has {', '.join(_SHIP_KEYS)}")  # fmt: skip
+            bad = True
+            continue
+        if name == "to" and not (
+            isinstance(val, str) and val.startswith(("postgresql://", "postgres://"))
+        ):
+            shown = "a text that is not one" if isinstance(val, str) else repr(val)
+            problem = f"ship: to must be a postgresql:// URL (got {shown})"  # may hold a password
+        elif name == "to" and (why := url_problem(val)) is not None:
+            problem = f"ship: to is not a valid URL ({why})"  # the URL itself is not shown
+        elif name == "source" and not (isinstance(val, str) and val):
+            problem = f"ship: source must be a name (got {val!r})"
+        elif name in ("interval", "retry") and not (number and 0.01 <= val <= 3600):
+            problem = f"ship: {name} must be seconds from 0.01 to 3600 (got {val!r})"
+        elif name == "batch" and not (number and isinstance(val, int) and 1 <= val <= 1_000_000):
+            problem = f"ship: batch must be a number of rows 1-1000000 (got {val!r})"
+        if problem:
+            error("D530", line, problem, example)
+            bad = True
+        else:
+            fields[name] = val
+    if "to" not in fields:
+        if not bad:
+            error("D530", line_of(node), "ship: no 'to'", example)
+        return None
+    return None if bad else ShipConfig(**fields)

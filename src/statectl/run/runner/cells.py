@@ -1,0 +1,67 @@
+"""Which files are cells, and the device setups of a cell's instances with their recovery rules.
+
+Library code under the run command (:mod:`statectl.channels.cli.run`) and the tests:
+it returns setups and the warnings that apply, and prints nothing."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+
+from statectl.cell.model import Cell
+from statectl.front.tables import safeyaml
+from statectl.front.tables.inputs import read_input_text
+from statectl.kernel.errors import Diagnostic, DiagnosticError
+from statectl.run.journal import (
+    load_device,
+)
+from statectl.run.system import DeviceSetup
+
+
+def is_cell(path: str) -> bool:
+    """A YAML file with a ``devices`` section and no ``states`` table is a cell file."""
+    if Path(path).suffix.lower() not in (".yaml", ".yml"):
+        return False
+    try:
+        data = safeyaml.load_value(read_input_text(path))
+    except (OSError, UnicodeDecodeError, safeyaml.YamlRefused):
+        return False  # loaded as a device file, whose loader says what is wrong
+    return isinstance(data, dict) and "devices" in data and "states" not in data
+
+
+#: Recovery warnings matter only when there is a journal to recover from.
+JOURNAL_ONLY_WARNINGS = frozenset({"J606", "J608"})
+
+
+def relevant_warnings(warnings: Iterable[Diagnostic], journalled: bool) -> list[Diagnostic]:
+    """The warnings a run should show: recovery warnings only when it is journalled."""
+    return [d for d in warnings if journalled or d.code not in JOURNAL_ONLY_WARNINGS]
+
+
+def load_setups(
+    cell: Cell, *, journalled: bool = True
+) -> tuple[tuple[DeviceSetup, ...], list[Diagnostic]]:
+    """One setup per device instance of ``cell``, and the warnings that apply to the run.
+
+    Raises one :class:`DiagnosticError` for every device file whose rules do not
+    load; recovery warnings are kept only for a ``journalled`` run.
+    """
+    setups: list[DeviceSetup] = []
+    problems: list[Diagnostic] = []
+    warnings: list[Diagnostic] = []
+    for ref in cell.devices:
+        try:
+            dev = load_device(ref.path)
+        except DiagnosticError as exc:
+            problems.extend(exc.diagnostics)
+            continue
+        warnings.extend(relevant_warnings(dev.warnings, journalled))
+        setups.append(DeviceSetup(ref.name, ref.chart, dev.rules, ref.path))
+    if problems:
+        raise DiagnosticError(problems)
+    return tuple(setups), warnings
+
+
+def cell_setups(cell: Cell, *, journalled: bool = True) -> tuple[DeviceSetup, ...]:
+    """One setup per device instance of ``cell`` (see :func:`load_setups`; warnings dropped)."""
+    return load_setups(cell, journalled=journalled)[0]

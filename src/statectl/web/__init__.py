@@ -1,7 +1,0 @@
-"""The live dashboard (aiohttp + Server-Sent Events on its own loop); see docs/dashboard.md."""
-
-from statectl.web.app import Limits
-from statectl.web.server import LOG_SIZE, Dashboard, PostFn
-from statectl.web.svg import fallback_svg
-
-__all__ = ["LOG_SIZE", "Dashboard", "Limits", "PostFn", "fallback_svg"]
