@@ -44,7 +44,16 @@ import yaml
 from statectl.cell.expressions import _d, parse_global
 from statectl.cell.nodes import read_nodes
 from statectl.cell.options import check_cross_refs, violation_events
-from statectl.cell.reader import _environment, _expr, _links, _load_devices, _named, _Reader
+from statectl.cell.reader import (
+    INVARIANT_FIELDS,
+    RECOVERY_FIELDS,
+    _environment,
+    _expr,
+    _links,
+    _load_devices,
+    _named,
+    _Reader,
+)
 from statectl.cell.values import (
     CODES,
     TOP_KEYS,
@@ -79,12 +88,18 @@ __all__ = [
 ]
 
 
-def load_cell(path: str | os.PathLike[str]) -> tuple[Cell | None, list[Diagnostic]]:
-    """Load a cell file and its devices; ``None`` and every diagnostic if any is an error."""
+def load_cell(
+    path: str | os.PathLike[str], text: str | None = None
+) -> tuple[Cell | None, list[Diagnostic]]:
+    """Load a cell file and its devices; ``None`` and every diagnostic if any is an error.
+
+    ``text`` is the file's content when the caller holds it (an editor's buffer,
+    statectl.channels.lsp); the devices are read from their files either way.
+    """
     file = str(path)
     top = Location(file, 1)
     try:
-        text = read_input_text(path)
+        text = read_input_text(path) if text is None else text
     except OSError as exc:
         return None, [_d("V801", top, f"cannot read the cell file: {exc.strerror or exc}")]
     except UnicodeDecodeError as exc:
@@ -128,7 +143,7 @@ def load_cell(path: str | os.PathLike[str]) -> tuple[Cell | None, list[Diagnosti
     invariants: list[Invariant] = []
     names: set[str] = set()
     for inv_name, fields, _ in _named(
-        r, f.get("invariants"), "invariant", ("name", "holds", "on_violation"), ("holds",), names
+        r, f.get("invariants"), "invariant", INVARIANT_FIELDS, ("holds",), names
     ):
         expr = _expr(r, fields.get("holds"), f"invariant {inv_name!r}", charts)
         react, problems = violation_events(fields.get("on_violation"), file, charts)
@@ -137,7 +152,7 @@ def load_cell(path: str | os.PathLike[str]) -> tuple[Cell | None, list[Diagnosti
             invariants.append(Invariant(inv_name, expr, react))
     recovery: list[Recovery] = []
     for rec_name, fields, _ in _named(
-        r, f.get("recovery"), "recovery", ("name", "to", "from"), ("to",), names
+        r, f.get("recovery"), "recovery", RECOVERY_FIELDS, ("to",), names
     ):
         target = _expr(r, fields.get("to"), f"recovery {rec_name!r} to", charts)
         source = _expr(r, fields.get("from"), f"recovery {rec_name!r} from", charts)

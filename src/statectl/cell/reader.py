@@ -19,6 +19,12 @@ from statectl.front.builder.build import load_and_build
 from statectl.kernel.errors import Diagnostic, Location, Severity, has_errors
 from statectl.kernel.model import Chart, ControlKind, EventKind
 
+#: The keys of an entry in each of a cell's lists (the JSON Schema, out/schema.py, reads them).
+LINK_FIELDS = ("from", "enters", "raises", "to", "send", "guard", *LINK_OPTION_KEYS, *LINK_KEYS)
+ENVIRONMENT_FIELDS = ("send", "fault", "to", "when")
+INVARIANT_FIELDS = ("name", "holds", "on_violation")
+RECOVERY_FIELDS = ("name", "to", "from")
+
 # -- YAML reading ---------------------------------------------------------------------------
 
 
@@ -208,9 +214,8 @@ def _event(
 
 def _links(r: _Reader, node: yaml.Node | None, charts: Mapping[str, Chart]) -> list[Link]:
     out: list[Link] = []
-    keys = ("from", "enters", "raises", "to", "send", "guard", *LINK_OPTION_KEYS, *LINK_KEYS)
     for item in r.items(node, "links"):
-        f = r.mapping(item, "link", keys, ("from", "to", "send"))
+        f = r.mapping(item, "link", LINK_FIELDS, ("from", "to", "send"))
         if f is None:
             continue
         at = r.at(item)
@@ -262,7 +267,7 @@ def _links(r: _Reader, node: yaml.Node | None, charts: Mapping[str, Chart]) -> l
 def _environment(r: _Reader, node: yaml.Node | None, charts: Mapping[str, Chart]) -> list[EnvInput]:
     out: list[EnvInput] = []
     for item in r.items(node, "environment"):
-        f = r.mapping(item, "environment entry", ("send", "fault", "to", "when"), ("to",))
+        f = r.mapping(item, "environment entry", ENVIRONMENT_FIELDS, ("to",))
         if f is None:
             continue
         at = r.at(item)

@@ -495,15 +495,16 @@ def check_chart(chart: Chart) -> Iterator[Diagnostic]:
         yield from rule(st)
 
 
-def check_paths(paths: Sequence[str]) -> list[Diagnostic]:
+def check_paths(paths: Sequence[str], texts: Mapping[str, str] | None = None) -> list[Diagnostic]:
     """Load and build each file (its diagnostics included), then check each chart that built.
 
     The chart's Recovery table is checked too (J603-J605 errors); a monitored
     state without a rule (J606) is info here, since only a journalled run needs one.
+    ``texts`` holds unsaved content by absolute path (:func:`statectl.front.tables.load`).
     """
     out: list[Diagnostic] = []
     for path in paths:
-        tables, diagnostics = load(path)
+        tables, diagnostics = load(path, texts)
         out.extend(diagnostics)
         if tables is None:
             continue

@@ -23,6 +23,7 @@ import contextlib
 import enum
 import os
 import secrets
+from collections.abc import Mapping
 from pathlib import Path
 
 from statectl.front.tables.csv_io import csv_paths, dump_csv, read_csv
@@ -109,7 +110,11 @@ def _unknown_format(path: Path, fmt: str | None = None) -> Diagnostic:
     return diag("T102", Location(str(path)), f"{what} names no device table format", hint)
 
 
-def _read_text(path: Path, diags: list[Diagnostic]) -> str | None:
+def _read_text(
+    path: Path, diags: list[Diagnostic], texts: Mapping[str, str] | None = None
+) -> str | None:
+    if texts and (held := texts.get(os.path.abspath(path))) is not None:
+        return held
     try:
         return read_input(path).decode("utf-8-sig")
     except FileNotFoundError:
@@ -121,8 +126,15 @@ def _read_text(path: Path, diags: list[Diagnostic]) -> str | None:
     return None
 
 
-def load(path: str | os.PathLike[str]) -> tuple[DeviceTables | None, list[Diagnostic]]:
-    """Read a device file in any format; all problems come back as diagnostics."""
+def load(
+    path: str | os.PathLike[str], texts: Mapping[str, str] | None = None
+) -> tuple[DeviceTables | None, list[Diagnostic]]:
+    """Read a device file in any format; all problems come back as diagnostics.
+
+    ``texts`` holds the content of text files by absolute path, read instead of
+    the disk (an editor's unsaved buffers: statectl.channels.lsp); a CSV pair
+    takes either file from it.
+    """
     p = Path(path)
     fmt = format_of(p)
     if fmt is None:
@@ -141,10 +153,10 @@ def load(path: str | os.PathLike[str]) -> tuple[DeviceTables | None, list[Diagno
                     "name the pair's file instead",
                 )
             ]
-        states = _read_text(files.states, diags)
-        events = _read_text(files.events, diags)
-        data = _read_text(files.data, diags) if files.data.exists() else None
-        recovery = _read_text(files.recovery, diags) if files.recovery.exists() else None
+        states = _read_text(files.states, diags, texts)
+        events = _read_text(files.events, diags, texts)
+        data = _read_text(files.data, diags, texts) if files.data.exists() else None
+        recovery = _read_text(files.recovery, diags, texts) if files.recovery.exists() else None
         if states is None or events is None:
             return None, diags
         tables, more = read_csv(
@@ -163,7 +175,7 @@ def load(path: str | os.PathLike[str]) -> tuple[DeviceTables | None, list[Diagno
         except OSError as exc:
             return None, [diag("T110", Location(str(p)), f"cannot read: {exc.strerror or exc}")]
         return read_xlsx(content, str(p), p.stem)
-    text = _read_text(p, diags)
+    text = _read_text(p, diags, texts)
     if text is None:
         return None, diags
     if fmt is Format.YAML:

@@ -126,8 +126,11 @@ SUPPLIED = ("chart",)
 #: device -> (driver name, options)
 DriverConfig = dict[str, tuple[str, dict[str, Any]]]
 
-_DEVICE_KEYS = ("driver", "options")
-_DASHBOARD_KEYS = ("host", "port", "token", "streams")
+#: The sections of a run config, and the keys of a device entry, the dashboard and ship
+#: (the JSON Schema, out/schema.py, reads them).
+RUN_CONFIG_KEYS = ("devices", "dashboard", "opcua", "ship")
+DEVICE_KEYS = ("driver", "options")
+DASHBOARD_KEYS = ("host", "port", "token", "streams")
 #: The most event streams a config file may allow (each holds a socket and a buffer).
 MAX_STREAMS = 100_000
 
@@ -306,8 +309,11 @@ def load_driver_config(path: str | Path) -> DriverConfig:
     return config.drivers
 
 
-def load_run_config(path: str | Path) -> RunConfig:
-    """Read a run's config file (drivers, dashboard); every problem becomes a D5xx diagnostic."""
+def load_run_config(path: str | Path, text: str | None = None) -> RunConfig:
+    """Read a run's config file (drivers, dashboard); every problem becomes a D5xx diagnostic.
+
+    ``text`` is the file's content when the caller holds it (an editor's buffer).
+    """
     file = str(path)
     diags: list[Diagnostic] = []
 
@@ -315,7 +321,7 @@ def load_run_config(path: str | Path) -> RunConfig:
         diags.append(Diagnostic(code, Severity.ERROR, Location(file, line), message, hint))
 
     try:
-        text = read_input_text(path)
+        text = read_input_text(path) if text is None else text
     except (OSError, UnicodeDecodeError) as exc:
         error("D501", None, f"cannot read driver config ({exc})", "check the path")
         raise DiagnosticError(diags) from None
@@ -388,12 +394,12 @@ def load_run_config(path: str | Path) -> RunConfig:
             continue
         fields = {str(value(k)): (k, v) for k, v in entry.value}
         for name, (k, _) in fields.items():
-            if name not in _DEVICE_KEYS:
+            if name not in DEVICE_KEYS:
                 error(
                     "D507",
                     line_of(k),
                     f"device {device!r}: unknown key {name!r}",
-                    f"an entry has {', '.join(_DEVICE_KEYS)}",
+                    f"an entry has {', '.join(DEVICE_KEYS)}",
                 )
         if "driver" not in fields:
             error("D504", here, f"device {device!r}: no 'driver'", f"name one of: {_available()}")
@@ -484,9 +490,9 @@ def _dashboard(
     fields: dict[str, Any] = {}
     for k, v in node.value:
         name, val, line = value(k), value(v), line_of(v)
-        if name not in _DASHBOARD_KEYS:
+        if name not in DASHBOARD_KEYS:
             error("D510", line_of(k), f"dashboard: unknown key {name!r}",
-                  f"the dashboard has {', '.join(_DASHBOARD_KEYS)}")  # fmt: skip
+                  f"the dashboard has {', '.join(DASHBOARD_KEYS)}")  # fmt: skip
         elif name == "host" and not (isinstance(val, str) and val):
             error("D510", line, f"dashboard: host must be an address (got {val!r})",
                   "write 'host: 127.0.0.1' (the default, loopback only)")  # fmt: skip
@@ -514,7 +520,7 @@ def _dashboard(
     return DashboardConfig(**fields)
 
 
-_SHIP_KEYS = ("to", "source", "interval", "retry", "batch")
+SHIP_KEYS = ("to", "source", "interval", "retry", "batch")
 
 
 def _ship(
@@ -534,9 +540,9 @@ def _ship(
         name, val, line = value(k), value(v), line_of(v)
         number = isinstance(val, int | float) and not isinstance(val, bool)
         problem = ""
-        if name not in _SHIP_KEYS:
+        if name not in SHIP_KEYS:
             error("D530", line_of(k), f"ship: unknown key {name!r}",
-                  f"the ship section has {', '.join(_SHIP_KEYS)}")  # fmt: skip
+                  f"the ship section has {', '.join(SHIP_KEYS)}")  # fmt: skip
             bad = True
             continue
         if name == "to" and not (

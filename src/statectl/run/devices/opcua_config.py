@@ -33,7 +33,7 @@ __all__ = ["MIN_PASSWORD", "POLICIES", "OpcuaConfig", "endpoint_problem", "parse
 POLICIES = ("Basic256Sha256", "None")
 #: The shortest password the section accepts: a short one is guessed.
 MIN_PASSWORD = 12
-_KEYS = ("endpoint", "user", "password", "security", "certificates")
+OPCUA_KEYS = ("endpoint", "user", "password", "security", "certificates")
 
 
 @dataclass(frozen=True, slots=True)
@@ -82,9 +82,9 @@ def parse_opcua(
     for k, v in node.value:
         name, val, line = value(k), value(v), line_of(v)
         given.add(name)
-        if name not in _KEYS:
+        if name not in OPCUA_KEYS:
             error("D520", line_of(k), f"opcua: unknown key {name!r}",
-                  f"the opcua section has {', '.join(_KEYS)}")  # fmt: skip
+                  f"the opcua section has {', '.join(OPCUA_KEYS)}")  # fmt: skip
         elif name == "endpoint" and (why := endpoint_problem(val)):
             error("D520", line, f"opcua: {why}",
                   "write 'endpoint: opc.tcp://127.0.0.1:4840' (loopback only)")  # fmt: skip
