@@ -145,6 +145,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "explore",
         "system",
     ),
+    "schema": ("errors", "model", "tables", "cell", "devices"),  # out/schema.py: JSON Schemas
     "testgen": (
         "errors",
         "model",

@@ -271,6 +271,9 @@ def build_parser() -> argparse.ArgumentParser:
     from statectl.channels.cli.node import register as register_node
 
     register_node(sub)  # node, dashboard (src/statectl/channels/cli/node.py; docs/distributed.md)
+    from statectl.channels.cli.editors import register as register_editors
+
+    register_editors(sub)  # schema, lsp (src/statectl/channels/cli/editors.py; docs/editors.md)
     return p
 
 
