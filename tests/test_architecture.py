@@ -146,6 +146,19 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "system",
     ),
     "schema": ("errors", "model", "tables", "cell", "devices"),  # out/schema.py: JSON Schemas
+    "lsp": (  # channels/lsp: the language server reads what check, verify and run read
+        "errors",
+        "model",
+        "expr",
+        "observers",
+        "tables",
+        "build",
+        "rules",
+        "recovery",
+        "devices",
+        "cell",
+        "schema",
+    ),
     "testgen": (
         "errors",
         "model",
