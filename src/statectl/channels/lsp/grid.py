@@ -145,6 +145,8 @@ def _node_span(node: yaml.Node, lines: list[str]) -> Span:
     start, end = node.start_mark, node.end_mark
     line = start.line
     stop = end.column if end.line == line else len(lines[line]) if line < len(lines) else 0
+    if isinstance(node, yaml.ScalarNode) and node.style in ("'", '"') and end.line == line:
+        return Span(line, start.column + 1, max(stop - 1, start.column + 1))  # inside the quotes
     return Span(line, start.column, max(stop, start.column))
 
 

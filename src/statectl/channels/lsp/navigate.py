@@ -105,12 +105,12 @@ def hover(project: Project, doc: Document, line: int, character: int) -> str | N
         parts.append(f"_not defined in {device}_")
     elif symbol.kind is Kind.STATE:
         parts.append(_cells(defining.row, ("component", "api", "control", "description")))
-        parts[0] += f", line {defining.row.line + 1}"
+        parts[0] += f", line {defining.span.line + 1}"
     else:
         rows = [s.row for d in docs for s in d.symbols if _is_event_row(s, symbol)]
         parts.append("\n".join(_transition(r) for r in rows if r is not None))
         parts.append(_cells(defining.row, ("condition", "kind", "api")))
-        parts[0] += f", line {defining.row.line + 1}"
+        parts[0] += f", line {defining.span.line + 1}"
     uses = [(d, s) for d, s in namings(project, doc, symbol) if not s.definition]
     uses = [(d, s) for d, s in uses if not (s.row is not None and _is_event_row(s, symbol))]
     if uses:

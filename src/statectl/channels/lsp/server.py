@@ -8,8 +8,9 @@ Rules:
 2. Diagnostics are published on open, on every change and on save, for the file
    itself, with the code, severity, message and hint of the command line (the
    message reads as ``statectl check`` prints it, ``message (hint)``; the hint
-   is also in ``data``). Each is placed on its line, narrowed to the first name
-   the message quotes that the line holds, else to the line's text.
+   is also in ``data``). Each is placed on its line, narrowed to the last name
+   the message quotes that the line holds as a word (what was not found, in
+   "X has no Y 'Z'"), else to the line's text.
 3. A file that is not a device, cell or run config still gets the device
    loader's answer, as ``statectl check`` would give it; nothing here raises
    for bad input.
@@ -93,10 +94,10 @@ def _diagnostic(d: Diagnostic, lines: list[str]) -> lsp.Diagnostic:
     text = lines[line] if line < len(lines) else ""
     start = len(text) - len(text.lstrip())
     end = len(text.rstrip())
-    for name in QUOTED.findall(d.message):
-        at = text.find(name)
-        if at >= 0:
-            start, end = at, at + len(name)
+    for name in reversed(QUOTED.findall(d.message)):  # the last is what was not found
+        m = re.search(rf"(?<!\w){re.escape(name)}(?!\w)", text)
+        if m:
+            start, end = m.span()
             break
     message = f"{d.message} ({d.hint})" if d.hint else d.message
     return lsp.Diagnostic(
