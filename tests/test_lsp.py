@@ -14,18 +14,15 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from lsprotocol import types as lsp
+from pygls.lsp.client import LanguageClient
+from pygls.uris import from_fs_path
 
-pytest.importorskip("pygls")
-
-from lsprotocol import types as lsp  # noqa: E402
-from pygls.lsp.client import LanguageClient  # noqa: E402
-from pygls.uris import from_fs_path  # noqa: E402
-
-import statectl  # noqa: E402
-from statectl.cell.model import load_cell  # noqa: E402
-from statectl.front.rules import check_paths  # noqa: E402
-from statectl.kernel.errors import Diagnostic, DiagnosticError  # noqa: E402
-from statectl.run.devices.config import load_run_config  # noqa: E402
+import statectl
+from statectl.cell.model import load_cell
+from statectl.front.rules import check_paths
+from statectl.kernel.errors import Diagnostic, DiagnosticError
+from statectl.run.devices.config import load_run_config
 
 ROOT = Path(__file__).resolve().parents[1]
 SRC = Path(statectl.__file__).resolve().parents[1]
@@ -155,6 +152,17 @@ async def converse(s: Session, files: dict[str, Path]) -> None:
         for name in s.texts:
             await received[name].wait()
         await ask(client, s, files)
+        first = dict(s.diagnostics)
+        received["drivers.yaml"].clear()  # as you type: the typo fixed, the error goes
+        client.text_document_did_change(
+            lsp.DidChangeTextDocumentParams(
+                lsp.VersionedTextDocumentIdentifier(2, uri(files["drivers.yaml"])),
+                [lsp.TextDocumentContentChangeWholeDocument(files["drivers.yaml"].read_text())],
+            )
+        )
+        await received["drivers.yaml"].wait()
+        s.answers["after change"] = s.diagnostics["drivers.yaml"]
+        s.diagnostics.update(first)
         await client.shutdown_async(None)
         client.exit(None)
     finally:
@@ -405,3 +413,9 @@ def test_code_action_declares_event_data(session: Session, tmp_path: Path) -> No
     assert "    data: {distance: any}\n" in text
     codes = check_text(tmp_path, text)
     assert "B233" not in codes and not [c for c in codes if c.startswith(("B", "T", "X"))]
+
+
+def test_diagnostics_follow_the_text_as_it_changes(session: Session) -> None:
+    """didChange republishes: the run config's driver typo fixed in the editor, its D505 goes."""
+    assert [d.code for d in session.diagnostics["drivers.yaml"]] == ["D505"]
+    assert list(session.answers["after change"]) == []
