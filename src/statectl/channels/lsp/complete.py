@@ -23,7 +23,7 @@ from statectl.cell.reader import ENVIRONMENT_FIELDS, INVARIANT_FIELDS, LINK_FIEL
 from statectl.cell.reader import RECOVERY_FIELDS as GOAL_FIELDS
 from statectl.cell.values import TOP_KEYS as CELL_KEYS
 from statectl.channels.lsp.documents import Document, FileKind, Project
-from statectl.channels.lsp.index import Kind
+from statectl.channels.lsp.index import Kind, device_key
 from statectl.front.tables.rows import COLUMNS, CONTROL_WORDS, TYPE_NAMES, normalize_column
 from statectl.front.tables.yaml_io import TOP_KEYS as DEVICE_KEYS
 from statectl.kernel.model import EventKind
@@ -63,7 +63,9 @@ def complete(project: Project, doc: Document, line: int, character: int) -> list
         return [(k, "section") for k in DEVICE_KEYS]
     if key is None:
         return [(c, f"{table} column") for c in COLUMNS.get(table, ())]
-    return _in_device(doc, table, normalize_column(key))
+    docs = project.device_documents(device_key(doc.path)) if doc.grid.format == "csv" else []
+    docs = [doc, *(d for d in docs if d.path != doc.path)]  # a CSV pair's names are in both
+    return _in_device(docs, table, normalize_column(key))
 
 
 def _place(
@@ -111,13 +113,15 @@ def _yaml_key(prefix: str) -> str | None:
     return str(key) if key else None
 
 
-def _names(doc: Document, kind: Kind) -> list[str]:
-    return list(dict.fromkeys(s.name for s in doc.symbols if s.kind is kind and s.definition))
+def _names(docs: Iterable[Document], kind: Kind) -> list[str]:
+    return list(
+        dict.fromkeys(s.name for d in docs for s in d.symbols if s.kind is kind and s.definition)
+    )
 
 
-def _in_device(doc: Document, table: str, key: str) -> list[Candidate]:
-    states = [(n, "state") for n in _names(doc, Kind.STATE)]
-    events = [(n, "event") for n in _names(doc, Kind.EVENT)]
+def _in_device(docs: list[Document], table: str, key: str) -> list[Candidate]:
+    states = [(n, "state") for n in _names(docs, Kind.STATE)]
+    events = [(n, "event") for n in _names(docs, Kind.EVENT)]
     if key in STATE_COLUMNS or (key == "state" and table == "recovery"):
         return states
     if key == "ignore":
@@ -125,7 +129,7 @@ def _in_device(doc: Document, table: str, key: str) -> list[Candidate]:
     if key in EVENT_COLUMNS or (key == "event" and table == "recovery"):
         return events
     if key == "api":
-        apis = (r.text("api") for r in doc.grid.rows if r.table in ("states", "events"))
+        apis = (r.text("api") for d in docs for r in d.grid.rows if r.table in ("states", "events"))
         return [(a, "API") for a in dict.fromkeys(_split(apis))]
     if key == "control":
         return [(w, "control") for w in CONTROL_WORDS if " " in w or w == "default"]
@@ -177,4 +181,4 @@ def _device_names(project: Project, doc: Document, instance: str, kind: Kind) ->
     if key is None:
         return []
     docs = project.device_documents(key)
-    return list(dict.fromkeys(n for d in docs for n in _names(d, kind)))
+    return _names(docs, kind)
