@@ -353,8 +353,9 @@ def test_missing_input_table_covers_every_command() -> None:
     assert commands(build_parser(), ()) - TAKES_NO_INPUT <= listed
 
 
-#: Commands that read no input file: they list or write from what the package ships.
-TAKES_NO_INPUT = {("profiles",), ("new",)}
+#: Commands that read no input file: they list or write from what the package ships (or,
+#: lsp, read what an editor sends).
+TAKES_NO_INPUT = {("profiles",), ("new",), ("schema",), ("lsp",)}
 
 
 MOTOR_XLSX = ROOT / "examples" / "motor" / "motor.xlsx"
