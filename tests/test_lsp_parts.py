@@ -104,7 +104,12 @@ def test_definition_and_hover_across_a_csv_pair(pair: Path) -> None:
     assert doc is not None
     where = at(doc.text, ",,Returning,Blocked,", 3)
     found = definition(project, doc, *where)
-    assert found is not None and found.row is not None and found.row.table == "states"
+    assert found is not None and found[1].row is not None and found[1].row.table == "states"
+    assert Path(found[0]).name == "motor.states.csv"
+    states = project.document(str(pair / "motor.states.csv"))
+    assert states is not None
+    event = definition(project, states, *at(states.text, "Movement completion, Init", 2))
+    assert event is not None and Path(event[0]).name == "motor.events.csv"
     text = hover(project, doc, *where)
     assert text is not None and "**state `Returning`** of motor.states.csv" in text
 
@@ -186,3 +191,44 @@ def test_lsp_without_pygls_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> N
     assert err.getvalue() == (
         "statectl lsp: the language server needs pygls: pip install 'statectl[lsp]'\n"
     )
+
+
+SOURCES = [
+    MOTOR / "motor.yaml",
+    MOTOR / "motor.states.csv",
+    MOTOR / "motor.events.csv",
+    MOTOR / "drivers.yaml",
+    ROOT / "examples" / "pick-and-place" / "cell.yaml",
+]
+
+
+def damaged(text: str) -> list[str]:
+    """The text cut short at many places, and with a stray quote, bracket, pipe or comma."""
+    step = max(len(text) // 12, 1)
+    cuts = [text[:n] for n in range(0, len(text), step)]
+    stray = [text[:n] + ch + text[n:] for n in range(0, len(text), step * 3) for ch in "\"'{[|,:"]
+    return [*cuts, *stray]
+
+
+@pytest.mark.parametrize("source", [*SOURCES, "motor.md"], ids=lambda p: Path(p).name)
+def test_damaged_text_never_raises(source: Path | str, tmp_path: Path, markdown: Path) -> None:
+    """Half-typed files (cut anywhere, a stray quote or bracket) get answers or none, never
+    an exception: the server runs while the user types."""
+    from statectl.channels.lsp.documents import diagnose
+
+    path = markdown if source == "motor.md" else Path(source)
+    target = tmp_path / path.name
+    for text in damaged(path.read_text(encoding="utf-8")):
+        project = Project((str(tmp_path),))
+        project.texts[str(target)] = text
+        doc = project.document(str(target))
+        assert doc is not None
+        for d in diagnose(doc, project.texts):
+            fixes(doc, d.code, d.message, (d.where.line or 1) - 1)
+        lines = text.split("\n")
+        for line in range(0, len(lines) + 1, 4):
+            for character in (0, 9, 200):
+                complete(project, doc, line, character)
+                hover(project, doc, line, character)
+                definition(project, doc, line, character)
+                rename(project, doc, line, character, "X")

@@ -51,7 +51,9 @@ SECTION = re.compile(r"^([A-Za-z_]+)\s*:")
 def complete(project: Project, doc: Document, line: int, character: int) -> list[Candidate]:
     """Rules 1-3: what may be written at the cursor."""
     lines = doc.lines
-    prefix = lines[line][:character] if line < len(lines) else ""
+    if not 0 <= line < len(lines):
+        return []  # a position past the text: nothing is written there
+    prefix = lines[line][:character]
     table, key = _place(doc, lines, line, prefix)
     if doc.kind is FileKind.RUN_CONFIG:
         if key == "driver":

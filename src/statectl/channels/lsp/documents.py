@@ -144,6 +144,8 @@ class Project:
     def __init__(self, roots: tuple[str, ...] = ()) -> None:
         self.texts: dict[str, str] = {}
         self.roots = roots
+        #: YAML and Markdown files read from disk, by path: (modified, size), the document
+        self._read: dict[str, tuple[tuple[int, int], Document]] = {}
 
     def text(self, path: str) -> str | None:
         """The editor's text of ``path``, else the file's; ``None`` if neither reads."""
@@ -155,6 +157,18 @@ class Project:
             return None
 
     def document(self, path: str) -> Document | None:
+        """The file as the editor holds it, else as on disk (read again only when it changed:
+        a search for cells reads many)."""
+        stamp: tuple[int, int] | None = None
+        if path not in self.texts and not path.lower().endswith(".csv"):
+            try:
+                info = os.stat(path)
+            except OSError:
+                return None
+            stamp = (info.st_mtime_ns, info.st_size)
+            cached = self._read.get(path)
+            if cached is not None and cached[0] == stamp:
+                return cached[1]
         text = self.text(path)
         if text is None:
             return None
@@ -163,7 +177,10 @@ class Project:
             sibling = self.text(key)  # the pair's states file: the names a guard may quote
             if sibling is not None:
                 states = tuple(r.text("state") for r in read_grid(key, sibling).table("states"))
-        return analyse(path, text, states)
+        doc = analyse(path, text, states)
+        if stamp is not None:
+            self._read[path] = (stamp, doc)
+        return doc
 
     def device_documents(self, key: str) -> list[Document]:
         """Every file of the device ``key`` names (:func:`device_key`): one, or a CSV pair's."""

@@ -40,18 +40,20 @@ def _device_docs(project: Project, doc: Document, symbol: Symbol) -> list[Docume
     return [doc if d.path == doc.path else d for d in docs]
 
 
-def definition(project: Project, doc: Document, line: int, character: int) -> Symbol | None:
-    """Rule 2: the naming that defines the name under the cursor."""
+def definition(
+    project: Project, doc: Document, line: int, character: int
+) -> tuple[str, Symbol] | None:
+    """Rule 2: the file and naming that define the name under the cursor."""
     symbol = symbol_at(doc, line, character)
     if symbol is None:
         return None
     return _defining(_device_docs(project, doc, symbol), symbol)
 
 
-def _defining(docs: Iterable[Document], symbol: Symbol) -> Symbol | None:
+def _defining(docs: Iterable[Document], symbol: Symbol) -> tuple[str, Symbol] | None:
     return next(
         (
-            s
+            (d.path, s)
             for d in docs
             for s in d.symbols
             if s.definition and s.kind is symbol.kind and s.name == symbol.name
@@ -98,8 +100,9 @@ def hover(project: Project, doc: Document, line: int, character: int) -> str | N
     if symbol is None:
         return None
     docs = _device_docs(project, doc, symbol)
-    defining = _defining(docs, symbol)
-    device = Path(symbol.file).name
+    found = _defining(docs, symbol)
+    defining = found[1] if found is not None else None
+    device = Path(found[0] if found is not None else symbol.file).name
     parts = [f"**{symbol.kind.value} `{symbol.name}`** of {device}"]
     if defining is None or defining.row is None:
         parts.append(f"_not defined in {device}_")

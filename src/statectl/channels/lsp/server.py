@@ -31,6 +31,7 @@ from statectl.channels.lsp.complete import complete
 from statectl.channels.lsp.documents import Document, Project, analyse, diagnose
 from statectl.channels.lsp.fixes import Change, fixes
 from statectl.channels.lsp.grid import Span
+from statectl.channels.lsp.index import device_key
 from statectl.channels.lsp.navigate import definition, hover, rename
 from statectl.kernel.errors import Diagnostic, Severity
 
@@ -69,11 +70,18 @@ class StatectlServer(LanguageServer):
         return self.project.document(path) or analyse(path, text)
 
     def publish(self, uri: str) -> None:
+        """Rule 2, for the file and, in a CSV pair, the pair's other open files (a state
+        renamed in one is a problem in the other)."""
         doc = self.doc(uri)
-        found = [_diagnostic(d, doc.lines) for d in diagnose(doc, self.project.texts)]
-        self.text_document_publish_diagnostics(
-            lsp.PublishDiagnosticsParams(uri=uri, diagnostics=found)
-        )
+        docs = [doc]
+        if doc.grid.format == "csv":
+            pair = self.project.device_documents(device_key(doc.path))
+            docs += [d for d in pair if d.path != doc.path and d.path in self.project.texts]
+        for each in docs:
+            found = [_diagnostic(d, each.lines) for d in diagnose(each, self.project.texts)]
+            self.text_document_publish_diagnostics(
+                lsp.PublishDiagnosticsParams(uri=_uri(each.path), diagnostics=found)
+            )
 
 
 def _path(uri: str) -> str:
@@ -160,11 +168,10 @@ def _register_requests(server: StatectlServer) -> None:
     def on_definition(ls: StatectlServer, params: lsp.DefinitionParams) -> lsp.Location | None:
         doc, at = ls.doc(params.text_document.uri), params.position
         found = definition(ls.project, doc, at.line, at.character)
-        if found is None or found.row is None:
+        if found is None:
             return None
-        docs = ls.project.device_documents(found.file)
-        path = next((d.path for d in docs if found in d.symbols), found.file)
-        return lsp.Location(_uri(path), _range(found.span))
+        path, symbol = found
+        return lsp.Location(_uri(path), _range(symbol.span))
 
     @server.feature(
         lsp.TEXT_DOCUMENT_COMPLETION,
