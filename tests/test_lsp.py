@@ -211,7 +211,7 @@ async def ask(client: LanguageClient, s: Session, files: dict[str, Path]) -> Non
         )
     except Exception as exc:  # the server's JSON-RPC error, raised by the client
         s.answers["rename refused"] = str(exc)
-    for name in ("motor.yaml",):
+    for name in ("motor.yaml", "motor.events.csv", "motor.md"):
         actions = []
         for d in s.diagnostics[name]:
             actions.extend(
@@ -419,3 +419,48 @@ def test_diagnostics_follow_the_text_as_it_changes(session: Session) -> None:
     """didChange republishes: the run config's driver typo fixed in the editor, its D505 goes."""
     assert [d.code for d in session.diagnostics["drivers.yaml"]] == ["D505"]
     assert list(session.answers["after change"]) == []
+
+
+@pytest.mark.parametrize(
+    ("name", "typo", "meant"),
+    [("motor.events.csv", "Movin", "Moving"), ("motor.md", "Blockd", "Blocked")],
+)
+def test_code_action_takes_the_did_you_mean(
+    session: Session, name: str, typo: str, meant: str, tmp_path: Path
+) -> None:
+    """A hint "did you mean 'Moving'?" is a quick fix that puts the suggestion in place of the
+    name the diagnostic is on: the file then checks clean."""
+    actions = [
+        a for a in session.answers[f"actions {name}"] if a.title == f"Change {typo!r} to {meant!r}"
+    ]
+    assert len(actions) == 1, [a.title for a in session.answers[f"actions {name}"]]
+    (edits,) = actions[0].edit.changes.values()
+    text = apply(session.texts[name], edits)
+    assert text == session.texts[name].replace(f" {typo} |", f" {meant} |").replace(
+        f",{typo},", f",{meant},"
+    )
+    for other in session.root.glob("motor.*"):
+        shutil.copy(other, tmp_path / other.name)
+    (tmp_path / name).write_text(text, encoding="utf-8")
+    assert [
+        d.code for d in check_paths([str(tmp_path / name)]) if d.severity.value == "error"
+    ] == []
+
+
+def test_rename_reaches_a_nodes_peer_lost(tmp_path: Path) -> None:
+    """A node's peer_lost event (cell-nodes.yaml: {conveyor: Stop}) is renamed with the rest."""
+    from statectl.channels.lsp.documents import Project
+    from statectl.channels.lsp.navigate import rename
+
+    for p in (ROOT / "examples" / "pick-and-place").glob("*.yaml"):
+        shutil.copy(p, tmp_path / p.name)
+    project = Project((str(tmp_path),))
+    conveyor = project.document(str(tmp_path / "conveyor.yaml"))
+    assert conveyor is not None
+    where = position(conveyor.text, "event: Stop", 7)
+    found = rename(project, conveyor, where.line, where.character, "Halt")
+    assert isinstance(found, dict)
+    nodes = (tmp_path / "cell-nodes.yaml").read_text(encoding="utf-8").split("\n")
+    spans = found[str(tmp_path / "cell-nodes.yaml")]
+    assert any("peer_lost: {conveyor: Stop}" in nodes[s.line] for s in spans)
+    assert all(nodes[s.line][s.start : s.end] == "Stop" for s in spans)

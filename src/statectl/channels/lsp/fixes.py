@@ -6,7 +6,10 @@ Rules:
 2. B233 (a guard reads a field of an event that declares no data) and B232 (a
    field the event does not declare): declare the field, typed ``any``, on every
    row of the event (rows of one event must declare the same data, B230).
-3. Edits keep the file's format: in YAML a flow list or mapping grows in place,
+3. A hint that says "did you mean 'Moving'?" replaces the name the diagnostic is
+   placed on (the server places it on the name the message quotes) by the
+   suggestion, in every file kind: an unknown state, event, column or driver.
+4. Edits keep the file's format: in YAML a flow list or mapping grows in place,
    a block one gets a line, a missing key is added to its row; in CSV and
    Markdown the cell is rewritten (quoted or escaped as the format needs). A
    CSV or Markdown table without the column gets no action: adding a column
@@ -22,7 +25,7 @@ import re
 import yaml
 
 from statectl.channels.lsp.documents import Document
-from statectl.channels.lsp.grid import GridCell, Row, split_items
+from statectl.channels.lsp.grid import GridCell, Row, Span, split_items
 
 __all__ = ["Change", "Fix", "fixes"]
 
@@ -36,10 +39,30 @@ _NONE = r" of event (.+?), which declares no data"
 _UNDECLARED = r", which event (.+?) does not declare"
 FIELD = re.compile(rf"reads field (.+?)(?:{_NONE}|{_UNDECLARED})")
 PLAIN = re.compile(r"^[A-Za-z_][\w .()-]*$")
+MEANT = re.compile(r"did you mean ('[^']*'|\"[^\"]*\")\?")
+QUOTED = re.compile(r"'([^']+)'")
 
 
-def fixes(doc: Document, code: str, message: str, line: int) -> list[Fix]:
-    """The fixes for one diagnostic of ``doc`` (rules 1 and 2); none for other codes."""
+def fixes(
+    doc: Document, code: str, message: str, line: int, hint: str = "", span: Span | None = None
+) -> list[Fix]:
+    """The fixes for one diagnostic of ``doc`` placed at ``span`` (rules 1-3)."""
+    return [*_fixes(doc, code, message), *_meant(doc, message, hint, span)]
+
+
+def _meant(doc: Document, message: str, hint: str, span: Span | None) -> list[Fix]:
+    """Rule 3: the name the diagnostic is placed on, replaced by the hint's suggestion."""
+    m = MEANT.search(hint)
+    if m is None or span is None or not 0 <= span.line < len(doc.lines):
+        return []
+    word, meant = doc.lines[span.line][span.start : span.end], _literal(m.group(1))
+    if not word.strip() or word == meant or word not in QUOTED.findall(message):
+        return []  # only a name the message quotes (what was not found) is replaced
+    change = (span.line, span.start, span.line, span.end, meant)
+    return [(f"Change {word!r} to {meant!r}", [change])]
+
+
+def _fixes(doc: Document, code: str, message: str) -> list[Fix]:
     if code == "C404" and (m := C404.match(message)):
         state, names = _literal(m.group(1)), [_literal(n) for n in m.group(2).split(", ")]
         row = next((r for r in doc.grid.table("states") if r.text("state") == state), None)

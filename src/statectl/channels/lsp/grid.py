@@ -190,6 +190,7 @@ def _yaml_grid(text: str, lines: list[str]) -> Grid:
             rows.extend(_named_entries(section, node, lines))
     for item in _violations(top.get("invariants")):
         rows.append(_yaml_row("on_violation", item, lines, normalize=False))
+    rows.extend(_peer_lost(top.get("nodes"), lines))
     return Grid("yaml", tuple(rows), root=root)
 
 
@@ -235,6 +236,22 @@ def _violations(node: yaml.Node | None) -> Iterator[yaml.MappingNode]:
                 continue
             entries = value.value if isinstance(value, yaml.SequenceNode) else [value]
             yield from (e for e in entries if isinstance(e, yaml.MappingNode))
+
+
+def _peer_lost(node: yaml.Node | None, lines: list[str]) -> Iterator[Row]:
+    """Each ``device: EVENT`` of every node's ``peer_lost`` as a row ``device``, ``event``."""
+    if not isinstance(node, yaml.MappingNode):
+        return
+    for _, entry in node.value:
+        fields = entry.value if isinstance(entry, yaml.MappingNode) else []
+        lost = next((v for k, v in fields if getattr(k, "value", "") == "peer_lost"), None)
+        for key, value in lost.value if isinstance(lost, yaml.MappingNode) else []:
+            if isinstance(key, yaml.ScalarNode) and isinstance(value, yaml.ScalarNode):
+                cells = {
+                    "device": GridCell("device", str(key.value), _node_span(key, lines), key),
+                    "event": GridCell("event", str(value.value), _node_span(value, lines), value),
+                }
+                yield Row("peer_lost", key.start_mark.line, cells, None, value.end_mark.line)
 
 
 # -- CSV and Markdown -----------------------------------------------------------------------

@@ -13,7 +13,8 @@ Rules:
    ``enters``/``raises`` (of ``from``) and ``send`` (of ``to``, data after ``{``
    left out) and ``dropped`` (of ``from``), an environment entry's ``send`` or
    ``fault`` (of ``to``), ``on_violation``'s ``send``, and ``In('dev.State')`` in
-   ``guard``, ``when``, ``holds`` and a recovery goal's ``to``/``from``. Each
+   ``guard``, ``when``, ``holds`` and a recovery goal's ``to``/``from``, and a
+   node's ``peer_lost`` event (of the device it names). Each
    such use carries the device file it points into, so a rename there renames
    it in the device and in every cell that uses it.
 """
@@ -173,6 +174,8 @@ def cell_symbols(grid: Grid, lines: list[str], files: Mapping[str, str]) -> list
             add(Kind.EVENT, row.text("to"), c.get("send") or c.get("fault"), row)
         elif row.table == "on_violation":
             add(Kind.EVENT, row.text("to"), c.get("send"), row)
+        elif row.table == "peer_lost":
+            add(Kind.EVENT, row.text("device"), c.get("event"), row)
         for key in EXPRESSIONS.get(row.table, ()):
             expression = c.get(key)
             if expression is not None:

@@ -209,8 +209,12 @@ def _register_requests(server: StatectlServer) -> None:
         actions = []
         for d in params.context.diagnostics:
             data: Any = d.data if isinstance(d.data, dict) else {}
-            message = str(data.get("message", d.message))
-            for title, changes in fixes(doc, str(d.code or ""), message, d.range.start.line):
+            message, hint = str(data.get("message", d.message)), str(data.get("hint", ""))
+            start, end = d.range.start, d.range.end
+            span = (
+                Span(start.line, start.character, end.character) if start.line == end.line else None
+            )
+            for title, changes in fixes(doc, str(d.code or ""), message, start.line, hint, span):
                 actions.append(
                     lsp.CodeAction(
                         title,
