@@ -38,7 +38,7 @@ from statectl.channels.lsp.index import (
 from statectl.front.tables import safeyaml
 from statectl.front.tables.csv_io import csv_paths
 from statectl.front.tables.inputs import read_input_text
-from statectl.kernel.errors import Diagnostic, DiagnosticError, Location, Severity
+from statectl.kernel.errors import Diagnostic, DiagnosticError, Location
 from statectl.run.devices.config import RUN_CONFIG_KEYS
 
 __all__ = ["Document", "FileKind", "Project", "diagnose", "kind_of"]
@@ -129,13 +129,6 @@ def diagnose(doc: Document, texts: dict[str, str]) -> list[Diagnostic]:
 
 def _here(where: Location, path: str) -> bool:
     return where.file == "<memory>" or os.path.abspath(where.file) == path
-
-
-def no_text(path: str) -> Diagnostic:
-    """A file the server cannot read (it is not UTF-8, or it went away)."""
-    return Diagnostic(
-        "T101", Severity.ERROR, Location(path, 1), "the file cannot be read as UTF-8 text"
-    )
 
 
 class Project:

@@ -91,7 +91,6 @@ class Grid:
     format: str  # "yaml" | "csv" | "md"
     rows: tuple[Row, ...] = ()
     headers: Mapping[str, tuple[GridCell, ...]] = field(default_factory=dict)
-    root: yaml.Node | None = None  # the composed YAML document, if it read
 
     def table(self, name: str) -> Iterator[Row]:
         return (r for r in self.rows if r.table == name)
@@ -172,7 +171,7 @@ def _yaml_grid(text: str, lines: list[str]) -> Grid:
     except safeyaml.YamlRefused:
         return Grid("yaml")
     if not isinstance(root, yaml.MappingNode):
-        return Grid("yaml", root=root)
+        return Grid("yaml")
     top = {str(k.value): v for k, v in root.value if isinstance(k, yaml.ScalarNode)}
     device = "states" in top or "events" in top
     rows: list[Row] = []
@@ -191,7 +190,7 @@ def _yaml_grid(text: str, lines: list[str]) -> Grid:
     for item in _violations(top.get("invariants")):
         rows.append(_yaml_row("on_violation", item, lines, normalize=False))
     rows.extend(_peer_lost(top.get("nodes"), lines))
-    return Grid("yaml", tuple(rows), root=root)
+    return Grid("yaml", tuple(rows))
 
 
 def _yaml_row(table: str, node: yaml.MappingNode, lines: list[str], *, normalize: bool) -> Row:
