@@ -27,7 +27,7 @@ from statectl.run.devices.config import load_run_config
 ROOT = Path(__file__).resolve().parents[1]
 SRC = Path(statectl.__file__).resolve().parents[1]
 #: A guard on the whole session: a server that stops answering fails the test, never hangs it.
-PATIENCE = 60.0
+PATIENCE = 300.0
 
 
 def uri(path: Path) -> str:
