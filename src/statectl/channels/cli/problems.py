@@ -31,6 +31,7 @@ class Problems:
         self.refused = 0  # environment commands whose 'when' was false (a cell)
         self.violated = 0  # invariant violations seen live (a cell)
         self.failed = 0  # events a driver refused in a live run (system.py rule 7)
+        self.partway = 0  # devices a bus outage left part-way (a driver's unfinished())
 
     def record(self, record: object) -> None:
         """A listener: count the events a device refused or did not know (a guard error is
@@ -116,6 +117,8 @@ class Problems:
             parts.append(f"{self.violated} invariant violation(s)")
         if self.failed:
             parts.append(f"{self.failed} event(s) a driver refused, reported above")
+        if self.partway:
+            parts.append(f"{self.partway} device(s) left part-way by a bus outage, reported above")
         return "; ".join(parts) or None
 
 

@@ -39,7 +39,9 @@ Rules:
    an event its device does not know, or one rejected under the ``error``
    policy, but then exits 1 with a line saying how many, so a batch run can be
    trusted in CI. A driver that lacks an observer method its chart calls is
-   refused before anything runs (devices/base.py rule 6).
+   refused before anything runs (devices/base.py rule 6). A live run ends with
+   the final-state line(s) too, and exits 1 when a driver says a bus outage left
+   its device part-way (``unfinished()``: a write given up, a command cut off).
 10. ``--driver none`` runs the model alone: no driver, so nothing but the events
     given happens (no completions, no monitors, no API calls); its invokes are
     still issued and shown. ``--json`` writes one JSON object per event line
@@ -442,9 +444,7 @@ def run(
             _feed(system, lines, err, batch=True, problems=problems, steps=steps, early=early)
             system.quiesce()
             problems.unsettled = unsettled_note(system, early, system.work_pending())
-            for name, subject in system.subjects.items():
-                final = ", ".join(sorted(subject.configuration))
-                info.write(f"final state {final}\n" if cell is None else f"final {name}: {final}\n")
+            _final_states(system, info, cell is None)
             return verdict(problems, err)
         halt = stop or threading.Event()
         if events is None and server is None:
@@ -460,6 +460,8 @@ def run(
             system.serve(halt)
         if system.journal is not None:
             system.journal.flush()  # a write that failed meanwhile fails the run
+        _final_states(system, out, cell is None)
+        problems.partway = _partway(drivers, err)
         return verdict(problems, err)
     except BrokenPipeError:
         raise  # the reader of the trace went away: the command line ends quietly
@@ -476,6 +478,25 @@ def run(
             _close(system, err, failed)
         if shipping is not None:
             shipping.stop()  # what the journal committed goes too, for a few seconds at most
+
+
+def _final_states(system: System, out: TextIO, one: bool) -> None:
+    """The line(s) a run ends with: each device's configuration."""
+    for name, subject in system.subjects.items():
+        final = ", ".join(sorted(subject.configuration))
+        out.write(f"final state {final}\n" if one else f"final {name}: {final}\n")
+
+
+def _partway(drivers: Mapping[str, DeviceDriver], err: TextIO) -> int:
+    """Devices a bus outage left part-way (a driver's ``unfinished()``), each said (rule 9)."""
+    count = 0
+    for name, d in drivers.items():
+        unfinished = getattr(d, "unfinished", None)
+        why = unfinished() if callable(unfinished) else None
+        if why:
+            err.write(f"statectl run: {name} was left part-way by a bus outage: {why}\n")
+            count += 1
+    return count
 
 
 def _feed_then_stop(
