@@ -16,6 +16,7 @@ import can
 
 from statectl.channels.cli.demo import motor_chart
 from statectl.kernel.errors import DiagnosticError, StatectlError
+from statectl.kernel.model import Chart
 from statectl.run.devices import connect, load_driver_config
 from statectl.run.devices.cia402 import Cia402Driver, Cia402SimDriver
 from statectl.run.devices.cia402.profile import (
@@ -117,6 +118,19 @@ class Sniffer:
     def controlwords(self, node: int = 1) -> list[int]:
         return [int.from_bytes(d[:2], "little") for i, d in self.frames if i == 0x200 + node]
 
+    def statuswords(self, node: int = 1) -> list[int]:
+        return [int.from_bytes(d[:2], "little") for i, d in self.frames if i == 0x180 + node]
+
+    def sdo(self, node: int = 1) -> list[tuple[str, int, int, int]]:
+        """The SDO requests to the node: (read|write, index, subindex, value written)."""
+        found = []
+        for i, d in list(self.frames):
+            if i == 0x600 + node and len(d) == 8:
+                kind = "read" if d[0] == 0x40 else "write" if d[0] & 0xE0 == 0x20 else "?"
+                index, sub = int.from_bytes(d[1:3], "little"), d[3]
+                found.append((kind, index, sub, int.from_bytes(d[4:8], "little", signed=True)))
+        return found
+
     def close(self) -> None:
         self._stop.set()
         self._thread.join(2.0)
@@ -126,11 +140,11 @@ class Sniffer:
 class Run:
     """The paper's Motor on a Cia402SimDriver, on a WallClock, records kept."""
 
-    def __init__(self, **options: Any) -> None:
+    def __init__(self, chart: Chart | None = None, **options: Any) -> None:
         self.driver = Cia402SimDriver(**options)
         self.sniffer = Sniffer(self.driver.channel)
         self.clock = WallClock()
-        self.subject = Subject(motor_chart(), clock=self.clock)
+        self.subject = Subject(chart or motor_chart(), clock=self.clock)
         self.records: list[Record] = []
         self.subject.listen(self.records.append)
         connect(self.subject, self.driver, period=0.01)
@@ -150,6 +164,17 @@ class Run:
             assert time.monotonic() < deadline, (state, self.events)
             time.sleep(0.002)
             self.subject.run_until_idle()
+
+    def seen(self, event: str, limit: float = 5.0) -> list[Any]:
+        """The data of each ``event`` the device took, once there is one."""
+        deadline = time.monotonic() + limit
+        while True:
+            self.subject.run_until_idle()
+            found = [d for e, d in self.events if e == event]
+            if found:
+                return found
+            assert time.monotonic() < deadline, (event, self.events)
+            time.sleep(0.002)
 
     @property
     def events(self) -> list[tuple[str, Any]]:
@@ -368,3 +393,181 @@ def test_a_bus_driver_runs_on_wall_time_only(realtime: bool, code: int, moved: b
     got = run(str(motor), driver="cia402-sim", realtime=realtime, events=lines, out=out, err=err)
     assert (got, "--realtime" in err.getvalue()) == (code, not realtime), err.getvalue()
     assert ("Cia402SimDriver.move_to(1.0)" in out.getvalue()) == moved
+
+
+# -- Fault reaction active, EMCY bytes, modes (issue 31) -------------------------------------
+
+AXIS = Path(__file__).parent.parent / "examples" / "motor" / "axis-cia402.yaml"
+
+
+def axis_chart() -> Chart:
+    from statectl.front.builder.build import load_chart
+
+    return load_chart(AXIS)
+
+
+def _wait(what: Callable[[], Any], limit: float = 5.0) -> Any:
+    deadline = time.monotonic() + limit
+    while not (got := what()):
+        assert time.monotonic() < deadline
+        time.sleep(0.002)
+    return got
+
+
+def test_the_drive_passes_through_fault_reaction_active_before_fault() -> None:
+    """A fault puts the simulated drive in Fault reaction active (statusword 0x..1F) for
+    ``fault_reaction`` s, then Fault (0x..08): the frames show both, in that order; the
+    driver raises one Error for the episode and Error() resets it as before."""
+    r = Run(fault_reaction=0.1, speed=200.0)
+    try:
+        r.subject.post("Movement", {"amount": 5})
+        r.subject.run_until_idle()
+        _wait(lambda: r.driver.drive.state is PowerState.OPERATION_ENABLED)
+        r.driver.drive.fault(0x7300, "enc")
+        r.until("Blocked")
+        states = [decode(w) for w in r.sniffer.statuswords()]
+        reaction = states.index(P.FAULT_REACTION)
+        assert P.FAULT in states[reaction:] and P.FAULT not in states[:reaction]
+        assert [e for e, _ in r.events].count("Error") == 1, r.events
+        assert r.events[-1][0] == "Error completion"
+    finally:
+        r.close()
+
+
+def test_an_emcy_keeps_its_manufacturer_bytes_in_the_detail() -> None:
+    """The Error an EMCY raises says its code, error register and the five
+    manufacturer-specific bytes in hex (they used to be dropped)."""
+    r = Run(speed=200.0)
+    try:
+        r.subject.post("Movement", {"amount": 5})
+        r.subject.run_until_idle()
+        _wait(lambda: r.driver.drive.state is PowerState.OPERATION_ENABLED)
+        r.driver.drive.fault(0x2310, "Iq!")
+        r.leave("Moving")
+        detail = next(d for e, d in r.events if e == "Error")["detail"]
+        assert "EMCY 0x2310" in detail and "error register 0x01" in detail
+        assert "manufacturer bytes 49 71 21 00 00" in detail
+    finally:
+        r.close()
+
+
+def test_homing_runs_the_drives_homing_mode_and_completes_when_attained() -> None:
+    """Homing() writes 0x6060 = 6 and reads 0x6061 back, writes the method (0x6098) and
+    the speeds (0x6099:1, :2, in counts/s), starts homing by controlword bit 4 once
+    enabled, and reports Homing completion when bits 12 and 10 say homing attained."""
+    r = Run(axis_chart(), homing_method=17, homing_speeds=[5.0, 0.5], scale=1000.0)
+    try:
+        r.driver.drive.position = 400.0  # the home switch is at 0
+        r.subject.post("Homing")
+        r.until("Ready")
+        sdo = r.sniffer.sdo()
+        mode = sdo.index(("write", 0x6060, 0, 6))
+        assert ("read", 0x6061, 0, 0) in sdo[mode:]
+        assert [s for s in sdo if s[0] == "write" and s[1] in (0x6098, 0x6099)] == [
+            ("write", 0x6098, 0, 17),
+            ("write", 0x6099, 1, 5000),
+            ("write", 0x6099, 2, 500),
+        ]
+        assert 0x1F in r.sniffer.controlwords()  # enable operation + bit 4: start homing
+        assert ("Homing completion", {"position": 0.0}) in r.events
+        assert r.driver.drive.position == 0.0
+    finally:
+        r.close()
+
+
+def test_a_homing_error_is_the_states_fault_event() -> None:
+    """A method the drive does not have (36 is reserved) makes it set statusword bit 13;
+    the driver reports it as a homing error, which Homing's monitor raises as Error."""
+    r = Run(axis_chart(), homing_method=36)
+    try:
+        r.subject.post("Homing")
+        errors = r.seen("Error")
+        assert "homing error" in errors[0]["detail"], r.events
+        assert "Homing completion" not in [e for e, _ in r.events]
+    finally:
+        r.close()
+
+
+def test_a_mode_the_drive_does_not_show_is_the_states_fault_event() -> None:
+    """If 0x6061 does not show the mode written to 0x6060 within mode_timeout, the call
+    does not go on (no homing start) and Homing's monitor raises Error saying so."""
+    r = Run(axis_chart(), mode_timeout=0.1)
+    try:
+        r.driver.drive.hold_mode()
+        r.subject.post("Homing")
+        errors = r.seen("Error")
+        assert "homing mode (0x6060 = 6) not confirmed" in errors[0]["detail"]
+        assert "0x6061 still reads 1" in errors[0]["detail"]
+        assert 0x1F not in r.sniffer.controlwords()
+    finally:
+        r.close()
+
+
+def test_velocity_runs_profile_velocity_and_completes_when_reached() -> None:
+    """Velocity({velocity: 2}) switches to profile velocity (0x6060 = 3), writes 0x60FF =
+    2000 counts/s and reports Velocity completion once statusword bit 10 says the velocity
+    is reached; a Movement afterwards goes back to profile position and completes."""
+    r = Run(axis_chart(), acceleration=50000.0)
+    try:
+        r.subject.post("Homing")
+        r.until("Ready")
+        r.subject.post("Velocity", {"velocity": 2.0})
+        r.until("Ready")
+        assert ("Velocity completion", {"velocity": 2.0}) in r.events
+        assert ("write", 0x6060, 0, 3) in r.sniffer.sdo()
+        assert ("write", 0x60FF, 0, 2000) in r.sniffer.sdo()
+        assert (r.driver.drive.mode_display, r.driver.drive.velocity) == (3, 2000.0)
+        r.subject.post("Movement", {"amount": 0.5})
+        r.until("Ready")
+        assert r.events[-1][0] == "Movement completion"
+        assert r.sniffer.sdo().count(("write", 0x6060, 0, 1)) == 2  # at start-up, and now
+    finally:
+        r.close()
+
+
+def test_the_axis_socketcan_config_loads_with_its_homing_options() -> None:
+    """examples/motor/axis-cia402-socketcan.yaml: the same cia402 driver, by configuration
+    only, with the homing method and speeds and the mode timeout."""
+    from statectl.run.devices import make_driver
+
+    root = Path(__file__).parent.parent
+    name, options = load_driver_config(root / "examples" / "motor" / "axis-cia402-socketcan.yaml")[
+        "Axis"
+    ]
+    assert (name, options["interface"], options["homing_method"]) == ("cia402", "socketcan", 17)
+    driver = make_driver(name, options, chart=axis_chart())
+    assert isinstance(driver, Cia402Driver) and driver.homing_speeds == (2.0, 0.2)
+    assert {"Homing", "Velocity"} <= driver.serves()
+
+
+@pytest.mark.parametrize(
+    ("options", "says"),
+    [
+        ("{homing_method: 300}", "homing_method must be"),
+        ("{homing_speeds: [1]}", "homing_speeds must be two speeds"),
+        ("{homing_speeds: [1, -1]}", "homing_speeds must be two speeds"),
+        ("{mode_timeout: 0}", "mode_timeout must be a number > 0"),
+    ],
+)
+def test_bad_mode_options_are_d511(tmp_path: Path, options: str, says: str) -> None:
+    """A homing method outside 0x6098's range, speeds that are not two numbers > 0 and a
+    mode timeout of 0 are each one D511 at the options' line."""
+    path = tmp_path / "run.yaml"
+    path.write_text(f"devices:\n  Axis:\n    driver: cia402\n    options: {options}\n")
+    with pytest.raises(DiagnosticError) as info:
+        load_driver_config(path)
+    found = [(d.code, d.where.line, says in d.message) for d in info.value.diagnostics]
+    assert found == [("D511", 4, True)], [d.message for d in info.value.diagnostics]
+
+
+def test_a_fault_reaction_time_is_a_sim_option(tmp_path: Path) -> None:
+    """cia402-sim takes fault_reaction (s >= 0); a negative one is D511."""
+    path = tmp_path / "run.yaml"
+    path.write_text(
+        "devices:\n  Axis:\n    driver: cia402-sim\n    options: {fault_reaction: -1}\n"
+    )
+    with pytest.raises(DiagnosticError) as info:
+        load_driver_config(path)
+    assert ["fault_reaction must be seconds >= 0" in d.message for d in info.value.diagnostics] == [
+        True
+    ]

@@ -26,10 +26,29 @@ def cia402_option_problems(options: Mapping[str, Any]) -> Sequence[str]:
     bitrate = options.get("bitrate")
     if bitrate is not None and not (isinstance(bitrate, int) and bitrate > 0):
         problems.append(f"bitrate must be bits per second, e.g. 500000 (got {bitrate!r})")
-    for key in ("scale", "speed", "sdo_timeout", "heartbeat_timeout", "stale_after"):
+    numbers = ("scale", "speed", "sdo_timeout", "heartbeat_timeout", "stale_after")
+    for key in (*numbers, "mode_timeout", "acceleration"):
         v = options.get(key, 1.0)
         if not (finite_number(v) and v > 0):  # an infinite scale or timeout neither
             problems.append(f"{key} must be a number > 0 (got {v!r})")
+    reaction = options.get("fault_reaction", 0.0)
+    if not (finite_number(reaction) and reaction >= 0):
+        problems.append(f"fault_reaction must be seconds >= 0 (got {reaction!r})")
+    method = options.get("homing_method", 35)
+    if not (type(method) is int and -128 <= method <= 127):
+        problems.append(
+            f"homing_method must be a 0x6098 method -128..127, e.g. 35 (got {method!r})"
+        )
+    speeds = options.get("homing_speeds", [1.0, 1.0])
+    if not (
+        isinstance(speeds, list | tuple)
+        and len(speeds) == 2
+        and all(finite_number(v) and v > 0 for v in speeds)
+    ):
+        problems.append(
+            "homing_speeds must be two speeds > 0 in units/s, [switch search, zero search] "
+            f"(got {speeds!r})"
+        )
     window = options.get("window", 0)
     if not (isinstance(window, int) and not isinstance(window, bool) and window >= 0):
         problems.append(f"window must be a number of counts >= 0 (got {window!r})")

@@ -9,6 +9,9 @@ Rules:
    active), or ``None`` where the drive must move by itself.
 3. :func:`drive_step` is the drive's side: the state a controlword takes a
    drive to from a state (transitions 2-12 and 15); the simulated drive runs it.
+4. Modes of operation (0x6060, shown in 0x6061): the operating-mode bits of the
+   controlword and statusword mean different things per mode; :data:`MODES`
+   names the three statectl drives, the bit constants say which mode they are of.
 """
 
 from __future__ import annotations
@@ -19,11 +22,18 @@ __all__ = [
     "CW_DISABLE_VOLTAGE",
     "CW_ENABLE_OPERATION",
     "CW_FAULT_RESET",
+    "CW_HOMING_START",
     "CW_NEW_SETPOINT",
     "CW_QUICK_STOP",
     "CW_SHUTDOWN",
     "CW_SWITCH_ON",
+    "HOMING",
+    "MODES",
+    "PROFILE_POSITION",
+    "PROFILE_VELOCITY",
     "SW_FAULT",
+    "SW_HOMING_ATTAINED",
+    "SW_HOMING_ERROR",
     "SW_SETPOINT_ACK",
     "SW_TARGET_REACHED",
     "SW_WARNING",
@@ -79,11 +89,26 @@ CW_DISABLE_VOLTAGE = 0x00  # transitions 7, 9, 10, 12
 CW_QUICK_STOP = 0x02  # transitions 7, 10, 11
 CW_FAULT_RESET = 0x80  # transition 15, on bit 7's rising edge
 CW_NEW_SETPOINT = 0x30  # profile position: bit 4 new set-point, bit 5 change immediately
+CW_HOMING_START = 0x10  # homing: bit 4 rising starts the homing operation
 
 SW_FAULT = 0x0008
 SW_WARNING = 0x0080
 SW_TARGET_REACHED = 0x0400  # bit 10
 SW_SETPOINT_ACK = 0x1000  # bit 12 in profile position mode
+SW_HOMING_ATTAINED = 0x1000  # bit 12 in homing mode (with bit 10: homing done)
+SW_HOMING_ERROR = 0x2000  # bit 13 in homing mode
+
+#: Modes of operation (0x6060 / 0x6061) statectl's driver and simulated drive speak.
+PROFILE_POSITION = 1
+PROFILE_VELOCITY = 3  # bit 10 of the statusword: target velocity reached
+HOMING = 6
+MODES: dict[int, str] = {
+    PROFILE_POSITION: "profile position",
+    PROFILE_VELOCITY: "profile velocity",
+    HOMING: "homing",
+}
+#: Homing methods the standard defines (0x6098); 0 is "no homing", 36 is reserved.
+HOMING_METHODS = frozenset(range(1, 36)) | {37}
 
 
 def decode(word: int) -> PowerState:
