@@ -231,6 +231,16 @@ SHIPPED = [
     (MOTOR, "cia402-sim", None),
     (MOTOR, "cia402", ROOT / "examples" / "motor" / "cia402-socketcan.yaml"),
     (GRIPPER, "modbus", PICK / "gripper-modbus.yaml"),
+    *(
+        (ROOT / "examples" / "modbus" / "clamp.yaml", "modbus", ROOT / "examples" / "modbus" / c)
+        for c in ("clamp-tcp.yaml", "clamp-rtu.yaml")
+    ),
+    (ROOT / "examples" / "motor" / "axis-cia402.yaml", "cia402-sim", None),
+    (
+        ROOT / "examples" / "motor" / "axis-cia402.yaml",
+        "cia402",
+        ROOT / "examples" / "motor" / "axis-cia402-socketcan.yaml",
+    ),
     *((PICK / f"{name}.yaml", "sim-twin", None) for name in ("arm", "conveyor", "sensor")),
     (GRIPPER, "sim-twin", None),
 ]

@@ -296,6 +296,7 @@ class ModbusIO(Driver):
             if self._stop.is_set():
                 return  # closing: the run is over, nothing is raised into it
             if failure is not None:
+                failure = failure.removeprefix(f"{self.where}: ")
                 self._give_up(method, f"{failure}; tried {self.retries + 1} times")
                 return
         with self._lock:
