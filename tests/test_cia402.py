@@ -476,14 +476,16 @@ def test_homing_runs_the_drives_homing_mode_and_completes_when_attained() -> Non
 
 
 def test_a_homing_error_is_the_states_fault_event() -> None:
-    """A method the drive does not have (36 is reserved) makes it set statusword bit 13;
-    the driver reports it as a homing error, which Homing's monitor raises as Error."""
-    r = Run(axis_chart(), homing_method=36)
+    """A method the drive does not have (36 is reserved; the event's data overrides the
+    option) makes it set statusword bit 13; the driver reports it as a homing error,
+    which Homing's monitor raises as Error."""
+    r = Run(axis_chart(), homing_method=35)
     try:
-        r.subject.post("Homing")
+        r.subject.post("Homing", {"method": 36})
         errors = r.seen("Error")
         assert "homing error" in errors[0]["detail"], r.events
         assert "Homing completion" not in [e for e, _ in r.events]
+        assert ("write", 0x6098, 0, 36) in r.sniffer.sdo()
     finally:
         r.close()
 

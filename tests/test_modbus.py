@@ -693,3 +693,24 @@ def test_the_clamp_runs_on_modbus_rtu_over_a_serial_line(tmp_path: Path) -> None
         c.close()
         server.stop()
         line.close()
+
+
+def test_a_fault_row_on_a_superstate_is_the_writes_fault_event(tmp_path: Path) -> None:
+    """A fault event declared on the superstate of the state a command enters is the one
+    a given-up write raises (a fault row on a superstate leaves every state inside it)."""
+    from statectl.front.builder.build import load_chart
+    from statectl.run.devices.modbus.driver import fault_event_for
+
+    device = tmp_path / "valve.yaml"
+    device.write_text(
+        "device: Valve\n"
+        "states:\n"
+        "  - {state: Idle, control: default, api: Open()}\n"
+        "  - {state: Working, control: monitoring required, api: Open()}\n"
+        "  - {state: Opening, parent: Working, control: event trigger required, api: Open()}\n"
+        "events:\n"
+        "  - {event: Open, old: Idle, new: Opening, kind: command, api: Open}\n"
+        "  - {event: Open completion, old: Opening, new: Idle, kind: completion, api: Open}\n"
+        "  - {event: Jam, old: Working, new: Idle, kind: fault, api: Open}\n"
+    )
+    assert fault_event_for(load_chart(device), "Open") == "Jam"

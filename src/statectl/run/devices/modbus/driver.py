@@ -90,7 +90,8 @@ QUIET = OutageFilter()
 
 
 def fault_event_for(chart: Chart | None, method: str) -> str | None:
-    """The fault event declared for the state ``method``'s command enters (rule 3)."""
+    """The fault event declared for the state ``method``'s command enters, or for a
+    superstate of it (rule 3); None when there is none."""
     if chart is None:
         return None
     entered: list[str] = []
@@ -100,11 +101,14 @@ def fault_event_for(chart: Chart | None, method: str) -> str | None:
             if event is not None and event.api == method and event.kind is EventKind.COMMAND:
                 entered += [s for s in t.targets if s not in entered]
     for state in entered:
-        for t in chart.transitions_from(state):
-            for name in t.events:
-                event = chart.event(name)
-                if event is not None and event.kind is EventKind.FAULT:
-                    return name
+        at: str | None = state
+        while at is not None:  # the state, then its superstates (a fault row on one)
+            for t in chart.transitions_from(at):
+                for name in t.events:
+                    event = chart.event(name)
+                    if event is not None and event.kind is EventKind.FAULT:
+                        return name
+            at = chart.state(at).parent
     return None
 
 
