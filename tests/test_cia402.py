@@ -573,3 +573,20 @@ def test_a_fault_reaction_time_is_a_sim_option(tmp_path: Path) -> None:
     assert ["fault_reaction must be seconds >= 0" in d.message for d in info.value.diagnostics] == [
         True
     ]
+
+
+def test_a_drive_that_does_not_show_profile_position_at_start_is_a_clear_error() -> None:
+    """At start-up 0x6060 = 1 is read back from 0x6061: a drive that keeps showing
+    another mode is a StatectlError saying what 0x6061 reads, not a run that starts."""
+    from statectl.run.devices.cia402.sim import SimDrive
+
+    drive = SimDrive(channel="statectl-test-mode", node_id=5)
+    try:
+        drive.hold_mode()
+        drive.mode_display = 0  # no mode
+        driver = Cia402Driver(channel="statectl-test-mode", node_id=5, mode_timeout=0.1)
+        with pytest.raises(StatectlError, match=r"node 5 .*0x6061 reads 0 0.1 s after 0x6060 = 1"):
+            driver.bind(lambda e, d: None, WallClock())
+        assert driver.network is None
+    finally:
+        drive.stop()
