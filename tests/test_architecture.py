@@ -44,7 +44,17 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     "render": ("errors", "model", "observers", "semantics"),
     "scxml": ("errors", "model", "expr", "semantics", "observers", "runtime"),
     "runtime": ("errors", "model", "expr", "semantics", "observers"),
-    "devices": ("errors", "model", "expr", "semantics", "observers", "runtime", "tables"),
+    "commands": ("errors",),  # who may command a device: pure, asked at the System's door
+    "devices": (
+        "errors",
+        "model",
+        "expr",
+        "semantics",
+        "observers",
+        "runtime",
+        "tables",
+        "commands",  # config.py reads the run config's commands: section
+    ),
     "codegen": ("errors", "model", "expr", "semantics", "observers", "tables", "build"),
     "cell": ("errors", "model", "expr", "semantics", "observers", "tables", "build"),
     "explore": (
@@ -83,6 +93,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     ),
     "system": (
         "errors",
+        "commands",
         "model",
         "expr",
         "semantics",
@@ -98,6 +109,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     ),
     "web": (
         "errors",
+        "commands",
         "model",
         "expr",
         "semantics",
@@ -131,6 +143,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     ),
     "opcua": (
         "errors",
+        "commands",
         "model",
         "expr",
         "semantics",

@@ -301,6 +301,12 @@ ALL: tuple[Code, ...] = (
     _c("D512", _E, "a bus driver whose library is not installed", _BUS),
     _c("D520", _E, "a bad 'opcua:' section", ("docs/opcua.md", "configuration")),
     _c("D530", _E, "a bad 'ship:' section", ("docs/journal.md", "shipping-to-postgresql")),
+    _c(
+        "D540",
+        _E,
+        "a bad 'commands:' section",
+        ("docs/runtime.md", "who-may-command-the-commands-section"),
+    ),
     # -- S6xx: reading SCXML (statectl.out.scxml.reader) --------------------------------------
     _c("S601", _E, "the document is not well-formed XML", _SCXML),
     _c("S602", _E, "the root is not <scxml> in the SCXML namespace", _SCXML),

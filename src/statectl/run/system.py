@@ -57,6 +57,10 @@ Rules:
    refusing an event's data, ``Movement {amount: abc}``) fails the same way: the
    message goes to ``on_failure`` and the loop goes on; before, one bad event sent
    from the dashboard or typed into a ``--realtime`` run ended the whole run.
+8. The door, :meth:`System.admit` (post and send): an event with an ``origin``
+   (:mod:`statectl.run.commands`) enters if :attr:`System.commands` allows it, else
+   ``CommandRefused``, journalled as a ``refused`` step that changes nothing. An event
+   without one is the host's own (a driver, the Python API): one test.
 """
 
 from __future__ import annotations
@@ -76,6 +80,7 @@ from statectl.cell.model import Cell
 from statectl.kernel.errors import StatectlError
 from statectl.kernel.model import Chart
 from statectl.kernel.semantics.eventview import GuardError
+from statectl.run.commands import Commands, Origin
 from statectl.run.devices import DeviceDriver, connect
 from statectl.run.journal import (
     Guarantee,
@@ -133,6 +138,8 @@ class System:
     #: a cell's run-time rules (rule 6: refusals, invariants); off for a harness that
     #: drives the links from any state (statectl.out.testgen)
     enforce: bool = True
+    #: who may command which device (rule 8): the run config's ``commands:`` section
+    commands: Commands = field(default_factory=Commands)
     subjects: dict[str, Subject] = field(default_factory=dict)
     bound: dict[str, JournalledDevice] = field(default_factory=dict)
     wake: threading.Event = field(default_factory=threading.Event)
@@ -192,6 +199,7 @@ class System:
                     s.on_step(self._link_step)
         if self.journal is not None and self.journal.guarantee is Guarantee.DURABLE_FIRST:
             self.journal.after_commit(self._committed)
+        self.commands.check_names({n: s.chart.event_names for n, s in self.subjects.items()})
 
     def _link_step(self, event: str, data: Any, outcome: str) -> None:
         """Rule 4: on the owner after a device's step, send the links it fired."""
@@ -312,9 +320,16 @@ class System:
             raise StatectlError(f"no device {name!r}; devices: {', '.join(self.subjects)}")
         return name
 
-    def _admit(self, device: str | None) -> str:
-        """The device's name, once its queue has room for one more event (rule 4)."""
+    def admit(
+        self, device: str | None, event: str, data: Any = None, origin: Origin | None = None
+    ) -> str:
+        """The door (rules 4, 8): the device, once ``origin`` may send ``event`` and it has room."""
         name = self.device(device)
+        if origin is not None and not self.commands.allows(origin, name, event):
+            if (bound := self.bound.get(name)) is not None:
+                with self.owner:  # between the device's steps: the row keeps their order
+                    bound.refused(event, data, str(origin))
+            raise self.commands.refusal(origin, name, event)
         limit = self.max_queue
         if limit is not None and self.subjects[name].queued >= limit:
             raise QueueFull(
@@ -323,12 +338,14 @@ class System:
             )
         return name
 
-    def post(self, device: str | None, event: str, data: Any = None) -> Ticket | None:
+    def post(
+        self, device: str | None, event: str, data: Any = None, *, origin: Origin | None = None
+    ) -> Ticket | None:
         """Accept an event from outside (any thread); with a journal the ticket says when.
 
-        Never blocks; with ``max_queue`` a full device raises :class:`QueueFull` (rule 4).
+        Never blocks; a full device raises :class:`QueueFull` (rule 4); ``origin``: rule 8.
         """
-        name = self._admit(device)
+        name = self.admit(device, event, data, origin)
         if self.rules is not None and self.rules.guarded(name, event):
             with self.owner:  # the global state once what came before has settled (rule 6)
                 if not self._draining:  # (a post from a step: the drain running is the owner)
@@ -494,20 +511,17 @@ class System:
 
     # -- asyncio (rule 5) ---------------------------------------------------------------------
 
-    async def send(self, device: str | None, event: str, data: Any = None) -> str:
-        """Post ``event`` and wait until its device has processed it; returns the outcome.
-
-        The outcome is ``"handled"`` or the :class:`~statectl.kernel.semantics.Unhandled`
-        reason. Something must own the devices meanwhile (:meth:`serve` on a thread,
-        as :meth:`start_owner` starts it). A journalled System accepts through its
-        journal: use :meth:`post` and the ticket there.
-        """
+    async def send(
+        self, device: str | None, event: str, data: Any = None, *, origin: Origin | None = None
+    ) -> str:
+        """Post ``event`` and wait until its device has processed it; returns the outcome,
+        ``"handled"`` or the :class:`~statectl.kernel.semantics.Unhandled` reason. Something
+        must own the devices meanwhile (:meth:`serve` on a thread, :meth:`start_owner`). A
+        journalled System accepts through its journal: use :meth:`post` and the ticket."""
         if self.journal is not None:
-            raise StatectlError(
-                "send() runs on a System without a journal; with one, post() and wait "
-                "for the ticket"
-            )
-        name = self._admit(device)
+            why = "send() runs on a System without a journal; with one, post() and wait"
+            raise StatectlError(f"{why} for the ticket")
+        name = self.admit(device, event, data, origin)
         subject = self.subjects[name]
         loop = asyncio.get_running_loop()
         done: asyncio.Future[str] = loop.create_future()
@@ -518,12 +532,10 @@ class System:
         return await done
 
     async def records(self, maxsize: int = 10_000) -> AsyncIterator[Record]:
-        """Every device's records as they happen, until the consumer stops iterating.
-
-        The owner hands each step over as one :class:`StepRecord`; its typed records
-        are built here, on the consumer's side, as they are iterated. A consumer that
-        falls ``maxsize`` steps behind loses the oldest (never a stalled owner).
-        """
+        """Every device's records as they happen, until the consumer stops iterating: the
+        owner hands each step over as one :class:`StepRecord`, whose typed records are built
+        here, as they are iterated. A consumer that falls ``maxsize`` steps behind loses the
+        oldest (never a stalled owner)."""
         loop = asyncio.get_running_loop()
         queue: asyncio.Queue[StepRecord] = asyncio.Queue(maxsize)
 

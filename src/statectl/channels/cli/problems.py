@@ -88,9 +88,9 @@ class Problems:
     def counting(self, post: Callable[..., Any], err: TextIO) -> Callable[..., Any]:
         """``post`` for the dashboard: a refused command is reported and counted (rule 10)."""
 
-        def post_counted(device: str | None, event: str, data: Any = None) -> Any:
+        def post_counted(device: str | None, event: str, data: Any = None, **how: Any) -> Any:
             try:
-                return post(device, event, data)
+                return post(device, event, data, **how)
             except Refused as exc:
                 err.write(f"statectl run: {exc}\n")
                 self.refuse()

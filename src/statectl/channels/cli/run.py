@@ -78,6 +78,7 @@ from statectl.channels.cli.run_journal import new_journal, open_journal, undone_
 from statectl.channels.cli.settle import unsettled_note
 from statectl.channels.cli.steps import StepLog
 from statectl.kernel.errors import DiagnosticError, Severity, StatectlError
+from statectl.run.commands import Origin
 from statectl.run.devices import (
     MIN_TOKEN,
     DashboardConfig,
@@ -136,6 +137,8 @@ MAX_PORT = 65535
 
 #: The environment variable that may hold the dashboard's token (rule 7).
 TOKEN_VARIABLE = "STATECTL_DASHBOARD_TOKEN"
+#: Event lines typed or piped in come from the operator at the console (run/commands.py).
+STDIN = Origin("stdin", "operator")
 
 
 def _dashboard_settings(
@@ -214,7 +217,7 @@ def _feed(
             device, event, data = parsed
             if batch and early is not None and system.work_pending():
                 early.append(number)
-            ticket = system.post(device, event, data)
+            ticket = system.post(device, event, data, origin=STDIN)
             if batch:
                 if ticket is not None:
                     ticket.wait()
@@ -374,7 +377,7 @@ def run(
                 journal, mode, promise, resume=resume, fresh=fresh, out=info, inputs=read
             )
         with undone_on_failure(store, journal if store is not None and made else None):
-            system = System(setups, clock, store, cell)
+            system = System(setups, clock, store, cell, commands=table.commands)
         if table.ship is not None:
             shipping = _start_shipping(table.ship, store, config, err)
         if settle_limit is not None:
@@ -409,6 +412,7 @@ def run(
                 post=problems.counting(system.post, err),
                 token=token,
                 limits=limits,
+                origin=Origin("dashboard", "token"),  # its token is checked before it posts
             )
             url = server.start(host, port)
         if opcua is not None:

@@ -395,9 +395,9 @@ class NodeSystem(System):
                 out.append((self.bound.get(device) or self._remote[device], event))
         return out
 
-    def post(self, device: str | None, event: str, data: Any = None) -> Ticket | None:
+    def post(self, device: str | None, event: str, data: Any = None, **how: Any) -> Ticket | None:
         """Rule 5: an event for a device on another node is forwarded there."""
         if device in self._remote:
             self._wire.forward(device, event, data)
             return None
-        return System.post(self, device, event, data)
+        return System.post(self, device, event, data, **how)  # how: the origin (run/commands.py)

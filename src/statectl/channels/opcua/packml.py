@@ -18,7 +18,8 @@ Rules:
    the event and returns Good when the unit took a transition, ``BadInvalidState``
    when the event changed nothing in its state, ``BadResourceUnavailable`` when it
    was not accepted (a full queue). Calling needs the configured user, as every
-   method does. The device object's own statectl methods stay as they are.
+   method does, on the machine that holds it (else ``BadMethodInvalid``). The device
+   object's own statectl methods stay as they are.
 5. A ``PackMLObjects`` folder under ``Objects`` organizes every PackML device object,
    where the companion's clients look for units.
 """
@@ -124,24 +125,28 @@ class PackmlSpace:
         device: Any,
         machines: list[Any],
         names: PackmlNaming,
-        call: Callable[[str], Callable[..., Any]],
+        call: Callable[[str, Any], Callable[..., Any]],
     ) -> None:
-        """Add the command methods to the machines and file the device (rules 4 and 5)."""
+        """Add the command methods to the machines and file the device (rules 4 and 5);
+        ``call(command, machine)`` makes the handler of ``command`` on that machine."""
         ua = _ua()
         for at, commands in names.methods.items():
             for command in commands:
-                await machines[at].add_method(
-                    self.new_id(), self.name(command), call(command), [], []
+                held = machines[at]
+                await held.add_method(
+                    self.new_id(), self.name(command), call(command, held.nodeid), [], []
                 )
         await self.folder.add_reference(device.nodeid, ua.ObjectIds.Organizes)
 
 
-def packml_call(outcome: Callable[[], Any]) -> Callable[..., Any]:
-    """A method handler: await the outcome, answer Good or a bad status (rule 4)."""
+def packml_call(outcome: Callable[[Any, Any], Any]) -> Callable[[Any, Any], Any]:
+    """What a PackML method does once its call was checked (object, inputs, user: see
+    :mod:`statectl.channels.opcua.methods`): await ``outcome(data, origin)``, answer Good
+    or a bad status (rule 4)."""
     ua = _ua()
 
-    async def call(_parent: Any, *_args: Any) -> Any:
-        code = status_of(await outcome())
+    async def call(data: Any, origin: Any) -> Any:
+        code = status_of(await outcome(data, origin))
         return [] if code is None else ua.StatusCode(code)
 
     return call

@@ -17,15 +17,20 @@ Rules:
    object. ``Invokes`` lists the device's invoke numbers, ``LastInvoke`` is the
    last one issued (-1: none yet). A machine whose states are all inactive shows
    an empty ``CurrentState``.
-3. Each command event is a method of the device object with no inputs and two
-   outputs: ``Handled`` and ``Reason`` (empty when handled, else why the event
-   changed nothing, or why it was not accepted). A device whose file declares
+3. Each command event is a method of the device object with one optional input,
+   ``Data`` (the event's data as JSON), and two outputs: ``Handled`` and ``Reason``
+   (empty when handled, else why the event changed nothing, or why it was not
+   accepted). Every call is checked (its object, its inputs, the session's user
+   against the System's commands policy) and sent through the System's door
+   (:mod:`statectl.channels.opcua.methods`). A device whose file declares
    ``profile: packml`` gets the PackML companion's names too
    (:mod:`statectl.channels.opcua.packml`).
 4. Security: anonymous sessions may browse, read and subscribe; calling a method
    needs the configured user (a session with wrong credentials is refused). The
    endpoints offer only the configured policies (Basic256Sha256 SignAndEncrypt
-   by default) with the server's certificate (:mod:`statectl.channels.opcua.certs`).
+   by default) with the server's certificate (:mod:`statectl.channels.opcua.certs`),
+   and only those open a session: a None channel the config does not list serves
+   discovery only (:mod:`statectl.channels.opcua.access`).
 """
 
 from __future__ import annotations
@@ -44,15 +49,17 @@ from typing import Any
 from urllib.parse import urlparse
 
 from statectl.channels.opcua.access import Users as _Users
+from statectl.channels.opcua.access import discovery_only
 from statectl.channels.opcua.access import rules as _Rules
 from statectl.channels.opcua.access import ua_module as _ua
 from statectl.channels.opcua.certs import APP_URI, default_directory, ensure_certificate
+from statectl.channels.opcua.methods import DATA_ARGUMENT, MAX_DATA, Calls
 from statectl.channels.opcua.packml import PackmlNaming, PackmlSpace, naming, packml_call
 from statectl.channels.opcua.space import Change, Layout, changes, layout
 from statectl.kernel.errors import StatectlError
 from statectl.run.devices.opcua_config import endpoint_problem
 from statectl.run.runtime import InvokeIssued, MicrostepTaken, Started, StepRecord
-from statectl.run.system import QueueFull, System
+from statectl.run.system import System
 
 __all__ = ["NAMESPACE", "OpcuaServer", "OpcuaSettings"]
 
@@ -137,6 +144,7 @@ class OpcuaServer:
         self._kick: Any = None  # an asyncio.Event of the server's loop
         self._loop_thread: int | None = None
         self._packml_space: PackmlSpace | None = None  # when a device declares PackML
+        self._calls = Calls(system)  # the methods' handlers (rule 3, methods.py)
 
     # -- hooks on the owner (rule 1) ------------------------------------------------------
 
@@ -272,6 +280,14 @@ class OpcuaServer:
         if "None" in settings.security:
             policies.append(ua.SecurityPolicyType.NoSecurity)
         server.set_security_policy(policies, permission_ruleset=_Rules())
+        if "None" not in settings.security:  # a None channel only discovers (access.py rule 2)
+            factories = getattr(server, "_policies", None)  # asyncua's, shared with each channel
+            if not isinstance(factories, list):  # never serve what could not be refused
+                raise StatectlError(
+                    "opcua: this asyncua has no policy factories statectl can add to, so it "
+                    "could not refuse the None policy; install asyncua 1.1.5 to 2.x"
+                )
+            factories.append(discovery_only())
         server.set_identity_tokens([ua.AnonymousIdentityToken, ua.UserNameIdentityToken])
 
     # -- the address space (rule 2) --------------------------------------------------------
@@ -299,8 +315,8 @@ class OpcuaServer:
                 methods[event] = await node.add_method(
                     idx,
                     _browse(event),
-                    self._method(name, event),
-                    [],
+                    self._calls.event(name, event, node.nodeid),
+                    [_data_argument()],
                     [ua.VariantType.Boolean, ua.VariantType.String],
                 )
             invokes = [f"{i.number} {i.name} {i.method}" for i in chart.invokes]
@@ -314,6 +330,14 @@ class OpcuaServer:
             made = await self._machines(node, kind, idx, device, methods, chart.initial, pack)
             if packml is not None and pack is not None:
                 await packml.finish(node, made, pack, functools.partial(self._packml, name))
+
+    def _packml(self, device: str, event: str, holder: Any) -> Callable[..., Any]:
+        """A PackML command method of ``holder``: the same call, answered with a status."""
+        return self._calls.checked(
+            holder,
+            False,
+            packml_call(lambda data, origin: self._calls.outcome(device, event, data, origin)),
+        )
 
     async def _machines(
         self, node: Any, kind: Any, idx: int, device: _Device, methods: dict[str, Any],
@@ -459,93 +483,6 @@ class OpcuaServer:
             setattr(ev.event, "ToState/Id", ua.Variant(to_id, node_id))
             await ev.trigger(message=f"{device.name}: {name}")
 
-    # -- methods (rule 3) -------------------------------------------------------------------
-
-    def _method(self, device: str, event: str) -> Callable[..., Any]:
-        ua = _ua()
-
-        async def call(_parent: Any, *_args: Any) -> list[Any]:
-            outcome = await self._outcome(device, event)
-            handled = outcome == "handled"
-            return [
-                ua.Variant(handled, ua.VariantType.Boolean),
-                ua.Variant("" if handled else str(outcome), ua.VariantType.String),
-            ]
-
-        return call
-
-    def _packml(self, device: str, event: str) -> Callable[..., Any]:
-        """A PackML command method: the same call, answered with a status code."""
-        return packml_call(lambda: self._outcome(device, event))
-
-    async def _outcome(self, device: str, event: str) -> str:
-        """Post ``event`` and wait for the device's step: ``handled`` or why not."""
-        try:
-            if self.system.journal is None:
-                return await _send(self.system, device, event)
-            return await self._journalled(device, event)
-        except StatectlError as exc:
-            return str(exc)
-
-    async def _journalled(self, device: str, event: str) -> str:
-        """Post through the journal and wait for the device's step on ``event``."""
-        loop = asyncio.get_running_loop()
-        done: asyncio.Future[str] = loop.create_future()
-        subject = self.system.subjects[device]
-        off: Callable[[], None] | None = None
-
-        def heard(name: str, _data: Any, outcome: str) -> None:
-            if name == event and off is not None:
-                off()
-                with contextlib.suppress(RuntimeError):  # the loop closed: stopping
-                    loop.call_soon_threadsafe(_settle, done, outcome)
-
-        off = subject.on_step(heard)
-        try:
-            self.system.post(device, event)
-        except StatectlError:
-            off()
-            raise
-        return await done
-
-
-async def _send(system: System, device: str, event: str) -> str:
-    """:meth:`System.send`, but the loop's thread is the owner for a moment if nobody is.
-
-    As the journal's writer does (system.py rule 2): the step runs here, with no hop to
-    the owner's thread and back. It never waits for the owner lock: when another thread
-    owns the devices, that thread is woken and runs the event.
-    """
-    subject = system.subjects[system.device(device)]
-    limit = system.max_queue
-    if limit is not None and subject.queued >= limit:
-        raise QueueFull(f"{device}: {limit} events are queued already (max_queue)")
-    loop = asyncio.get_running_loop()
-    done: asyncio.Future[str] = loop.create_future()
-    here = threading.get_ident()
-
-    def then(outcome: str) -> None:
-        if threading.get_ident() == here:
-            _settle(done, outcome)
-        else:
-            with contextlib.suppress(RuntimeError):  # the loop closed: stopping
-                loop.call_soon_threadsafe(_settle, done, outcome)
-
-    subject.post(event, None, then=then)
-    if subject.started and system.owner.acquire(blocking=False):
-        try:
-            system.drain()
-        finally:
-            system.owner.release()
-    else:
-        system.wake.set()
-    return await done
-
-
-def _settle(future: asyncio.Future[str], outcome: str) -> None:
-    if not future.done():
-        future.set_result(outcome)
-
 
 def _initial(chart: Any, spec: Any, chart_initial: set[str]) -> str | None:
     """The state a machine starts in: the holder's initial child, else the chart's."""
@@ -572,3 +509,17 @@ async def _optional(node: Any, idx: int, name: str, variant: Any, empty: Any) ->
     except ua.UaError:  # BadNoMatch: the type left it out
         where = ua.NodeId(0, idx)  # a new numeric id in statectl's namespace
         return await node.add_property(where, ua.QualifiedName(name, 0), ua.Variant(empty, variant))
+
+
+def _data_argument() -> Any:
+    """A device method's one optional input (methods.py rule 2)."""
+    ua = _ua()
+
+    arg = ua.Argument()
+    arg.Name = DATA_ARGUMENT
+    arg.DataType = ua.NodeId(ua.ObjectIds.String)
+    arg.ValueRank = -1
+    arg.Description = ua.LocalizedText(
+        f"the event's data as a JSON object, at most {MAX_DATA} bytes; empty: none"
+    )
+    return arg

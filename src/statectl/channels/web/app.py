@@ -11,7 +11,8 @@ Rules:
    ``Limits.body_timeout`` (408) and parses to ``{"event": ...}`` (400, also for
    nesting too deep to parse), naming an event the device's chart knows (422,
    with the events it knows). The event is handed to ``post`` on a worker
-   thread, so a journal's wait for durability never blocks the loop.
+   thread, so a journal's wait for durability never blocks the loop; an event the
+   System's commands policy refuses gets 403.
 4. ``GET /api/events`` beyond ``Limits.streams`` open streams gets 503 with
    ``Retry-After``.
 """
@@ -30,6 +31,7 @@ from aiohttp import web
 
 from statectl.channels.web.stream import Fanout
 from statectl.kernel.errors import StatectlError
+from statectl.run.commands import CommandRefused
 
 if TYPE_CHECKING:
     from statectl.channels.web.server import Dashboard
@@ -204,6 +206,8 @@ def make_app(dash: Dashboard, fanout: Fanout, limits: Limits) -> web.Application
             seq, durable = await loop.run_in_executor(
                 None, _deliver, send, device, event, data, limits.durable_wait
             )
+        except CommandRefused as exc:  # the System's commands policy (run/commands.py)
+            return _refuse(HTTPStatus.FORBIDDEN, str(exc))
         except StatectlError as exc:
             return _refuse(HTTPStatus.BAD_REQUEST, str(exc))
         return web.json_response({"accepted": True, "seq": seq, "durable": durable})

@@ -23,13 +23,16 @@ Rules:
 5. Reading is open; posting an event (``POST /api/post``) needs the token printed
    at start-up and the ``Origin`` and ``Host`` rules of ``statectl.channels.web.app``.
    With a journal the reply to a post comes once the event is durable and says
-   so (``"durable": true``); without one the event is queued (``false``).
+   so (``"durable": true``); without one the event is queued (``false``). Given an
+   ``origin``, every post carries it to the System's commands policy, whose refusal
+   is a 403.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import hmac
 import json
 import logging
@@ -51,6 +54,7 @@ from statectl.front.observers import extract
 from statectl.kernel.errors import StatectlError
 from statectl.out.render import render
 from statectl.out.render.diagram import from_chart
+from statectl.run.commands import Origin
 from statectl.run.runtime.records import (
     FaultDetected,
     MonitorStarted,
@@ -226,9 +230,14 @@ class Dashboard:
         post: PostFn | None = None,
         token: str | None = None,
         limits: Limits | None = None,
+        origin: Origin | None = None,
     ) -> None:
         self.devices = {s.name: _Device(s) for s in subjects}
-        self.post = post
+        #: rule 5: ``origin`` is passed with every post, for the System's commands policy
+        send: Callable[..., Any] | None = post  # a System's post takes the origin too
+        if send is not None and origin is not None:
+            send = functools.partial(send, origin=origin)
+        self.post: PostFn | None = send
         self.token = token or secrets.token_urlsafe(18)
         self.limits = limits or Limits()
         self.origins: frozenset[str] = frozenset()

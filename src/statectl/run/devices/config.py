@@ -38,6 +38,8 @@ Rules:
    between looks when nothing wakes the shipper), ``retry`` (seconds between
    attempts while the server is down) and ``batch`` (rows per transaction) are
    optional. Problems there are D530; a password in ``to`` is never echoed.
+8. A ``commands:`` section says who may command which device (parsed by
+   :mod:`statectl.run.commands`, which the System asks; problems there are D540).
 """
 
 from __future__ import annotations
@@ -56,6 +58,7 @@ from statectl.front.tables import safeyaml
 from statectl.front.tables.inputs import read_input_text
 from statectl.kernel.errors import Diagnostic, DiagnosticError, Location, Severity, StatectlError
 from statectl.kernel.model import Chart
+from statectl.run.commands import Commands, parse_commands
 from statectl.run.devices.cia402 import Cia402Driver, Cia402SimDriver
 from statectl.run.devices.cia402.options import cia402_option_problems
 from statectl.run.devices.modbus import ModbusIO, modbus_option_problems
@@ -169,6 +172,8 @@ class RunConfig:
     opcua: OpcuaConfig = field(default_factory=OpcuaConfig)
     #: the ``ship:`` section: the run's journal shipped to PostgreSQL
     ship: ShipConfig | None = None
+    #: the ``commands:`` section: who may command which device (run/commands.py)
+    commands: Commands = field(default_factory=Commands)
 
 
 def _available() -> str:
@@ -342,6 +347,7 @@ def load_run_config(path: str | Path, text: str | None = None) -> RunConfig:
     dashboard_node: yaml.Node | None = None
     opcua_node: yaml.Node | None = None
     ship_node: yaml.Node | None = None
+    commands_node: yaml.Node | None = None
     if not isinstance(root, yaml.MappingNode):
         error(
             "D503",
@@ -359,18 +365,17 @@ def load_run_config(path: str | Path, text: str | None = None) -> RunConfig:
                 opcua_node = val
             elif value(key) == "ship":
                 ship_node = val
+            elif value(key) == "commands":
+                commands_node = val
             else:
                 error(
                     "D507",
                     line_of(key),
                     f"unknown key {value(key)!r}",
-                    "a run config has 'devices', 'dashboard', 'opcua' and 'ship'",
+                    "a run config has 'devices', 'dashboard', 'opcua', 'ship' and 'commands'",
                 )
-        if (
-            devices_node is None
-            and dashboard_node is None
-            and opcua_node is None
-            and ship_node is None
+        if all(
+            n is None for n in (devices_node, dashboard_node, opcua_node, ship_node, commands_node)
         ):
             error(
                 "D503",
@@ -471,9 +476,14 @@ def load_run_config(path: str | Path, text: str | None = None) -> RunConfig:
         dashboard = _dashboard(dashboard_node, value, line_of, error)
     opcua = OpcuaConfig() if opcua_node is None else parse_opcua(opcua_node, value, line_of, error)
     ship = None if ship_node is None else _ship(ship_node, value, line_of, error)
+    commands = (
+        Commands()
+        if commands_node is None
+        else parse_commands(commands_node, value, line_of, error, file)
+    )
     if diags:
         raise DiagnosticError(diags)
-    return RunConfig(result if devices_node is not None else None, dashboard, opcua, ship)
+    return RunConfig(result if devices_node is not None else None, dashboard, opcua, ship, commands)
 
 
 def _dashboard(

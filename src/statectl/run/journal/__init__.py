@@ -9,6 +9,7 @@ from statectl.run.journal.check import JournalDamaged, check_journal, set_aside
 from statectl.run.journal.device import JournalledDevice
 from statectl.run.journal.read import (
     REDO,
+    REFUSED,
     DeviceRow,
     InboxRow,
     JournalReader,
@@ -31,6 +32,7 @@ from statectl.run.journal.subjects import restore_subject
 __all__ = [
     "CODES",
     "REDO",
+    "REFUSED",
     "DeviceFile",
     "DeviceRow",
     "Guarantee",

@@ -46,10 +46,15 @@ Rules:
    runs) is written when it starts or resumes, not when it is bound: a resume
    refused because the journal was written by another chart (:meth:`misfit`:
    its last snapshot names states this chart lacks) leaves the journal as it was.
+7. A command the System's door refused (its commands policy) is journalled by
+   :meth:`JournalledDevice.refused` as an ``event`` step with no inbox row and the
+   outcome ``refused: ORIGIN``, with the snapshot it left unchanged; the System calls it
+   as the owner, so the row follows the device's steps. Replay passes over it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -59,7 +64,8 @@ from statectl.kernel.errors import StatectlError
 from statectl.kernel.model import Notify
 from statectl.kernel.semantics import Step, step
 from statectl.run.journal.assigned import replay_assigned_data
-from statectl.run.journal.read import REDO, JournalReader, StepRow
+from statectl.run.journal.format import JournalError, encode_data
+from statectl.run.journal.read import REDO, REFUSED, JournalReader, StepRow
 from statectl.run.journal.recovery import RecoveryRule
 from statectl.run.journal.store import Guarantee, Journal, Send, StepKind, Ticket
 from statectl.run.journal.subjects import restore_subject
@@ -297,6 +303,22 @@ class JournalledDevice:
             data=entering.data,
             outcome=REDO,
         )
+
+    def refused(self, event: str, data: Any, origin: str) -> None:
+        """Rule 7: journal a command refused at the door; a journal that cannot take the
+        row any more fails elsewhere, and the command is refused all the same."""
+        snapshot = self.subject.snapshot
+        if snapshot is None:  # not started: no state to journal it with
+            return
+        try:
+            encode_data(data)
+        except StatectlError:
+            data = None  # the refusal is kept, data that JSON cannot hold is not
+        with contextlib.suppress(JournalError):
+            self.journal.record(
+                self.name, StepKind.EVENT, snapshot, time_=self.subject.clock.now(),
+                event=event, data=data, outcome=f"{REFUSED}: {origin}",
+            )  # fmt: skip
 
     def _record_now(self, kind: StepKind) -> None:
         snapshot = self.subject.snapshot

@@ -11,7 +11,8 @@ Rules:
    each event and recovery step is posted and processed (an accepted event
    applied by two steps is refused: it ran twice), except a recovery
    ``redo`` step (:data:`REDO`): it re-issued device calls and changed no state,
-   so it is not posted. The
+   so it is not posted, nor is a ``refused`` step (:data:`REFUSED`, a command the
+   System's door refused). The
    snapshot the model reaches must equal the journalled one after every step
    (for a redo: the one before it), and a ``restore`` must find the device where
    the run before it left it; every difference is reported as a
@@ -43,6 +44,7 @@ from statectl.run.runtime.subject import Listener, Subject
 
 __all__ = [
     "REDO",
+    "REFUSED",
     "DeviceRow",
     "InboxRow",
     "JournalReader",
@@ -57,6 +59,8 @@ __all__ = [
 
 #: The outcome of a recovery step that re-issued device calls and changed no state.
 REDO = "redo"
+#: The outcome of a command the System's door refused (``refused: ORIGIN``): nothing ran.
+REFUSED = "refused"
 
 
 @dataclass(frozen=True, slots=True)
@@ -402,7 +406,10 @@ def replay(
             else:  # the window starts mid-run: take the journal's word for the first state
                 restore_subject(subject, row.snapshot)
             subjects[row.device] = subject
-        if row.kind is StepKind.EVENT or (row.kind is StepKind.RECOVERY and row.outcome != REDO):
+        refused = row.outcome.partition(":")[0] == REFUSED  # the door refused it: nothing ran
+        if (row.kind is StepKind.EVENT and not refused) or (
+            row.kind is StepKind.RECOVERY and row.outcome != REDO
+        ):
             assert row.event is not None
             subject.post(row.event, row.data)
             subject.run_until_idle()

@@ -1,0 +1,204 @@
+"""The OPC UA server's methods: every call checked, then sent through the System's door.
+
+Rules (rule 3 of :mod:`statectl.channels.opcua.server` in detail):
+1. A method belongs to one object: a device's event methods to the device object, a
+   PackML command to the machine that holds it. Called on any other object it is
+   ``BadMethodInvalid`` (asyncua only checks that both nodes exist).
+2. Inputs. A device's method takes at most one, ``Data``: a String holding the event's
+   data as a JSON object (empty or absent: no data), at most :data:`MAX_DATA` bytes,
+   its numbers finite. A second input is ``BadTooManyArguments``; an input of another
+   type (a Double NaN, say), too long, not JSON, NaN or infinite, or not an object is
+   ``BadInvalidArgument`` with the input's own status. A PackML command takes none.
+3. Who. The session's user (:func:`~statectl.channels.opcua.access.caller`) is the
+   command's origin, ``Origin("opcua", user)``, anonymous when the session has none;
+   the System's commands policy decides at its door (:mod:`statectl.run.commands`)
+   whatever asyncua's own rules let through. A refusal is ``BadUserAccessDenied``; the
+   System journals it and nothing moves.
+4. Then the call posts the event and answers once the device's step on it ran: through
+   the journal when there is one; else the loop's thread runs the step itself when no
+   other thread owns the devices (as the journal's writer does, system.py rule 2).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import math
+import threading
+from collections.abc import Awaitable, Callable
+from typing import Any
+
+from statectl.channels.opcua.access import caller
+from statectl.channels.opcua.access import ua_module as _ua
+from statectl.kernel.errors import StatectlError
+from statectl.run.commands import CommandRefused, Origin
+from statectl.run.system import System
+
+__all__ = ["DATA_ARGUMENT", "MAX_DATA", "Calls", "read_data"]
+
+#: The most bytes of JSON a method's ``Data`` input may hold (the dashboard's body bound).
+MAX_DATA = 65536
+#: The name of a device method's one optional input (rule 2).
+DATA_ARGUMENT = "Data"
+
+#: ``run(data, origin)``: post the event and answer the call.
+Run = Callable[[Any, Origin], Awaitable[Any]]
+
+
+class _Bad(Exception):
+    """An input refused (rule 2): the call's status and the input's own."""
+
+    def __init__(self, call: str, argument: str) -> None:
+        super().__init__(call)
+        self.call, self.argument = call, argument
+
+
+def read_data(args: tuple[Any, ...], takes_data: bool) -> Any:
+    """The event data the inputs carry (rule 2); raises :class:`_Bad` for inputs refused."""
+    if len(args) > (1 if takes_data else 0):
+        raise _Bad("BadTooManyArguments", "BadTooManyArguments")
+    if not args:
+        return None
+    ua = _ua()
+    arg = args[0]
+    if getattr(arg, "VariantType", None) != ua.VariantType.String:
+        raise _Bad("BadInvalidArgument", "BadTypeMismatch")
+    text = arg.Value
+    if text is None or text == "":
+        return None
+    if len(text) > MAX_DATA or len(text.encode("utf-8", "surrogatepass")) > MAX_DATA:
+        raise _Bad("BadInvalidArgument", "BadOutOfRange")
+    try:
+        data = json.loads(text, parse_constant=_not_finite, parse_float=_finite)
+    except (ValueError, RecursionError):  # not JSON, NaN/Infinity, too deep, a huge int
+        raise _Bad("BadInvalidArgument", "BadInvalidArgument") from None
+    if not isinstance(data, dict):
+        raise _Bad("BadInvalidArgument", "BadInvalidArgument")
+    return data
+
+
+def _not_finite(name: str) -> Any:
+    raise ValueError(f"{name} is not a number data may hold")
+
+
+def _finite(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"{text} is not finite")
+    return value
+
+
+class Calls:
+    """The handlers of one server's methods, over its System (rules 1-4)."""
+
+    def __init__(self, system: System) -> None:
+        self.system = system
+
+    def checked(self, holder: Any, takes_data: bool, run: Run) -> Callable[..., Any]:
+        """A handler for a method of ``holder`` (a node id): rules 1-3, then ``run``."""
+        ua = _ua()
+
+        def status(name: str, *inputs: str) -> Any:
+            result = ua.CallMethodResult()
+            result.StatusCode = ua.StatusCode(getattr(ua.StatusCodes, name))
+            result.InputArgumentResults = [
+                ua.StatusCode(getattr(ua.StatusCodes, i)) for i in inputs
+            ]
+            return result
+
+        async def call(parent: Any, *args: Any) -> Any:
+            if parent != holder:
+                return status("BadMethodInvalid")
+            try:
+                data = read_data(args, takes_data)
+            except _Bad as bad:
+                return status(bad.call, *([bad.argument] * len(args)))
+            try:
+                return await run(data, Origin("opcua", caller()))
+            except CommandRefused:
+                return status("BadUserAccessDenied")
+
+        return call
+
+    def event(self, device: str, event: str, holder: Any) -> Callable[..., Any]:
+        """A device's method: ``[Handled, Reason]`` (server rule 3)."""
+        ua = _ua()
+
+        async def run(data: Any, origin: Origin) -> list[Any]:
+            outcome = await self.outcome(device, event, data, origin)
+            handled = outcome == "handled"
+            return [
+                ua.Variant(handled, ua.VariantType.Boolean),
+                ua.Variant("" if handled else str(outcome), ua.VariantType.String),
+            ]
+
+        return self.checked(holder, True, run)
+
+    async def outcome(self, device: str, event: str, data: Any, origin: Origin) -> str:
+        """Rule 4: post ``event`` and wait for the device's step: ``handled`` or why not.
+        A refusal of the commands policy is raised (rule 3), any other said."""
+        try:
+            if self.system.journal is None:
+                return await _send(self.system, device, event, data, origin)
+            return await self._journalled(device, event, data, origin)
+        except CommandRefused:
+            raise
+        except StatectlError as exc:
+            return str(exc)
+
+    async def _journalled(self, device: str, event: str, data: Any, origin: Origin) -> str:
+        """Post through the journal and wait for the device's step on ``event``."""
+        loop = asyncio.get_running_loop()
+        done: asyncio.Future[str] = loop.create_future()
+        subject = self.system.subjects[self.system.device(device)]
+        off: Callable[[], None] | None = None
+
+        def heard(name: str, _data: Any, outcome: str) -> None:
+            if name == event and off is not None:
+                off()
+                with contextlib.suppress(RuntimeError):  # the loop closed: stopping
+                    loop.call_soon_threadsafe(_settle, done, outcome)
+
+        off = subject.on_step(heard)
+        try:
+            self.system.post(device, event, data, origin=origin)
+        except StatectlError:
+            off()
+            raise
+        return await done
+
+
+async def _send(system: System, device: str, event: str, data: Any, origin: Origin) -> str:
+    """:meth:`System.send`, but the loop's thread is the owner for a moment if nobody is.
+
+    As the journal's writer does (system.py rule 2): the step runs here, with no hop to
+    the owner's thread and back. It never waits for the owner lock: when another thread
+    owns the devices, that thread is woken and runs the event.
+    """
+    subject = system.subjects[system.admit(device, event, data, origin)]
+    loop = asyncio.get_running_loop()
+    done: asyncio.Future[str] = loop.create_future()
+    here = threading.get_ident()
+
+    def then(outcome: str) -> None:
+        if threading.get_ident() == here:
+            _settle(done, outcome)
+        else:
+            with contextlib.suppress(RuntimeError):  # the loop closed: stopping
+                loop.call_soon_threadsafe(_settle, done, outcome)
+
+    subject.post(event, data, then=then)
+    if subject.started and system.owner.acquire(blocking=False):
+        try:
+            system.drain()
+        finally:
+            system.owner.release()
+    else:
+        system.wake.set()
+    return await done
+
+
+def _settle(future: asyncio.Future[str], outcome: str) -> None:
+    if not future.done():
+        future.set_result(outcome)
