@@ -226,3 +226,35 @@ def test_an_event_the_chart_does_not_know_is_refused(
     assert (got, says in json.loads(reply)["error"]) == (status, True), reply
     served.system.drain()
     assert served.system.subjects["Motor"].events_processed == 0
+
+
+def test_a_command_the_policy_refuses_gets_403_and_nothing_moves() -> None:
+    """The dashboard posts with its origin; the System's commands policy refuses what no
+    grant of the dashboard covers: 403 with the reason, and the Motor stays Blocked."""
+    from statectl.run.commands import Commands, Grant, Origin
+
+    system = System(
+        (DeviceSetup("Motor", motor_chart()),),
+        SimClock(),
+        commands=Commands([Grant("dashboard", events=frozenset({"Initialization"}))]),
+    )
+    dash = Dashboard(
+        system.subjects.values(), post=system.post, token=TOKEN, origin=Origin("dashboard", "t")
+    )
+    dash.start("127.0.0.1", 0)
+    try:
+        system.start()
+        served = Served(system, dash, dash.port)
+        refused = served.request("POST", "/api/post", {"event": "Movement"}, POST)
+        allowed = served.request("POST", "/api/post", {"event": "Initialization"}, POST)
+        system.drain()
+        assert (refused[0], allowed[0]) == (403, 200)
+        assert (
+            "Motor: Movement refused: dashboard t may not send it"
+            in json.loads(refused[2])["error"]
+        )
+        assert system.subjects["Motor"].configuration == frozenset({"Blocked"})
+        assert system.subjects["Motor"].events_processed == 1  # Initialization only
+    finally:
+        dash.stop()
+        system.close()
