@@ -175,6 +175,29 @@ def test_an_anonymous_packml_call_is_refused(unit: Served) -> None:
         run(go())
 
 
+def test_a_packml_call_with_an_input_or_on_another_object_is_refused(unit: Served) -> None:
+    """A PackML command takes no input (BadTooManyArguments) and belongs to the machine
+    that holds it: called with the device object as its object, BadMethodInvalid."""
+
+    async def go() -> list[str]:
+        client = await connect(unit, user=USER, password=PASSWORD)
+        got = []
+        try:
+            m = await machines(client)
+            abort = await m["base"].get_child([f"{m['ns']}:Abort"])
+            for target, inputs in ((m["base"], ("now",)), (m["device"], ())):
+                try:
+                    await target.call_method(abort, *inputs)
+                    got.append("Good")
+                except ua.uaerrors.UaStatusCodeError as exc:
+                    got.append(type(exc).__name__)
+            return got
+        finally:
+            await client.disconnect()
+
+    assert run(go()) == ["BadTooManyArguments", "BadMethodInvalid"]
+
+
 @pytest.mark.parametrize(
     ("profile", "expected"),
     [("packml", {"BaseStateMachine", "MachineState", "ExecuteState"}), ("motor", None)],

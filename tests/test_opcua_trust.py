@@ -288,6 +288,7 @@ def test_a_bad_input_is_refused_and_nothing_moves(
     assert plant.state == frozenset({"Blocked"})
 
 
+@pytest.mark.parametrize("plant", [((), True)], indirect=True)
 def test_data_as_a_json_object_reaches_the_device(plant: Plant) -> None:
     """The one input a method takes carries the event's data; empty means none."""
     assert plant.calls(("Movement", ('{"amount": 5}',)), ("Movement", ("",))) == [
@@ -295,6 +296,10 @@ def test_data_as_a_json_object_reaches_the_device(plant: Plant) -> None:
         [False, "declared ignored"],
     ]
     assert plant.state == frozenset({"Moving"})
+    plant.system.journal.flush()  # type: ignore[union-attr]
+    with JournalReader(plant.path) as reader:
+        data = [(r.event, r.data) for r in reader.steps() if r.event is not None]
+    assert data == [("Movement", {"amount": 5}), ("Movement", None)]
 
 
 def test_a_method_called_on_another_object_is_bad_method_invalid(plant: Plant) -> None:
