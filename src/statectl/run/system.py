@@ -167,6 +167,7 @@ class System:
     hold_time: bool = False
 
     def __post_init__(self) -> None:
+        self.commands.check_names({d.name: d.chart.event_names for d in self.setups})
         if self.max_queue is not None and self.max_queue < 1:
             raise StatectlError(f"max_queue must be at least 1 (got {self.max_queue!r})")
         ready = self._ready.append
@@ -199,7 +200,6 @@ class System:
                     s.on_step(self._link_step)
         if self.journal is not None and self.journal.guarantee is Guarantee.DURABLE_FIRST:
             self.journal.after_commit(self._committed)
-        self.commands.check_names({n: s.chart.event_names for n, s in self.subjects.items()})
 
     def _link_step(self, event: str, data: Any, outcome: str) -> None:
         """Rule 4: on the owner after a device's step, send the links it fired."""
