@@ -272,6 +272,7 @@ def test_an_anonymous_call_is_refused_inside_statectl_whatever_asyncua_allows(
         (("",) * 100, "BadTooManyArguments"),
         ((ua.Variant(float("nan"), ua.VariantType.Double),), "BadInvalidArgument"),  # a NaN
         ((ua.Variant(5, ua.VariantType.Int32),), "BadInvalidArgument"),  # not a String
+        ((ua.Variant(["{}"], ua.VariantType.String, is_array=True),), "BadInvalidArgument"),
         (("x" * 1_000_000,), "BadInvalidArgument"),  # a 1 MB string
         (('{"amount": NaN}',), "BadInvalidArgument"),  # NaN in the JSON
         (('{"amount": 1e999}',), "BadInvalidArgument"),  # infinite

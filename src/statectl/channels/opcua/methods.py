@@ -67,6 +67,8 @@ def read_data(args: tuple[Any, ...], takes_data: bool) -> Any:
     text = arg.Value
     if text is None or text == "":
         return None
+    if not isinstance(text, str):  # an array of Strings
+        raise _Bad("BadInvalidArgument", "BadTypeMismatch")
     if len(text) > MAX_DATA or len(text.encode("utf-8", "surrogatepass")) > MAX_DATA:
         raise _Bad("BadInvalidArgument", "BadOutOfRange")
     try:
