@@ -81,9 +81,7 @@ class Origin:
 
     def __str__(self) -> str:
         who = self.principal
-        if who is None:
-            return f"{self.channel} (anonymous)"
-        return f"{self.channel} {who if who.isprintable() else repr(who)}"
+        return f"{self.channel} (anonymous)" if who is None else f"{self.channel} {_shown(who)}"
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,10 +104,15 @@ class Grant:
         )
 
     def __str__(self) -> str:
-        who = {ANYONE: "", AUTHENTICATED: "/*"}.get(self.principal, f"/{self.principal}")
+        who = {ANYONE: "", AUTHENTICATED: "/*"}.get(self.principal, f"/{_shown(self.principal)}")
         to = "any device" if self.devices is None else ", ".join(sorted(self.devices))
         send = "any event" if self.events is None else ", ".join(sorted(self.events))
         return f"{self.channel}{who} may send {send} to {to} ({self.where})"
+
+
+def _shown(name: str) -> str:
+    """A principal's name as a message shows it: escaped when it holds a control character."""
+    return name if name.isprintable() else repr(name)
 
 
 #: Rule 3: what each channel allowed before there was a policy.
