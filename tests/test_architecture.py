@@ -158,7 +158,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "explore",
         "system",
     ),
-    "schema": ("errors", "model", "tables", "cell", "devices"),  # out/schema.py: JSON Schemas
+    "schema": ("errors", "model", "tables", "cell", "devices", "commands"),  # JSON Schemas
     "lsp": (  # channels/lsp: the language server reads what check, verify and run read
         "errors",
         "model",

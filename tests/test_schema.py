@@ -91,6 +91,9 @@ REFUSED = [
     ("run-config", {"dashboard": {"port": 70000}}, "70000"),
     ("run-config", {"dashboard": {"token": "short"}}, "'short' is too short"),
     ("run-config", {"ship": {"to": "mysql://x"}}, "does not match"),
+    ("run-config", {"commands": [{"from": "telnet"}]}, "'telnet' does not match"),
+    ("run-config", {"commands": [{"to": "Motor"}]}, "'from' is a required"),
+    ("run-config", {"commands": [{"from": "stdin", "send": []}]}, "is not valid under any"),
 ]
 
 
@@ -122,3 +125,15 @@ def test_schema_command_prints_and_writes(tmp_path: Path) -> None:
     assert target.read_text(encoding="utf-8") == schema_text("device")
     assert out.getvalue() == f"wrote {target}\n"
     assert main(["schema", "scxml"], io.StringIO(), io.StringIO()) == 2
+
+
+def test_schema_accepts_the_commands_section_the_loader_reads() -> None:
+    """from CHANNEL, CHANNEL/* or CHANNEL/NAME; to and send a name or a list of names."""
+    data = {
+        "commands": [
+            {"from": "opcua/operator", "to": "Motor", "send": ["Movement", "Initialization"]},
+            {"from": "opcua/*", "send": "Error"},
+            {"from": "dashboard"},
+        ]
+    }
+    assert errors("run-config", data) == []

@@ -6,7 +6,7 @@ Rules:
    device file's top keys (:mod:`statectl.front.tables.yaml_io`), the cell's keys
    (:mod:`statectl.cell.values`, :mod:`statectl.cell.reader`,
    :mod:`statectl.cell.nodes`) and the run config's
-   (:mod:`statectl.run.devices.config`). The copies shipped in
+   (:mod:`statectl.run.devices.config`, :mod:`statectl.run.commands`). The copies shipped in
    ``statectl/data/schema/`` are checked equal to these by the suite.
 2. A schema accepts every file the loader accepts as to its shape (a column
    may be a scalar or, for the list columns, a list of scalars) and refuses
@@ -42,6 +42,7 @@ from statectl.front.tables.rows import (
 )
 from statectl.front.tables.yaml_io import TOP_KEYS as DEVICE_KEYS
 from statectl.kernel.model import EventKind
+from statectl.run.commands import CHANNELS, GRANT_KEYS
 from statectl.run.devices.config import (
     DASHBOARD_KEYS,
     DRIVERS,
@@ -263,11 +264,24 @@ def _run_config() -> dict[str, Any]:
             },
             ("to",),
         ),
+        "commands": {"type": "array", "items": _grant()},
     }
     assert tuple(sections) == RUN_CONFIG_KEYS, "the run config's keys changed: update rule 1"
     document = _document("run-config", "a statectl run configuration", sections, [])
     document["minProperties"] = 1
     return document
+
+
+def _grant() -> dict[str, Any]:
+    """A grant of the ``commands:`` section (:mod:`statectl.run.commands`)."""
+    name = {"type": "string", "minLength": 1}
+    names = {"anyOf": [name, {"type": "array", "minItems": 1, "items": name}]}
+    origin = {
+        "type": "string",
+        "pattern": f"^({'|'.join(CHANNELS)})(/.+)?$",
+        "description": "CHANNEL (anyone), CHANNEL/* (anyone it authenticated) or CHANNEL/NAME",
+    }
+    return _mapping(GRANT_KEYS, {"from": origin, "to": names, "send": names}, ("from",))
 
 
 def _document(

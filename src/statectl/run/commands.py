@@ -44,6 +44,7 @@ __all__ = [
     "AUTHENTICATED",
     "CHANNELS",
     "DEFAULT_GRANTS",
+    "GRANT_KEYS",
     "CommandRefused",
     "Commands",
     "Grant",
@@ -58,7 +59,8 @@ CHANNELS: Final = ("stdin", "dashboard", "opcua", "zenoh", "link")
 ANYONE: Final = ""
 #: A grant's principal: anyone the channel authenticated (``from: CHANNEL/*``).
 AUTHENTICATED: Final = "*"
-_KEYS = ("from", "to", "send")
+#: The keys of a grant in the ``commands:`` section.
+GRANT_KEYS: Final = ("from", "to", "send")
 _EXAMPLE = "write '- {from: opcua/operator, to: Motor, send: [Movement]}'"
 
 
@@ -213,9 +215,9 @@ def _grant(
     fields = {str(value(k)): (k, v) for k, v in node.value}
     bad = False
     for name, (k, _) in fields.items():
-        if name not in _KEYS:
+        if name not in GRANT_KEYS:
             error("D540", line_of(k), f"commands: unknown key {name!r}",
-                  f"a grant has {', '.join(_KEYS)}")  # fmt: skip
+                  f"a grant has {', '.join(GRANT_KEYS)}")  # fmt: skip
             bad = True
     if "from" not in fields:
         error("D540", line, "commands: a grant needs 'from' (CHANNEL or CHANNEL/PRINCIPAL)",

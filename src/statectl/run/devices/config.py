@@ -131,7 +131,7 @@ DriverConfig = dict[str, tuple[str, dict[str, Any]]]
 
 #: The sections of a run config, and the keys of a device entry, the dashboard and ship
 #: (the JSON Schema, out/schema.py, reads them).
-RUN_CONFIG_KEYS = ("devices", "dashboard", "opcua", "ship")
+RUN_CONFIG_KEYS = ("devices", "dashboard", "opcua", "ship", "commands")
 DEVICE_KEYS = ("driver", "options")
 DASHBOARD_KEYS = ("host", "port", "token", "streams")
 #: The most event streams a config file may allow (each holds a socket and a buffer).
