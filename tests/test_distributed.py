@@ -311,9 +311,14 @@ def test_nodes_section_values(tmp_path: Path) -> None:
 def test_inbound_applies_each_number_once_in_order(
     offers: list[tuple[str, int]], verdicts: list[str]
 ) -> None:
-    """A stream applies the next number only; older ones are duplicates, newer ones a gap."""
+    """A stream applies the next number only; older ones are duplicates, newer ones a gap
+    (each epoch announced by its sender's hello first)."""
     inbound = Inbound()
-    got = [inbound.offer("line", "arm", e, n)[0].value for e, n in offers]
+    got = []
+    for e, n in offers:
+        if inbound.announced.get(("line", "arm")) != e:
+            inbound.announce("line", "arm", e)
+        got.append(inbound.offer("line", "arm", e, n)[0].value)
     assert got == verdicts
     assert Verdict.APPLY.value == "apply"
 

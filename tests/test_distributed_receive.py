@@ -113,6 +113,8 @@ def _node(tmp_path: Path, name: str) -> tuple[NodeSystem, Wire]:
 
 def _receiver_b(tmp_path: Path, pause: float = 0.0) -> tuple[NodeSystem, Wire, _Hits]:
     system, wire = _node(tmp_path, "b")
+    for node, epoch in (("a", "ep1"), ("c", "ep-c")):  # as the senders' hellos would
+        wire.inbound.announce(node, "pong", epoch)
     hits = _Hits(pause)
     system.subjects["pong"].attach(hits)
     return system, wire, hits
@@ -186,6 +188,7 @@ def test_a_driver_refusing_a_link_event_fails_that_event_only(tmp_path: Path) ->
     system.subjects["pong"].attach(refuses)
     failures: list[str] = []
     system.on_failure.append(lambda exc: failures.append(str(exc)))
+    wire.inbound.announce("a", "pong", "ep1")  # as the sender's hello would
     on_link = wire._receiver("a", "pong")
     on_link(_event("ep1", 1))
     on_link(_event("ep1", 2))
@@ -233,6 +236,7 @@ def test_receivers_on_two_threads_never_step_the_device_at_once(tmp_path: Path) 
     pong.on_step(lambda event, data, outcome: order.append(("step", 0)))
     count = 60
     errors: list[BaseException] = []
+    wire.inbound.announce("a", "pong", "ep-a")
 
     def feed(node: str) -> Callable[[], None]:
         on_link = wire._receiver(node, "pong")
@@ -268,12 +272,14 @@ def test_a_link_event_sent_is_read_by_the_receiver(tmp_path: Path) -> None:
     wire_a._pubs["pong"] = pub
     wire_a.up.add("b")
     wire_a._session = object()  # open, as far as send() asks
+    wire_a.outbound["pong"].greeted = True  # its hello went out
     system_a.post("ping", "Go")
     system_a.drain()
     system_a.post("ping", "Go")
     system_a.drain()
     assert len(pub.puts) == 2
     _system_b, wire_b, hits = _receiver_b(tmp_path / "b")
+    wire_b.inbound.announce("a", "pong", wire_a.epoch)
     on_link = wire_b._receiver("a", "pong")
     for data in pub.puts:
         on_link(_Sample(data))

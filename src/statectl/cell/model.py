@@ -37,6 +37,7 @@ before the split.
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 from pathlib import Path
 
 import yaml
@@ -54,6 +55,7 @@ from statectl.cell.reader import (
     _named,
     _Reader,
 )
+from statectl.cell.security import read_security
 from statectl.cell.values import (
     CODES,
     TOP_KEYS,
@@ -139,6 +141,9 @@ def load_cell(
         completions = value != "off"
     links = _links(r, f.get("links"), charts)
     nodes = read_nodes(r, f.get("nodes"), f.get("links"), charts)  # cell/nodes.py
+    security = read_security(r, f.get("security"), nodes, Path(file).parent, list(charts))
+    if nodes is not None:
+        nodes = replace(nodes, security=security)
     environment = _environment(r, f.get("environment"), charts)
     invariants: list[Invariant] = []
     names: set[str] = set()

@@ -28,6 +28,7 @@ from typing import Any
 import yaml
 
 from statectl.cell.expressions import _d
+from statectl.cell.security import OPEN, Security
 from statectl.kernel.errors import Diagnostic, Location, Severity
 from statectl.kernel.model import Chart
 
@@ -78,6 +79,7 @@ class LinkDelivery:
 class Nodes:
     nodes: tuple[Node, ...]
     delivery: tuple[LinkDelivery, ...]  # one per link of the cell, in its order
+    security: Security = OPEN  # the cell's security: section (cell/security.py)
 
     def node(self, name: str) -> Node:
         for n in self.nodes:

@@ -23,6 +23,7 @@ CODES: Mapping[str, str] = family("V8")
 TOP_KEYS = (
     *("cell", "devices", "links", "environment", "invariants", "recovery", "completions"),
     "nodes",  # cell/nodes.py: which device runs in which process
+    "security",  # cell/security.py: TLS, users, who may publish what over Zenoh
 )
 
 

@@ -81,6 +81,12 @@ def register(sub: Any) -> None:
         help="Zenoh endpoint to connect to (repeatable; default: every node's listen endpoints)",
     )
     s.add_argument("--config", help="run configuration YAML: its dashboard: section")
+    s.add_argument(
+        "--as",
+        dest="station",
+        metavar="NAME",
+        help="this station's name among the cell's security: stations (its certificate)",
+    )
     s.add_argument("--host", help="dashboard address (default: loopback)")
     s.add_argument("--port", type=int, help="dashboard port (default: any free)")
     s.add_argument("--token", help="dashboard token (default: as statectl run)")
@@ -92,6 +98,7 @@ def _cmd_dashboard(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         args.file,
         connect=args.connect,
         config=args.config,
+        as_station=args.station,
         host=args.host,
         port=args.port,
         token=args.token,
@@ -105,6 +112,7 @@ def dashboard_main(
     *,
     connect: list[str] | None = None,
     config: str | None = None,
+    as_station: str | None = None,
     host: str | None = None,
     port: int | None = None,
     token: str | None = None,
@@ -133,6 +141,8 @@ def dashboard_main(
     if cell.nodes is None and not connect:
         err.write(f"statectl dashboard: {path}: the cell has no nodes: section\n")
         return PROBLEMS
+    if _plain_off_loopback(cell, connect or (), err):
+        return PROBLEMS
     halt = stop or threading.Event()
     try:
         table = RunConfig(None, DashboardConfig())
@@ -152,6 +162,7 @@ def dashboard_main(
                 out=out,
                 stop=halt,
                 streams=table.dashboard.streams,
+                station=as_station,
             )
         return 0
     except (StatectlError, OSError) as exc:
@@ -208,6 +219,7 @@ def node_main(
     from statectl.channels.cli import run as runcli
     from statectl.channels.cli.run_journal import new_journal, open_journal, undone_on_failure
     from statectl.channels.distributed import NodeSystem, Wire
+    from statectl.channels.distributed.trust import security_line
     from statectl.run.devices import DashboardConfig, RunConfig, load_run_config
     from statectl.run.journal import Guarantee, Sync
     from statectl.run.runtime import TraceWriter, WallClock
@@ -286,6 +298,7 @@ def node_main(
             f"node {node}: devices {', '.join(mine) or 'none'}; listen "
             f"{', '.join(me.listen) or 'none'}; connect {', '.join(me.connect) or 'none'}; "
             f"lease {me.lease:g} s; key expressions under {wire.keys.root}/\n"
+            f"node {node}: {security_line(cell)}\n"
         )
         wire.open(states=dashboard)
         resumed = system.start(resume=resume)
@@ -364,6 +377,23 @@ def _bad_usage(command: str, port: int | None, connect: Sequence[str], err: Text
             err.write(
                 f"statectl {command}: --connect {endpoint!r} {problem}; "
                 "write PROTOCOL/HOST:PORT, e.g. tcp/127.0.0.1:7447\n"
+            )
+            return True
+    return False
+
+
+def _plain_off_loopback(cell: Any, connect: Sequence[str], err: TextIO) -> bool:
+    """V827's rule for a station's --connect: off loopback only over TLS or when insecure."""
+    from statectl.cell.security import TLS_PROTOCOLS, is_loopback
+
+    sec = cell.nodes.security if cell.nodes is not None else None
+    for endpoint in connect:
+        tls = endpoint.partition("/")[0] in TLS_PROTOCOLS
+        if not tls and not is_loopback(endpoint) and not (sec is not None and sec.insecure):
+            err.write(
+                f"statectl dashboard: --connect {endpoint!r} is off loopback without TLS; "
+                "give the cell security: {tls: ...} and a tls/ endpoint, or security: "
+                "{insecure: true}\n"
             )
             return True
     return False

@@ -116,11 +116,12 @@ def station(
     stop: threading.Event,
     streams: int | None = None,
     ready: Callable[[str], object] | None = None,
+    station: str | None = None,
 ) -> int:
     """Rule 3: an operator station's dashboard until ``stop``; the exit code."""
     from statectl.channels.distributed.view import CellView
 
-    view = CellView(cell, connect)
+    view = CellView(cell, connect, station=station)
     server = None
     try:
         view.open()

@@ -12,8 +12,14 @@ Rules:
 3. The receiver applies ``n`` only if it is the next one of the epoch
    (``Inbound.offer``): an older one is a duplicate (a resend after a reconnect)
    and is dropped; a newer one means a gap and asks the sender to resend from the
-   one after the last applied. An epoch the receiver has not seen starts at
-   whatever comes first: a sender resends from its oldest unacknowledged event.
+   one after the last applied.
+4. An epoch changes only through the hello exchange: a sender's ``hello`` names
+   its epoch (:meth:`Inbound.announce`), and an epoch the receiver has not seen
+   is taken only once announced, starting at whatever comes first (a sender
+   resends from its oldest unacknowledged event). Any other epoch, and a number
+   outside 1 .. :data:`MAX_NUMBER`, is refused: nothing is applied and the
+   stream's position is kept, so old numbers cannot be replayed by switching
+   epochs and the real sender's once-only delivery holds.
 """
 
 from __future__ import annotations
@@ -25,13 +31,17 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["Inbound", "Outbound", "Verdict"]
+__all__ = ["MAX_NUMBER", "Inbound", "Outbound", "Verdict"]
+
+#: The highest number of a stream's event (JSON's exact integers).
+MAX_NUMBER = 2**53
 
 
 class Verdict(enum.Enum):
     APPLY = "apply"
     DUPLICATE = "duplicate"
     GAP = "gap"
+    REFUSED = "refused"  # rule 4: an epoch never announced, or a number out of range
 
 
 @dataclass(slots=True)
@@ -46,6 +56,8 @@ class Outbound:
     unacked: deque[tuple[int, str, Any]] = field(default_factory=deque)
     lock: threading.Lock = field(default_factory=threading.Lock)
     last_send: float = 0.0  # monotonic time of the last (re)send, for the resend timer
+    #: a hello went out since the peer came up: its epoch is known there (rule 4)
+    greeted: bool = False
 
     def add(self, event: str, data: Any) -> int:
         """Under ``lock``: number the next event and keep it until acknowledged."""
@@ -69,12 +81,22 @@ class Inbound:
 
     last: dict[tuple[str, str], tuple[str, int]] = field(default_factory=dict)
     lock: threading.Lock = field(default_factory=threading.Lock)
+    #: per stream, the epoch its sender's last hello named (rule 4)
+    announced: dict[tuple[str, str], str] = field(default_factory=dict)
+
+    def announce(self, node: str, device: str, epoch: str) -> None:
+        """Under ``lock``: a hello named ``epoch`` for this stream (rule 4)."""
+        self.announced[node, device] = epoch
 
     def offer(self, node: str, device: str, epoch: str, n: int) -> tuple[Verdict, int]:
         """Under ``lock``: what to do with event ``n``, and the last applied number after it."""
         key = (node, device)
         seen = self.last.get(key)
+        if not 1 <= n <= MAX_NUMBER:
+            return Verdict.REFUSED, seen[1] if seen is not None else 0
         if seen is None or seen[0] != epoch:
+            if self.announced.get(key) != epoch:
+                return Verdict.REFUSED, seen[1] if seen is not None else 0
             self.last[key] = (epoch, n)
             return Verdict.APPLY, n
         last = seen[1]

@@ -18,6 +18,7 @@ from typing import Any
 from statectl.cell.model import Cell
 from statectl.channels.distributed.keys import Keys
 from statectl.channels.distributed.messages import parse_snapshot
+from statectl.channels.distributed.trust import session_config
 from statectl.kernel.errors import StatectlError
 from statectl.kernel.semantics import Snapshot
 
@@ -27,9 +28,18 @@ __all__ = ["CellView"]
 class CellView:
     """Each device's last published snapshot and the nodes present, live from Zenoh."""
 
-    def __init__(self, cell: Cell, connect: Sequence[str] | None = None) -> None:
+    def __init__(
+        self, cell: Cell, connect: Sequence[str] | None = None, *, station: str | None = None
+    ) -> None:
         if cell.nodes is None:
             raise StatectlError(f"{cell.path}: the cell has no nodes: section")
+        stations = cell.nodes.security.stations
+        if cell.nodes.security.authenticated and station not in stations:
+            raise StatectlError(
+                f"{cell.path}: the cell's nodes authenticate their peers: name this station "
+                f"(--as NAME, one of security: stations: {', '.join(stations) or 'none declared'})"
+            )
+        self.station = station or "station"
         self.cell = cell
         self.keys = Keys(cell.name)
         if connect is None:
@@ -46,11 +56,7 @@ class CellView:
     def open(self) -> CellView:
         import zenoh
 
-        c = zenoh.Config()
-        c.insert_json5("mode", '"peer"')
-        c.insert_json5("scouting/multicast/enabled", "false")
-        c.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
-        c.insert_json5("listen/endpoints", "[]")
+        c = session_config(self.cell, self.station, listen=(), connect=self.connect)
         self._session = s = zenoh.open(c)
         root = self.keys.root
         self._decls = [
@@ -105,7 +111,7 @@ class CellView:
 
     def _on_state(self, sample: Any) -> None:
         _, device = Keys.last(sample.key_expr)
-        try:
+        try:  # a payload too long or too deep is dropped before it is decoded (Unreadable)
             snap, t = parse_snapshot(sample.payload.to_bytes())
         except (ValueError, KeyError, TypeError):
             return

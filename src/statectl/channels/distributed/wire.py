@@ -34,6 +34,13 @@ Rules:
 6. A node resumed from its journal keeps its epoch and stream positions (the
    journal's ``meta`` rows ``link-epoch`` and ``link-in/<node>/<device>``) and
    sends again what its journal holds and the receiver has not acknowledged.
+7. A node subscribes only to the streams some link carries and checks what
+   arrives (statectl.channels.distributed.receive); every message it reads (acks,
+   hellos, posts, states) is bounded before it is decoded, and a refused one is
+   one escaped log line and a journal note (``zenoh-refused/NN``, the last 100,
+   and ``zenoh-refused``, their count), nothing else. A sender puts a stream's
+   events only after its hello went out since the peer came up, so the receiver
+   knows the epoch before its first event.
 """
 
 from __future__ import annotations
@@ -47,35 +54,36 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
-import msgspec
-
 from statectl.cell.explore.enforce import Refused
 from statectl.cell.model import Cell, Link
 from statectl.channels.distributed.keys import Keys
 from statectl.channels.distributed.messages import (
-    decode_link,
+    Unreadable,
     encode_link,
     parse_snapshot,
+    read_ack,
+    read_hello,
+    read_post,
     refuse_non_finite,
-    session_config,
     snapshot_payload,
 )
-from statectl.channels.distributed.resume import EPOCH_KEY, INBOUND_KEY, read_links
-from statectl.channels.distributed.streams import Inbound, Outbound, Verdict
+from statectl.channels.distributed.receive import stream_receiver
+from statectl.channels.distributed.resume import EPOCH_KEY, read_links
+from statectl.channels.distributed.streams import Inbound, Outbound
 from statectl.channels.distributed.system import NodeSystem
+from statectl.channels.distributed.trust import carried, printable, session_config, shown
 from statectl.kernel.errors import StatectlError
 from statectl.kernel.semantics import Snapshot
-from statectl.run.journal.format import Guarantee
 
 __all__ = ["RESEND_AFTER", "Wire"]
 
 #: Seconds without an acknowledgement after which a stream asks again (rule 3).
 RESEND_AFTER = 0.5
+#: The journal's meta keys of refused messages (rule 7): ``zenoh-refused/NN`` and the count.
+REFUSED_KEY = "zenoh-refused/"
 _TICK = 0.05
 _ACK_PAUSE = 0.002  # seconds between two rounds of acknowledgements, at least
 _ENC = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
-#: one JSON value at an index of a text: json.loads without its per-call checks (acks)
-_scan: Callable[[str, int], tuple[Any, int]] = getattr(json.JSONDecoder(), "scan_once")  # noqa: B009
 
 
 class Wire:
@@ -107,6 +115,9 @@ class Wire:
         self.up: set[str] = set()
         self.mirror: dict[str, int] = {}
         self.inbound = Inbound()
+        #: (sending node, device) -> the events links and invariants send on that stream
+        self.carried = carried(cell)
+        self.refused = 0  # messages refused by rule 7, for the journal's note
         self.outbound: dict[str, Outbound] = {}
         self._acks: deque[tuple[int, str, str, str, int]] = deque()  # seq, node, device, e, n
         self._ack_due: dict[tuple[str, str], tuple[str, int, bool]] = {}
@@ -183,7 +194,10 @@ class Wire:
         """
         import zenoh
 
-        self._session = s = zenoh.open(session_config(self.me))
+        me = self.me
+        self._session = s = zenoh.open(
+            session_config(self.cell, me.name, listen=me.listen, connect=me.connect, lease=me.lease)
+        )
         root = self.keys.root
         block = zenoh.CongestionControl.BLOCK
         for name, stream in self.outbound.items():
@@ -208,7 +222,6 @@ class Wire:
                     f"{root}/state/*", self._on_state, allowed_origin=zenoh.Locality.REMOTE
                 )
             )
-        self._decls.append(s.liveliness().declare_token(self.keys.node(self.me.name)))
 
     def _watch_matching(self, pub: Any, key: str) -> None:
         """Rule 5: put a device's states only while a subscriber somewhere takes them in
@@ -255,12 +268,11 @@ class Wire:
         """After the System started (resumed): take link events, posts and presence."""
         s = self._session
         root = self.keys.root
-        others = [n.name for n in self.nodes.nodes if n.name != self.me.name]
+        for (node, name), events in sorted(self.carried.items()):
+            if name in self.local:  # rule 7: only the streams some link carries
+                receiver = self._receiver(node, name, events)
+                self._decls.append(s.declare_subscriber(self.keys.link(node, name), receiver))
         for name in sorted(self.local):
-            self._decls += [
-                s.declare_subscriber(self.keys.link(node, name), self._receiver(node, name))
-                for node in others
-            ]
             self._decls += [
                 s.declare_subscriber(f"{root}/hello/*/{name}", self._on_hello),
                 s.declare_subscriber(self.keys.post(name), self._on_post),
@@ -268,6 +280,8 @@ class Wire:
         self._decls.append(
             s.liveliness().declare_subscriber(f"{root}/node/*", self._on_presence, history=True)
         )
+        # present once listening: a peer's hello to a node that cannot hear it yet is lost
+        self._decls.append(s.liveliness().declare_token(self.keys.node(self.me.name)))
         if self._mirrored:
             s.get(f"{root}/state/*", self._on_reply)
         for name in self.local:  # started or resumed: say where each device is now
@@ -300,7 +314,7 @@ class Wire:
             refuse_non_finite(data, device, event)
         with stream.lock:
             n = stream.add(event, data)
-            if stream.node in self.up and self._session is not None:
+            if stream.greeted and stream.node in self.up and self._session is not None:
                 self._pubs[device].put(encode_link(stream.epoch, n, event, data))
 
     def forward(self, device: str, event: str, data: Any) -> None:
@@ -333,58 +347,25 @@ class Wire:
 
     # -- Zenoh callbacks ---------------------------------------------------------------------
 
-    def _receiver(self, node: str, device: str) -> Callable[[Any], None]:
-        """The subscriber of one stream (``node`` -> ``device``, rules 3-4).
+    def _receiver(
+        self, node: str, device: str, events: frozenset[str] | None = None
+    ) -> Callable[[Any], None]:
+        """The subscriber of one stream (``node`` -> ``device``, rules 3-4 and 7)."""
+        if events is None:
+            events = self.carried.get((node, device), frozenset())
+        return stream_receiver(self, node, device, events)
 
-        The hot path of a link event, so everything per stream is looked up once
-        here: the key is known (only the payload is parsed), the device, its
-        journal binding, the stream's inbound note.
-        """
-        decode = decode_link
-        inbound = self.inbound
-        lock = inbound.lock
-        offer = inbound.offer
-        system = self.system
-        subject = system.subjects[device]
-        bound = system.bound.get(device)
-        note = f"{INBOUND_KEY}{node}/{device}"
-        ack = self._ack
-        wake = self._wake
-        run_devices = self._run_devices
-        run_now = system.run_now
-
-        def on_link(sample: Any) -> None:
-            try:
-                msg = decode(sample.payload.to_bytes())
-            except (msgspec.DecodeError, AttributeError):
-                return
-            e, n, event = msg.e, msg.n, msg.ev
-            run = True
-            with lock:
-                verdict, last = offer(node, device, e, n)
-                if verdict is not Verdict.APPLY:
-                    ack(node, device, e, last, verdict is Verdict.GAP)
-                    wake.set()
-                    return
-                try:  # under the lock: the stream's next event waits until this one ran
-                    if bound is not None:  # acknowledged once committed (_committed)
-                        ticket = bound.post(event, msg.d, note=(note, f"{e} {n}"))
-                        self._acks.append((ticket.seq, node, device, e, n))
-                        run = bound.journal.guarantee is Guarantee.PROMPT
-                    elif run_now(device, event, msg.d):  # nobody owned the devices: ran here
-                        run = False
-                    else:  # the owner's thread runs it
-                        subject.post(event, msg.d)
-                except StatectlError as exc:
-                    self._say(f"link event {event!r} from {node} to {device}: {exc}")
-            if run:
-                run_devices()  # before waking the wire's thread: the device first
-            if bound is None:
-                ack(node, device, e, n, False)
-                if not wake.is_set():
-                    wake.set()
-
-        return on_link
+    def _refuse(self, key: str, reason: str) -> None:
+        """Rule 7: one log line, and a note in the journal (the last 100 are kept)."""
+        self.refused += 1
+        text = f"refused on {key}: {reason}"
+        self._say(text)
+        journal = self.system.journal
+        if journal is not None:
+            journal.note(
+                f"{REFUSED_KEY}{self.refused % 100:02d}", f"{time.time():.3f} {printable(text)}"
+            )
+            journal.note(REFUSED_KEY.rstrip("/"), str(self.refused))
 
     def _ack(self, node: str, device: str, e: str, n: int, again: bool) -> None:
         """Note an acknowledgement for the wire's thread to send (rule 4)."""
@@ -407,12 +388,12 @@ class Wire:
         _, device = Keys.last(sample.key_expr)
         stream = self.outbound.get(device)
         try:
-            msg = _scan(sample.payload.to_string(), 0)[0]
-            e, n, again = str(msg["e"]), int(msg["n"]), bool(msg.get("r"))
-        except (ValueError, KeyError, TypeError, StopIteration, AttributeError):
+            e, n, again = read_ack(sample.payload.to_bytes())
+        except Unreadable as exc:
+            self._refuse(str(sample.key_expr), str(exc))
             return
-        if stream is None or e != stream.epoch:
-            return
+        if stream is None or e != stream.epoch or not 0 <= n <= stream.sent:
+            return  # an acknowledgement of what was never sent acknowledges nothing
         with stream.lock:
             stream.ack(n)
         if again:
@@ -421,12 +402,17 @@ class Wire:
             self._wake.set()
 
     def _on_hello(self, sample: Any) -> None:
+        """Rule 3 and streams rule 4: how far this stream got; its epoch may start now."""
         node, device = Keys.last(sample.key_expr)
         try:
-            e = str(json.loads(sample.payload.to_bytes())["e"])
-        except (ValueError, KeyError, TypeError):
+            if (node, device) not in self.carried:
+                raise Unreadable(f"no link from {shown(node)} sends to {shown(device)}")
+            e = read_hello(sample.payload.to_bytes())
+        except Unreadable as exc:
+            self._refuse(str(sample.key_expr), str(exc))
             return
         with self.inbound.lock:
+            self.inbound.announce(node, device, e)
             applied = self.inbound.applied(node, device, e)
             if applied is not None and self.system.journal is not None:
                 # an event still waiting for its commit is acknowledged by _committed
@@ -439,8 +425,12 @@ class Wire:
     def _on_post(self, sample: Any) -> None:
         _, device = Keys.last(sample.key_expr)
         try:
-            msg = json.loads(sample.payload.to_bytes())
-            self.system.post(device, str(msg["ev"]), msg.get("d"))
+            event, data = read_post(sample.payload.to_bytes())
+        except Unreadable as exc:
+            self._refuse(str(sample.key_expr), str(exc))
+            return
+        try:
+            self.system.post(device, event, data)
         except (ValueError, KeyError, TypeError, StatectlError) as exc:
             self._say(f"event for {device} from another node refused: {exc}")
             if isinstance(exc, Refused):
@@ -451,6 +441,9 @@ class Wire:
         _, device = Keys.last(sample.key_expr)
         try:
             snap, t = parse_snapshot(sample.payload.to_bytes())
+        except Unreadable as exc:
+            self._refuse(str(sample.key_expr), str(exc))
+            return
         except (ValueError, KeyError, TypeError):
             return
         if device not in self.local:
@@ -499,6 +492,9 @@ class Wire:
             return
         self.up.discard(node)
         self.lost_at[node] = time.monotonic()
+        for stream in self.outbound.values():
+            if stream.node == node:
+                stream.greeted = False  # its epoch is announced again when it is back
         self._say(f"peer {node} lost; peers: {', '.join(sorted(self.up)) or 'none'}")
         for device, event in self.peer_lost_events(node):
             try:
@@ -520,8 +516,9 @@ class Wire:
         return out
 
     def _say(self, text: str) -> None:
+        """One line of the node's log; whatever came from the wire is escaped (rule 7)."""
         with self._print:
-            self.out.write(f"node {self.me.name}: {text}\n")
+            self.out.write(f"node {self.me.name}: {printable(text)}\n")
             self.out.flush()
 
     # -- the wire's thread (rules 3-4) -------------------------------------------------------
@@ -588,6 +585,7 @@ class Wire:
                     stream.last_send = now
             if name in hello:
                 session.put(self.keys.hello(self.me.name, name), _ENC.encode({"e": stream.epoch}))
+                stream.greeted = True  # what is sent from now on follows the hello
 
     def _put_all(self, stream: Outbound) -> None:
         """Under the stream's lock: put every unacknowledged event again, in order."""

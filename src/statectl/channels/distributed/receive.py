@@ -1,0 +1,103 @@
+"""The receiving end of one link stream: the hot path of a link event (wire rules 3-4, 7).
+
+Rule 7 (what a stream accepts): a link stream ``node`` -> ``device`` takes only
+the events the cell's links from ``node``'s devices (and the invariants ``node``
+watches) send to ``device`` (:func:`statectl.channels.distributed.trust.carried`);
+its payload is bounded in size and nesting before it is decoded; its epoch must be
+the stream's or one a hello announced, its number in range
+(statectl.channels.distributed.streams rule 4). Anything else is refused: one line
+in the node's log, a note in its journal, nothing applied, the stream's position
+kept. Which node may put on the stream's key at all is Zenoh's access control
+(trust rule 2), when the cell authenticates its nodes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import msgspec
+
+from statectl.channels.distributed.messages import decode_link
+from statectl.channels.distributed.resume import INBOUND_KEY
+from statectl.channels.distributed.streams import MAX_NUMBER, Verdict
+from statectl.channels.distributed.trust import payload_problem, shown
+from statectl.kernel.errors import StatectlError
+from statectl.run.journal.format import Guarantee
+
+if TYPE_CHECKING:
+    from statectl.channels.distributed.wire import Wire
+
+__all__ = ["stream_receiver"]
+
+
+def stream_receiver(
+    wire: Wire, node: str, device: str, events: frozenset[str]
+) -> Callable[[Any], None]:
+    """The subscriber of one stream: everything per stream is looked up once here (the
+    key is known, so only the payload is parsed; the device, its journal binding, the
+    stream's inbound note, the events the stream carries)."""
+    decode = decode_link
+    inbound = wire.inbound
+    lock = inbound.lock
+    offer = inbound.offer
+    system = wire.system
+    subject = system.subjects[device]
+    bound = system.bound.get(device)
+    note = f"{INBOUND_KEY}{node}/{device}"
+    ack = wire._ack
+    wake = wire._wake
+    run_devices = wire._run_devices
+    run_now = system.run_now
+    key = wire.keys.link(node, device)
+    refuse = wire._refuse
+
+    def why(e: str, n: int) -> str:
+        if not 1 <= n <= MAX_NUMBER:
+            return f"a number is 1 to {MAX_NUMBER}"
+        return "an epoch changes only after a hello names it"
+
+    def on_link(sample: Any) -> None:
+        payload = sample.payload.to_bytes()
+        problem = payload_problem(payload)
+        if problem is not None:
+            refuse(key, problem)
+            return
+        try:
+            msg = decode(payload)
+        except (msgspec.DecodeError, AttributeError):
+            refuse(key, "a payload that is not [epoch, number, event, data]")
+            return
+        e, n, event = msg.e, msg.n, msg.ev
+        if event not in events:  # rule 7: only what a link from that node carries
+            refuse(key, f"event {shown(event)}: no link from {node} sends it to {device}")
+            return
+        run = True
+        with lock:
+            verdict, last = offer(node, device, e, n)
+            if verdict is Verdict.REFUSED:
+                refuse(key, f"{shown(event)} numbered {n} in epoch {shown(e)}: {why(e, n)}")
+                return
+            if verdict is not Verdict.APPLY:
+                ack(node, device, e, last, verdict is Verdict.GAP)
+                wake.set()
+                return
+            try:  # under the lock: the stream's next event waits until this one ran
+                if bound is not None:  # acknowledged once committed (_committed)
+                    ticket = bound.post(event, msg.d, note=(note, f"{e} {n}"))
+                    wire._acks.append((ticket.seq, node, device, e, n))
+                    run = bound.journal.guarantee is Guarantee.PROMPT
+                elif run_now(device, event, msg.d):  # nobody owned the devices: ran here
+                    run = False
+                else:  # the owner's thread runs it
+                    subject.post(event, msg.d)
+            except StatectlError as exc:
+                wire._say(f"link event {shown(event)} from {node} to {device}: {exc}")
+        if run:
+            run_devices()  # before waking the wire's thread: the device first
+        if bound is None:
+            ack(node, device, e, n, False)
+            if not wake.is_set():
+                wake.set()
+
+    return on_link
