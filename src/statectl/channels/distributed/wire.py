@@ -483,7 +483,7 @@ class Wire:
             if self._mirrored:
                 self.refresh()  # where its devices are now
             for name, stream in self.outbound.items():
-                if stream.node == node:
+                if stream.node == node and (self.me.name, name) in self.carried:
                     with self._due:
                         self._hello_due.add(name)
             self._wake.set()
