@@ -117,7 +117,9 @@ class InProcess:
             db.close()
 
 
-def session(endpoint: str, tls: dict[str, Any] | None = None, *, must_connect: bool = True) -> Any:
+def session(
+    endpoint: str, tls: dict[str, Any] | None = None, *, auth: dict[str, str] | None = None
+) -> Any:
     """A Zenoh session that connects to ``endpoint`` only (an attacker or a stand-in node).
 
     ``exit_on_failure``: opening fails at once when the endpoint refuses it (no
@@ -131,6 +133,8 @@ def session(endpoint: str, tls: dict[str, Any] | None = None, *, must_connect: b
     c.insert_json5("connect/exit_on_failure", "true")
     if tls is not None:
         c.insert_json5("transport/link/tls", json.dumps(tls))
+    if auth:
+        c.insert_json5("transport/auth/usrpwd", json.dumps(auth))
     return zenoh.open(c)
 
 
@@ -350,6 +354,65 @@ def test_under_mutual_tls_only_the_cells_nodes_connect_and_each_puts_its_own_key
     assert arm.meta("link-in/line/arm") == "L 1"
 
 
+def test_an_operator_station_under_tls_needs_its_name_and_sees_the_arm(
+    tmp_path: Path, cleanup: list[Any]
+) -> None:
+    """A station of a TLS cell opens with its own certificate (``--as operator``), sees the
+    arm's state and may post to it (posts: arm: [line, operator]); unnamed, it is refused
+    before anything opens."""
+    from statectl.channels.distributed.view import CellView
+    from statectl.kernel.errors import StatectlError
+
+    cell_path, ports = example_cell(tmp_path, "cell-nodes-tls.yaml", 7461)
+    arm = InProcess(cell_path, "arm", tmp_path / "arm.db")
+    cleanup.append(arm)
+    cell, _ = load_cell(cell_path)
+    assert cell is not None
+    with pytest.raises(StatectlError, match="--as NAME, one of security: stations: operator"):
+        CellView(cell)
+    view = CellView(cell, [f"tls/127.0.0.1:{ports['arm']}"], station="operator").open()
+    cleanup.append(view)
+    assert view.wait_for(lambda active: active.get("arm") == frozenset({"Blocked"}), WAIT)
+    view.post("arm", "Movement")
+    assert view.wait_for(lambda active: active.get("arm") == frozenset({"Moving"}), WAIT)
+
+
+def test_user_password_authentication_keeps_out_who_has_no_login(
+    tmp_path: Path, cleanup: list[Any]
+) -> None:
+    """security: {users: FILE} on a loopback cell: a peer without a login, or with a wrong
+    password, cannot connect; one logged in as the gripper cannot put on the line's
+    stream; logged in as the line it can, and the arm moves on its event only."""
+    (tmp_path / "users.txt").write_text("line:l-secret\narm:a-secret\ngripper:g-secret\n")
+    cell, ports = example_cell(tmp_path, "cell-nodes.yaml", 7451, "security: {users: users.txt}\n")
+    arm = InProcess(cell, "arm", tmp_path / "arm.db")
+    cleanup.append(arm)
+    assert "security user/password" in arm.out.getvalue()
+    endpoint = f"tcp/127.0.0.1:{ports['arm']}"
+
+    def login(user: str | None, password: str = "") -> Any:
+        c = {} if user is None else {"user": user, "password": password}
+        return session(endpoint, auth=c)
+
+    with pytest.raises(zenoh.ZError):
+        login(None)
+    with pytest.raises(zenoh.ZError):
+        login("line", "guess")
+    gripper = login("gripper", "g-secret")
+    cleanup.append(gripper)
+    gripper.put(f"{ROOT}/hello/line/arm", json.dumps({"e": "G"}))
+    gripper.put(LINK, b'["G",1,"Movement",null]')
+    synced(gripper, ROOT, "gripper", "arm", "G")
+    line = login("line", "l-secret")
+    cleanup.append(line)
+    synced(line, ROOT, "line", "arm", "L")
+    line.put(LINK, b'["L",1,"Movement",null]')
+    arm.wait_for("enter    Moving")
+    assert arm.close() == 0
+    assert arm.inbox() == [("arm", "Movement")]
+    assert arm.meta("link-in/line/arm") == "L 1"
+
+
 def test_a_tls_cell_runs_end_to_end_on_two_node_processes(tmp_path: Path) -> None:
     """The example TLS cell on two `statectl node` processes (certificates made by the
     first, under a lock): the line's belt brings a part, the link to the arm fires over
@@ -424,8 +487,10 @@ def _cell(tmp: Path, endpoint: str, security: str = "") -> tuple[Any, list[str]]
         ("tcp/10.0.0.5:7000", "security: {insecure: true}\n", None),  # said so
         ("tls/10.0.0.5:7000", "security: {tls: certs}\n", None),
         ("tcp/127.0.0.1:7000", "security: {tls: certs}\n", "V828"),  # a plain door beside TLS
-        ("tcp/127.0.0.1:7000", "security: {posts: {arm: [nobody]}}\n", "V828"),
-        ("tcp/127.0.0.1:7000", "security: {posts: {belt: [a]}}\n", "V828"),
+        ("tls/127.0.0.1:7000", "security: {tls: certs, posts: {arm: [nobody]}}\n", "V828"),
+        ("tls/127.0.0.1:7000", "security: {tls: certs, posts: {belt: [a]}}\n", "V828"),
+        ("tls/127.0.0.1:7000", "security: {tls: certs, posts: {arm: [a]}}\n", None),
+        ("tcp/127.0.0.1:7000", "security: {posts: {arm: [a]}}\n", "V828"),  # nobody proves it
         ("tcp/127.0.0.1:7000", "security: {stations: [a]}\n", "V828"),  # a node's name
         ("tcp/127.0.0.1:7000", "security: {users: missing.txt}\n", "V828"),
         ("tcp/127.0.0.1:7000", "security: {tls: {ca: missing.pem, certificates: {}}}\n", "V828"),

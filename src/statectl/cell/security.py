@@ -12,7 +12,8 @@ Rules:
    ``tcp/`` listener beside it would let anyone in (V828).
 3. ``users`` names a file of ``name:password`` lines (Zenoh's user/password
    authentication): each node logs in as its own name, and accepts the names in
-   the file.
+   the file (so each node holds every password: TLS binds a name to a key, users
+   only to a secret every node knows).
 4. Who may publish what follows from the cell (a node puts its own links'
    events, acknowledgements and states); ``posts`` says who may post an
    operator's event to a device (``{arm: [line, operator]}``; a device not named
@@ -20,6 +21,7 @@ Rules:
    stations (``statectl dashboard --as NAME``) besides the nodes. With ``tls`` or
    ``users`` each node's Zenoh refuses anything else on receive (its access
    control); statectl checks the rest (statectl.channels.distributed.trust).
+   ``posts`` without ``tls`` or ``users`` is V828: nobody proves who they are.
 5. Without ``tls`` a node's endpoints must all be on loopback (V827), unless the
    cell says ``insecure: true``: anyone who reaches a plain endpoint may publish.
 """
@@ -157,6 +159,16 @@ def _fields(
                     )
                 )
     posts = _posts(r, f.get("posts"), devices, principals)
+    if posts and tls is None and users is None and "posts" in f:
+        r.diags.append(
+            _d(
+                "V828",
+                r.at(f["posts"]),
+                "security posts: without tls or users nobody proves who they are, so posts "
+                "cannot be held to",
+                "add tls: DIR (mutual TLS) or users: FILE",
+            )
+        )
     insecure = False
     if "insecure" in f:
         text = r.text(f["insecure"], "security insecure")
