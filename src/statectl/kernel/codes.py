@@ -426,7 +426,7 @@ ALL: tuple[Code, ...] = (
     _c("V825", _E, "a node's peer_lost names a device that does not run on it", _NODES),
     _c("V826", _W, "on_peer_down or dropped in a cell without nodes:", _NODES),
     _c("V827", _E, "a node endpoint off loopback without TLS (and no insecure: true)", _NODES),
-    _c("V828", _E, "the security: section is wrong (TLS files, posts, stations, endpoints)", _NODES),
+    _c("V828", _E, "the security: section cannot hold (files, posts, stations, endpoints)", _NODES),
 )
 
 #: Code -> record, read-only.
