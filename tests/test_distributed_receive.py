@@ -48,7 +48,7 @@ nodes:
   b: {devices: [pong], listen: [tcp/127.0.0.1:2]}
   c: {devices: [ping2], listen: [tcp/127.0.0.1:3]}
 links:
-  - {from: ping, raises: Go, to: pong, send: Hit}
+  - {from: ping, raises: Go, to: pong, send: Hit, forward_data: true}
   - {from: ping2, raises: Go, to: pong, send: Hit}
 """
 

@@ -272,6 +272,27 @@ def test_link_data_nested_1000_deep_is_dropped_with_one_line(
 
 
 @pytest.mark.parametrize(
+    ("key", "payload", "reason"),
+    [
+        (LINK, b'["A",1,"Movement",{"amount":5}]', "data, which no link sends with it"),
+        (POST, '{"ev":"Movement","d":{"x":"a\u202eb"}}'.encode(), "'a\\u202eb'"),
+        (POST, b'{"ev":"Movement","d":["ok","\\n"]}', "'\\n'"),
+    ],
+    ids=["link-data-no-link-sends", "post-data-U+202E", "post-data-newline"],
+)
+def test_event_data_no_link_sends_or_not_printable_is_refused(
+    tmp_path: Path, cleanup: list[Any], key: str, payload: bytes, reason: str
+) -> None:
+    """Data on a link event whose links send none, and text in posted data that is not
+    printable (a trace prints it), are refused: one log line, nothing accepted."""
+    attack = Attack(tmp_path, cleanup)
+    attack.hello("A")
+    attack.play((key, payload))
+    assert len(attack.refused()) == 1 and reason in attack.refused()[0], attack.refused()
+    assert attack.arm.inbox() == []
+
+
+@pytest.mark.parametrize(
     ("name", "shown_as"),
     [
         ("M" * 1_000_000, "bytes (at most"),  # 1 MB: the payload is too long to read

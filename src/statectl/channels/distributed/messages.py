@@ -14,7 +14,12 @@ from typing import Any
 
 import msgspec
 
-from statectl.channels.distributed.trust import name_problem, payload_problem, shown
+from statectl.channels.distributed.trust import (
+    data_problem,
+    name_problem,
+    payload_problem,
+    shown,
+)
 from statectl.kernel.semantics import Snapshot
 from statectl.run.journal.format import decode_snapshot, encode_snapshot
 
@@ -120,7 +125,7 @@ def read_post(payload: bytes) -> tuple[str, Any]:
         raise Unreadable("a payload that is not {ev, d}") from None
     if not isinstance(event, str):
         raise Unreadable("an event name that is not text")
-    problem = name_problem(event)
+    problem = name_problem(event) or data_problem(data)
     if problem is not None:
         raise Unreadable(problem)
     return event, data

@@ -2,7 +2,8 @@
 
 Rule 7 (what a stream accepts): a link stream ``node`` -> ``device`` takes only
 the events the cell's links from ``node``'s devices (and the invariants ``node``
-watches) send to ``device`` (:func:`statectl.channels.distributed.trust.carried`);
+watches) send to ``device`` (:func:`statectl.channels.distributed.trust.carried`),
+with data only where such a link sends some, and that data's text printable;
 its payload is bounded in size and nesting before it is decoded; its epoch must be
 the stream's or one a hello announced, its number in range
 (statectl.channels.distributed.streams rule 4). Anything else is refused: one line
@@ -21,7 +22,7 @@ import msgspec
 from statectl.channels.distributed.messages import decode_link
 from statectl.channels.distributed.resume import INBOUND_KEY
 from statectl.channels.distributed.streams import MAX_NUMBER, Verdict
-from statectl.channels.distributed.trust import payload_problem, shown
+from statectl.channels.distributed.trust import data_problem, payload_problem, shown
 from statectl.kernel.errors import StatectlError
 from statectl.run.journal.format import Guarantee
 
@@ -32,7 +33,7 @@ __all__ = ["stream_receiver"]
 
 
 def stream_receiver(
-    wire: Wire, node: str, device: str, events: frozenset[str]
+    wire: Wire, node: str, device: str, events: dict[str, bool]
 ) -> Callable[[Any], None]:
     """The subscriber of one stream: everything per stream is looked up once here (the
     key is known, so only the payload is parsed; the device, its journal binding, the
@@ -69,9 +70,15 @@ def stream_receiver(
             refuse(key, "a payload that is not [epoch, number, event, data]")
             return
         e, n, event = msg.e, msg.n, msg.ev
-        if event not in events:  # rule 7: only what a link from that node carries
+        with_data = events.get(event)
+        if with_data is None:  # rule 7: only what a link from that node carries
             refuse(key, f"event {shown(event)}: no link from {node} sends it to {device}")
             return
+        if msg.d is not None:
+            problem = data_problem(msg.d) if with_data else "data, which no link sends with it"
+            if problem is not None:
+                refuse(key, f"event {shown(event)} with {problem}")
+                return
         run = True
         with lock:
             verdict, last = offer(node, device, e, n)

@@ -37,6 +37,7 @@ __all__ = [
     "MAX_PAYLOAD",
     "access_control",
     "carried",
+    "data_problem",
     "name_problem",
     "payload_problem",
     "printable",
@@ -107,29 +108,52 @@ def printable(text: str, limit: int = 400) -> str:
     return out if len(text) <= limit else f"{out}... ({len(text)} characters)"
 
 
-def carried(cell: Cell) -> dict[tuple[str, str], frozenset[str]]:
-    """Per stream (sending node, device elsewhere): the events it may carry, and nothing
-    else: the links' events from that node's devices to the device, and the
-    ``on_violation`` events of the invariants that node watches (the node of the first
-    device, in the cell's order, an invariant reads: distributed.system rule 6)."""
+def carried(cell: Cell) -> dict[tuple[str, str], dict[str, bool]]:
+    """Per stream (sending node, device elsewhere): the events it may carry, each with
+    whether it may carry data, and nothing else: the links' events from that node's
+    devices to the device (with data when the link sends some or forwards the step's),
+    and the ``on_violation`` events (no data) of the invariants that node watches (the
+    node of the first device, in the cell's order, an invariant reads:
+    distributed.system rule 6)."""
     assert cell.nodes is not None
     nodes = cell.nodes
-    out: dict[tuple[str, str], set[str]] = {}
+    out: dict[tuple[str, str], dict[str, bool]] = {}
 
-    def add(node: str, device: str, event: str) -> None:
+    def add(node: str, device: str, event: str, data: bool) -> None:
         if nodes.node_of(device) != node:
-            out.setdefault((node, device), set()).add(event)
+            events = out.setdefault((node, device), {})
+            events[event] = events.get(event, False) or data
 
     for link in cell.links:
-        add(nodes.node_of(link.source), link.target, link.event)
+        data = link.forward_data or link.data is not None
+        add(nodes.node_of(link.source), link.target, link.event, data)
     order = [d.name for d in cell.devices]
     for inv in cell.invariants:
         read = {d for d, _ in inv.expr.refs}
         first = next((d for d in order if d in read), None)
         if first is not None:
             for device, event in inv.on_violation:
-                add(nodes.node_of(first), device, event)
-    return {k: frozenset(v) for k, v in out.items()}
+                add(nodes.node_of(first), device, event, False)
+    return out
+
+
+def data_problem(data: Any) -> str | None:
+    """Rule 3 for event data from the wire: every text in it (keys too) printable, since
+    a trace or a log prints it; None when it is fine (and at once for no data)."""
+    if data is None or isinstance(data, int | float | bool):
+        return None
+    values = [data]
+    while values:
+        value = values.pop()
+        if isinstance(value, str):
+            if not value.isprintable():
+                return f"data holding a character that is not printable: {shown(value)}"
+        elif isinstance(value, dict):
+            values.extend(value.keys())
+            values.extend(value.values())
+        elif isinstance(value, list):
+            values.extend(value)
+    return None
 
 
 def security_line(cell: Cell) -> str:

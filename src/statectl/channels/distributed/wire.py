@@ -348,11 +348,11 @@ class Wire:
     # -- Zenoh callbacks ---------------------------------------------------------------------
 
     def _receiver(
-        self, node: str, device: str, events: frozenset[str] | None = None
+        self, node: str, device: str, events: dict[str, bool] | None = None
     ) -> Callable[[Any], None]:
         """The subscriber of one stream (``node`` -> ``device``, rules 3-4 and 7)."""
         if events is None:
-            events = self.carried.get((node, device), frozenset())
+            events = self.carried.get((node, device), {})
         return stream_receiver(self, node, device, events)
 
     def _refuse(self, key: str, reason: str) -> None:
