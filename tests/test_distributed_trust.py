@@ -292,6 +292,19 @@ def test_event_data_no_link_sends_or_not_printable_is_refused(
     assert attack.arm.inbox() == []
 
 
+@pytest.mark.parametrize("device", ["arm", "ghost"])
+def test_a_state_put_for_this_nodes_device_or_none_of_the_cell_is_refused(
+    tmp_path: Path, cleanup: list[Any], device: str
+) -> None:
+    """The arm's node mirrors other nodes' states (a guard reads the gripper): a state put
+    from elsewhere for its own arm, or for a device the cell does not have, is refused."""
+    attack = Attack(tmp_path, cleanup)
+    attack.play((f"{ROOT}/state/{device}", b'{"a":[],"h":{},"p":null,"t":1e12}'))
+    assert [line.split("refused on ")[1] for line in attack.refused()] == [
+        f"{ROOT}/state/{device}: no other node runs this device"
+    ]
+
+
 @pytest.mark.parametrize(
     ("name", "shown_as"),
     [

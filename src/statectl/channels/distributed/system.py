@@ -288,11 +288,15 @@ class NodeSystem(System):
         return first is not None and first in self.subjects
 
     def reads_remote(self) -> bool:
-        """Whether rule 6 here reads a device on another node (the wire mirrors them then)."""
+        """Whether rule 2 or 6 here reads a device on another node (a guard of a link that
+        starts here, a when, an invariant, a device guard): the wire mirrors them then."""
         cell = self.cell
         assert cell is not None
         here = self.subjects
         refs: list[tuple[str, str]] = []
+        for k in cell.links:
+            if k.source in here and k.guard is not None:
+                refs.extend(k.guard.refs)
         for e in cell.environment:
             if e.device in here and e.when is not None:
                 refs.extend(e.when.refs)

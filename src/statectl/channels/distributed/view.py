@@ -41,6 +41,7 @@ class CellView:
             )
         self.station = station or "station"
         self.cell = cell
+        self._devices = {d.name for d in cell.devices}
         self.keys = Keys(cell.name)
         if connect is None:
             connect = [e for n in cell.nodes.nodes for e in n.listen]
@@ -111,6 +112,8 @@ class CellView:
 
     def _on_state(self, sample: Any) -> None:
         _, device = Keys.last(sample.key_expr)
+        if device not in self._devices:  # only the cell's devices are kept and shown
+            return
         try:  # a payload too long or too deep is dropped before it is decoded (Unreadable)
             snap, t = parse_snapshot(sample.payload.to_bytes())
         except (ValueError, KeyError, TypeError):

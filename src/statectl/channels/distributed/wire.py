@@ -112,6 +112,7 @@ class Wire:
         self.out = out
         self.keys = Keys(cell.name)
         self.local = set(self.me.devices)
+        self._devices = {d.name for d in cell.devices}
         self.up: set[str] = set()
         self.mirror: dict[str, int] = {}
         self.inbound = Inbound()
@@ -215,7 +216,7 @@ class Wire:
             s.declare_subscriber(f"{root}/ack/{self.me.name}/*", self._on_ack),
             s.declare_queryable(f"{root}/state/*", self._on_query),
         ]
-        self._mirrored = states or self._guards_read_others() or self.system.reads_remote()
+        self._mirrored = states or self.system.reads_remote()
         if self._mirrored:
             self._decls.append(
                 s.declare_subscriber(
@@ -248,14 +249,6 @@ class Wire:
         """Ask every node for its devices' states now (a dashboard that starts late)."""
         if self._session is not None:
             self._session.get(f"{self.keys.root}/state/*", self._on_reply)
-
-    def _guards_read_others(self) -> bool:
-        """Whether a guard of a link that starts here reads a device of another node."""
-        return any(
-            k.guard is not None and any(d not in self.local for d, _ in k.guard.refs)
-            for k in self.cell.links
-            if k.source in self.local
-        )
 
     @property
     def session(self) -> Any:
@@ -437,8 +430,12 @@ class Wire:
                 for callback in self.on_refused:
                     callback(exc)
 
-    def _on_state(self, sample: Any) -> None:
+    def _on_state(self, sample: Any, reply: bool = False) -> None:
         _, device = Keys.last(sample.key_expr)
+        if device in self.local or device not in self._devices:
+            if not reply:  # a put from elsewhere of this node's device, or of none
+                self._refuse(str(sample.key_expr), "no other node runs this device")
+            return
         try:
             snap, t = parse_snapshot(sample.payload.to_bytes())
         except Unreadable as exc:
@@ -459,7 +456,7 @@ class Wire:
 
     def _on_reply(self, reply: Any) -> None:
         if reply.ok is not None:
-            self._on_state(reply.ok)
+            self._on_state(reply.ok, reply=True)
 
     def _on_query(self, query: Any) -> None:
         for name in sorted(self.local):
