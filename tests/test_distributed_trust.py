@@ -566,6 +566,41 @@ def test_the_example_tls_cell_loads_with_its_stations_and_posts() -> None:
     assert sec.posters("conveyor", ("line", "arm")) == ("line", "arm")
 
 
+def test_certificates_made_elsewhere_are_taken_as_given(tmp_path: Path) -> None:
+    """tls: {ca, certificates}: each node's session uses the files the cell names, and
+    nothing is made; a node the mapping leaves out is V828."""
+    from statectl.channels.distributed.certs import ensure_certificates, tls_files
+
+    ensure_certificates(tmp_path / "pki", {"a": ("127.0.0.1",), "b": ()})
+    made = sorted(p.name for p in (tmp_path / "pki").iterdir())
+    given = (
+        "security:\n  tls:\n    ca: pki/ca.pem\n    certificates:\n"
+        "      a: {certificate: pki/a.pem, key: pki/a-key.pem}\n"
+        "      b: {certificate: pki/b.pem, key: pki/b-key.pem}\n"
+    )
+    cell, diags = _cell(tmp_path, "tls/127.0.0.1:7000", given)
+    assert cell is not None, diags
+    assert tls_files(cell, "a") == tuple(
+        tmp_path / "pki" / f for f in ("ca.pem", "a.pem", "a-key.pem")
+    )
+    assert sorted(p.name for p in (tmp_path / "pki").iterdir()) == made
+    cell, diags = _cell(tmp_path, "tls/127.0.0.1:7000", given.rsplit("      b:", 1)[0])
+    assert cell is None and any("no certificate for b" in d for d in diags), diags
+
+
+def test_a_station_connects_off_loopback_only_over_tls(tmp_path: Path) -> None:
+    """statectl dashboard --connect tcp/10.0.0.5:... on a cell without TLS: exit 1 with
+    V827's advice, before anything opens."""
+    from statectl.channels.cli.node import dashboard_main
+
+    _cell(tmp_path, "tcp/127.0.0.1:7000")
+    err = io.StringIO()
+    code = dashboard_main(
+        str(tmp_path / "c.yaml"), connect=["tcp/10.0.0.5:7000"], out=io.StringIO(), err=err
+    )
+    assert code == 1 and "off loopback without TLS" in err.getvalue()
+
+
 def test_access_control_lets_each_node_put_only_its_own_keys() -> None:
     """The access control made from the example TLS cell: the line's node may put its link
     streams, hellos and its devices' acks and states, posts where posts: lets it."""

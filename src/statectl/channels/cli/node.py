@@ -16,6 +16,11 @@ Rules:
    what it sees (statectl.channels.distributed.system rule 6): a refused environment
    command (from stdin or forwarded) and an invariant it sees violated are
    reported and make it exit 1.
+6. Its banner's second line says what a peer must prove to connect (the cell's
+   ``security:``: mutual TLS, user/password, open on loopback, or insecure); a
+   cell reachable off loopback without TLS does not load (V827).
+   ``statectl dashboard --as NAME`` is a station of the cell's ``security:
+   stations`` (its certificate); its ``--connect`` follows V827's rule.
 """
 
 from __future__ import annotations
