@@ -42,6 +42,7 @@ from statectl.kernel.errors import Location
 __all__ = [
     "OPEN",
     "SECURITY_KEYS",
+    "TLS_KEYS",
     "TLS_PROTOCOLS",
     "Security",
     "Tls",
@@ -50,7 +51,7 @@ __all__ = [
 ]
 
 SECURITY_KEYS = ("tls", "users", "posts", "stations", "insecure")
-_TLS_KEYS = ("ca", "certificates")
+TLS_KEYS = ("ca", "certificates")
 #: Protocols whose links Zenoh runs over TLS (the transport/link/tls settings).
 TLS_PROTOCOLS = frozenset({"tls", "quic"})
 
@@ -189,7 +190,7 @@ def _tls(r: Any, node: yaml.Node | None, base: Path, principals: Sequence[str]) 
     if isinstance(node, yaml.ScalarNode):
         text = r.text(node, "security tls")
         return Tls(directory=(base / text).resolve()) if text else None
-    f = r.mapping(node, "security tls", _TLS_KEYS, _TLS_KEYS)
+    f = r.mapping(node, "security tls", TLS_KEYS, TLS_KEYS)
     if f is None or "ca" not in f:
         return None
     ca = _file(r, f["ca"], "security tls ca", base)

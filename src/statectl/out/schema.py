@@ -5,7 +5,7 @@ Rules:
    columns and their accepted spellings (:mod:`statectl.front.tables.rows`), the
    device file's top keys (:mod:`statectl.front.tables.yaml_io`), the cell's keys
    (:mod:`statectl.cell.values`, :mod:`statectl.cell.reader`,
-   :mod:`statectl.cell.nodes`) and the run config's
+   :mod:`statectl.cell.nodes`, :mod:`statectl.cell.security`) and the run config's
    (:mod:`statectl.run.devices.config`, :mod:`statectl.run.commands`). The copies shipped in
    ``statectl/data/schema/`` are checked equal to these by the suite.
 2. A schema accepts every file the loader accepts as to its shape (a column
@@ -31,6 +31,7 @@ from statectl.cell.reader import (
     LINK_FIELDS,
     RECOVERY_FIELDS,
 )
+from statectl.cell.security import SECURITY_KEYS, TLS_KEYS
 from statectl.cell.values import TOP_KEYS as CELL_KEYS
 from statectl.front.tables.rows import (
     ALIASES,
@@ -216,9 +217,33 @@ def _cell_file() -> dict[str, Any]:
         "recovery": {"type": ["array", "null"], "items": recovery},
         "completions": {"enum": ["auto", "off"]},
         "nodes": {"type": "object", "additionalProperties": node},
+        "security": _security(texts),
     }
     assert tuple(sections) == CELL_KEYS, "the cell file's keys changed: update rule 1"
     return _document("cell", "a statectl cell file", sections, ["devices"])
+
+
+def _security(texts: dict[str, Any]) -> dict[str, Any]:
+    """The cell's ``security:`` section (statectl.cell.security)."""
+    pair = _mapping(("certificate", "key"), {"certificate": _TEXT, "key": _TEXT})
+    pair["required"] = ["certificate", "key"]
+    given = _mapping(
+        TLS_KEYS, {"ca": _TEXT, "certificates": {"type": "object", "additionalProperties": pair}}
+    )
+    given["required"] = list(TLS_KEYS)
+    return _mapping(
+        SECURITY_KEYS,
+        {
+            "tls": {
+                "anyOf": [_TEXT, given],
+                "description": "a directory for the cell's CA and node certificates, or files",
+            },
+            "users": {**_TEXT, "description": "a file of name:password lines"},
+            "posts": {"type": "object", "additionalProperties": texts},
+            "stations": texts,
+            "insecure": {"type": "boolean"},
+        },
+    )
 
 
 def _run_config() -> dict[str, Any]:
