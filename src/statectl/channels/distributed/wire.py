@@ -37,8 +37,8 @@ Rules:
 7. A node subscribes only to the streams some link carries and checks what
    arrives (statectl.channels.distributed.receive); every message it reads (acks,
    hellos, posts, states) is bounded before it is decoded, and a refused one is
-   one escaped log line and a journal note (``zenoh-refused/NN``, the last 100,
-   and ``zenoh-refused``, their count), nothing else. A sender puts a stream's
+   one escaped log line and a journal note (``zenoh-refused/NN``, the run's last
+   100, and ``zenoh-refused``, the run's count), nothing else. A sender puts a stream's
    events only after its hello went out since the peer came up, so the receiver
    knows the epoch before its first event.
 """
