@@ -555,6 +555,19 @@ def test_node_refuses_a_cell_reachable_from_the_network_without_tls(tmp_path: Pa
     assert "V827" in err.getvalue() and "insecure: true" in err.getvalue()
 
 
+def test_a_certificate_directory_that_cannot_be_made_is_said_not_raised(tmp_path: Path) -> None:
+    """tls: DIR where DIR cannot be a directory (under a file): `statectl node` says so and
+    exits 1, with no traceback and nothing opened."""
+    from statectl.channels.cli.node import node_main
+
+    _cell(tmp_path, "tls/127.0.0.1:7000", "security: {tls: c.yaml/certs}\n")
+    err = io.StringIO()
+    code = node_main(str(tmp_path / "c.yaml"), node="a", out=io.StringIO(), err=err)
+    assert code == 1
+    assert "cannot create the certificate directory" in err.getvalue(), err.getvalue()
+    assert "Traceback" not in err.getvalue()
+
+
 def test_the_example_tls_cell_loads_with_its_stations_and_posts() -> None:
     """examples/pick-and-place/cell-nodes-tls.yaml: TLS, a station, posts limited."""
     cell, diags = load_cell(EXAMPLE / "cell-nodes-tls.yaml")

@@ -72,7 +72,15 @@ def tls_files(cell: Cell, principal: str) -> tuple[Path, Path, Path]:
     principals = cell_principals(cell)
     if principal not in principals:
         raise StatectlError(f"{cell.path}: {principal!r} is no node or station of the cell")
-    ensure_certificates(tls.directory, principals)
+    try:
+        ensure_certificates(tls.directory, principals)
+    except ImportError:
+        raise StatectlError(
+            "security: tls makes certificates with 'cryptography': pip install 'statectl[zenoh]'"
+        ) from None
+    except (OSError, ValueError) as exc:
+        where = tls.directory
+        raise StatectlError(f"tls: cannot make the certificates in {where}: {exc}") from None
     d = tls.directory
     return d / "ca.pem", d / f"{principal}.pem", d / f"{principal}-key.pem"
 
