@@ -638,6 +638,42 @@ def test_access_control_lets_each_node_put_only_its_own_keys() -> None:
     assert subjects["is-line"] == {"id": "is-line", "cert_common_names": ["line"]}
 
 
+class _Sample:
+    """What a Zenoh callback reads of a sample: its key and payload."""
+
+    def __init__(self, key: str, data: bytes) -> None:
+        self.key_expr = key
+        self.payload = self
+        self._data = data
+
+    def to_bytes(self) -> bytes:
+        return self._data
+
+    def to_string(self) -> str:
+        return self._data.decode()
+
+
+@pytest.mark.parametrize(("n", "kept"), [(5, 2), (-1, 2), (1, 1), (2, 0)])
+def test_an_acknowledgement_of_what_was_never_sent_forgets_nothing(n: int, kept: int) -> None:
+    """The line's node has sent two link events to the arm: an ack of 5 (never sent) or
+    -1 forgets none of them (an ack of 5 used to drop both, unsent); 1 and 2 as before."""
+    from statectl.channels.distributed import NodeSystem, Wire
+    from statectl.run.runner.cells import cell_setups
+    from statectl.run.runtime import SimClock
+
+    cell, _ = load_cell(EXAMPLE / "cell-nodes.yaml")
+    assert cell is not None and cell.nodes is not None
+    mine = cell.nodes.node("line").devices
+    setups = tuple(s for s in cell_setups(cell, journalled=False) if s.name in mine)
+    wire = Wire(cell, "line", NodeSystem(setups, SimClock(), None, cell), out=io.StringIO())
+    stream = wire.outbound["arm"]
+    stream.add("Movement", None)
+    stream.add("Movement", None)
+    ack = json.dumps({"e": stream.epoch, "n": n, "r": False}).encode()
+    wire._on_ack(_Sample(f"{ROOT}/ack/line/arm", ack))
+    assert len(stream.unacked) == kept
+
+
 # -- bounds and escaping, without a session -----------------------------------------------------
 
 
