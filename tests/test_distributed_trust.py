@@ -118,18 +118,23 @@ class InProcess:
 
 
 def session(
-    endpoint: str, tls: dict[str, Any] | None = None, *, auth: dict[str, str] | None = None
+    endpoint: str,
+    tls: dict[str, Any] | None = None,
+    *,
+    auth: dict[str, str] | None = None,
+    refused: bool = False,
 ) -> Any:
     """A Zenoh session that connects to ``endpoint`` only (an attacker or a stand-in node).
 
-    ``exit_on_failure``: opening fails at once when the endpoint refuses it (no
-    certificate of the cell's CA), instead of retrying in the background.
+    ``exit_on_failure``: opening fails when the endpoint refuses it (no certificate of
+    the cell's CA) within the connect timeout, instead of retrying in the background;
+    ``refused``: the test expects that, so the timeout is short.
     """
     c = zenoh.Config()
     c.insert_json5("mode", '"peer"')
     c.insert_json5("scouting/multicast/enabled", "false")
     c.insert_json5("connect/endpoints", json.dumps([endpoint]))
-    c.insert_json5("connect/timeout_ms", "5000")
+    c.insert_json5("connect/timeout_ms", "1500" if refused else "10000")
     c.insert_json5("connect/exit_on_failure", "true")
     if tls is not None:
         c.insert_json5("transport/link/tls", json.dumps(tls))
@@ -365,11 +370,12 @@ def test_under_mutual_tls_only_the_cells_nodes_connect_and_each_puts_its_own_key
     ensure_certificates(tmp_path / "other", {"intruder": ()})  # a CA of someone else's
     endpoint = f"tls/127.0.0.1:{ports['arm']}"
     with pytest.raises(zenoh.ZError):
-        session(endpoint, _tls(certs, None))  # no client certificate
+        session(endpoint, _tls(certs, None), refused=True)  # no client certificate
     with pytest.raises(zenoh.ZError):
         session(
             endpoint,
             {**_tls(tmp_path / "other", "intruder"), "root_ca_certificate": str(certs / "ca.pem")},
+            refused=True,
         )
     gripper = session(endpoint, _tls(certs, "gripper"))
     cleanup.append(gripper)
@@ -424,14 +430,14 @@ def test_user_password_authentication_keeps_out_who_has_no_login(
     assert "security user/password" in arm.out.getvalue()
     endpoint = f"tcp/127.0.0.1:{ports['arm']}"
 
-    def login(user: str | None, password: str = "") -> Any:
+    def login(user: str | None, password: str = "", *, refused: bool = False) -> Any:
         c = {} if user is None else {"user": user, "password": password}
-        return session(endpoint, auth=c)
+        return session(endpoint, auth=c, refused=refused)
 
     with pytest.raises(zenoh.ZError):
-        login(None)
+        login(None, refused=True)
     with pytest.raises(zenoh.ZError):
-        login("line", "guess")
+        login("line", "guess", refused=True)
     gripper = login("gripper", "g-secret")
     cleanup.append(gripper)
     gripper.put(f"{ROOT}/hello/line/arm", json.dumps({"e": "G"}))
