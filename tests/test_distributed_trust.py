@@ -70,7 +70,7 @@ def example_cell(tmp: Path, name: str, base: int, extra: str = "") -> tuple[Path
 class InProcess:
     """`statectl node CELL --node NAME --driver none --journal DB` on a thread of this test."""
 
-    def __init__(self, cell: Path, node: str, journal: Path) -> None:
+    def __init__(self, cell: Path, node: str, journal: Path, config: Path | None = None) -> None:
         from statectl.channels.cli.node import node_main
 
         self.out = io.StringIO()
@@ -79,6 +79,8 @@ class InProcess:
         self.stop = threading.Event()
         self.code: int | None = None
         args = {"node": node, "driver": "none", "journal": str(journal)}
+        if config is not None:
+            args["config"] = str(config)
 
         def run() -> None:
             self.code = node_main(
@@ -105,6 +107,15 @@ class InProcess:
         db = sqlite3.connect(self.journal)
         try:
             return list(db.execute("SELECT device, event FROM inbox ORDER BY seq"))
+        finally:
+            db.close()
+
+    def refused_steps(self) -> list[tuple[str, str]]:
+        """The journal's ``refused`` steps: (event, outcome)."""
+        db = sqlite3.connect(self.journal)
+        try:
+            rows = db.execute("SELECT event, outcome FROM steps WHERE outcome LIKE 'refused%'")
+            return list(rows)
         finally:
             db.close()
 
@@ -178,9 +189,9 @@ class Attack:
     reaches its endpoint: ``play`` puts each payload, in order, then waits until the node
     has taken or refused them all, and stops the node."""
 
-    def __init__(self, tmp_path: Path, cleanup: list[Any]) -> None:
+    def __init__(self, tmp_path: Path, cleanup: list[Any], config: Path | None = None) -> None:
         cell, ports = example_cell(tmp_path, "cell-nodes.yaml", 7451)
-        self.arm = InProcess(cell, "arm", tmp_path / "arm.db")
+        self.arm = InProcess(cell, "arm", tmp_path / "arm.db", config)
         cleanup.append(self.arm)
         self.s = session(f"tcp/127.0.0.1:{ports['arm']}")
         cleanup.append(self.s)
@@ -231,6 +242,9 @@ def test_a_fault_no_link_carries_is_refused_on_a_link_stream(
     assert attack.arm.inbox() == [("arm", "Movement")]
     assert len(attack.refused()) == 1 and "'Error': no link from line" in attack.refused()[0]
     assert "final arm: Moving" in out
+    assert attack.arm.refused_steps() == [
+        ("Error", f"refused: zenoh {LINK}: event 'Error': no link from line sends it to arm")
+    ]
 
 
 @pytest.mark.parametrize(
@@ -255,6 +269,7 @@ def test_an_epoch_or_number_no_hello_announced_keeps_the_saved_position(
     assert attack.arm.inbox() == [("arm", "Movement")]
     assert attack.arm.meta("link-in/line/arm") == "A 1"
     assert len(attack.refused()) == 1
+    assert [event for event, _ in attack.arm.refused_steps()] == ["Movement"]
 
 
 def test_link_data_nested_1000_deep_is_dropped_with_one_line(
@@ -295,6 +310,19 @@ def test_event_data_no_link_sends_or_not_printable_is_refused(
     attack.play((key, payload))
     assert len(attack.refused()) == 1 and reason in attack.refused()[0], attack.refused()
     assert attack.arm.inbox() == []
+
+
+def test_a_zenoh_post_goes_through_the_systems_door(tmp_path: Path, cleanup: list[Any]) -> None:
+    """`statectl node --config` with a commands: section granting zenoh Movement only: a
+    post of Error over Zenoh is refused at the System's door and journalled as refused;
+    Movement is taken."""
+    config = tmp_path / "run.yaml"
+    config.write_text("commands:\n  - {from: zenoh, send: [Movement]}\n")
+    attack = Attack(tmp_path, cleanup, config)
+    out = attack.play((POST, b'{"ev":"Error"}'), (POST, b'{"ev":"Movement"}'))
+    assert "Error refused: zenoh (anonymous) may not send it" in out
+    assert attack.arm.inbox() == [("arm", "Movement")]
+    assert attack.arm.refused_steps() == [("Error", "refused: zenoh (anonymous)")]
 
 
 @pytest.mark.parametrize("device", ["arm", "ghost"])

@@ -279,7 +279,7 @@ def node_main(
                 journal, Sync.NORMAL, promise, resume=resume, fresh=fresh, out=out, inputs=read
             )
         with undone_on_failure(store, journal if store is not None and made else None):
-            system = NodeSystem(setups, WallClock(), store, cell)
+            system = NodeSystem(setups, WallClock(), store, cell, commands=table.commands)
         wire = Wire(
             cell,
             node,

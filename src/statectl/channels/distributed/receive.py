@@ -14,6 +14,7 @@ kept. Which node may put on the stream's key at all is Zenoh's access control
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -22,14 +23,36 @@ import msgspec
 from statectl.channels.distributed.messages import decode_link
 from statectl.channels.distributed.resume import INBOUND_KEY
 from statectl.channels.distributed.streams import MAX_NUMBER, Verdict
-from statectl.channels.distributed.trust import data_problem, payload_problem, shown
+from statectl.channels.distributed.trust import data_problem, payload_problem, printable, shown
 from statectl.kernel.errors import StatectlError
 from statectl.run.journal.format import Guarantee
 
 if TYPE_CHECKING:
     from statectl.channels.distributed.wire import Wire
 
-__all__ = ["stream_receiver"]
+__all__ = ["REFUSED_KEY", "refuse", "stream_receiver"]
+
+#: The journal's meta keys of refused messages: ``zenoh-refused/NN`` and the run's count.
+REFUSED_KEY = "zenoh-refused/"
+
+
+def refuse(
+    wire: Wire, key: str, reason: str, device: str | None = None, event: str | None = None
+) -> None:
+    """Rule 7: one log line and a journal note (the run's last 100); an event ``device``
+    knows is a ``refused`` step in its journal too, as the System's door writes one."""
+    wire.refused += 1
+    text = f"refused on {key}: {reason}"
+    wire._say(text)
+    journal = wire.system.journal
+    if journal is None:
+        return
+    journal.note(f"{REFUSED_KEY}{wire.refused % 100:02d}", f"{time.time():.3f} {printable(text)}")
+    journal.note(REFUSED_KEY.rstrip("/"), str(wire.refused))
+    bound = wire.system.bound.get(device) if device is not None else None
+    if bound is not None and event in bound.subject.chart.event_names:
+        with wire.system.owner:  # between the device's steps, as the door does
+            bound.refused(event, None, printable(f"zenoh {key}: {reason}"))
 
 
 def stream_receiver(
@@ -51,7 +74,9 @@ def stream_receiver(
     run_devices = wire._run_devices
     run_now = system.run_now
     key = wire.keys.link(node, device)
-    refuse = wire._refuse
+
+    def refused(reason: str, event: str) -> None:  # a refused step too, if the device knows it
+        refuse(wire, key, reason, device, event)
 
     def why(e: str, n: int) -> str:
         if not 1 <= n <= MAX_NUMBER:
@@ -62,44 +87,45 @@ def stream_receiver(
         payload = sample.payload.to_bytes()
         problem = payload_problem(payload)
         if problem is not None:
-            refuse(key, problem)
+            refuse(wire, key, problem)
             return
         try:
             msg = decode(payload)
         except (msgspec.DecodeError, AttributeError):
-            refuse(key, "a payload that is not [epoch, number, event, data]")
+            refuse(wire, key, "a payload that is not [epoch, number, event, data]")
             return
         e, n, event = msg.e, msg.n, msg.ev
         with_data = events.get(event)
         if with_data is None:  # rule 7: only what a link from that node carries
-            refuse(key, f"event {shown(event)}: no link from {node} sends it to {device}")
+            refused(f"event {shown(event)}: no link from {node} sends it to {device}", event)
             return
         if msg.d is not None:
             problem = data_problem(msg.d) if with_data else "data, which no link sends with it"
             if problem is not None:
-                refuse(key, f"event {shown(event)} with {problem}")
+                refused(f"event {shown(event)} with {problem}", event)
                 return
         run = True
         with lock:
             verdict, last = offer(node, device, e, n)
-            if verdict is Verdict.REFUSED:
-                refuse(key, f"{shown(event)} numbered {n} in epoch {shown(e)}: {why(e, n)}")
-                return
-            if verdict is not Verdict.APPLY:
+            if verdict is Verdict.DUPLICATE or verdict is Verdict.GAP:
                 ack(node, device, e, last, verdict is Verdict.GAP)
                 wake.set()
                 return
-            try:  # under the lock: the stream's next event waits until this one ran
-                if bound is not None:  # acknowledged once committed (_committed)
-                    ticket = bound.post(event, msg.d, note=(note, f"{e} {n}"))
-                    wire._acks.append((ticket.seq, node, device, e, n))
-                    run = bound.journal.guarantee is Guarantee.PROMPT
-                elif run_now(device, event, msg.d):  # nobody owned the devices: ran here
-                    run = False
-                else:  # the owner's thread runs it
-                    subject.post(event, msg.d)
-            except StatectlError as exc:
-                wire._say(f"link event {shown(event)} from {node} to {device}: {exc}")
+            if verdict is Verdict.APPLY:
+                try:  # under the lock: the stream's next event waits until this one ran
+                    if bound is not None:  # acknowledged once committed (_committed)
+                        ticket = bound.post(event, msg.d, note=(note, f"{e} {n}"))
+                        wire._acks.append((ticket.seq, node, device, e, n))
+                        run = bound.journal.guarantee is Guarantee.PROMPT
+                    elif run_now(device, event, msg.d):  # nobody owned the devices: ran here
+                        run = False
+                    else:  # the owner's thread runs it
+                        subject.post(event, msg.d)
+                except StatectlError as exc:
+                    wire._say(f"link event {shown(event)} from {node} to {device}: {exc}")
+        if verdict is Verdict.REFUSED:  # out of the stream's lock: its journal row takes the owner
+            refused(f"{shown(event)} numbered {n} in epoch {shown(e)}: {why(e, n)}", event)
+            return
         if run:
             run_devices()  # before waking the wire's thread: the device first
         if bound is None:

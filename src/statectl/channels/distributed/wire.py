@@ -67,20 +67,22 @@ from statectl.channels.distributed.messages import (
     refuse_non_finite,
     snapshot_payload,
 )
-from statectl.channels.distributed.receive import stream_receiver
+from statectl.channels.distributed.receive import refuse, stream_receiver
 from statectl.channels.distributed.resume import EPOCH_KEY, read_links
 from statectl.channels.distributed.streams import Inbound, Outbound
 from statectl.channels.distributed.system import NodeSystem
 from statectl.channels.distributed.trust import carried, printable, session_config, shown
 from statectl.kernel.errors import StatectlError
 from statectl.kernel.semantics import Snapshot
+from statectl.run.commands import Origin
 
 __all__ = ["RESEND_AFTER", "Wire"]
 
 #: Seconds without an acknowledgement after which a stream asks again (rule 3).
 RESEND_AFTER = 0.5
-#: The journal's meta keys of refused messages (rule 7): ``zenoh-refused/NN`` and the count.
-REFUSED_KEY = "zenoh-refused/"
+#: A post's origin at the System's door: who put it is Zenoh's to know (its access
+#: control, with security:), not statectl's, so it is anonymous there.
+ZENOH = Origin("zenoh")
 _TICK = 0.05
 _ACK_PAUSE = 0.002  # seconds between two rounds of acknowledgements, at least
 _ENC = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
@@ -348,17 +350,10 @@ class Wire:
             events = self.carried.get((node, device), {})
         return stream_receiver(self, node, device, events)
 
-    def _refuse(self, key: str, reason: str) -> None:
-        """Rule 7: one log line, and a note in the journal (the last 100 are kept)."""
-        self.refused += 1
-        text = f"refused on {key}: {reason}"
-        self._say(text)
-        journal = self.system.journal
-        if journal is not None:
-            journal.note(
-                f"{REFUSED_KEY}{self.refused % 100:02d}", f"{time.time():.3f} {printable(text)}"
-            )
-            journal.note(REFUSED_KEY.rstrip("/"), str(self.refused))
+    def _refuse(
+        self, key: str, reason: str, device: str | None = None, event: str | None = None
+    ) -> None:
+        refuse(self, key, reason, device, event)  # rule 7 (statectl.channels.distributed.receive)
 
     def _ack(self, node: str, device: str, e: str, n: int, again: bool) -> None:
         """Note an acknowledgement for the wire's thread to send (rule 4)."""
@@ -422,8 +417,8 @@ class Wire:
         except Unreadable as exc:
             self._refuse(str(sample.key_expr), str(exc))
             return
-        try:
-            self.system.post(device, event, data)
+        try:  # at the System's door: the commands policy's zenoh grants (run/commands.py)
+            self.system.post(device, event, data, origin=ZENOH)
         except (ValueError, KeyError, TypeError, StatectlError) as exc:
             self._say(f"event for {device} from another node refused: {exc}")
             if isinstance(exc, Refused):
