@@ -323,6 +323,9 @@ class EventDef:
     origin: Location = NOWHERE
     #: declared data fields ``((name, type), ...)``; empty: the event declares none
     fields: tuple[tuple[str, str], ...] = ()
+    #: a completion the device may report with no call of its API pending (the
+    #: table's ``unasked`` column; statectl.kernel.semantics.calls rule 4)
+    unasked: bool = False
 
 
 @dataclass(frozen=True, slots=True)

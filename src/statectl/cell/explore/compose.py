@@ -12,7 +12,11 @@ Rules:
 3. A stimulus is *enabled* in a global state when its ``when`` holds, it is a
    fault and the device is in a monitored state (or it is a command or a
    completion), and the device has a row for it there; it *happens* when some
-   outcome handles it. Free choices give several successors.
+   outcome handles it. Free choices give several successors. A completion is the
+   device's own report (``REPORT``): offered only while an API call it completes
+   is pending on the device (:mod:`statectl.kernel.semantics.calls`, the twin's
+   model), and it settles that call; a timeout while its state is active; an
+   ``unasked`` completion wherever the device handles it.
 4. An event a link delivers to a device state that neither handles nor ignores
    it is reported (the event is then dropped, as the runtime drops it). A
    cascade longer than :data:`MAX_DELIVERIES` is a link livelock.
@@ -35,9 +39,11 @@ from statectl.cell.model import Cell, GlobalExpr, InputKind, Link, Trigger
 from statectl.kernel.model import EventKind
 from statectl.kernel.semantics import Unhandled
 
-__all__ = ["MAX_DELIVERIES", "Branch", "Composed", "Delivery", "Predicate", "Stimulus"]
+__all__ = ["MAX_DELIVERIES", "REPORT", "Branch", "Composed", "Delivery", "Predicate", "Stimulus"]
 
 MAX_DELIVERIES = 256
+#: The ``link`` argument of :meth:`Composed.outcomes` for a device's own report (rule 3).
+REPORT = -2
 
 Predicate = Callable[[int], bool]
 
@@ -122,7 +128,7 @@ class Composed:
         by_chart: dict[int, LocalSpace] = {}
         spaces: list[LocalSpace] = []
         for d in cell.devices:
-            spaces.append(LocalSpace(d.name, d.chart))
+            spaces.append(LocalSpace(d.name, d.chart, calls=cell.completions))
             by_chart[id(d.chart)] = spaces[-1]
         self.spaces = tuple(spaces)
         self.bits = tuple(max(1, (len(s.snapshots) - 1).bit_length()) for s in self.spaces)
@@ -215,11 +221,25 @@ class Composed:
         if s.kind is InputKind.FAULT and not space.monitored[lid]:
             return False
         if s.kind is InputKind.COMPLETION:
-            if timing_out(space, lid, s.event):
-                return True
-            completion = self.cell.completions and space.kind[s.event] is EventKind.COMPLETION
-            return completion and any(o.handled for o in space.outcomes(lid, s.event))
+            return any(o.happens for o in self.outcomes(s.device, lid, s.event, REPORT))
         return True
+
+    @staticmethod
+    def via(s: Stimulus) -> int:
+        """The ``link`` argument of :meth:`outcomes` for stimulus ``s``."""
+        return REPORT if s.kind is InputKind.COMPLETION else -1
+
+    def _reported(self, d: int, lid: int, event: str) -> tuple[Outcome, ...]:
+        """Rule 3: ``event`` as device ``d`` raises it itself in ``lid``."""
+        space = self.spaces[d]
+        if timing_out(space, lid, event):
+            return space.outcomes(lid, event)
+        if not self.cell.completions or space.kind[event] is not EventKind.COMPLETION:
+            return ()
+        reports = space.reports(lid, event)
+        if space.unasked(event):
+            return tuple(dict.fromkeys((*reports, *space.outcomes(lid, event))))
+        return reports
 
     def fires(self, d: int, outcome: Outcome) -> tuple[int, ...]:
         """Indices of the links whose trigger matches device ``d``'s step ``outcome``."""
@@ -276,6 +296,8 @@ class Composed:
     def outcomes(self, d: int, lid: int, event: str, link: int = -1) -> tuple[Outcome, ...]:
         """Device ``d``'s outcomes; delivered by ``link``, those its data rules out dropped
         (explore/conditions.py rule 2)."""
+        if link == REPORT:
+            return self._reported(d, lid, event)
         outs = self.spaces[d].outcomes(lid, event)
         if link < 0 or self.links[link].forward_data or event != self.links[link].event:
             return outs
@@ -322,8 +344,8 @@ class Composed:
             int,
         ]
         work: list[Work] = []
-        for o in space.outcomes(lid, s.event):
-            if not o.handled:
+        for o in self.outcomes(d, lid, s.event, self.via(s)):
+            if not o.happens:
                 continue
             cond = self.condition(d, o)
             if cond is not None and not cond(g):
@@ -408,7 +430,7 @@ class Composed:
             found = tuple(
                 (
                     o.target,
-                    o.handled,
+                    o.happens,
                     o.unhandled,
                     tuple(
                         (
@@ -444,7 +466,7 @@ class Composed:
         work: list[
             tuple[int, tuple[tuple[int, str, int], ...], tuple[tuple[int, int, str, int], ...], int]
         ] = []
-        for target, handled, _unhandled, fired, cond in self.moves(d, lid, s.event):
+        for target, handled, _unhandled, fired, cond in self.moves(d, lid, s.event, self.via(s)):
             if handled and (cond is None or cond(g)):
                 g1 = (g & ~(mask[d] << shift[d])) | (target << shift[d])
                 pending = tuple((t, e, i) for t, e, i, guard in fired if guard is None or guard(g1))

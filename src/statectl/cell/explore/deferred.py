@@ -65,7 +65,9 @@ def released(
                         here = space.snapshots[o.target]
                         values = _values(space, o.target)
                         for result, choices in space._runs(event, here, *values):
-                            r = space._outcome(result, choices, queue, *values)
+                            pend = space.pending[o.target] if getattr(space, "calls", None) else ()
+                            vals = values[0] if values else ()
+                            r = space._outcome(result, choices, queue, vals, pend)
                             if not r.handled:
                                 nxt.append(o)
                                 continue

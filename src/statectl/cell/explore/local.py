@@ -18,7 +18,14 @@ Rules:
    value; the Machine's guards are never rewritten.
 3. ``previous`` is kept in the snapshot only when some guard reads it, so local
    states that no guard can tell apart are one state.
-4. Each outcome says how the device reacted: handled, or the kernel's
+4. With ``calls`` (a cell whose devices report their completions), the API calls
+   the device was issued and has not completed are part of its local state, as
+   :mod:`statectl.kernel.semantics.calls` (the twin's own model) keeps them: every
+   outcome's target carries the calls after its notifications, and
+   :meth:`LocalSpace.reports` are the device's own completions, each settling one
+   pending call it completes. A report the device's state ignores still settles
+   its call (``Outcome.settles``): the twin did report it.
+5. Each outcome says how the device reacted: handled, or the kernel's
    :class:`~statectl.kernel.semantics.Unhandled` reason (declared ignored, guard false,
    no transition: the missed transition the cell checks for, guard error: a guard
    raised, e.g. ``10 / scale`` with ``scale`` 0; the runtime refuses that event, so
@@ -48,6 +55,7 @@ from statectl.kernel.semantics import (
     initial,
     step,
 )
+from statectl.kernel.semantics.calls import DeviceCalls, Pending
 
 __all__ = ["FreeGuard", "LocalSpace", "Outcome"]
 
@@ -69,10 +77,17 @@ class Outcome:
     notifies: tuple[str, ...] = ()  # observer methods called, in order
     choices: tuple[tuple[str, bool], ...] = ()  # free guard parts and the value taken
     failure: str = ""  # a GUARD_ERROR step: the guard, its row and why it raised
+    #: the device's own report, ignored by its state, that settled a pending call
+    settles: bool = False
 
     @property
     def handled(self) -> bool:
         return self.unhandled is None
+
+    @property
+    def happens(self) -> bool:
+        """Whether the step changes the device: handled, or a report that settled a call."""
+        return self.unhandled is None or self.settles
 
 
 @dataclass(frozen=True, slots=True)
@@ -183,10 +198,12 @@ def _literal(text: str | None) -> Any:
 class LocalSpace:
     """A device instance: its machine, numbered snapshots and the outcome table."""
 
-    def __init__(self, name: str, chart: Chart) -> None:
+    def __init__(self, name: str, chart: Chart, *, calls: bool = False) -> None:
         self.name = name
         self.chart = chart
         self.machine = Machine(chart)
+        #: rule 4: the twin's model of calls and completions, when they are tracked
+        self.calls: DeviceCalls | None = DeviceCalls(chart, self.machine) if calls else None
         self.data: dict[str, Any] = {d.name: _literal(d.expr) for d in chart.data}
         self.tracker = DataTracker(chart, self.data)  # data changed by assign (explore.data)
         tracked_data = frozenset(
@@ -226,8 +243,11 @@ class LocalSpace:
         }
         self.snapshots: list[Snapshot] = []
         self.valuations: list[tuple[Any, ...]] = []  # tracked data per local id (explore.data)
-        self.index: dict[tuple[Snapshot, tuple[Any, ...]], int] = {}
+        self.pending: list[Pending] = []  # calls not completed per local id (rule 4)
+        self.index: dict[tuple[Snapshot, tuple[Any, ...], Pending], int] = {}
+        self.first: dict[tuple[Snapshot, tuple[Any, ...]], int] = {}  # any calls
         self.table: dict[tuple[int, str], tuple[Outcome, ...]] = {}
+        self.report_table: dict[tuple[int, str], tuple[Outcome, ...]] = {}
         self.initial: tuple[Outcome, ...] = self._close()
         self.monitored: tuple[bool, ...] = tuple(
             any(ControlKind.MONITORING in chart.state(s).controls for s in snap.active)
@@ -248,15 +268,19 @@ class LocalSpace:
             return Snapshot(snap.active, snap.history, None)
         return snap
 
-    def _id(self, snap: Snapshot, values: tuple[Any, ...], queue: deque[int]) -> int:
-        key = (self._canon(snap), values)
+    def _id(
+        self, snap: Snapshot, values: tuple[Any, ...], queue: deque[int], pending: Pending = ()
+    ) -> int:
+        key = (self._canon(snap), values, pending)
         found = self.index.get(key)
         if found is None:
             if self.tracker.dynamic and len(self.snapshots) >= MAX_LOCAL_STATES:
                 raise self.tracker.unbounded(self.name, MAX_LOCAL_STATES)
             found = self.index[key] = len(self.snapshots)
+            self.first.setdefault(key[:2], found)
             self.snapshots.append(key[0])
             self.valuations.append(values)
+            self.pending.append(pending)
             queue.append(found)
         return found
 
@@ -283,14 +307,23 @@ class LocalSpace:
         return out
 
     def _outcome(
-        self, result: Step, choices: Choices, queue: deque[int], values: tuple[Any, ...] = ()
+        self,
+        result: Step,
+        choices: Choices,
+        queue: deque[int],
+        values: tuple[Any, ...] = (),
+        pending: Pending = (),
+        settled: bool = False,
     ) -> Outcome:
         after = values
         if self.tracker.dynamic and result.handled:
             after = self.tracker.after(result, self.tracker.values(self.data, values))
-        target = self._id(result.target, after, queue)
+        calls = tuple((a.method, a.event) for a in result.actions if isinstance(a, Notify))
+        if self.calls is not None and calls and result.handled:
+            pending = self.calls.after_calls(pending, calls)
+        target = self._id(result.target, after, queue, pending)
         events = frozenset(m.event for m in result.microsteps if m.event and m.transitions)
-        notifies = tuple(a.method for a in result.actions if isinstance(a, Notify))
+        notifies = tuple(c[0] for c in calls)
         return Outcome(
             target,
             result.unhandled,
@@ -301,6 +334,9 @@ class LocalSpace:
             notifies,
             choices,
             _failure(result),
+            settled
+            and result.unhandled is not None
+            and result.unhandled is not Unhandled.GUARD_ERROR,
         )
 
     def _close(self) -> tuple[Outcome, ...]:
@@ -313,25 +349,58 @@ class LocalSpace:
         )
         while queue:
             lid = queue.popleft()
-            snap, values = self.snapshots[lid], self.valuations[lid]
+            snap, values, pending = self.snapshots[lid], self.valuations[lid], self.pending[lid]
             for event in self.events:
                 outs = dict.fromkeys(
-                    self._outcome(r, c, queue, values) for r, c in self._runs(event, snap, values)
+                    self._outcome(r, c, queue, values, pending)
+                    for r, c in self._runs(event, snap, values)
                 )
                 if self.chart.deferred:  # a kept event may come back (explore/deferred.py)
                     outs.update(dict.fromkeys(released(self, snap, tuple(outs), queue)))
                 self.table[lid, event] = tuple(outs)
+            if self.calls is not None and pending:
+                self._reports(lid, queue)
         return starts
+
+    def _reports(self, lid: int, queue: deque[int]) -> None:
+        """Rule 4: the completions the device may report in ``lid``, each settling a call."""
+        assert self.calls is not None
+        snap, values, pending = self.snapshots[lid], self.valuations[lid], self.pending[lid]
+        for event in dict.fromkeys(c for key in pending for c in self.calls.call(*key).completions):
+            outs: dict[Outcome, None] = {}
+            for rest in self.calls.settled_by(pending, event):
+                for r, c in self._runs(event, snap, values):
+                    outs[self._outcome(r, c, queue, values, rest, settled=True)] = None
+            self.report_table[lid, event] = tuple(outs)
 
     # -- reading -----------------------------------------------------------------------------
 
-    def lookup(self, snap: Snapshot, data: Mapping[str, Any] | None = None) -> int | None:
-        """The local id of a runtime snapshot (and data), or ``None`` if never reached."""
+    def lookup(
+        self,
+        snap: Snapshot,
+        data: Mapping[str, Any] | None = None,
+        calls: Pending | None = None,
+    ) -> int | None:
+        """The local id of a runtime snapshot (and data, and the calls pending on its
+        device: ``None`` takes the first id with that snapshot, for questions about
+        states alone), or ``None`` if never reached."""
         values = tuple((data or self.data).get(n) for n in self.tracker.dynamic)
-        return self.index.get((self._canon(snap), values))
+        if calls is None or self.calls is None:
+            return self.first.get((self._canon(snap), values))
+        return self.index.get((self._canon(snap), values, calls))
 
     def outcomes(self, lid: int, event: str) -> tuple[Outcome, ...]:
         return self.table.get((lid, event), ())
+
+    def reports(self, lid: int, event: str) -> tuple[Outcome, ...]:
+        """Rule 4: ``event`` reported by the device itself, settling a call; empty when no
+        call pending in ``lid`` is completed by it."""
+        return self.report_table.get((lid, event), ())
+
+    def unasked(self, event: str) -> bool:
+        """Whether the device may report ``event`` with no call pending (its table says so,
+        or calls are not tracked: every completion is then offered where handled)."""
+        return self.calls is None or event in self.calls.unasked
 
     def active(self, lid: int) -> frozenset[str]:
         return self.snapshots[lid].active

@@ -71,13 +71,13 @@ class _Writer:
         table = self.m.spaces[d].states_in(state)
         return self._in(d, [i for i, v in enumerate(table) if v])
 
-    def happens(self, d: int, event: str, lids: list[int]) -> str:
+    def happens(self, d: int, event: str, lids: list[int], link: int = -1) -> str:
         """Where ``event`` happens: the local states, each with the other devices' states
         its handled outcomes need (explore/conditions.py rule 1)."""
         free: list[int] = []
         parts: list[str] = []
         for lid in lids:
-            conds = [self.condition(o) for o in self.m.outcomes(d, lid, event) if o.handled]
+            conds = [self.condition(o) for o in self.m.outcomes(d, lid, event, link) if o.happens]
             if all(conds):
                 parts.append(f"({self.var[d]} == {lid} && ({' || '.join(conds)}))")
             else:
@@ -123,7 +123,7 @@ class _Writer:
         for lid in range(len(space.snapshots)):
             outs = self.m.outcomes(d, lid, event, link)
             if only_handled:
-                outs = tuple(o for o in outs if o.handled)
+                outs = tuple(o for o in outs if o.happens)
             if not outs or all(o.unhandled is Unhandled.DECLARED_IGNORED for o in outs):
                 continue
             lines.append(f"{indent}:: {self.var[d]} == {lid} -> /* {space.state_of(lid)} */")
@@ -131,7 +131,7 @@ class _Writer:
             for o in outs:
                 cond = self.condition(o)
                 when = f"{cond} -> " if cond else ""
-                if o.handled:
+                if o.happens:
                     body = self.outcome(d, o, indent + "      ")
                     body[0] = f"{indent}   :: {when}" + body[0].lstrip()
                     lines.extend(body)
@@ -223,18 +223,19 @@ def export_promela(model: Composed, *, invariants: bool = True, unhandled: bool 
         lids = [
             lid
             for lid in range(len(space.snapshots))
-            if m.enabled_locally(s, lid) and any(o.handled for o in space.outcomes(lid, s.event))
+            if m.enabled_locally(s, lid)
+            and any(o.happens for o in m.outcomes(d, lid, s.event, m.via(s)))
         ]
         if not lids:
             continue
-        guard = w.happens(d, s.event, lids)
+        guard = w.happens(d, s.event, lids, m.via(s))
         if s.when >= 0:
             when = m.cell.environment[s.when].when
             if when is not None:
                 guard = f"{guard} && {w.expr(when)}"
         out.append(f"  :: {block} {{ {guard} -> /* {s.label(m.names)} */")
         out.append(f'       printf("{STEP_MARK} {i}\\n");')
-        out.extend(w.table(d, s.event, "       ", only_handled=True))
+        out.extend(w.table(d, s.event, "       ", only_handled=True, link=m.via(s)))
         out.append("       drain();")
         out.append("       check()")
         out.append("     }")

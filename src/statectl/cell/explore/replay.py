@@ -18,6 +18,12 @@ Rules:
 5. :class:`CellLinks` is rule 1's link part alone, for any host of running
    Subjects: this runner, and ``statectl run CELL --dashboard/--journal``
    (:mod:`statectl.channels.cli.run`).
+6. Every device runs on its simulated twin (:class:`~statectl.run.devices.twin.SimTwin`,
+   whose clock never runs on by itself here): a completion step is the twin's own
+   report of a call it has pending, never an injected event. When the twin would
+   not report the completion a step needs (the explorer offered one no device
+   makes), the run stops there with a divergence naming the step. A state's
+   timeout and a completion its table marks ``unasked`` are posted as they are.
 """
 
 from __future__ import annotations
@@ -31,11 +37,14 @@ from typing import Any
 
 from statectl.cell.explore.compose import Composed, Stimulus
 from statectl.cell.explore.conditions import bind_cross_guards
+from statectl.cell.explore.timeouts import timing_out
 from statectl.cell.model import Cell, InputKind, Link, Trigger
 from statectl.front.tables import safeyaml
 from statectl.front.tables.inputs import read_input_text
 from statectl.kernel.errors import StatectlError
-from statectl.kernel.semantics import Unhandled
+from statectl.kernel.semantics import Snapshot, Unhandled
+from statectl.kernel.semantics.calls import Pending
+from statectl.run.devices.twin import SimTwin
 from statectl.run.runtime import (
     EventIgnored,
     MicrostepTaken,
@@ -150,11 +159,17 @@ class CellLinks:
 
     def state(self) -> int:
         """The explorer's packed global state for the subjects' snapshots."""
+        return self.packed(None)
+
+    def packed(self, calls: Mapping[str, Pending] | None) -> int:
+        """:meth:`state`, with the calls pending on each device when they are known."""
         g = 0
         for d, space in enumerate(self.model.spaces):
-            subject = self.subjects[self.model.names[d]]
+            name = self.model.names[d]
+            subject = self.subjects[name]
             snap = subject.snapshot
-            lid = space.lookup(snap, subject.data) if snap is not None else None
+            pending = calls.get(name) if calls is not None else None
+            lid = space.lookup(snap, subject.data, pending) if snap is not None else None
             if lid is None:
                 raise StatectlError(f"{self.model.names[d]} is in a state the explorer never saw")
             g = self.model.replace(g, d, lid)
@@ -194,8 +209,12 @@ class _Runner:
         self.delivering: tuple[str, str] | None = None
         self.harmless = False  # the link being delivered says its event may land unhandled
         self.fates: list[tuple[str, str]] = []  # what the replayed trace says happened to links
+        self.twins: dict[str, SimTwin] = {}
         for d in cell.devices:
             s = Subject(d.chart, clock=self.clock, name=d.name)
+            twin = self.twins[d.name] = SimTwin(d.chart)
+            twin.bind(s.post, self.clock)
+            s.attach(twin)
             s.listen(self._trace)
             s.listen(self.links.watch)
             s.listen(self._watch)
@@ -218,12 +237,41 @@ class _Runner:
         ):
             self.unhandled.append(f"{r.device} gets {r.event} ({r.reason})")
 
-    def state(self) -> int:
-        return self.links.state()
+    def calls(self) -> dict[str, Pending]:
+        """The calls each twin has pending that the explorer tracks (its model's rule)."""
+        out: dict[str, Pending] = {}
+        for d, space in enumerate(self.model.spaces):
+            name = self.model.names[d]
+            model = space.calls
+            pending = self.twins[name].pending_calls
+            if model is not None:
+                pending = tuple(k for k in pending if model.tracked(model.call(*k)))
+            out[name] = pending
+        return out
 
-    def _step(self, device: str, event: str, data: Any = None) -> None:
+    def state(self) -> int:
+        return self.links.packed(self.calls())
+
+    def refusal(self, device: str, event: str) -> str:
+        """Why the twin of ``device`` would not report ``event`` now ("" if it would)."""
+        d = self.model.position[device]
+        space = self.model.spaces[d]
+        lid = space.lookup(self.subjects[device].snapshot or Snapshot(frozenset()))
+        if lid is not None and timing_out(space, lid, event):
+            return ""
+        if space.unasked(event) or self.twins[device].would_report(event):
+            return ""
+        calls = self.twins[device].pending_calls
+        doing = ", ".join(f"{m}() for {e}" for m, e in calls) or "none"
+        return (
+            f"{device}'s twin would not report {event}: no call it completes is pending "
+            f"(pending calls: {doing})"
+        )
+
+    def _step(self, device: str, event: str, data: Any = None, report: bool = False) -> None:
         self.links.fired.clear()
-        self.subjects[device].post(event, data)
+        if not (report and self.twins[device].complete_now(event)):
+            self.subjects[device].post(event, data)
         self.subjects[device].run_until_idle()
 
     def _fate(self, link: Link) -> str:
@@ -232,12 +280,19 @@ class _Runner:
             return self.fates.pop(0)[1]
         return ""
 
-    def perform(self, device: str, event: str, fates: Sequence[tuple[str, str]] = ()) -> None:
+    def perform(
+        self,
+        device: str,
+        event: str,
+        fates: Sequence[tuple[str, str]] = (),
+        report: bool = False,
+    ) -> None:
         """Rule 1: one stimulus and its cascade of link deliveries (lost or overtaken as
-        ``fates`` says: a replayed trace of a cell with lossy or delayed links)."""
+        ``fates`` says: a replayed trace of a cell with lossy or delayed links); a
+        completion (``report``) is the twin's own (rule 6)."""
         self.fates = list(fates)
         queue: deque[tuple[Link, Any, bool]] = deque()
-        self._step(device, event)
+        self._step(device, event, report=report)
         queue.extend((k, d, False) for k, d in self._links(event, None))
         count = 0
         while queue and count < 256:
@@ -308,9 +363,16 @@ def run_cell(
                 write("--- no stimulus can change the cell: deadlock\n")
                 break
             stim = rng.choice(choices)
+        report = stim.kind is InputKind.COMPLETION
+        refused = r.refusal(m.names[stim.device], stim.event) if report else ""
+        if refused:  # rule 6: never inject what no device would do
+            divergences.append(f"step {i + 1}: {refused}")
+            write(f"--- step {i + 1}: {stim.label(m.names)}: {refused}\n")
+            break
         write(f"--- step {i + 1}: {stim.label(m.names)}\n")
         expected = {h for h, _, _ in m.successors(g, stim)}
-        r.perform(m.names[stim.device], stim.event, plan[i].fates if plan is not None else ())
+        fates = plan[i].fates if plan is not None else ()
+        r.perform(m.names[stim.device], stim.event, fates, report)
         done += 1
         h = r.state()
         if plan is not None and plan[i].expect:

@@ -81,10 +81,10 @@ class _Tables:
                     for i, s in mine:
                         if not model.enabled_locally(s, lid):
                             continue
-                        outs = space.outcomes(lid, s.event)
+                        outs = model.outcomes(d, lid, s.event, model.via(s))
                         if any(o.unhandled is Unhandled.GUARD_ERROR for o in outs):
                             err.append(s)
-                        handled = [o for o in outs if o.handled]
+                        handled = [o for o in outs if o.happens]
                         if not handled:
                             if outs and all(o.unhandled is Unhandled.NO_TRANSITION for o in outs):
                                 uns.append((i, s))

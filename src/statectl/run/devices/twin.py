@@ -36,8 +36,8 @@ from typing import Any
 
 from statectl.front.observers import Notification
 from statectl.kernel.errors import StatectlError
-from statectl.kernel.model import Chart, ControlKind, EventKind, Notify, StateKind, Transition
-from statectl.kernel.semantics import Machine, entry_set, structural
+from statectl.kernel.model import Chart, ControlKind
+from statectl.kernel.semantics.calls import Call, CallKey, DeviceCalls
 from statectl.run.devices.base import Driver, finite_number
 from statectl.run.runtime.clock import Timer
 
@@ -62,19 +62,9 @@ class TwinNote:
 
 
 @dataclass(frozen=True, slots=True)
-class _Plan:
-    """What a notification (method, event) means for the twin; derived once from the chart."""
-
-    entered: frozenset[str]
-    left: frozenset[str]
-    sources: frozenset[str]
-    completions: tuple[str, ...]
-    reason: str  # why nothing is reported, when ``completions`` is empty
-
-
-@dataclass(frozen=True, slots=True)
 class _Work:
     method: str
+    event: str  # the event whose step called ``method``: with it, the call's key
     entered: frozenset[str]
     completion: str
     timer: Timer
@@ -107,37 +97,6 @@ def twin_option_problems(options: Mapping[str, Any]) -> tuple[str, ...]:
     if seed is not None and (not isinstance(seed, int) or isinstance(seed, bool)):
         problems.append(f"seed must be an integer (got {seed!r})")
     return tuple(problems)
-
-
-def _ancestors(chart: Chart, name: str) -> Iterable[str]:
-    parent = chart.state(name).parent
-    while parent is not None:
-        yield parent
-        parent = chart.state(parent).parent
-
-
-def _entered(m: Machine, t: Transition) -> set[str]:
-    """What taking ``t`` enters, by the kernel; a targetless transition stays in its source."""
-    if not t.targets:
-        return {t.source} if t.source in m.order else set()
-    if not all(x in m.order for x in t.targets):
-        return set()
-    return set(entry_set(m, [t]))
-
-
-def _around(m: Machine, states: Iterable[str]) -> set[str]:
-    """``states`` and their superstates: whose transitions leave them."""
-    out = set(states)
-    for s in states:
-        out.update(m.ancestors.get(s, ()))
-    return out
-
-
-def _descendants(chart: Chart, name: str) -> set[str]:
-    found = {name}
-    for child in chart.children(name):
-        found |= _descendants(chart, child.name)
-    return found
 
 
 class SimTwin(Driver):
@@ -173,13 +132,12 @@ class SimTwin(Driver):
         if problems:
             raise StatectlError(f"SimTwin for {chart.name}: " + "; ".join(problems))
         self.chart = chart
-        self._machine = structural(chart)
+        self.calls = DeviceCalls(chart)  # which completion follows which call (shared)
         self.delay = float(delay)
         self.delays: dict[str, float] = {k: float(v) for k, v in (delays or {}).items()}
         self.faults: dict[str, float] = {k: float(v) for k, v in (faults or {}).items()}
         self.seed = seed
         self._rng = random.Random(seed) if seed is not None else None
-        self._plans: dict[tuple[str, str], _Plan] = {}
         self._work: list[_Work] = []
         self._armed: dict[str, tuple[str, float]] = {}  # state -> (detail, due)
         self._notes: list[TwinNote] = []
@@ -197,55 +155,11 @@ class SimTwin(Driver):
         with self._lock:
             return tuple(w.completion for w in self._work)
 
-    def _transitions(self, method: str, event: str) -> tuple[Transition, ...]:
-        """The transitions an ``event`` notifying ``method`` may have taken."""
-        on_event = tuple(t for t in self.chart.transitions if event in t.events)
-        notifying = tuple(
-            t
-            for t in on_event
-            if any(isinstance(a, Notify) and a.method == method for a in t.actions)
-        )
-        return notifying or on_event
-
-    def _plan(self, method: str, event: str) -> _Plan:
-        """What a notification of ``method`` for ``event`` makes the twin do (rule 2)."""
-        key = (method, event)
-        cached = self._plans.get(key)
-        if cached is not None:
-            return cached
-        chart = self.chart
-        taken = self._transitions(method, event)
-        entered: set[str] = set()
-        left: set[str] = set()
-        for t in taken:
-            left |= _descendants(chart, t.source) if chart.has_state(t.source) else {t.source}
-            entered |= _entered(self._machine, t)
-        leaves = _around(self._machine, entered)
-        api = next((a for a in chart.apis if a.method == method), None)
-        events = api.events if api is not None else ()
-        kinds = {e: chart.event(e) for e in events}
-        candidates = tuple(
-            e for e, d in kinds.items() if d is not None and d.kind is EventKind.COMPLETION
-        )
-        completions = tuple(
-            e
-            for e in candidates
-            if any(e in t.events and t.source in leaves for t in chart.transitions)
-        )
-        where = ", ".join(sorted(entered)) or "no known state"
-        if not candidates:
-            reason = f"{method}() has no completion event in {chart.name}'s Event Definition table"
-        elif not completions:
-            reason = (
-                f"{event} entered {where}, and no completion of {method}() "
-                f"({', '.join(candidates)}) leaves it"
-            )
-        else:
-            reason = ""
-        sources = frozenset(t.source for t in taken)
-        plan = _Plan(frozenset(entered), frozenset(left), sources, completions, reason)
-        self._plans[key] = plan
-        return plan
+    @property
+    def pending_calls(self) -> tuple[CallKey, ...]:
+        """The calls the twin has not completed, as the explorer keeps them (sorted)."""
+        with self._lock:
+            return tuple(sorted({(w.method, w.event) for w in self._work}))
 
     # -- the driver protocol ------------------------------------------------------------------
 
@@ -257,9 +171,9 @@ class SimTwin(Driver):
         method, event = notification.method, notification.event
         with self._lock:
             self.method = method
-            plan = self._plan(method, event)
-            self._leave(plan.left, f"superseded by {event}")
-            self._forget(plan.sources, event)
+            plan = self.calls.call(method, event)
+            self._leave(plan, f"superseded by {event}")
+            self._forget(plan, event)
             self.log_call(method)
             self._enter(plan.entered)
             if not plan.completions:
@@ -271,7 +185,7 @@ class SimTwin(Driver):
             # callback reads its work only under the lock, which is held until it is listed
             work: list[_Work] = []
             timer = self.clock.call_later(delay, lambda: self._finish(work))
-            work.append(_Work(method, plan.entered, completion, timer))
+            work.append(_Work(method, event, plan.entered, completion, timer))
             self._work.append(work[0])
 
     def poll_fault(self) -> str | None:
@@ -293,33 +207,58 @@ class SimTwin(Driver):
             return completions[0]
         return self._rng.choice(completions)
 
-    def _finish(self, holder: list[_Work]) -> None:
+    def _finish(self, holder: list[_Work], completion: str | None = None) -> None:
         with self._lock:
             if not holder or holder[0] not in self._work:
                 return  # never listed (call_later raised) or superseded
             work = holder[0]
+            if completion is not None:  # another completion of the same call (a replay)
+                work = _Work(work.method, work.event, work.entered, completion, work.timer)
+                self._work[self._work.index(holder[0])] = work
             self._work.remove(work)
             self._disarm(work.entered)
-            entered: set[str] = set()
-            leaves = _around(self._machine, work.entered)
-            for t in self.chart.transitions:
-                if work.completion in t.events and t.source in leaves and t.targets:
-                    entered |= _entered(self._machine, t)
-            self._enter(entered)
+            self._enter(self.calls.completion_entered(work.entered, work.completion))
         self.report(work.completion)
 
-    def _leave(self, states: frozenset[str], why: str) -> None:
-        """Rule 3: cancel the work whose state ``states`` leaves; disarm their faults."""
-        for w in [w for w in self._work if w.entered & states]:
+    def would_report(self, completion: str) -> bool:
+        """Whether a pending call of the twin is completed by ``completion``."""
+        with self._lock:
+            return any(
+                completion in self.calls.call(w.method, w.event).completions for w in self._work
+            )
+
+    def complete_now(self, completion: str) -> bool:
+        """Report ``completion`` at once if a pending call it completes is listed (the
+        oldest such); False when none is: the twin would never report it (a replay)."""
+        with self._lock:
+            work = next((w for w in self._work if w.completion == completion), None)
+            if work is None:
+                plans = (self.calls.call(w.method, w.event) for w in self._work)
+                if not any(completion in p.completions for p in plans):
+                    return False
+                work = next(
+                    w
+                    for w in self._work
+                    if completion in self.calls.call(w.method, w.event).completions
+                )
+            work.timer.cancel()
+        self._finish([work], completion)
+        return True
+
+    def _leave(self, plan: Call, why: str) -> None:
+        """Rule 3: cancel the work whose state ``plan`` leaves; disarm their faults."""
+        for w in [w for w in self._work if self.calls.left_by(w.entered, plan)]:
             w.timer.cancel()
             self._work.remove(w)
             self._note(w.method, f"{w.completion} not reported: {why}")
-        self._disarm(states)
+        self._disarm(plan.left)
 
-    def _forget(self, sources: frozenset[str], event: str) -> None:
-        """Rule 3: work whose state the device cannot be in beside ``sources`` was left unseen."""
+    def _forget(self, plan: Call, event: str) -> None:
+        """Rule 3: work whose state the device cannot be in beside ``plan``'s sources was
+        left unseen."""
+        sources = plan.sources
         for w in list(self._work):
-            if sources and not any(self._together(s, e) for s in sources for e in w.entered):
+            if self.calls.unseen(w.entered, plan):
                 w.timer.cancel()
                 self._work.remove(w)
                 self._note(
@@ -328,18 +267,6 @@ class SimTwin(Driver):
                     f"{', '.join(sorted(sources))}, so the device left "
                     f"{', '.join(sorted(w.entered))}",
                 )
-
-    def _together(self, a: str, b: str) -> bool:
-        """Whether the device can be in states ``a`` and ``b`` at once."""
-        chart = self.chart
-        if not (chart.has_state(a) and chart.has_state(b)):
-            return True  # not a state the twin knows: assume nothing
-        above_a = [a, *_ancestors(chart, a)]
-        above_b = [b, *_ancestors(chart, b)]
-        if a in above_b or b in above_a:
-            return True
-        common = next((x for x in above_a if x in above_b), None)
-        return common is not None and chart.state(common).kind is StateKind.PARALLEL
 
     def _enter(self, states: Iterable[str]) -> None:
         now = self.clock.now()

@@ -1,0 +1,140 @@
+"""Completions follow calls: the twin and the explorer share one model (issue 27)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from statectl.cell.explore import LocalSpace, explore
+from statectl.cell.explore.replay import ReplayStep, run_cell
+from statectl.cell.model import InputKind, load_cell_or_raise
+from statectl.front.builder.build import build
+from statectl.front.tables import DeviceTables, EventRow, StateRow
+from statectl.kernel.model import Chart, ControlKind, EventKind
+from statectl.kernel.semantics import Snapshot
+from statectl.run.devices.twin import SimTwin
+from statectl.run.runtime import SimClock, Subject
+
+CELLS = Path(__file__).parent / "data" / "cells"
+GRIPPER = CELLS / "motor-gripper" / "cell.yaml"
+NAMES = st.text("abcde", min_size=1, max_size=3)
+
+
+@st.composite
+def device_charts(draw: st.DrawFn) -> Chart:
+    """Flat devices whose commands and faults call APIs that completions answer."""
+    names = draw(st.lists(NAMES, min_size=2, max_size=4, unique=True))
+    states = [
+        StateRow(
+            "Dev",
+            "",
+            n,
+            (ControlKind.DEFAULT,)
+            if i == 0
+            else draw(st.sampled_from([(), (ControlKind.MONITORING,)])),
+            "",
+            (),
+        )
+        for i, n in enumerate(names)
+    ]
+    apis = ["Run", "Stop", "Halt"]
+    rows = []
+    for k in range(draw(st.integers(2, 9))):
+        kind = draw(st.sampled_from([EventKind.COMMAND, EventKind.COMPLETION, EventKind.FAULT]))
+        api = draw(st.sampled_from(apis))
+        event = f"{api} {kind.value}" if kind is not EventKind.COMMAND else f"{api}{k % 2}"
+        guard = draw(st.sampled_from(["", "", "previous == " + repr(names[0])]))
+        old, new = draw(st.sampled_from(names)), draw(st.sampled_from(names))
+        rows.append(EventRow(event, "", guard, old, new, kind, api))
+    chart, diags = build(DeviceTables("Dev", tuple(states), tuple(rows)))
+    assert chart is not None, [str(d) for d in diags]
+    return chart
+
+
+def _run(chart: Chart) -> tuple[Subject, SimTwin]:
+    clock = SimClock()
+    subject = Subject(chart, clock=clock, name="dev")
+    twin = SimTwin(chart, delay=1e9)  # reports only when the test says so
+    twin.bind(subject.post, clock)
+    subject.attach(twin)
+    subject.start()
+    subject.run_until_idle()
+    return subject, twin
+
+
+def _lid(space: LocalSpace, subject: Subject, twin: SimTwin) -> int:
+    assert space.calls is not None
+    calls = tuple(k for k in twin.pending_calls if space.calls.tracked(space.calls.call(*k)))
+    lid = space.lookup(subject.snapshot or Snapshot(frozenset()), subject.data, calls)
+    assert lid is not None, f"the explorer never has {subject.configuration} with calls {calls}"
+    return lid
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(device_charts(), st.lists(st.integers(0, 30), max_size=14))
+def test_twin_and_explorer_offer_the_same_completions(chart: Chart, moves: list[int]) -> None:
+    """On random devices and runs, the explorer offers exactly the completions the twin
+    would report, and every step (a command, a fault or the twin's report) reaches a
+    local state, calls included, that the explorer predicts."""
+    space = LocalSpace("dev", chart, calls=True)
+    subject, twin = _run(chart)
+    driving = [e.name for e in chart.events if e.kind is not EventKind.COMPLETION]
+    completions = [e.name for e in chart.events if e.kind is EventKind.COMPLETION]
+    for move in moves:
+        lid = _lid(space, subject, twin)
+        offered = {c for c in completions if space.reports(lid, c)}
+        assert offered == {c for c in completions if twin.would_report(c)}
+        options = [(False, e) for e in driving] + [(True, c) for c in sorted(offered)]
+        if not options:
+            return
+        report, event = options[move % len(options)]
+        expected = {o.target for o in (space.reports if report else space.outcomes)(lid, event)}
+        if report:
+            assert twin.complete_now(event)
+        else:
+            subject.post(event)
+        subject.run_until_idle()
+        assert _lid(space, subject, twin) in expected | ({lid} if not report else set())
+
+
+def test_motor_and_gripper_do_not_deadlock() -> None:
+    """Issue 27's cell: the Motor answers Initialization() with Initialization completion,
+    never Error completion, so the gripper always opens again: every property holds."""
+    report = explore(load_cell_or_raise(GRIPPER))
+    assert report.findings == ()
+    assert report.verdict == "holds"
+
+
+def test_replay_refuses_a_completion_no_twin_reports() -> None:
+    """The trace verify used to print (an Error completion answering Initialization())
+    stops at its step 3 with the twin's reason, instead of being injected."""
+    steps = [
+        ReplayStep(InputKind.COMMAND, "motor", "Movement"),
+        ReplayStep(InputKind.COMPLETION, "motor", "Movement completion"),
+        ReplayStep(InputKind.COMPLETION, "motor", "Error completion"),
+    ]
+    result = run_cell(load_cell_or_raise(GRIPPER), replay=steps)
+    assert result.steps == 2
+    assert any(
+        d.startswith("step 3: motor's twin would not report Error completion")
+        and "Initialization() for Initialization" in d
+        for d in result.divergences
+    ), result.divergences
+
+
+def test_replay_plays_the_twins_completions() -> None:
+    """A real run replays with no divergence: each completion is the twin's report."""
+    steps = [
+        ReplayStep(InputKind.COMMAND, "motor", "Movement"),
+        ReplayStep(InputKind.COMPLETION, "motor", "Movement completion"),
+        ReplayStep(
+            InputKind.COMPLETION,
+            "motor",
+            "Initialization completion",
+            (("motor", "Blocked"), ("gripper", "Open")),
+        ),
+    ]
+    result = run_cell(load_cell_or_raise(GRIPPER), replay=steps)
+    assert (result.steps, result.divergences) == (3, ())
