@@ -138,3 +138,52 @@ def test_replay_plays_the_twins_completions() -> None:
     ]
     result = run_cell(load_cell_or_raise(GRIPPER), replay=steps)
     assert (result.steps, result.divergences) == (3, ())
+
+
+DOOR = """\
+device: Door
+states:
+  - {state: Shut, control: default}
+  - {state: Open}
+events:
+  - {event: Push, old: Shut, new: Open, kind: command, api: Swing}
+  - {event: Kick, old: Shut, new: Open, kind: command}
+  - {event: Swung shut, old: Open, new: Shut, kind: completion, api: Swing%s}
+"""
+
+
+def _door_cell(tmp_path: Path, unasked: str) -> Path:
+    (tmp_path / "door.yaml").write_text(DOOR % unasked, encoding="utf-8")
+    cell = tmp_path / "cell.yaml"
+    cell.write_text(
+        "cell: Doors\ndevices:\n  door: door.yaml\n"
+        "environment:\n  - {send: Push, to: door}\n  - {send: Kick, to: door}\n",
+        encoding="utf-8",
+    )
+    return cell
+
+
+def test_a_completion_comes_only_after_its_call(tmp_path: Path) -> None:
+    """A door kicked open was never called, so no Swung shut comes: a real deadlock."""
+    report = explore(load_cell_or_raise(_door_cell(tmp_path, "")))
+    assert [f.kind.value for f in report.findings] == ["deadlock"]
+    assert report.findings[0].trace is not None
+    assert [s.event for s in report.findings[0].trace.steps] == ["Kick"]
+
+
+def test_an_unasked_completion_is_offered_without_a_call(tmp_path: Path) -> None:
+    """``unasked: yes`` says the door may swing shut by itself: no deadlock."""
+    report = explore(load_cell_or_raise(_door_cell(tmp_path, ", unasked: yes")))
+    assert report.findings == ()
+
+
+def test_bad_unasked_cells_are_t125(tmp_path: Path) -> None:
+    """A value other than yes/no, or unasked on a command, is T125 at its row."""
+    from statectl.front.tables import load
+
+    bad = DOOR.replace("kind: command, api: Swing}", "kind: command, api: Swing, unasked: yes}")
+    for text in (DOOR % ", unasked: maybe", bad % ""):
+        path = tmp_path / "door.yaml"
+        path.write_text(text, encoding="utf-8")
+        _, diags = load(path)
+        assert [d.code for d in diags] == ["T125"], [str(d) for d in diags]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 from hypothesis import given, settings
@@ -100,7 +101,8 @@ event_rows = st.builds(
     kind=st.sampled_from(list(EventKind)),
     api=optional_names,
     invoke=optional_names,
-)
+    unasked=st.booleans(),
+).map(lambda r: replace(r, unasked=r.unasked and r.kind is EventKind.COMPLETION))
 device_tables = st.builds(
     DeviceTables,
     device=names,

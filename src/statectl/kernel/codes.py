@@ -121,6 +121,12 @@ ALL: tuple[Code, ...] = (
     _c("T122", _E, "a bad event data declaration (data column: 'name: type, ...')", _TABLES),
     _c("T123", _E, "a bad assign cell ('name = expression; ...')", _TABLES),
     _c("T124", _E, "an XLSX formula cell with no saved value (read it would be empty)", _TABLES),
+    _c(
+        "T125",
+        _E,
+        "a bad unasked cell (not yes, no, true or false; or on an event that is not a completion)",
+        _TABLES,
+    ),
     # -- B2xx: building a chart from tables, and tables from a chart (front.builder.build) --
     _c("B201", _E, "an event row's old or new state is not in the State Definition table", _TABLES),
     _c("B202", _E, "no state is marked default", _TABLES),

@@ -77,6 +77,7 @@ def _event_defs(rows: Sequence[EventRow], diags: list[Diagnostic]) -> tuple[Even
                 first.api or None,
                 "; ".join(_unique([r.condition for r in group])),
                 first.where,
+                unasked=any(r.unasked for r in group),
             )
         )
     return tuple(defs)

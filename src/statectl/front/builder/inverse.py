@@ -260,6 +260,7 @@ def _rows_of(chart: Chart) -> tuple[DeviceTables, Chart]:
             if t.events[0] in declared and first_row.get(t.events[0]) is t
             else (),
             assign=tuple((a.location, a.expr or "") for a in t.actions if isinstance(a, Assign)),
+            unasked=t.events[0] in declared and declared[t.events[0]].unasked,
         )
         for t, spec in zip(chart.transitions, specs, strict=True)
     )

@@ -231,8 +231,40 @@ def event_row(row: RawRow, diags: list[Diagnostic]) -> EventRow:
         api=_text(row, "api", diags),
         invoke=_text(row, "invoke", diags),
         where=row.where,
+        unasked=_unasked(row, diags),
         **event_data_cells(row, diags),
     )
+
+
+def _unasked(row: RawRow, diags: list[Diagnostic]) -> bool:
+    """The ``unasked`` cell: yes when the device may report this completion by itself."""
+    text = _text(row, "unasked", diags).lower()
+    if not text:
+        return False
+    value = REDO_WORDS.get(text)
+    if value is None:
+        diags.append(
+            diag(
+                "T125",
+                row.cells["unasked"][1],
+                f"event 'unasked' must be yes or no (got {text!r})",
+                "write unasked: yes on a completion the device may report with no call "
+                "pending; leave it empty for no",
+            )
+        )
+        return False
+    kind = _text(row, "kind", diags).strip().lower() if "kind" in row.cells else ""
+    if value and kind != EventKind.COMPLETION.value:
+        diags.append(
+            diag(
+                "T125",
+                row.cells["unasked"][1],
+                f"unasked: yes on {kind or 'command'} event {_text(row, 'event', diags)!r}",
+                "only a completion can come unasked: set kind: completion or remove it",
+            )
+        )
+        return False
+    return value
 
 
 def _unreadable(row: RawRow, column: str) -> bool:

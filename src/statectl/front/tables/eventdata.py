@@ -214,6 +214,8 @@ def event_columns(events: Sequence[Any], flat: Sequence[str]) -> tuple[str, ...]
         extra.append("data")
     if any(e.assign for e in events):
         extra.append("assign")
+    if any(getattr(e, "unasked", False) for e in events):
+        extra.append("unasked")
     return (*flat, *extra)
 
 
@@ -239,4 +241,6 @@ def event_extra_cells(e: Any, columns: Sequence[str]) -> list[str]:
         out.append(format_fields(e.fields))
     if "assign" in columns:
         out.append(format_assign(e.assign))
+    if "unasked" in columns:
+        out.append("yes" if e.unasked else "")
     return out

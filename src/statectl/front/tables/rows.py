@@ -43,8 +43,10 @@ EVENT_COLUMNS = (
     "invoke",
     "data",
     "assign",
+    "unasked",
 )
-#: The event columns every writer emits; ``data`` and ``assign`` only when a row uses them.
+#: The event columns every writer emits; ``data``, ``assign`` and ``unasked`` only when a
+#: row uses them.
 FLAT_EVENT_COLUMNS = EVENT_COLUMNS[:8]
 DATA_COLUMNS = ("name", "value")
 RECOVERY_COLUMNS = ("state", "event", "data", "redo")
@@ -158,6 +160,8 @@ class EventRow:
     fields: tuple[tuple[str, str], ...] = ()
     #: data assignments ``((name, expression), ...)`` when taken (tables.eventdata rule 2)
     assign: tuple[tuple[str, str], ...] = ()
+    #: a completion the device may report with no call pending (kernel.semantics.calls)
+    unasked: bool = False
 
 
 @dataclass(frozen=True, slots=True)

@@ -328,6 +328,8 @@ def _event_doc(tables: DeviceTables) -> list[dict[str, Any]]:
             row["data"] = format_fields(e.fields)
         if e.assign:
             row["assign"] = format_assign(e.assign)
+        if e.unasked:
+            row["unasked"] = _Yes()
         rows.append(row)
     return rows
 
