@@ -28,6 +28,9 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     "builder": ("errors", "model", "expr", "observers", "tables"),  # build's parts
     "recovery": ("errors", "model", "expr", "semantics", "tables"),
     "guards": (),
+    # front/rules/names.py: guards name what their device has (C420, C421); the cell
+    # applies it to its devices' guards too
+    "names": ("errors", "model", "tables"),
     "rules": (
         "errors",
         "model",
@@ -38,6 +41,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "build",
         "recovery",
         "guards",
+        "names",
         "profiles",
     ),
     "profiles": ("errors", "model", "tables"),
@@ -56,7 +60,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "commands",  # config.py reads the run config's commands: section
     ),
     "codegen": ("errors", "model", "expr", "semantics", "observers", "tables", "build"),
-    "cell": ("errors", "model", "expr", "semantics", "observers", "tables", "build"),
+    "cell": ("errors", "model", "expr", "semantics", "observers", "tables", "build", "names"),
     "explore": (
         "errors",
         "model",
@@ -201,6 +205,7 @@ GROUPS = ("kernel", "front", "run", "cell", "channels", "out")
 NESTED = {
     "front.builder.build": "build",
     "front.rules.guards": "guards",
+    "front.rules.names": "names",
     "channels.cli.demo": "demo",
     "out.scxml.tables_io": "scxml_io",
 }

@@ -10,6 +10,7 @@ import ast
 from collections.abc import Mapping
 
 from statectl.cell.values import GlobalExpr
+from statectl.front.tables.rows import did_you_mean
 from statectl.kernel.errors import Diagnostic, Location, Severity
 from statectl.kernel.expr import compile_expression
 from statectl.kernel.model import Chart
@@ -66,7 +67,9 @@ def parse_global(
                         "V808",
                         where,
                         f"{what} {source!r}: device {device!r} has no state {state!r}",
-                        "states: " + ", ".join(s.name for s in chart.states),
+                        did_you_mean(state, [s.name for s in chart.states])
+                        + "states: "
+                        + ", ".join(s.name for s in chart.states),
                     )
                 )
             else:

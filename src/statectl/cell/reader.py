@@ -16,6 +16,8 @@ from statectl.cell.nodes import LINK_KEYS
 from statectl.cell.options import LINK_OPTION_KEYS, link_options, send_and_data
 from statectl.cell.values import DeviceRef, EnvInput, GlobalExpr, InputKind, Link, Trigger
 from statectl.front.builder.build import load_and_build
+from statectl.front.rules.names import check_guard_names
+from statectl.front.tables.rows import did_you_mean
 from statectl.kernel.errors import Diagnostic, Location, Severity, has_errors
 from statectl.kernel.model import Chart, ControlKind, EventKind
 
@@ -153,6 +155,8 @@ def _load_devices(r: _Reader, node: yaml.Node | None, base: Path, at: Location) 
             else:
                 loaded[path] = load_and_build(path)
         chart, diags = loaded[path]
+        if chart is not None:  # a guard naming a state or event the device lacks (C420/C421)
+            diags = [*diags, *check_guard_names(chart)]
         if chart is None or has_errors(diags):
             errors = [d for d in diags if d.severity is Severity.ERROR]
             r.diags.append(
@@ -245,7 +249,9 @@ def _links(r: _Reader, node: yaml.Node | None, charts: Mapping[str, Chart]) -> l
                         "V808",
                         r.at(f["enters"]),
                         f"link: device {source!r} has no state {what!r}",
-                        "states: " + ", ".join(s.name for s in chart.states),
+                        did_you_mean(what, [s.name for s in chart.states])
+                        + "states: "
+                        + ", ".join(s.name for s in chart.states),
                     )
                 )
                 continue

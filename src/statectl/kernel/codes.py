@@ -287,6 +287,18 @@ ALL: tuple[Code, ...] = (
         _check("c419--guards-that-may-leave-an-event-unhandled-warning"),
     ),
     _c(
+        "C420",
+        _E,
+        "a guard names a state the device does not have (In(), previous)",
+        _check("c420--a-guard-names-a-state-the-device-does-not-have-error"),
+    ),
+    _c(
+        "C421",
+        _E,
+        "a guard compares _event.name with an event the device does not have",
+        _check("c421--a-guard-names-an-event-the-device-does-not-have-error"),
+    ),
+    _c(
         "C413",
         _E,
         "a recovery rule's data does not fit the fields its event declares",

@@ -27,6 +27,9 @@ C411 warning  An ``event trigger required`` state is entered by no command or fa
 C419 warning  Every row of a state for one event is guarded and the guards are not proven
               to cover every case (statectl.front.rules.guards.guards_cover): the event
               may go unhandled.
+C420 error    A guard's ``In('X')`` or ``previous == 'X'`` names a state the device does
+              not have (statectl.front.rules.names).
+C421 error    A guard compares ``_event.name`` with an event the device does not have.
 
 Undefined guard names and other table errors are the builder's (X3xx, T/B codes);
 :func:`check_paths` reports those too, then checks each chart that built, and its
@@ -42,6 +45,7 @@ from statectl.front.builder.build import build
 from statectl.front.profiles import PROFILES, find
 from statectl.front.recovery import check_recovery
 from statectl.front.rules.guards import guards_cover, guards_exclusive
+from statectl.front.rules.names import check_guard_names
 from statectl.front.rules.timing import check_deferred, check_timeouts, check_triggers
 from statectl.front.tables import load
 from statectl.kernel.codes import family
@@ -485,6 +489,7 @@ _RULES: tuple[Callable[[_Structure], Iterator[Diagnostic]], ...] = (
     check_deferred,
     check_triggers,
     _check_cover,  # C419
+    lambda st: check_guard_names(st.chart),  # C420, C421 (rules/names.py)
 )
 
 
