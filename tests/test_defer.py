@@ -28,8 +28,8 @@ states:
   - {state: Done, ignore: [Go, Stroke done]}
   - {state: Stopped, ignore: [all others]}
 events:
-  - {event: Go, old: Idle, new: Pressing}
-  - {event: Stroke done, old: Pressing, new: Done, kind: completion}
+  - {event: Go, old: Idle, new: Pressing, api: Stroke}
+  - {event: Stroke done, old: Pressing, new: Done, kind: completion, api: Stroke}
   - {event: Stop, old: Done, new: Stopped}
   - {event: Eject, old: Done, new: Idle}
   - {event: Reset, old: Stopped, new: Idle}
@@ -224,8 +224,9 @@ def test_c410_sees_a_superstate_row_leaving_the_deferring_state(tmp_path: Path) 
         "  - {state: Pressing, parent: Work, defer: [Stop, Eject], ignore: [Go]}\n"
         "  - {state: Halted, ignore: [Go, Stroke done, Stop, Reset, Abort]}",
     ).replace(
-        "  - {event: Go, old: Idle, new: Pressing}",
-        "  - {event: Go, old: Idle, new: Pressing}\n  - {event: Abort, old: Work, new: Halted}",
+        "  - {event: Go, old: Idle, new: Pressing, api: Stroke}",
+        "  - {event: Go, old: Idle, new: Pressing, api: Stroke}\n"
+        "  - {event: Abort, old: Work, new: Halted}",
     )
     found = [d for d in check_paths([str(press(tmp_path, text))]) if d.code == "C410"]
     assert [("'Abort'" in d.message, "'Eject'" in d.message) for d in found] == [(True, True)]

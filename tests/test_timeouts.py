@@ -45,8 +45,8 @@ states:
   - state: Jammed
     ignore: [all others]
 events:
-  - {{event: Close, old: Open, new: Closing}}
-  - {{event: Closed, old: Closing, new: Shut, kind: completion}}
+  - {{event: Close, old: Open, new: Closing, api: Shut}}
+  - {{event: Closed, old: Closing, new: Shut, kind: completion, api: Shut}}
   - {{event: Jam, old: Closing, new: Jammed}}
   - {{event: Open, old: Shut, new: Open}}
   - {{event: Clear, old: Jammed, new: Open}}

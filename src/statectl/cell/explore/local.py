@@ -371,6 +371,8 @@ class LocalSpace:
             for rest in self.calls.settled_by(pending, event):
                 for r, c in self._runs(event, snap, values):
                     outs[self._outcome(r, c, queue, values, rest, settled=True)] = None
+            if self.chart.deferred:  # a kept event may come back (explore/deferred.py)
+                outs.update(dict.fromkeys(released(self, snap, tuple(outs), queue)))
             self.report_table[lid, event] = tuple(outs)
 
     # -- reading -----------------------------------------------------------------------------
