@@ -187,3 +187,39 @@ def test_bad_unasked_cells_are_t125(tmp_path: Path) -> None:
         path.write_text(text, encoding="utf-8")
         _, diags = load(path)
         assert [d.code for d in diags] == ["T125"], [str(d) for d in diags]
+
+
+VALVE = """\
+device: Valve
+states:
+  - {state: Shut, control: default}
+  - {state: Open}
+events:
+  - {event: Go, old: Shut, new: Open, guard: "_event.data.ok", data: {ok: bool}}
+  - {event: Stop, old: Open, new: Shut}
+"""
+
+
+def test_verdicts_that_rely_on_an_over_approximation_say_so(tmp_path: Path) -> None:
+    """A counterexample through a free choice over untracked data is marked "may not be
+    reproducible" (text and JSON); a deadlock verdict that holds on such a model is
+    marked over-approximated; a cell without free choices or deferred events has no mark."""
+    (tmp_path / "valve.yaml").write_text(VALVE, encoding="utf-8")
+    (tmp_path / "cell.yaml").write_text(
+        "cell: V\ndevices:\n  valve: valve.yaml\n"
+        "environment:\n  - {send: Go, to: valve}\n  - {send: Stop, to: valve}\n"
+        "invariants:\n  - {name: shut, holds: \"In('valve.Shut')\"}\n",
+        encoding="utf-8",
+    )
+    report = explore(load_cell_or_raise(tmp_path / "cell.yaml"))
+    (finding,) = report.failures
+    assert finding.assumed == ("a free choice over data verify does not track",)
+    text = report.to_text()
+    assert "shortest trace (1 steps; may not be reproducible: assumes a free choice" in text
+    assert "FAILS      invariant shut: In('valve.Shut') [may not be reproducible:" in text
+    assert "HOLDS      no deadlock [over-approximated: a free choice" in text
+    doc = report.to_json()
+    assert doc["findings"][0]["reproducible"] is False
+    assert doc["properties"][0]["assumes"] == list(finding.assumed)
+    clean = explore(load_cell_or_raise(GRIPPER))
+    assert clean.relies == () and "over-approximated" not in clean.to_text()

@@ -31,7 +31,8 @@ import ast
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from statectl.cell.explore.conditions import foreign_leaf, under_link
+from statectl.cell.explore.conditions import UNTRACKED, assumptions, foreign_leaf, under_link
+from statectl.cell.explore.deferred import DEFERRED
 from statectl.cell.explore.local import LocalSpace, Outcome
 from statectl.cell.explore.nodes import crossing, peer_lost
 from statectl.cell.explore.timeouts import timeout_events, timing_out
@@ -77,6 +78,9 @@ class Delivery:
     #: "lost": a lossy link's event never arrived; "overtaken": a delayed link's event
     #: was put behind the events queued after it (docs/cells.md, distribution)
     fate: str = ""
+    #: what taking this way assumes beyond the model (conditions.assumptions): a trace
+    #: with any such delivery may not be reproducible on the devices
+    assumed: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -365,6 +369,7 @@ class Composed:
                         o.unhandled,
                         o.notifies,
                         o.choices,
+                        assumed=assumptions(space, o, False),
                     ),
                 )
             work.append((g1, self._queue(g1, d, o), log, (), 1))
@@ -413,6 +418,7 @@ class Composed:
                             o.notifies,
                             o.choices,
                             "overtaken" if overtaken else "",
+                            assumptions(tspace, o, not k.forward_data and not back),
                         ),
                     )
                 work.append((g2, rest + more, log2, bad2, count + 1))
@@ -499,6 +505,15 @@ class Composed:
                 bad2 = _bad(bad, t, tlid, event, link, unhandled, harmless[link])
                 work.append((g2, rest + more, bad2, count + 1))
         return out
+
+    def assumes(self) -> tuple[str, ...]:
+        """What the model assumes beyond what it tracks, anywhere (report rule 4)."""
+        out: list[str] = []
+        if any(space.free_guards for space in self.spaces):
+            out.append(UNTRACKED)
+        if any(space.chart.deferred for space in self.spaces):
+            out.append(DEFERRED)
+        return tuple(out)
 
     def offered(self, s: Stimulus, g: int) -> bool:
         """Whether ``s``'s ``when`` (if it has one) holds in ``g``. The search's inner

@@ -34,7 +34,17 @@ from statectl.kernel.semantics.eventview import EventView
 if TYPE_CHECKING:
     from statectl.run.runtime import Subject
 
-__all__ = ["FOREIGN_IN", "bind_cross_guards", "foreign_leaf", "under_link"]
+__all__ = [
+    "FOREIGN_IN",
+    "UNTRACKED",
+    "assumptions",
+    "bind_cross_guards",
+    "foreign_leaf",
+    "under_link",
+]
+
+#: What a free choice over data assumes (``Delivery.assumed``; the report names it).
+UNTRACKED = "a free choice over data verify does not track"
 
 #: ``In('device.State')`` as the explorer writes a free guard part.
 FOREIGN_IN = re.compile(r"^In\((['\"])([A-Za-z_][A-Za-z0-9_]*)\.(.+)\1\)$")
@@ -88,6 +98,18 @@ def under_link(space: LocalSpace, lid: int, o: Outcome, event: str, data: Any) -
         if actual is not value:
             return None
     return o
+
+
+def assumptions(space: LocalSpace, o: Outcome, data_sent: bool) -> tuple[str, ...]:
+    """What outcome ``o`` assumes beyond the model: its own (a deferred release) and a free
+    choice over untracked data, unless the cell decides it (another device's state, or
+    the data a link sends: ``data_sent``)."""
+    tracked = frozenset(k for k, v in space.data.items() if v is not None)
+    free = any(
+        foreign_leaf(leaf) is None and not (data_sent and _decidable(leaf, tracked) is not None)
+        for leaf, _ in o.choices
+    )
+    return (*o.assumed, UNTRACKED) if free else o.assumed
 
 
 @dataclass(frozen=True, slots=True)

@@ -24,10 +24,12 @@ from statectl.kernel.semantics import Snapshot
 if TYPE_CHECKING:
     from statectl.cell.explore.local import LocalSpace, Outcome
 
-__all__ = ["MAX_RELEASED", "released"]
+__all__ = ["DEFERRED", "MAX_RELEASED", "released"]
 
 #: Distinct deferred events explored as released together after one step, at most.
 MAX_RELEASED = 3
+#: What a released outcome assumes (``Outcome.assumed``; the report names it).
+DEFERRED = "events the device may have kept (deferred) released at once"
 
 
 def _deferring(space: LocalSpace, snap: Snapshot) -> tuple[str, ...]:
@@ -81,6 +83,7 @@ def released(
                                     o.entered_order + r.entered_order,
                                     o.notifies + r.notifies,
                                     o.choices + r.choices,
+                                    assumed=(DEFERRED,),
                                 )
                             )
                     paths = nxt

@@ -79,6 +79,9 @@ class Outcome:
     failure: str = ""  # a GUARD_ERROR step: the guard, its row and why it raised
     #: the device's own report, ignored by its state, that settled a pending call
     settles: bool = False
+    #: what verify assumed to take this way, beyond what it tracks ("deferred": kept
+    #: events released, explore/deferred.py); empty: a step the device surely can take
+    assumed: tuple[str, ...] = ()
 
     @property
     def handled(self) -> bool:

@@ -8,6 +8,12 @@ Rules:
    failed; a bounded search that found nothing is ``incomplete``.
 3. Every trace starts in the initial global state and is as short as any trace
    to its state (breadth-first order).
+4. Where verify over-approximates (free choices over data it does not track, kept
+   events released beyond what a device keeps), a trace that takes such a way is
+   marked "may not be reproducible" with what it assumes, and so is a failing
+   verdict all of whose counterexamples do; a deadlock or recovery verdict that
+   holds on a model with such ways is marked "over-approximated" (an assumed way
+   on may hide a real dead end). Other verdicts that hold are sound as they are.
 """
 
 from __future__ import annotations
@@ -52,6 +58,10 @@ class TraceStep:
     def choices(self) -> tuple[tuple[str, bool], ...]:
         return tuple(c for d in self.deliveries for c in d.choices)
 
+    @property
+    def assumed(self) -> tuple[str, ...]:
+        return tuple(dict.fromkeys(a for d in self.deliveries for a in d.assumed))
+
     def to_json(self) -> dict[str, Any]:
         return {
             "source": self.kind.value,
@@ -87,6 +97,11 @@ class Trace:
     @property
     def end(self) -> tuple[str, ...]:
         return self.steps[-1].state if self.steps else self.start
+
+    @property
+    def assumed(self) -> tuple[str, ...]:
+        """What the trace assumes beyond the model: non-empty, it may not be reproducible."""
+        return tuple(dict.fromkeys(a for s in self.steps for a in s.assumed))
 
     def to_json(self) -> dict[str, Any]:
         """The replay file format too: ``statectl run CELL --replay`` reads ``steps``."""
@@ -142,7 +157,13 @@ class Finding:
             "failure": self.failure,
             "states": self.count,
             "trace": self.trace.to_json() if self.trace is not None else None,
+            **({"reproducible": False, "assumes": list(self.assumed)} if self.assumed else {}),
         }
+
+    @property
+    def assumed(self) -> tuple[str, ...]:
+        """What the counterexample assumes beyond the model (empty: a run the devices make)."""
+        return self.trace.assumed if self.trace is not None else ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -183,6 +204,8 @@ class Report:
     unanticipated_states: int = 0
     free_guards: tuple[FreeGuard, ...] = ()
     properties: tuple[tuple[str, str], ...] = field(default=())  # (property, verdict)
+    #: (property, what its verdict relies on beyond the model): rule 4
+    relies: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
     @property
     def failures(self) -> tuple[Finding, ...]:
@@ -199,6 +222,7 @@ class Report:
         return self.states / self.seconds if self.seconds > 0 else float(self.states)
 
     def to_json(self) -> dict[str, Any]:
+        relies = {p: () for p, _ in self.properties} | dict(self.relies)
         return {
             "cell": self.cell,
             "path": self.path,
@@ -211,7 +235,10 @@ class Report:
             "seconds": round(self.seconds, 3),
             "states_per_second": round(self.rate),
             "peak_bytes": self.peak_bytes,
-            "properties": [{"property": p, "verdict": v} for p, v in self.properties],
+            "properties": [
+                {"property": p, "verdict": v, **({"assumes": list(r)} if (r := relies[p]) else {})}
+                for p, v in self.properties
+            ],
             "findings": [f.to_json() for f in self.findings],
             "unanticipated_states": self.unanticipated_states,
             "unanticipated": [u.to_json() for u in self.unanticipated],
@@ -247,14 +274,18 @@ class Report:
                 f"free choice: {g.device} guard {g.guard!r} ({g.where}) reads data the "
                 f"model does not track ({parts}); both outcomes explored"
             )
+        relies = dict(self.relies)
         for p, v in self.properties:
-            out.append(f"  {v.upper():<10} {p}")
+            why = relies.get(p, ())
+            note = f" [{'over-approximated' if v == 'holds' else 'may not be reproducible'}: "
+            out.append(f"  {v.upper():<10} {p}" + (note + "; ".join(why) + "]" if why else ""))
         for f in self.findings:
             head = "FAIL" if f.failure else "warning"
             more = f" ({f.count:,} states)" if f.count > 1 else ""
             out.append(f"{head} {f.kind.value} {f.name}: {f.message}{more}")
             if f.trace is not None:
-                out.append(f"  shortest trace ({len(f.trace)} steps):")
+                maybe = f"; may not be reproducible: assumes {'; '.join(f.assumed)}"
+                out.append(f"  shortest trace ({len(f.trace)} steps{maybe if f.assumed else ''}):")
                 out.extend(f.trace.lines())
         if self.unanticipated:
             out.append(

@@ -421,6 +421,7 @@ def explore(
         unanticipated_states=unant_states,
         free_guards=tuple(g for sp in model.spaces for g in sp.free_guards),
         properties=tuple(properties),
+        relies=_relies(model, properties, findings),
     )
 
 
@@ -473,6 +474,38 @@ def _guard_errors(
             )
         )
     return out
+
+
+def _relies(
+    model: Composed, properties: list[tuple[str, str]], findings: list[Finding]
+) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    """Report rule 4: what each verdict relies on beyond the model, where it does."""
+    everywhere = model.assumes()
+    out: list[tuple[str, tuple[str, ...]]] = []
+    for text, verdict in properties:
+        mine = [f for f in findings if f.failure and _about(f, text)]
+        why: tuple[str, ...] = ()
+        if verdict == "fails" and mine and all(f.assumed for f in mine):
+            why = tuple(dict.fromkeys(a for f in mine for a in f.assumed))
+        elif verdict == "holds" and (text == "no deadlock" or text.startswith("recovery ")):
+            why = everywhere
+        if why:
+            out.append((text, why))
+    return tuple(out)
+
+
+def _about(f: Finding, text: str) -> bool:
+    """Whether finding ``f`` is a counterexample to the property line ``text``."""
+    if f.kind is Kind.DEADLOCK:
+        return text == "no deadlock"
+    if f.kind in (Kind.INVARIANT, Kind.RECOVERY):
+        return text.startswith(f"{f.kind.value} {f.name}:")
+    lines = {
+        Kind.UNHANDLED: "every link-delivered event is handled or ignored",
+        Kind.GUARD_ERROR: "no guard raises",
+        Kind.LIVELOCK: "no link livelock",
+    }
+    return lines.get(f.kind) == text
 
 
 def _recovery(
