@@ -13,7 +13,7 @@ Rules:
    target (when the link's guard held).
 3. ``--hypothesis`` for a cell writes a state machine that draws what the cell's
    environment may do now (inputs whose ``when`` holds, faults in monitored
-   states, completions a device handles), checks every device against the
+   states, completions of calls its twin has pending), checks every device against the
    kernel's cell after each step, and the cell's invariants after every step.
 """
 
@@ -272,7 +272,7 @@ _HYPOTHESIS = '''"""Cell {cell} under random environment sequences (statectl tes
 Cell: {source}
 Regenerate: statectl testgen {source} --hypothesis --out {out}
 Hypothesis draws what the cell's environment may do now (its inputs whose `when`
-holds, faults in monitored states, completions a device handles); after every step
+holds, faults in monitored states, completions of calls its twin has pending); after every step
 each device must be where the kernel's cell puts it, and every invariant of the
 cell must hold. A failure shrinks to a short sequence. The devices run on their
 simulated twins unless a conftest.py overrides ``statectl_cell_new_drivers``; see

@@ -220,7 +220,9 @@ class CellUnderTest:
 
         A ``send`` input when its ``when`` holds; a ``fault`` while its device is in a
         state that requires monitoring; a device's completion event while its state
-        handles it (unless the cell says ``completions: off``).
+        handles it (unless the cell says ``completions: off``) and, on a simulated twin,
+        only while a call it completes is pending (or its row says ``unasked``): the
+        twin's model, :mod:`statectl.kernel.semantics.calls`, which verify assumes too.
         """
         active = {n: self.system.subjects[n].configuration for n in self.devices}
         out: list[tuple[str, str]] = []
@@ -244,6 +246,11 @@ class CellUnderTest:
                     d = s.chart.event(event)
                     if d is None or d.kind is not EventKind.COMPLETION:
                         continue
+                    twin = self.drivers.get(name)
+                    if isinstance(twin, SimTwin) and not twin.calls.completes(
+                        twin.pending_calls, event
+                    ):
+                        continue
                     if kernel_step(s.machine, snap, event, s.data).handled:
                         out.append((name, event))
         return out
@@ -260,7 +267,11 @@ class CellUnderTest:
         self.sent.append(f"{device}: {event}")
         if data is None:
             data = self.event_data.get(device, {}).get(event)
-        self.system.post(device, event, data)
+        twin = self.drivers.get(device)
+        if not (isinstance(twin, SimTwin) and twin.would_report(event)):
+            self.system.post(device, event, data)
+        elif not twin.complete_now(event):  # the twin's own report settles its call
+            self.system.post(device, event, data)
         self.system.drain()
         if self.strict:
             missed = [
