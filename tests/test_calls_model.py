@@ -223,3 +223,22 @@ def test_verdicts_that_rely_on_an_over_approximation_say_so(tmp_path: Path) -> N
     assert doc["properties"][0]["assumes"] == list(finding.assumed)
     clean = explore(load_cell_or_raise(GRIPPER))
     assert clean.relies == () and "over-approximated" not in clean.to_text()
+
+
+def test_a_completion_that_answers_no_call_is_c422(tmp_path: Path) -> None:
+    """Kick opens the door with no call, and Swung shut names no API: C422 (warning),
+    unless the row says unasked: yes."""
+    from statectl.front.rules import check_paths
+
+    path = tmp_path / "door.yaml"
+    path.write_text((DOOR % "").replace(', api: Swing}\n"""', "}"), encoding="utf-8")
+    text = (DOOR % "").replace("kind: completion, api: Swing", "kind: completion")
+    path.write_text(text, encoding="utf-8")
+    found = [d for d in check_paths([str(path)]) if d.code == "C422"]
+    assert [(d.severity.value, d.where.line) for d in found] == [("warning", 8)]
+    assert "it names no API" in found[0].message
+    unasked = text.replace("kind: completion", "kind: completion, unasked: yes")
+    path.write_text(unasked, encoding="utf-8")
+    assert [d for d in check_paths([str(path)]) if d.code == "C422"] == []
+    path.write_text(DOOR % "", encoding="utf-8")  # Push calls Swing(): answered
+    assert [d for d in check_paths([str(path)]) if d.code == "C422"] == []

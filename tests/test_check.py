@@ -277,7 +277,7 @@ def test_codes_table_lists_every_code() -> None:
     """CODES documents exactly the C4 codes: the rules' (C401-C411, C413, C418-C421),
     verify's (C412) and check's file kinds (C415, C416)."""
     codes = [*(f"C4{i:02d}" for i in range(1, 14)), "C415", "C416", "C418", "C419"]
-    codes += ["C420", "C421"]
+    codes += ["C420", "C421", "C422"]
     assert sorted(CODES) == codes
 
 

@@ -299,6 +299,12 @@ ALL: tuple[Code, ...] = (
         _check("c421--a-guard-names-an-event-the-device-does-not-have-error"),
     ),
     _c(
+        "C422",
+        _W,
+        "a completion answers no call: the twin never reports it, verify never offers it",
+        _check("c422--a-completion-that-answers-no-call-warning"),
+    ),
+    _c(
         "C413",
         _E,
         "a recovery rule's data does not fit the fields its event declares",

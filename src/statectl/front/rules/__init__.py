@@ -30,6 +30,8 @@ C419 warning  Every row of a state for one event is guarded and the guards are n
 C420 error    A guard's ``In('X')`` or ``previous == 'X'`` names a state the device does
               not have (statectl.front.rules.names).
 C421 error    A guard compares ``_event.name`` with an event the device does not have.
+C422 warning  A completion answers no call (statectl.front.rules.completions): the twin
+              never reports it and verify never offers it, unless it is ``unasked``.
 
 Undefined guard names and other table errors are the builder's (X3xx, T/B codes);
 :func:`check_paths` reports those too, then checks each chart that built, and its
@@ -44,6 +46,7 @@ from dataclasses import dataclass
 from statectl.front.builder.build import build
 from statectl.front.profiles import PROFILES, find
 from statectl.front.recovery import check_recovery
+from statectl.front.rules.completions import check_completions
 from statectl.front.rules.guards import guards_cover, guards_exclusive
 from statectl.front.rules.names import check_guard_names
 from statectl.front.rules.timing import check_deferred, check_timeouts, check_triggers
@@ -490,6 +493,7 @@ _RULES: tuple[Callable[[_Structure], Iterator[Diagnostic]], ...] = (
     check_triggers,
     _check_cover,  # C419
     lambda st: check_guard_names(st.chart),  # C420, C421 (rules/names.py)
+    lambda st: check_completions(st.chart),  # C422 (rules/completions.py)
 )
 
 
