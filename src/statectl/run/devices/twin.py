@@ -24,6 +24,11 @@ Rules:
 5. Notes (why nothing was reported, what was superseded) are kept in
    :attr:`SimTwin.notes`, go to the ``statectl.run.devices.twin`` logger and to
    :attr:`SimTwin.on_note` when a host sets it.
+6. Rules 2 and 3 are not decided here: :mod:`statectl.kernel.semantics.calls`
+   decides them, the one model ``statectl verify`` assumes too
+   (:attr:`SimTwin.calls`); :attr:`SimTwin.pending_calls` are the calls as the
+   explorer keeps them, and :meth:`SimTwin.complete_now` reports one at once
+   (``run --replay`` plays a trace's completion steps with it).
 """
 
 from __future__ import annotations
