@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 from hypothesis import HealthCheck, given, settings
@@ -11,7 +14,8 @@ from statectl.cell.explore import LocalSpace, explore
 from statectl.cell.explore.replay import ReplayStep, run_cell
 from statectl.cell.model import InputKind, load_cell_or_raise
 from statectl.front.builder.build import build
-from statectl.front.tables import DeviceTables, EventRow, StateRow
+from statectl.front.rules import check_paths
+from statectl.front.tables import DeviceTables, EventRow, StateRow, load
 from statectl.kernel.model import Chart, ControlKind, EventKind
 from statectl.kernel.semantics import Snapshot
 from statectl.run.devices.twin import SimTwin
@@ -179,8 +183,6 @@ def test_an_unasked_completion_is_offered_without_a_call(tmp_path: Path) -> None
 
 def test_bad_unasked_cells_are_t125(tmp_path: Path) -> None:
     """A value other than yes/no, or unasked on a command, is T125 at its row."""
-    from statectl.front.tables import load
-
     bad = DOOR.replace("kind: command, api: Swing}", "kind: command, api: Swing, unasked: yes}")
     for text in (DOOR % ", unasked: maybe", bad % ""):
         path = tmp_path / "door.yaml"
@@ -228,8 +230,6 @@ def test_verdicts_that_rely_on_an_over_approximation_say_so(tmp_path: Path) -> N
 def test_a_completion_that_answers_no_call_is_c422(tmp_path: Path) -> None:
     """Kick opens the door with no call, and Swung shut names no API: C422 (warning),
     unless the row says unasked: yes."""
-    from statectl.front.rules import check_paths
-
     path = tmp_path / "door.yaml"
     path.write_text((DOOR % "").replace(', api: Swing}\n"""', "}"), encoding="utf-8")
     text = (DOOR % "").replace("kind: completion, api: Swing", "kind: completion")
@@ -242,3 +242,26 @@ def test_a_completion_that_answers_no_call_is_c422(tmp_path: Path) -> None:
     assert [d for d in check_paths([str(path)]) if d.code == "C422"] == []
     path.write_text(DOOR % "", encoding="utf-8")  # Push calls Swing(): answered
     assert [d for d in check_paths([str(path)]) if d.code == "C422"] == []
+
+
+def test_run_replay_exits_1_naming_the_step(tmp_path: Path) -> None:
+    """``statectl run CELL --replay TRACE`` with the old impossible trace exits 1 and
+    names step 3 (it exited 0 after injecting the completion)."""
+    trace = tmp_path / "old.trace.yaml"
+    trace.write_text(
+        "steps:\n"
+        "  - {source: environment, to: motor, event: Movement}\n"
+        "  - {source: completion, to: motor, event: Movement completion}\n"
+        "  - {source: completion, to: motor, event: Error completion}\n",
+        encoding="utf-8",
+    )
+    src = str(Path(__file__).parents[1] / "src")
+    done = subprocess.run(
+        [sys.executable, "-m", "statectl", "run", str(GRIPPER), "--replay", str(trace)],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": src},
+        timeout=120,
+    )
+    assert done.returncode == 1, done.stdout[-2000:] + done.stderr[-2000:]
+    assert "diverged: step 3: motor's twin would not report Error completion" in done.stdout
