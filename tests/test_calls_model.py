@@ -265,3 +265,31 @@ def test_run_replay_exits_1_naming_the_step(tmp_path: Path) -> None:
     )
     assert done.returncode == 1, done.stdout[-2000:] + done.stderr[-2000:]
     assert "diverged: step 3: motor's twin would not report Error completion" in done.stdout
+
+
+ARM = """\
+device: Arm
+states:
+  - {state: Work, control: default}
+  - {state: Reaching, parent: Work, control: [default, monitoring required]}
+  - {state: Stopped}
+  - {state: Dropped}
+events:
+  - {event: Overload, old: Reaching, new: Stopped, kind: fault, api: Halt}
+  - {event: Power loss, old: Work, new: Dropped, kind: fault, api: Halt}
+"""
+
+
+def test_a_fault_is_offered_where_an_active_monitor_raises_it(tmp_path: Path) -> None:
+    """Reaching's monitor raises Overload (a row leaving Reaching), not Power loss (a row
+    of its superstate, which no monitor watches): verify offers what the runtime's
+    monitors raise, so Dropped is never reached."""
+    (tmp_path / "arm.yaml").write_text(ARM, encoding="utf-8")
+    (tmp_path / "cell.yaml").write_text(
+        "cell: A\ndevices:\n  arm: arm.yaml\n"
+        "environment:\n  - {fault: Overload, to: arm}\n  - {fault: Power loss, to: arm}\n",
+        encoding="utf-8",
+    )
+    report = explore(load_cell_or_raise(tmp_path / "cell.yaml"))
+    unreached = [f.name for f in report.findings if f.kind.value == "unreached state"]
+    assert unreached == ["arm.Dropped"]

@@ -10,8 +10,9 @@ Rules:
    events are delivered first in, first out, each one a device step that may
    fire links in turn, until nothing is queued (run-to-completion of the cell).
 3. A stimulus is *enabled* in a global state when its ``when`` holds, it is a
-   fault and the device is in a monitored state (or it is a command or a
-   completion), and the device has a row for it there; it *happens* when some
+   fault an active monitor of the device raises (``observers.extract``, as the
+   runtime's monitors; or it is a command or a completion), and the device has a
+   row for it there; it *happens* when some
    outcome handles it. Free choices give several successors. A completion is the
    device's own report (``REPORT``): offered only while an API call it completes
    is pending on the device (:mod:`statectl.kernel.semantics.calls`, the twin's
@@ -222,8 +223,8 @@ class Composed:
     def enabled_locally(self, s: Stimulus, lid: int) -> bool:
         """Rule 3 without ``when``: the device side of whether ``s`` can be offered."""
         space = self.spaces[s.device]
-        if s.kind is InputKind.FAULT and not space.monitored[lid]:
-            return False
+        if s.kind is InputKind.FAULT and s.event not in space.raises[lid]:
+            return False  # no active monitor raises it (the runtime's monitors: observers)
         if s.kind is InputKind.COMPLETION:
             return any(o.happens for o in self.outcomes(s.device, lid, s.event, REPORT))
         return True

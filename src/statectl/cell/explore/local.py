@@ -42,6 +42,7 @@ from typing import Any
 
 from statectl.cell.explore.data import MAX_LOCAL_STATES, DataTracker
 from statectl.cell.explore.deferred import released
+from statectl.front.observers import extract
 from statectl.kernel.errors import Location
 from statectl.kernel.expr import Expression
 from statectl.kernel.model import Chart, ControlKind, EventKind, Notify, Transition
@@ -254,6 +255,13 @@ class LocalSpace:
         self.initial: tuple[Outcome, ...] = self._close()
         self.monitored: tuple[bool, ...] = tuple(
             any(ControlKind.MONITORING in chart.state(s).controls for s in snap.active)
+            for snap in self.snapshots
+        )
+        # the faults the active monitors raise: the runtime's monitors, from one definition
+        # (statectl.front.observers.extract, observers rule 6)
+        raising = {m.state: frozenset(m.raises) for m in extract(chart).monitors}
+        self.raises: tuple[frozenset[str], ...] = tuple(
+            frozenset().union(*(raising.get(s, frozenset()) for s in snap.active))
             for snap in self.snapshots
         )
         order = self.machine.order

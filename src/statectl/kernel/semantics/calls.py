@@ -22,8 +22,8 @@ Rules:
    completion-kind event the device did not report (a link, the environment)
    settles nothing. An event row marked ``unasked`` may be reported with no call
    pending (the device raises it by itself).
-5. A state marked ``monitoring required`` has a monitor that raises the
-   ``fault`` events of the transitions leaving it.
+Which faults a monitored state raises is :func:`statectl.front.observers.extract`'s
+answer (its monitors), which the runtime's monitors and the explorer both read.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from statectl.kernel.model import Chart, ControlKind, EventKind, Notify, StateKind, Transition
+from statectl.kernel.model import Chart, EventKind, Notify, StateKind, Transition
 from statectl.kernel.semantics.algorithm import entry_set
 from statectl.kernel.semantics.machine import Machine, structural
 
@@ -211,18 +211,3 @@ class DeviceCalls:
         return completion in self.unasked or any(
             completion in self.call(*key).completions for key in pending
         )
-
-    # -- rule 5 ---------------------------------------------------------------------------
-
-    def monitor_faults(self, state: str) -> tuple[str, ...]:
-        """The fault events a monitored ``state``'s monitor raises (none if unmonitored)."""
-        chart = self.chart
-        if not chart.has_state(state) or ControlKind.MONITORING not in chart.state(state).controls:
-            return ()
-        out: list[str] = []
-        for t in chart.transitions_from(state):
-            for ev in t.events:
-                edef = chart.event(ev)
-                if edef is not None and edef.kind is EventKind.FAULT and ev not in out:
-                    out.append(ev)
-        return tuple(out)
