@@ -13,17 +13,21 @@ Rules:
 from __future__ import annotations
 
 import enum
+import importlib
 from collections.abc import Iterable
 from dataclasses import dataclass
+from types import ModuleType
 
 __all__ = [
     "Diagnostic",
     "DiagnosticError",
     "Location",
+    "MissingExtra",
     "Severity",
     "StatectlError",
     "UnhandledEventError",
     "has_errors",
+    "require",
 ]
 
 
@@ -101,3 +105,26 @@ class DiagnosticError(StatectlError):
 
 class UnhandledEventError(StatectlError):
     """An event the active configuration neither handles nor ignores (policy ``error``)."""
+
+
+class MissingExtra(StatectlError):
+    """A feature whose optional extra is not installed: a usage error (exit 2), in one line.
+
+    The one wording of "install this" for every channel: what needed it, the module that
+    is missing and the extra (pyproject.toml) that brings it.
+    """
+
+    def __init__(self, what: str, module: str, extra: str) -> None:
+        self.what, self.module, self.extra = what, module, extra
+        super().__init__(
+            f"{what} needs {module}, which is not installed: pip install 'statectl[{extra}]' "
+            "(or 'statectl[all]' for every extra)"
+        )
+
+
+def require(module: str, extra: str, what: str) -> ModuleType:
+    """Import ``module`` for ``what``, or raise :class:`MissingExtra` naming ``extra``."""
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise MissingExtra(what, module, extra) from None

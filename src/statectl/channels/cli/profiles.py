@@ -13,6 +13,8 @@ import json
 from pathlib import Path
 from typing import Any, TextIO
 
+from statectl.channels.cli.outputs import output, wrote
+
 __all__ = ["cmd_new", "cmd_profiles", "register"]
 
 OK, PROBLEMS, USAGE = 0, 1, 2
@@ -73,9 +75,10 @@ def cmd_new(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
             "(choose another NAME or --out DIR, or remove the file)\n"
         )
         return PROBLEMS
-    write_files(dict(targets), make_dirs=True)
+    with output(args.out, directory=True):  # cli/outputs.py: the one output rule
+        write_files(dict(targets))
     for target in targets:
-        out.write(f"wrote {target}\n")
+        wrote(out, target)
     first = next(iter(targets))
     out.write(f"next: statectl check {first}\n")
     return OK
