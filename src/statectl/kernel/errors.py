@@ -12,9 +12,10 @@ Rules:
 
 from __future__ import annotations
 
+import difflib
 import enum
 import importlib
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from types import ModuleType
 
@@ -26,6 +27,7 @@ __all__ = [
     "Severity",
     "StatectlError",
     "UnhandledEventError",
+    "did_you_mean",
     "has_errors",
     "require",
 ]
@@ -89,6 +91,16 @@ class Diagnostic:
             "message": self.message,
             "hint": self.hint,
         }
+
+
+def did_you_mean(word: str, choices: Sequence[str]) -> str:
+    """``"did you mean 'X'? "`` for the choice closest to a mistyped ``word``, else ``""``.
+
+    The one suggestion every lookup by name makes (columns, kinds, profiles in ``check``;
+    events, devices, nodes, drivers in ``run``, ``node`` and the dashboard).
+    """
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
+    return f"did you mean {close[0]!r}? " if close else ""
 
 
 def has_errors(diagnostics: Iterable[Diagnostic]) -> bool:

@@ -37,7 +37,7 @@ from typing import Any, TextIO
 
 from statectl.channels.cli.commands import PROBLEMS, USAGE
 from statectl.channels.cli.problems import Problems, verdict
-from statectl.kernel.errors import DiagnosticError, StatectlError
+from statectl.kernel.errors import DiagnosticError, StatectlError, did_you_mean
 
 __all__ = ["dashboard_main", "node_main", "register"]
 
@@ -261,7 +261,10 @@ def node_main(
         return PROBLEMS
     names = [n.name for n in cell.nodes.nodes]
     if node not in names:
-        err.write(f"statectl node: the cell has no node {node!r}; nodes: {', '.join(names)}\n")
+        err.write(
+            f"statectl node: the cell has no node {node!r}; {did_you_mean(node, names)}"
+            f"nodes: {', '.join(names)}\n"
+        )
         return USAGE
     mine = cell.nodes.node(node).devices
     devices = tuple(d for d in devices if d.name in mine)

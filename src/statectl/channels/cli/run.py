@@ -83,7 +83,13 @@ from statectl.channels.cli.run_journal import (
 )
 from statectl.channels.cli.settle import unsettled_note
 from statectl.channels.cli.steps import StepLog
-from statectl.kernel.errors import DiagnosticError, MissingExtra, Severity, StatectlError
+from statectl.kernel.errors import (
+    DiagnosticError,
+    MissingExtra,
+    Severity,
+    StatectlError,
+    did_you_mean,
+)
 from statectl.run.commands import Origin
 from statectl.run.devices import (
     MIN_TOKEN,
@@ -221,6 +227,9 @@ def _feed(
                     steps.advance(number, parsed)
                 continue
             device, event, data = parsed
+            unknown = _unknown_event(system, device, event)
+            if unknown is not None:  # posted still: the trace and the exit status say it too
+                err.write(f"line {number}: {unknown}\n")
             if batch and early is not None and system.work_pending():
                 early.append(number)
             ticket = system.post(device, event, data, origin=STDIN)
@@ -242,6 +251,19 @@ def _feed(
                 problems.bad_line()
             if steps is not None:
                 steps.error(number, str(exc))
+
+
+def _unknown_event(system: System, device: str | None, event: str) -> str | None:
+    """An event the device's chart does not know, with the name it most likely meant."""
+    try:
+        name = system.device(device)
+    except StatectlError:
+        return None  # no such device: post says so
+    names = system.subjects[name].chart.event_names
+    if event in names:
+        return None
+    maybe = did_you_mean(event, names)
+    return f"{name} has no event {event!r}; {maybe}its events: {', '.join(names)}"
 
 
 def _load_cell(path: str, err: TextIO, journalled: bool) -> tuple[Cell, tuple[DeviceSetup, ...]]:
@@ -421,6 +443,7 @@ def run(
                 token=token,
                 limits=limits,
                 origin=Origin("dashboard", "token"),  # its token is checked before it posts
+                token_from=token_from,
             )
             url = server.start(host, port)
         if opcua is not None:
