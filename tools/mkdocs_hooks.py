@@ -72,26 +72,29 @@ def cli_page() -> str:
         "[one rule](../outputs.md).",
         "",
     ]
-    for name, sub in _subcommands(parser, "statectl"):
-        lines += [f"## `{name}`", "", *_usage(sub), ""]
+    for name, summary, sub in _subcommands(parser, "statectl"):
+        lines += [f"## `{name}`", "", *_usage(sub, summary), ""]
     return "\n".join(lines)
 
 
 def _subcommands(
     parser: argparse.ArgumentParser, prefix: str
-) -> list[tuple[str, argparse.ArgumentParser]]:
-    """``(statectl journal show, parser)`` for every leaf command, depth first."""
-    found: list[tuple[str, argparse.ArgumentParser]] = []
+) -> list[tuple[str, str, argparse.ArgumentParser]]:
+    """``(statectl journal show, its help line, parser)`` for every leaf command."""
+    found: list[tuple[str, str, argparse.ArgumentParser]] = []
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
+            helps = {a.dest: a.help or "" for a in action._choices_actions}
             for name, sub in action.choices.items():
-                found += _subcommands(sub, f"{prefix} {name}") or [(f"{prefix} {name}", sub)]
+                here = f"{prefix} {name}"
+                found += _subcommands(sub, here) or [(here, helps.get(name, ""), sub)]
     return found
 
 
-def _usage(parser: argparse.ArgumentParser) -> list[str]:
-    """The command's description, usage line and one row per argument."""
-    lines = [parser.description or "", "", "```text", parser.format_usage().strip(), "```", ""]
+def _usage(parser: argparse.ArgumentParser, summary: str) -> list[str]:
+    """The command's description (else its help line), usage line and its arguments."""
+    about = parser.description or (summary[:1].upper() + summary[1:] + "." if summary else "")
+    lines = [about, "", "```text", parser.format_usage().strip(), "```", ""]
     rows = ["| argument | what it does |", "|---|---|"]
     for a in parser._actions:
         if isinstance(a, argparse._HelpAction) or a.help == argparse.SUPPRESS:
@@ -100,7 +103,10 @@ def _usage(parser: argparse.ArgumentParser) -> list[str]:
         if a.choices and not isinstance(a, argparse._SubParsersAction):
             flag += " {" + ",".join(map(str, a.choices)) + "}"
         default = a.default not in (None, False, argparse.SUPPRESS) and a.option_strings
-        text = (a.help or "") + (f" (default: {a.default})" if default else "")
+        positional = "optional" if a.nargs in ("?", "*") else "required"
+        text = (a.help or ("" if a.option_strings else positional)) + (
+            f" (default: {a.default})" if default else ""
+        )
         rows.append(f"| `{_cell(flag)}` | {_cell(text)} |")
     return [*lines, *rows] if len(rows) > 2 else lines
 
