@@ -69,6 +69,22 @@ def test_a_missing_extra_is_one_line_and_exit_2(
     assert done.stdout == "" and list(tmp_path.iterdir()) == []
 
 
+def test_a_config_section_needing_a_missing_extra_is_exit_2(tmp_path: Path) -> None:
+    """A run config's opcua: section (no --opcua flag) without asyncua: one line, exit 2."""
+    config = tmp_path / "run.yaml"
+    config.write_text("opcua:\n  endpoint: opc.tcp://127.0.0.1:48499\n", encoding="utf-8")
+    done = subprocess.run(
+        [sys.executable, "-c", RUNNER, "asyncua", "run", MOTOR, "--config", str(config)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        stdin=subprocess.DEVNULL,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+        check=False,
+    )
+    assert (done.returncode, "pip install 'statectl[opcua]'" in done.stderr) == (2, True), done
+
+
 def test_all_installs_every_extra_a_command_names() -> None:
     """``statectl[all]`` holds every extra the commands name, and ``test`` holds pytest."""
     from statectl.channels.cli.extras import MODULES

@@ -498,8 +498,8 @@ def run(
         _final_states(system, out, cell is None, journal)
         problems.partway = _partway(drivers, err)
         return verdict(problems, err)
-    except BrokenPipeError:
-        raise  # the reader of the trace went away: the command line ends quietly
+    except (BrokenPipeError, MissingExtra):
+        raise  # the reader went away: quietly; an extra missing (a config's section): exit 2
     except (StatectlError, OSError) as exc:
         failed = str(exc)
         err.write(f"statectl run: {exc}\n")
