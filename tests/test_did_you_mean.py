@@ -62,3 +62,15 @@ def test_a_live_run_prints_the_final_states_as_a_batch_run_does(tmp_path: Path) 
     code = run(MOTOR, realtime=True, events=io.StringIO("Movement {amount: 0}\n"), out=out, err=err)
     assert code == 0, err.getvalue()
     assert "final state " in out.getvalue(), out.getvalue()
+
+
+def test_new_and_journal_lookups_suggest_too(tmp_path: Path) -> None:
+    """`new --profile` and `journal show --device` name the closest too."""
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["new", "X", "--profile", "cia40", "--out", str(tmp_path)], out, err) == 2
+    assert "did you mean 'cia402'?" in err.getvalue()
+    db = tmp_path / "run.db"
+    main(["run", MOTOR, "--journal", str(db)], io.StringIO(), io.StringIO())
+    err = io.StringIO()
+    assert main(["journal", "show", str(db), "--device", "Motr"], io.StringIO(), err) == 1
+    assert "did you mean 'Motor'?" in err.getvalue()

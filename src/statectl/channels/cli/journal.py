@@ -18,7 +18,7 @@ from typing import Any, TextIO
 
 from statectl.channels.cli.commands import OK, PROBLEMS, USAGE
 from statectl.channels.cli.outputs import output, wrote
-from statectl.kernel.errors import DiagnosticError, StatectlError
+from statectl.kernel.errors import DiagnosticError, StatectlError, did_you_mean
 from statectl.kernel.model import Chart
 from statectl.run.journal import (
     JournalError,
@@ -91,7 +91,7 @@ def _unknown_device(
     found = ", ".join(names) or "none"
     err.write(
         f"statectl journal {command}: no device {device!r} in the journal; "
-        f"devices journalled: {found}\n"
+        f"{did_you_mean(device, names)}devices journalled: {found}\n"
     )
     return True
 
