@@ -42,6 +42,7 @@ CASES = [
     ("psycopg", ["journal", "ship", "{tmp}/run.db", "--to", "postgresql://h/db"], "postgres"),
     ("psycopg", ["journal", "show", "postgresql://h/db"], "postgres"),
     ("hypothesis", ["testgen", MOTOR, "--hypothesis", "--out", "{tmp}/tests"], "test"),
+    ("pygls", ["lsp"], "lsp"),
 ]
 
 

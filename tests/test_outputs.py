@@ -35,6 +35,7 @@ WRITERS = [
     (["verify", str(CELL), "--export", "promela", "-o", "{tmp}/p/c.pml"], ["p/c.pml"]),
     (["verify", str(CELL), "--export", "promela", "-o", "{tmp}/p/"], ["p/cell.pml"]),
     (["new", "Axis", "--profile", "motor", "--out", "{tmp}/n/e/w"], ["n/e/w/Axis.yaml"]),
+    (["schema", "cell", "--out", "{tmp}/schemas/"], ["schemas/cell.schema.json"]),
 ]
 
 

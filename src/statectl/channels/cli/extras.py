@@ -26,6 +26,7 @@ MODULES: dict[str, tuple[str, ...]] = {
     "postgres": ("psycopg",),
     "opcua": ("asyncua",),
     "dashboard": ("aiohttp",),
+    "lsp": ("pygls",),
     "test": ("hypothesis",),
 }
 
@@ -49,6 +50,8 @@ def needed(args: argparse.Namespace) -> Iterator[tuple[str, str]]:
         sub = args.journal_command
         if sub == "ship" or str(getattr(args, "db", "")).startswith("postgresql://"):
             yield "PostgreSQL", "postgres"
+    if command == "lsp":
+        yield "the language server", "lsp"
     if command == "testgen" and getattr(args, "hypothesis", False):
         yield "--hypothesis (and the module it writes)", "test"
 

@@ -72,7 +72,7 @@ from statectl.channels.distributed.resume import EPOCH_KEY, read_links
 from statectl.channels.distributed.streams import Inbound, Outbound
 from statectl.channels.distributed.system import NodeSystem
 from statectl.channels.distributed.trust import carried, printable, session_config, shown
-from statectl.kernel.errors import StatectlError, did_you_mean
+from statectl.kernel.errors import StatectlError
 from statectl.kernel.semantics import Snapshot
 from statectl.run.commands import Origin
 
@@ -108,11 +108,8 @@ class Wire:
         try:
             self.me = self.nodes.node(node)
         except KeyError:
-            known = [n.name for n in self.nodes.nodes]
-            raise StatectlError(
-                f"the cell has no node {node!r}; {did_you_mean(node, known)}"
-                f"nodes: {', '.join(known)}"
-            ) from None
+            names = ", ".join(n.name for n in self.nodes.nodes)
+            raise StatectlError(f"the cell has no node {node!r}; nodes: {names}") from None
         self.system = system
         self.out = out
         self.keys = Keys(cell.name)
