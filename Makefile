@@ -1,4 +1,4 @@
-# One entry point per job; the README's quick start calls these two.
+# One entry point per job; the README's quick start calls demo and test (docs: the site).
 #
 # Both run in the project's own virtual environment, .venv, made on first use with
 # `python3 -m venv`: a stock Debian/Ubuntu Python refuses `pip install` outside a
@@ -14,7 +14,7 @@ endif
 VPY := $(VENV)/bin/python
 PIP := $(VPY) -m pip install -q --disable-pip-version-check
 
-.PHONY: demo test check install dev lint types unit venv
+.PHONY: demo test check install dev lint types unit venv docs
 
 demo: install
 	$(VPY) -m statectl demo
@@ -49,6 +49,10 @@ $(VENV)/.statectl-install: pyproject.toml | $(VPY)
 $(VENV)/.statectl-dev: pyproject.toml | $(VPY)
 	$(PIP) -e '.[dev]'
 	@touch $@ $(VENV)/.statectl-install
+
+# The docs site (mkdocs.yml): built into site/ with --strict; a broken link or anchor fails.
+docs: dev
+	NO_MKDOCS_2_WARNING=1 $(VPY) -m mkdocs build --strict
 
 lint:
 	$(VPY) -m ruff check .

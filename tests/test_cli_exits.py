@@ -48,8 +48,6 @@ CASES = [
     # (argv, stdin, exit code, text expected on stderr)
     (["codegen", str(MOTOR), "--out", "{file}"], "", 1, "T110"),
     (["codegen", str(MOTOR), "--out", "{file}/sub"], "", 1, "T110"),
-    (["render", str(MOTOR), "--out", "{tmp}/missing/x.mmd"], "", 1, "no such directory"),
-    (["render", str(MOTOR), "--out", "{tmp}"], "", 1, "is a directory"),
     (["scxml", "export", str(MOTOR), "--out", "{file}/x.scxml"], "", 1, "T110"),
     (["verify", str(BUGGY), "--traces", "{file}"], "", 1, "T110"),
     (["verify", str(CELL), "--export", "promela", "-o", "{file}/x.pml"], "", 1, "T110"),
@@ -92,6 +90,8 @@ LONG_NAMED = MOTOR.read_text(encoding="utf-8").replace("device: Motor", "device:
 BAD_FILES = [
     ("m.yaml", LONG_NAMED, ["codegen", "{input}", "--out", "out/cpp"], 1, "T110"),
     ("m.yaml", LONG_NAMED, ["testgen", "{input}", "--out", "out/tests"], 1, "cannot write"),
+    ("m.yaml", LONG_NAMED, ["render", "{input}", "--out", "out/diagrams/"], 1, "T110"),
+    ("m.yaml", LONG_NAMED, ["tables", "{input}", "--to", "csv", "--out", "out/csv/"], 1, "T108"),
     # (name, content of an input file in tmp, argv naming it as {input}, exit code, stderr says)
     ("t.json", "{\n", ["run", str(CELL), "--replay", "{input}"], 1, "t.json:2: T101"),
     ("t.json", "steps: 3\n", ["run", str(CELL), "--replay", "{input}"], 1, "'steps:' (a list)"),

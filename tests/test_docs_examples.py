@@ -31,11 +31,11 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCS = [*sorted((ROOT / "docs").glob("*.md")), ROOT / "README.md"]
+DOCS = [*sorted((ROOT / "docs").rglob("*.md")), ROOT / "README.md"]  # how-tos in docs/howto/
 FENCE = re.compile(r"^```python[^\n]*\n(.*?)^```[ \t]*$", re.MULTILINE | re.DOTALL)
 CONFTEST = re.compile(r"\A# conftest\.py for: statectl testgen (?P<args>[^\n]+)\n")
 #: Optional extras (pyproject.toml) a block may import; without them it is skipped.
-EXTRAS = ("asyncua", "aiohttp", "canopen", "can", "pymodbus", "psycopg", "hypothesis")
+EXTRAS = ("asyncua", "aiohttp", "canopen", "can", "pymodbus", "psycopg", "hypothesis", "zenoh")
 
 
 @dataclass(frozen=True)

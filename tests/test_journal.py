@@ -502,7 +502,8 @@ def test_a_device_the_journal_does_not_hold_is_an_error(
     out, err = io.StringIO(), io.StringIO()
     assert command(str(db), device="Motr", out=out, err=err) == 1
     assert out.getvalue() == ""
-    assert "no device 'Motr' in the journal; devices journalled: Motor" in err.getvalue()
+    said = "no device 'Motr' in the journal; did you mean 'Motor'? devices journalled: Motor"
+    assert said in err.getvalue()
 
 
 def test_a_line_of_bytes_that_are_not_utf8_is_a_bad_line_not_a_dead_journal(

@@ -641,12 +641,19 @@ def test_a_run_refused_before_it_starts_leaves_the_journal_as_it_was(
     assert snapshot_of(db) == before
 
 
-def test_a_journal_in_a_directory_that_does_not_exist_says_so(tmp_path: Path) -> None:
-    """`--journal nowhere/run.db`: exit 1 naming the missing directory and what to do, and
-    nothing made (SQLite's own words were 'unable to open database file')."""
+def test_a_journal_in_a_directory_that_does_not_exist_makes_it(tmp_path: Path) -> None:
+    """`--journal nowhere/run.db`: the missing directory is made (the output rule) and the
+    run journals there; it used to refuse, unlike codegen and testgen."""
     db = tmp_path / "nowhere" / "run.db"
     out, err = io.StringIO(), io.StringIO()
     code = run(str(MOTOR), journal=str(db), events=io.StringIO("Movement\n"), out=out, err=err)
-    said = err.getvalue()
-    assert (code, f"the directory {db.parent} does not exist" in said) == (1, True), said
-    assert (list(tmp_path.iterdir()), out.getvalue()) == ([], "")
+    assert (code, db.is_file()) == (0, True), err.getvalue()
+    assert f"wrote {db}" in out.getvalue()
+
+
+def test_a_journal_path_ending_in_a_slash_is_a_directory(tmp_path: Path) -> None:
+    """`--journal logs/`: the journal is logs/run.db, the directory made (the output rule)."""
+    out, err = io.StringIO(), io.StringIO()
+    logs = f"{tmp_path / 'logs'}/"
+    code = run(str(MOTOR), journal=logs, events=io.StringIO("Movement\n"), out=out, err=err)
+    assert (code, (tmp_path / "logs" / "run.db").is_file()) == (0, True), err.getvalue()

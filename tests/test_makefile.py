@@ -57,3 +57,11 @@ def test_inside_an_active_venv_make_uses_it(target: str, tmp_path: Path) -> None
     assert not any("-m venv" in line for line in lines), lines
     pythons = {line.split()[0] for line in lines if " -m " in line}
     assert pythons == {f"{active}/bin/python"}, lines
+
+
+def test_make_docs_builds_the_site_strict_in_the_venv(tmp_path: Path) -> None:
+    """`make docs` installs the dev tools (MkDocs among them) and builds with --strict."""
+    lines = dry_run("docs", tmp_path)
+    builds = [line for line in lines if "-m mkdocs build" in line]
+    assert len(builds) == 1 and "--strict" in builds[0], lines
+    assert ".venv/bin/python -m mkdocs" in builds[0], lines

@@ -258,3 +258,37 @@ def test_a_command_the_policy_refuses_gets_403_and_nothing_moves() -> None:
     finally:
         dash.stop()
         system.close()
+
+
+@pytest.mark.parametrize(
+    ("token", "token_from", "says", "not_said"),
+    [
+        (None, None, "printed at start-up", "set by"),
+        (TOKEN, "--token", "set by --token", "printed at start-up"),
+        (TOKEN, None, "set by --token, $STATECTL_DASHBOARD_TOKEN or the config", "printed"),
+    ],
+)
+def test_the_401_says_where_the_token_comes_from(
+    token: str | None, token_from: str | None, says: str, not_said: str
+) -> None:
+    """A token given (--token, environment, config) is not 'printed at start-up'; it used to
+    say so whatever gave it."""
+    system = System((DeviceSetup("Motor", motor_chart(), driver=SimMotor()),), SimClock())
+    dash = Dashboard(system.subjects.values(), post=system.post, token=token, token_from=token_from)
+    dash.start("127.0.0.1", 0)
+    try:
+        served = Served(system, dash, dash.port)
+        status, _, body = served.request(
+            "POST", "/api/post", {"event": "Movement"}, {"Content-Type": "application/json"}
+        )
+    finally:
+        dash.stop()
+        system.close()
+    text = body.decode()
+    assert (status, says in text, not_said in text) == (401, True, False), text
+
+
+def test_an_unknown_event_posted_says_did_you_mean(served: Served) -> None:
+    """A mistyped event name is refused with the closest the device knows, as check does."""
+    status, _, body = served.request("POST", "/api/post", {"event": "Movment"}, POST)
+    assert (status, "did you mean 'Movement'?" in body.decode()) == (422, True), body

@@ -12,18 +12,24 @@ Rules:
 
 from __future__ import annotations
 
+import difflib
 import enum
-from collections.abc import Iterable
+import importlib
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from types import ModuleType
 
 __all__ = [
     "Diagnostic",
     "DiagnosticError",
     "Location",
+    "MissingExtra",
     "Severity",
     "StatectlError",
     "UnhandledEventError",
+    "did_you_mean",
     "has_errors",
+    "require",
 ]
 
 
@@ -87,6 +93,16 @@ class Diagnostic:
         }
 
 
+def did_you_mean(word: str, choices: Sequence[str]) -> str:
+    """``"did you mean 'X'? "`` for the choice closest to a mistyped ``word``, else ``""``.
+
+    The one suggestion every lookup by name makes (columns, kinds, profiles in ``check``;
+    events, devices, nodes, drivers in ``run``, ``node`` and the dashboard).
+    """
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
+    return f"did you mean {close[0]!r}? " if close else ""
+
+
 def has_errors(diagnostics: Iterable[Diagnostic]) -> bool:
     return any(d.severity is Severity.ERROR for d in diagnostics)
 
@@ -101,3 +117,26 @@ class DiagnosticError(StatectlError):
 
 class UnhandledEventError(StatectlError):
     """An event the active configuration neither handles nor ignores (policy ``error``)."""
+
+
+class MissingExtra(StatectlError):
+    """A feature whose optional extra is not installed: a usage error (exit 2), in one line.
+
+    The one wording of "install this" for every channel: what needed it, the module that
+    is missing and the extra (pyproject.toml) that brings it.
+    """
+
+    def __init__(self, what: str, module: str, extra: str) -> None:
+        self.what, self.module, self.extra = what, module, extra
+        super().__init__(
+            f"{what} needs {module}, which is not installed: pip install 'statectl[{extra}]' "
+            "(or 'statectl[all]' for every extra)"
+        )
+
+
+def require(module: str, extra: str, what: str) -> ModuleType:
+    """Import ``module`` for ``what``, or raise :class:`MissingExtra` naming ``extra``."""
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise MissingExtra(what, module, extra) from None

@@ -77,7 +77,7 @@ from statectl.cell.explore.conditions import bind_cross_guards
 from statectl.cell.explore.enforce import CellRules, Violation
 from statectl.cell.explore.replay import CellLinks, link_data
 from statectl.cell.model import Cell
-from statectl.kernel.errors import StatectlError
+from statectl.kernel.errors import StatectlError, did_you_mean
 from statectl.kernel.model import Chart
 from statectl.kernel.semantics.eventview import GuardError
 from statectl.run.commands import Commands, Origin
@@ -317,7 +317,8 @@ class System:
                 return next(iter(self.subjects))
             raise StatectlError(f"name the device: {', '.join(self.subjects)}")
         if name not in self.subjects:
-            raise StatectlError(f"no device {name!r}; devices: {', '.join(self.subjects)}")
+            maybe = did_you_mean(name, list(self.subjects))
+            raise StatectlError(f"no device {name!r}; {maybe}devices: {', '.join(self.subjects)}")
         return name
 
     def admit(

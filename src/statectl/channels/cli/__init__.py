@@ -38,7 +38,8 @@ from statectl.channels.cli.commands import (
     cmd_verify,
     input_exists,
 )
-from statectl.kernel.errors import DiagnosticError, StatectlError
+from statectl.channels.cli.extras import check_extras
+from statectl.kernel.errors import DiagnosticError, MissingExtra, StatectlError
 
 __all__ = ["main"]
 
@@ -344,7 +345,12 @@ def main(
         )
         return USAGE
     try:
+        check_extras(args)  # extras.py: a missing extra is said before anything starts
         code: int = args.func(args, out, err)
+    except MissingExtra as exc:
+        words = (args.command, *(getattr(args, f"{args.command}_command", None),))
+        err.write(f"statectl {' '.join(w for w in words if w)}: {exc}\n")
+        return USAGE
     except DiagnosticError as exc:
         _print_diagnostics(exc.diagnostics, err, False)
         return PROBLEMS

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from typing import TextIO
 
+from statectl.channels.cli.outputs import output, wrote
 from statectl.channels.cli.progress import CountProgress
 from statectl.kernel.errors import DiagnosticError, Severity
 from statectl.out.codegen.cpp import generate
@@ -38,7 +39,8 @@ def run_codegen(
         return 1
     show = err.isatty() if progress is None else progress  # as verify --progress
     printer = CountProgress("codegen", "configurations stepped", err) if show else None
-    written, gen_diags = generate(chart, out_dir, printer)
+    with output(out_dir, directory=True) as folder:  # cli/outputs.py: the one output rule
+        written, gen_diags = generate(chart, str(folder), printer)
     if printer is not None:
         printer.done()
     for d in (*diags, *gen_diags):
@@ -47,5 +49,5 @@ def run_codegen(
     if not written:
         return 1
     for p in written:
-        out.write(f"{p}\n")
+        wrote(out, p)
     return 0

@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
+from statectl.channels.cli.outputs import output, wrote
 from statectl.kernel.errors import Diagnostic, Severity, StatectlError, has_errors
 
 if TYPE_CHECKING:  # the pipeline is imported inside each command, to keep --help fast
@@ -157,8 +158,19 @@ def cmd_render(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     if chart is None:
         return PROBLEMS
     text = render(chart, args.format)
-    _emit(text, args.out, out)
+    _emit(text, args.out, out, f"{_stem(chart.name)}.{RENDER_SUFFIX[args.format]}")
     return OK
+
+
+#: The file name ``render --out DIR/`` writes, by format.
+RENDER_SUFFIX = {"mermaid": "mmd", "dot": "dot", "plantuml": "puml", "svg": "svg", "md": "md"}
+
+
+def _stem(device: str) -> str:
+    """The file stem a device's outputs are named by (as ``tables`` and ``new`` name them)."""
+    from statectl.front.tables.csv_io import file_stem
+
+    return file_stem(device)
 
 
 def cmd_tables(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
@@ -177,14 +189,11 @@ def cmd_tables(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         assert isinstance(text, str)
         out.write(text)
         return OK
-    target = args.out
-    if args.to != "csv" and os.path.isdir(target):  # a directory: the device names the file
-        from statectl.front.tables.csv_io import file_stem
-
-        target = os.path.join(target, f"{file_stem(tables.device)}.{args.to}")
-    written = save(tables, target, args.to)
+    name = None if args.to == "csv" else f"{_stem(tables.device)}.{args.to}"
+    with output(args.out, name) as target:  # a directory: the device names the file(s)
+        written = save(tables, target, args.to)
     for p in written or [target]:
-        out.write(f"wrote {p}\n")
+        wrote(out, p)
     return OK
 
 
@@ -201,7 +210,6 @@ SCXML_WATCHDOG_GRACE = 2.0
 
 
 def cmd_scxml_run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
-    import os
     import threading
 
     from statectl.out.scxml import SessionTimeout, run_file
@@ -331,13 +339,17 @@ def cmd_journal(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
 def cmd_scxml_import(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     from statectl.out.scxml.tables_io import import_file
 
-    result, diags = import_file(args.file, args.out)
+    if args.out is None:
+        result, diags = import_file(args.file)
+    else:
+        with output(args.out, f"{Path(args.file).stem}.yaml") as target:
+            result, diags = import_file(args.file, target)
     if isinstance(result, str):
         _print_diagnostics(diags, err, False)
         err.write(f"{args.file}: kept as SCXML (it does not fit the table form); nothing written\n")
         return OK
     for p in result:
-        out.write(f"wrote {p}\n")
+        wrote(out, p)
     return OK
 
 
@@ -345,20 +357,23 @@ def cmd_scxml_export(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     from statectl.out.scxml.tables_io import export_file
 
     text = export_file(args.file)
-    _emit(text, args.out, out)
+    _emit(text, args.out, out, f"{Path(args.file).stem.split('.')[0]}.scxml")
     return OK
 
 
-def _emit(text: str, path: str | None, out: TextIO) -> None:
-    """Write a command's text to ``path`` atomically, or to standard output.
+def _emit(text: str, path: str | None, out: TextIO, name: str) -> None:
+    """Write a command's text to ``path`` atomically (``name`` in it if a directory), or
+    to standard output.
 
-    A file that cannot be written raises DiagnosticError (T110), which main() prints
-    with exit 1; nothing is left half-written (:func:`statectl.front.tables.write_files`).
+    The one output rule (:mod:`statectl.channels.cli.outputs`); a file that cannot be
+    written raises DiagnosticError (T110), which main() prints with exit 1; nothing is
+    left half-written (:func:`statectl.front.tables.write_files`).
     """
     if path:
         from statectl.front.tables import write_files
 
-        write_files({Path(path): text})
-        out.write(f"wrote {path}\n")
+        with output(path, name) as target:
+            write_files({target: text})
+        wrote(out, target)
     else:
         out.write(text if text.endswith("\n") else text + "\n")

@@ -34,7 +34,7 @@ def register(sub: Any) -> None:
 def cmd_schema(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     from statectl.out.schema import schema_text
 
-    _emit(schema_text(args.kind), args.out, out)
+    _emit(schema_text(args.kind), args.out, out, f"{args.kind}.schema.json")
     return OK
 
 

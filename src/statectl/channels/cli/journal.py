@@ -17,7 +17,8 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from statectl.channels.cli.commands import OK, PROBLEMS, USAGE
-from statectl.kernel.errors import DiagnosticError, StatectlError
+from statectl.channels.cli.outputs import output, wrote
+from statectl.kernel.errors import DiagnosticError, StatectlError, did_you_mean
 from statectl.kernel.model import Chart
 from statectl.run.journal import (
     JournalError,
@@ -90,7 +91,7 @@ def _unknown_device(
     found = ", ".join(names) or "none"
     err.write(
         f"statectl journal {command}: no device {device!r} in the journal; "
-        f"devices journalled: {found}\n"
+        f"{did_you_mean(device, names)}devices journalled: {found}\n"
     )
     return True
 
@@ -192,27 +193,35 @@ def journal_export(
         if to is None:
             export_jsonl(reader, out, device=device, since=lo, until=hi)
             return OK
-        target = Path(to)
-        tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+        name = f"{Path(path).stem}.jsonl"
         try:
-            if target.is_dir():
-                raise IsADirectoryError(errno.EISDIR, "it is a directory; name a file in it")
-            if not target.parent.is_dir():
-                raise NotADirectoryError(errno.ENOTDIR, f"{target.parent} is not a directory")
-            with tmp.open("w", encoding="utf-8") as f:
-                n = export_jsonl(reader, f, device=device, since=lo, until=hi)
-            tmp.replace(target)
+            with output(to, name) as target:  # cli/outputs.py: the one output rule
+                n = _export_to(reader, target, device, lo, hi)
         except OSError as exc:
             known = exc.errno in (errno.EISDIR, errno.ENOTDIR)  # said in words above
             why = exc.strerror if known and exc.strerror else sqlite_problem(exc)
             err.write(f"statectl journal export: cannot write {to}: {why}\n")
             code[0] = PROBLEMS
-        finally:
-            with contextlib.suppress(OSError):
-                tmp.unlink(missing_ok=True)
         if code[0] == OK:
-            out.write(f"wrote {n} line(s) to {to}\n")
+            wrote(out, target, f"{n} line(s)")
     return code[0]
+
+
+def _export_to(
+    reader: JournalSource, target: Path, device: str | None, lo: float | None, hi: float | None
+) -> int:
+    """Export to ``target`` whole or not at all (a temporary file renamed); the lines."""
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    try:
+        if not target.parent.is_dir():
+            raise NotADirectoryError(errno.ENOTDIR, f"{target.parent} is not a directory")
+        with tmp.open("w", encoding="utf-8") as f:
+            n = export_jsonl(reader, f, device=device, since=lo, until=hi)
+        tmp.replace(target)
+        return n
+    finally:
+        with contextlib.suppress(OSError):
+            tmp.unlink(missing_ok=True)
 
 
 def _is_the_journal(target: Path, journal: str) -> bool:

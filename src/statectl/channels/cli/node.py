@@ -37,7 +37,7 @@ from typing import Any, TextIO
 
 from statectl.channels.cli.commands import PROBLEMS, USAGE
 from statectl.channels.cli.problems import Problems, verdict
-from statectl.kernel.errors import DiagnosticError, StatectlError
+from statectl.kernel.errors import DiagnosticError, StatectlError, did_you_mean
 
 __all__ = ["dashboard_main", "node_main", "register"]
 
@@ -222,7 +222,13 @@ def node_main(
 ) -> int:
     """The whole ``statectl node``; returns the exit code (0 ok, 1 problems, 2 usage)."""
     from statectl.channels.cli import run as runcli
-    from statectl.channels.cli.run_journal import new_journal, open_journal, undone_on_failure
+    from statectl.channels.cli.outputs import output
+    from statectl.channels.cli.run_journal import (
+        JOURNAL_NAME,
+        new_journal,
+        open_journal,
+        undone_on_failure,
+    )
     from statectl.channels.distributed import NodeSystem, Wire
     from statectl.channels.distributed.trust import security_line
     from statectl.run.devices import DashboardConfig, RunConfig, load_run_config
@@ -255,7 +261,10 @@ def node_main(
         return PROBLEMS
     names = [n.name for n in cell.nodes.nodes]
     if node not in names:
-        err.write(f"statectl node: the cell has no node {node!r}; nodes: {', '.join(names)}\n")
+        err.write(
+            f"statectl node: the cell has no node {node!r}; {did_you_mean(node, names)}"
+            f"nodes: {', '.join(names)}\n"
+        )
         return USAGE
     mine = cell.nodes.node(node).devices
     devices = tuple(d for d in devices if d.name in mine)
@@ -273,11 +282,21 @@ def node_main(
         setups = tuple(replace(d, driver=drivers.get(d.name)) for d in devices)
         store = None
         if journal is not None:
-            read = (path, config, *(d.source for d in devices))
-            made = new_journal(journal, resume=resume, fresh=fresh)
-            store = open_journal(
-                journal, Sync.NORMAL, promise, resume=resume, fresh=fresh, out=out, inputs=read
-            )
+            with output(
+                journal, JOURNAL_NAME, existing=False
+            ) as target:  # cli/outputs.py: the output rule
+                journal = str(target)
+                read = (path, config, *(d.source for d in devices))
+                made = new_journal(journal, resume=resume, fresh=fresh)
+                store = open_journal(
+                    journal,
+                    Sync.NORMAL,
+                    promise,
+                    resume=resume,
+                    fresh=fresh,
+                    out=out,
+                    inputs=read,
+                )
         with undone_on_failure(store, journal if store is not None and made else None):
             system = NodeSystem(setups, WallClock(), store, cell, commands=table.commands)
         wire = Wire(

@@ -18,7 +18,7 @@ import os
 from pathlib import Path
 from typing import Any, TextIO
 
-from statectl.kernel.errors import StatectlError
+from statectl.kernel.errors import StatectlError, require
 from statectl.run.devices import OpcuaConfig
 from statectl.run.devices.opcua_config import MIN_PASSWORD
 from statectl.run.system import System
@@ -34,12 +34,9 @@ def serve_opcua(
     system: System, flag: str, section: OpcuaConfig, config: str | None, out: TextIO
 ) -> Any:
     """Start the OPC UA server for ``system`` (rules 1-3); returns it (``stop()`` it)."""
-    try:
-        from statectl.channels.opcua.server import OpcuaServer, OpcuaSettings
-    except ImportError as exc:
-        raise StatectlError(
-            f"--opcua needs asyncua ({exc}): pip install 'statectl[opcua]'"
-        ) from None
+    require("asyncua", "opcua", "--opcua")  # the server imports it when it starts
+    from statectl.channels.opcua.server import OpcuaServer, OpcuaSettings
+
     user, password, where = section.user, section.password, str(config)
     env_user, env_password = os.environ.get(USER_VARIABLE), os.environ.get(PASSWORD_VARIABLE)
     if env_user or env_password:

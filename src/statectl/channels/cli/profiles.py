@@ -13,6 +13,9 @@ import json
 from pathlib import Path
 from typing import Any, TextIO
 
+from statectl.channels.cli.outputs import output, wrote
+from statectl.kernel.errors import did_you_mean
+
 __all__ = ["cmd_new", "cmd_profiles", "register"]
 
 OK, PROBLEMS, USAGE = 0, 1, 2
@@ -50,8 +53,11 @@ def cmd_new(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
 
     profile = find(args.profile)
     if profile is None:
-        names = ", ".join(p.name for p in PROFILES)
-        err.write(f"statectl new: unknown profile {args.profile!r}; shipped: {names}\n")
+        names = [p.name for p in PROFILES]
+        maybe = did_you_mean(args.profile, names)
+        err.write(
+            f"statectl new: unknown profile {args.profile!r}; {maybe}shipped: {', '.join(names)}\n"
+        )
         return USAGE
     name = args.name.strip()
     if not name or name != args.name or name.startswith(".") or any(c in name for c in "/\\\0"):
@@ -73,9 +79,10 @@ def cmd_new(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
             "(choose another NAME or --out DIR, or remove the file)\n"
         )
         return PROBLEMS
-    write_files(dict(targets), make_dirs=True)
+    with output(args.out, directory=True):  # cli/outputs.py: the one output rule
+        write_files(dict(targets))
     for target in targets:
-        out.write(f"wrote {target}\n")
+        wrote(out, target)
     first = next(iter(targets))
     out.write(f"next: statectl check {first}\n")
     return OK

@@ -73,11 +73,23 @@ from urllib.parse import urlparse
 from statectl.cell.explore.enforce import Refused
 from statectl.cell.model import Cell, load_cell
 from statectl.channels.cli.commands import PROBLEMS, USAGE, input_exists
+from statectl.channels.cli.outputs import output, wrote
 from statectl.channels.cli.problems import Problems, verdict
-from statectl.channels.cli.run_journal import new_journal, open_journal, undone_on_failure
+from statectl.channels.cli.run_journal import (
+    JOURNAL_NAME,
+    new_journal,
+    open_journal,
+    undone_on_failure,
+)
 from statectl.channels.cli.settle import unsettled_note
 from statectl.channels.cli.steps import StepLog
-from statectl.kernel.errors import DiagnosticError, Severity, StatectlError
+from statectl.kernel.errors import (
+    DiagnosticError,
+    MissingExtra,
+    Severity,
+    StatectlError,
+    did_you_mean,
+)
 from statectl.run.commands import Origin
 from statectl.run.devices import (
     MIN_TOKEN,
@@ -215,6 +227,9 @@ def _feed(
                     steps.advance(number, parsed)
                 continue
             device, event, data = parsed
+            unknown = _unknown_event(system, device, event)
+            if unknown is not None:  # posted still: the trace and the exit status say it too
+                err.write(f"line {number}: {unknown}\n")
             if batch and early is not None and system.work_pending():
                 early.append(number)
             ticket = system.post(device, event, data, origin=STDIN)
@@ -236,6 +251,19 @@ def _feed(
                 problems.bad_line()
             if steps is not None:
                 steps.error(number, str(exc))
+
+
+def _unknown_event(system: System, device: str | None, event: str) -> str | None:
+    """An event the device's chart does not know, with the name it most likely meant."""
+    try:
+        name = system.device(device)
+    except StatectlError:
+        return None  # no such device: post says so
+    names = system.subjects[name].chart.event_names
+    if event in names:
+        return None
+    maybe = did_you_mean(event, names)
+    return f"{name} has no event {event!r}; {maybe}its events: {', '.join(names)}"
 
 
 def _load_cell(path: str, err: TextIO, journalled: bool) -> tuple[Cell, tuple[DeviceSetup, ...]]:
@@ -371,11 +399,15 @@ def run(
         clock: Clock = WallClock() if realtime else SimClock()
         store = None
         if journal is not None:
-            read = (path, config, *(d.source for d in devices))
-            made = new_journal(journal, resume=resume, fresh=fresh)
-            store = open_journal(
-                journal, mode, promise, resume=resume, fresh=fresh, out=info, inputs=read
-            )
+            with output(
+                journal, JOURNAL_NAME, existing=False
+            ) as target:  # cli/outputs.py: the output rule
+                journal = str(target)
+                read = (path, config, *(d.source for d in devices))
+                made = new_journal(journal, resume=resume, fresh=fresh)
+                store = open_journal(
+                    journal, mode, promise, resume=resume, fresh=fresh, out=info, inputs=read
+                )
         with undone_on_failure(store, journal if store is not None and made else None):
             system = System(setups, clock, store, cell, commands=table.commands)
         if table.ship is not None:
@@ -401,10 +433,8 @@ def run(
         if dashboard:
             try:
                 from statectl.channels.web import Dashboard, Limits  # optional at run time
-            except ImportError as exc:
-                raise StatectlError(
-                    f"the dashboard needs aiohttp ({exc}): pip install 'statectl[dashboard]'"
-                ) from None
+            except ImportError:
+                raise MissingExtra("the dashboard", "aiohttp", "dashboard") from None
             streams = table.dashboard.streams
             limits = Limits() if streams is None else Limits(streams=streams)
             server = Dashboard(
@@ -413,6 +443,7 @@ def run(
                 token=token,
                 limits=limits,
                 origin=Origin("dashboard", "token"),  # its token is checked before it posts
+                token_from=token_from,
             )
             url = server.start(host, port)
         if opcua is not None:
@@ -448,7 +479,7 @@ def run(
             _feed(system, lines, err, batch=True, problems=problems, steps=steps, early=early)
             system.quiesce()
             problems.unsettled = unsettled_note(system, early, system.work_pending())
-            _final_states(system, info, cell is None)
+            _final_states(system, info, cell is None, journal)
             return verdict(problems, err)
         halt = stop or threading.Event()
         if events is None and server is None:
@@ -464,11 +495,11 @@ def run(
             system.serve(halt)
         if system.journal is not None:
             system.journal.flush()  # a write that failed meanwhile fails the run
-        _final_states(system, out, cell is None)
+        _final_states(system, out, cell is None, journal)
         problems.partway = _partway(drivers, err)
         return verdict(problems, err)
-    except BrokenPipeError:
-        raise  # the reader of the trace went away: the command line ends quietly
+    except (BrokenPipeError, MissingExtra):
+        raise  # the reader went away: quietly; an extra missing (a config's section): exit 2
     except (StatectlError, OSError) as exc:
         failed = str(exc)
         err.write(f"statectl run: {exc}\n")
@@ -484,11 +515,14 @@ def run(
             shipping.stop()  # what the journal committed goes too, for a few seconds at most
 
 
-def _final_states(system: System, out: TextIO, one: bool) -> None:
-    """The line(s) a run ends with: each device's configuration."""
+def _final_states(system: System, out: TextIO, one: bool, journal: str | None) -> None:
+    """The line(s) a run ends with, batch or live: each device's configuration, and the
+    journal it wrote (cli/outputs.py rule 4)."""
     for name, subject in system.subjects.items():
         final = ", ".join(sorted(subject.configuration))
         out.write(f"final state {final}\n" if one else f"final {name}: {final}\n")
+    if journal is not None:
+        wrote(out, journal)
 
 
 def _partway(drivers: Mapping[str, DeviceDriver], err: TextIO) -> int:

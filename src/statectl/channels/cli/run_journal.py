@@ -15,7 +15,11 @@ from statectl.kernel.errors import StatectlError
 from statectl.run.journal import Guarantee, Journal, JournalDamaged, JournalError, Sync, set_aside
 from statectl.run.journal.check import journal_files
 
-__all__ = ["new_journal", "open_journal", "undone_on_failure"]
+__all__ = ["JOURNAL_NAME", "new_journal", "open_journal", "undone_on_failure"]
+
+
+#: The journal's file name when ``--journal`` names a directory (cli/outputs.py rule 2).
+JOURNAL_NAME = "run.db"
 
 
 def open_journal(

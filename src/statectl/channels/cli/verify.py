@@ -21,6 +21,7 @@ from statectl.cell.explore.promela import export_promela
 from statectl.cell.explore.search import DEFAULT_MAX_STATES, explore
 from statectl.cell.explore.verify import write_traces
 from statectl.cell.model import Cell, load_cell
+from statectl.channels.cli import outputs
 from statectl.channels.cli.commands import OK, PROBLEMS, USAGE
 from statectl.channels.cli.progress import ProgressPrinter
 from statectl.front.tables import write_files
@@ -71,7 +72,7 @@ def verify_main(
         err.write(f"{cell}: not loaded\n")
         return PROBLEMS
     if export == "promela":
-        return _export(loaded, output, out)
+        return _export(loaded, output, out, f"{Path(cell).stem}.pml")
     show = err.isatty() if progress is None else progress
     printer = ProgressPrinter(err) if show else None
     report = explore(loaded, max_states=bound, progress=printer)
@@ -88,15 +89,18 @@ def verify_main(
                 draw = to_mermaid if diagrams == "mermaid" else to_plantuml
                 out.write(f"\n{draw(f.trace, title)}")
     if traces:
-        for p in write_traces(report, traces):
-            err.write(f"wrote {p}\n")
+        with outputs.output(traces, directory=True) as folder:
+            for p in write_traces(report, str(folder)):
+                outputs.wrote(err, p)
     return OK if report.verdict == "holds" else PROBLEMS  # failed, or could not tell
 
 
-def _export(cell: Cell, output: str | None, out: TextIO) -> int:
+def _export(cell: Cell, output: str | None, out: TextIO, name: str) -> int:
     text = export_promela(Composed(cell))
     if output:
-        write_files({Path(output): text})  # T110 (exit 1 in main()) if it cannot be written
+        with outputs.output(output, name) as target:  # cli/outputs.py: the one output rule
+            write_files({target: text})  # T110 (exit 1 in main()) if it cannot be written
+        outputs.wrote(out, target)
     else:
         out.write(text)
     return OK

@@ -18,7 +18,7 @@ from collections.abc import Callable
 from typing import Any, TextIO, cast
 
 from statectl.cell.model import Cell
-from statectl.kernel.errors import StatectlError
+from statectl.kernel.errors import MissingExtra, StatectlError
 from statectl.kernel.model import Chart
 from statectl.kernel.semantics import Snapshot
 from statectl.run.runtime import Subject
@@ -85,10 +85,8 @@ def serve_cell(
     """Start the dashboard of the whole cell (rule 1); the started Dashboard and its URL."""
     try:
         from statectl.channels.web import Dashboard, Limits
-    except ImportError as exc:
-        raise StatectlError(
-            f"the dashboard needs aiohttp ({exc}): pip install 'statectl[dashboard]'"
-        ) from None
+    except ImportError:
+        raise MissingExtra("the dashboard", "aiohttp", "dashboard") from None
     mirrors = {
         d.name: MirrorSubject(d.name, d.chart) for d in cell.devices if d.name not in subjects
     }

@@ -19,7 +19,7 @@ from statectl.cell.model import Cell
 from statectl.channels.distributed.keys import Keys
 from statectl.channels.distributed.messages import parse_snapshot
 from statectl.channels.distributed.trust import session_config
-from statectl.kernel.errors import StatectlError
+from statectl.kernel.errors import StatectlError, did_you_mean
 from statectl.kernel.semantics import Snapshot
 
 __all__ = ["CellView"]
@@ -85,8 +85,12 @@ class CellView:
 
     def post(self, device: str, event: str, data: Any = None) -> None:
         """Send ``event`` to ``device`` on whichever node runs it."""
-        if device not in {d.name for d in self.cell.devices}:
-            raise StatectlError(f"no device {device!r} in {self.cell.name}")
+        names = [d.name for d in self.cell.devices]
+        if device not in names:
+            maybe = did_you_mean(device, names)
+            raise StatectlError(
+                f"no device {device!r} in {self.cell.name}; {maybe}devices: {', '.join(names)}"
+            )
         if self._session is None:
             raise StatectlError("the view is not open")
         self._session.put(self.keys.post(device), json.dumps({"ev": event, "d": data}))

@@ -175,7 +175,7 @@ def make_app(dash: Dashboard, fanout: Fanout, limits: Limits) -> web.Application
         if not dash.authorised(request.headers.get("X-Statectl-Token")):
             return _refuse(
                 HTTPStatus.UNAUTHORIZED,
-                "posting needs the token printed at start-up (X-Statectl-Token)",
+                f"posting needs the token {dash.token_source} (X-Statectl-Token)",
             )
         if request.content_type != "application/json":
             return _refuse(HTTPStatus.UNSUPPORTED_MEDIA_TYPE, "send application/json")

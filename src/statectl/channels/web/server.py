@@ -20,8 +20,9 @@ Rules:
 4. If the loop falls more than ``PENDING_MAX`` messages behind the devices, the
    messages are discarded and every stream is dropped (each page reconnects and
    starts from a snapshot): no page ever sees a gap.
-5. Reading is open; posting an event (``POST /api/post``) needs the token printed
-   at start-up and the ``Origin`` and ``Host`` rules of ``statectl.channels.web.app``.
+5. Reading is open; posting an event (``POST /api/post``) needs the token (printed
+   at start-up, or the one given by --token, the environment or the config; the 401
+   reply says which) and the ``Origin`` and ``Host`` rules of ``statectl.channels.web.app``.
    With a journal the reply to a post comes once the event is durable and says
    so (``"durable": true``); without one the event is queued (``false``). Given an
    ``origin``, every post carries it to the System's commands policy, whose refusal
@@ -51,7 +52,7 @@ from statectl.channels.web.app import Limits, make_app
 from statectl.channels.web.stream import Fanout
 from statectl.channels.web.svg import fallback_svg
 from statectl.front.observers import extract
-from statectl.kernel.errors import StatectlError
+from statectl.kernel.errors import StatectlError, did_you_mean
 from statectl.out.render import render
 from statectl.out.render.diagram import from_chart
 from statectl.run.commands import Origin
@@ -231,6 +232,7 @@ class Dashboard:
         token: str | None = None,
         limits: Limits | None = None,
         origin: Origin | None = None,
+        token_from: str | None = None,
     ) -> None:
         self.devices = {s.name: _Device(s) for s in subjects}
         #: rule 5: ``origin`` is passed with every post, for the System's commands policy
@@ -239,6 +241,12 @@ class Dashboard:
             send = functools.partial(send, origin=origin)
         self.post: PostFn | None = send
         self.token = token or secrets.token_urlsafe(18)
+        #: Where the token comes from, as the 401 reply says it (rule 5).
+        self.token_source = (
+            "printed at start-up"
+            if not token
+            else f"set by {token_from or '--token, $STATECTL_DASHBOARD_TOKEN or the config'}"
+        )
         self.limits = limits or Limits()
         self.origins: frozenset[str] = frozenset()
         self.hosts: frozenset[str] = frozenset()
@@ -490,7 +498,8 @@ class Dashboard:
         names = entry.subject.chart.event_names
         if event in names:
             return None
-        return f"{entry.subject.name} has no event {event!r}; its events: {', '.join(names)}"
+        maybe = did_you_mean(event, names)
+        return f"{entry.subject.name} has no event {event!r}; {maybe}its events: {', '.join(names)}"
 
     def authorised(self, given: str | None) -> bool:
         """The token's bytes compared in constant time; a header of bytes that are not

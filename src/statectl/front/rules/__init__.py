@@ -52,7 +52,7 @@ from statectl.front.rules.names import check_guard_names
 from statectl.front.rules.timing import check_deferred, check_timeouts, check_triggers
 from statectl.front.tables import load
 from statectl.kernel.codes import family
-from statectl.kernel.errors import Diagnostic, Location, Severity, has_errors
+from statectl.kernel.errors import Diagnostic, Location, Severity, did_you_mean, has_errors
 from statectl.kernel.model import Chart, ControlKind, EventKind, State, StateKind, Transition
 from statectl.kernel.semantics import entry_set, structural
 
@@ -444,10 +444,7 @@ def _check_profile(st: _Structure) -> Iterator[Diagnostic]:
 
 
 def _did_you_mean(word: str, choices: Sequence[str]) -> str:
-    import difflib
-
-    close = difflib.get_close_matches(word.lower(), list(choices), n=1, cutoff=0.6)
-    return f"did you mean {close[0]!r}? " if close else ""
+    return did_you_mean(word.lower(), choices)  # kernel/errors.py: the one suggestion
 
 
 def _check_cover(st: _Structure) -> Iterator[Diagnostic]:

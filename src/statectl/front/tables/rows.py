@@ -6,12 +6,12 @@ readers, the cell checks and the data literals import the values without the che
 
 from __future__ import annotations
 
-import difflib
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 
 from statectl.kernel.codes import family
 from statectl.kernel.errors import Diagnostic, Location, Severity
+from statectl.kernel.errors import did_you_mean as did_you_mean  # re-exported: cells, schema
 from statectl.kernel.model import ControlKind, EventKind, StateKind
 
 NOWHERE = Location()
@@ -243,11 +243,6 @@ class RawTable:
 def diag(code: str, where: Location, message: str, hint: str = "") -> Diagnostic:
     """An error diagnostic; the tables layer only reports errors."""
     return Diagnostic(code, Severity.ERROR, where, message, hint)
-
-
-def did_you_mean(word: str, choices: Sequence[str]) -> str:
-    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
-    return f"did you mean {close[0]!r}? " if close else ""
 
 
 def normalize_column(name: str) -> str:

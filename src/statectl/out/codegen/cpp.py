@@ -171,10 +171,18 @@ def generate(
     changed: dict[Path, str | bytes] = {
         path: texts[rel]
         for rel, path in zip(sorted(texts), written, strict=True)
-        if not path.is_file() or path.read_text(encoding="utf-8") != texts[rel]
+        if not _unchanged(path, texts[rel])
     }
     try:
         write_files(changed, make_dirs=True)  # all or nothing, unchanged files kept as they are
     except DiagnosticError as exc:
         return [], [*diags, *exc.diagnostics]
     return written, diags
+
+
+def _unchanged(path: Path, text: str) -> bool:
+    """Whether ``path`` holds ``text`` already; a name the system refuses is not (T110 next)."""
+    try:
+        return path.is_file() and path.read_text(encoding="utf-8") == text
+    except OSError:
+        return False

@@ -56,7 +56,14 @@ import yaml
 
 from statectl.front.tables import safeyaml
 from statectl.front.tables.inputs import read_input_text
-from statectl.kernel.errors import Diagnostic, DiagnosticError, Location, Severity, StatectlError
+from statectl.kernel.errors import (
+    Diagnostic,
+    DiagnosticError,
+    Location,
+    Severity,
+    StatectlError,
+    did_you_mean,
+)
 from statectl.kernel.model import Chart
 from statectl.run.commands import Commands, parse_commands
 from statectl.run.devices.cia402 import Cia402Driver, Cia402SimDriver
@@ -186,7 +193,8 @@ def resolve_driver(name: str) -> Callable[..., DeviceDriver]:
         return DRIVERS[name]
     module_name, sep, attr = name.partition(":")
     if not sep or not module_name or not attr:
-        raise StatectlError(f"unknown driver {name!r}; available: {_available()}")
+        maybe = did_you_mean(name, list(DRIVERS))
+        raise StatectlError(f"unknown driver {name!r}; {maybe}available: {_available()}")
     try:
         module = importlib.import_module(module_name)
     except ImportError as exc:

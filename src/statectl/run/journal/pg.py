@@ -27,6 +27,7 @@ import urllib.parse
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
 
+from statectl.kernel.errors import require
 from statectl.run.devices.urls import url_problem as url_syntax
 from statectl.run.journal.format import JournalError
 from statectl.run.journal.read import DeviceRow, InboxRow, StepRow, _datamodel, _json, _step
@@ -145,13 +146,7 @@ def display_url(url: str) -> str:
 
 
 def _psycopg() -> Any:
-    try:
-        import psycopg
-    except ImportError as exc:
-        raise JournalError(
-            f"PostgreSQL needs psycopg ({exc}): pip install 'statectl[postgres]'"
-        ) from None
-    return psycopg
+    return require("psycopg", "postgres", "PostgreSQL")
 
 
 def connect_pg(url: str, *, timeout: float = 5.0) -> psycopg.Connection[Any]:

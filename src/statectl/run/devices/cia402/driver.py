@@ -43,7 +43,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from statectl.kernel.errors import StatectlError
+from statectl.kernel.errors import MissingExtra, StatectlError
 from statectl.run.devices.base import Driver, finite_number, requested_target
 from statectl.run.devices.cia402.profile import (
     CW_ENABLE_OPERATION,
@@ -159,11 +159,8 @@ class Cia402Driver(Driver):
             import can
             import canopen
             from canopen.sdo.exceptions import SdoError
-        except ImportError as exc:
-            raise StatectlError(
-                f"the cia402 driver needs the canopen extra ({exc}); "
-                "pip install 'statectl[canopen]'"
-            ) from None
+        except ImportError:
+            raise MissingExtra("the cia402 driver", "canopen", "canopen") from None
         from statectl.run.devices.cia402.sim import packaged_eds
 
         eds = Path(self.eds) if self.eds else packaged_eds()

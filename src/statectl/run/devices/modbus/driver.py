@@ -34,7 +34,7 @@ from collections.abc import Mapping
 from typing import Any, ClassVar
 
 from statectl.front.observers import Notification
-from statectl.kernel.errors import StatectlError
+from statectl.kernel.errors import MissingExtra, StatectlError
 from statectl.kernel.model import Chart, EventKind
 from statectl.run.devices.base import Driver
 from statectl.run.devices.modbus.options import (
@@ -222,9 +222,8 @@ class ModbusIO(Driver):
                 )  # fmt: skip
             from pymodbus.client import ModbusTcpClient
         except ImportError as exc:
-            raise StatectlError(
-                f"the modbus driver needs the modbus extra ({exc}); pip install 'statectl[modbus]'"
-            ) from None
+            missing = exc.name or ("pyserial" if self.transport == "rtu" else "pymodbus")
+            raise MissingExtra("the modbus driver", missing, "modbus") from None
         return ModbusTcpClient(self.host, port=self.port, timeout=self.timeout, retries=0)
 
     def close(self) -> None:
