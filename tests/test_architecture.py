@@ -319,7 +319,6 @@ LONG_FUNCTIONS_TO_SPLIT: frozenset[str] = frozenset(
         "channels/cli/__init__.py:build_parser",
         "channels/cli/node.py:node_main",
         "channels/cli/run.py:run",
-        "channels/web/app.py:make_app",
         "out/codegen/cpp_header.py:_header",
         "run/devices/config.py:load_run_config",
     }
