@@ -320,7 +320,6 @@ LONG_FUNCTIONS_TO_SPLIT: frozenset[str] = frozenset(
         "channels/cli/node.py:node_main",
         "channels/cli/run.py:run",
         "out/codegen/cpp_header.py:_header",
-        "run/devices/config.py:load_run_config",
     }
 )
 
