@@ -462,15 +462,31 @@ def _device(
     if not isinstance(driver, str):
         error("D505", line_of(dnode), f"device {device!r}: driver must be a name (got {driver!r})")
         return None
+    if not _driver_fits(device, driver, dnode, fields, options, line_of, error):
+        return None
+    return driver, options
+
+
+def _driver_fits(
+    device: str,
+    driver: str,
+    dnode: yaml.Node,
+    fields: dict[str, tuple[yaml.Node, yaml.Node]],
+    options: dict[str, Any],
+    line_of: Callable[[yaml.Node], int],
+    error: _Error,
+) -> bool:
+    """Whether the named driver exists, takes these options with sane values (D505,
+    D508, D509, D511) and has its library installed (D512): so start-up cannot fail."""
     try:
         factory = resolve_driver(driver)
     except StatectlError as exc:
         error("D505", line_of(dnode), f"device {device!r}: {exc}")
-        return None
+        return False
     problem = _option_problem(factory, options)
     if problem:
         error("D508", line_of(fields["options"][1]), f"device {device!r}: {problem}")
-        return None
+        return False
     missing = _missing_library(driver)
     if missing is not None:
         error(
@@ -479,7 +495,7 @@ def _device(
             f"device {device!r}: driver {driver!r} needs a library that is not installed",
             missing,
         )
-        return None
+        return False
     if driver in BUS_OPTION_CHECKS:
         bad = _value_problems(driver, options)
         for text in bad:
@@ -490,7 +506,7 @@ def _device(
                 "see docs/drivers.md for the driver's options",
             )
         if bad:
-            return None
+            return False
     bad = _value_problems(driver, options)
     for text in bad:
         error(
@@ -499,6 +515,4 @@ def _device(
             f"device {device!r}: {text}",
             OPTION_HINTS.get(driver, ""),
         )
-    if bad:
-        return None
-    return driver, options
+    return not bad
