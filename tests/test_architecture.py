@@ -317,7 +317,6 @@ LONG_FUNCTIONS_TO_SPLIT: frozenset[str] = frozenset(
     {
         "cell/explore/compose.py:Composed.branches",
         "channels/cli/__init__.py:build_parser",
-        "channels/cli/node.py:node_main",
         "channels/cli/run.py:run",
         "out/codegen/cpp_header.py:_header",
     }
