@@ -316,7 +316,6 @@ MAX_FUNCTION_LINES = 80
 LONG_FUNCTIONS_TO_SPLIT: frozenset[str] = frozenset(
     {
         "channels/cli/run.py:run",
-        "out/codegen/cpp_header.py:_header",
     }
 )
 
