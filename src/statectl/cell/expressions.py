@@ -37,43 +37,11 @@ def parse_global(
     allowed = (ast.Expression, ast.BoolOp, ast.And, ast.Or, ast.UnaryOp, ast.Not, ast.Load)
     for node in ast.walk(tree):
         if isinstance(node, ast.Call):
-            arg = node.args[0] if len(node.args) == 1 else None
-            ok = isinstance(arg, ast.Constant) and isinstance(arg.value, str)
-            if not (isinstance(node.func, ast.Name) and node.func.id == "In") or not ok:
-                diags.append(
-                    _d(
-                        "V811",
-                        where,
-                        f"{what} {source!r}: {ast.unparse(node)} is not In('device.State')",
-                        "write In('arm.Moving'): one text argument naming device and state",
-                    )
-                )
-                continue
-            assert isinstance(arg, ast.Constant)
-            device, dot, state = str(arg.value).partition(".")
-            chart = charts.get(device)
-            if not dot or chart is None:
-                diags.append(
-                    _d(
-                        "V807",
-                        where,
-                        f"{what} {source!r}: In({arg.value!r}) names no device of the cell",
-                        "devices: " + ", ".join(sorted(charts)),
-                    )
-                )
-            elif not chart.has_state(state):
-                diags.append(
-                    _d(
-                        "V808",
-                        where,
-                        f"{what} {source!r}: device {device!r} has no state {state!r}",
-                        did_you_mean(state, [s.name for s in chart.states])
-                        + "states: "
-                        + ", ".join(s.name for s in chart.states),
-                    )
-                )
+            ref = _state_ref(node, source, where, charts, what)
+            if isinstance(ref, Diagnostic):
+                diags.append(ref)
             else:
-                refs.append((device, state))
+                refs.append(ref)
         elif isinstance(node, ast.Name):
             if node.id != "In":
                 diags.append(
@@ -107,3 +75,42 @@ def parse_global(
     if diags:
         return None, diags
     return GlobalExpr(source.strip(), tuple(dict.fromkeys(refs)), where), diags
+
+
+def _state_ref(
+    node: ast.Call, source: str, where: Location, charts: Mapping[str, Chart], what: str
+) -> tuple[str, str] | Diagnostic:
+    """The (device, state) a call names, or why it is no ``In('device.State')`` of the cell.
+
+    The only call a global expression may make is ``In`` on one text naming a state the
+    cell has (V811, V807, V808): that is all a cell's global state holds.
+    """
+    arg = node.args[0] if len(node.args) == 1 else None
+    ok = isinstance(arg, ast.Constant) and isinstance(arg.value, str)
+    if not (isinstance(node.func, ast.Name) and node.func.id == "In") or not ok:
+        return _d(
+            "V811",
+            where,
+            f"{what} {source!r}: {ast.unparse(node)} is not In('device.State')",
+            "write In('arm.Moving'): one text argument naming device and state",
+        )
+    assert isinstance(arg, ast.Constant)
+    device, dot, state = str(arg.value).partition(".")
+    chart = charts.get(device)
+    if not dot or chart is None:
+        return _d(
+            "V807",
+            where,
+            f"{what} {source!r}: In({arg.value!r}) names no device of the cell",
+            "devices: " + ", ".join(sorted(charts)),
+        )
+    if not chart.has_state(state):
+        return _d(
+            "V808",
+            where,
+            f"{what} {source!r}: device {device!r} has no state {state!r}",
+            did_you_mean(state, [s.name for s in chart.states])
+            + "states: "
+            + ", ".join(s.name for s in chart.states),
+        )
+    return device, state

@@ -37,6 +37,7 @@ before the split.
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
 
@@ -72,6 +73,7 @@ from statectl.cell.values import (
 from statectl.front.tables.inputs import read_input_text
 from statectl.front.tables.safeyaml import YamlRefused, compose
 from statectl.kernel.errors import Diagnostic, DiagnosticError, Location, Severity, has_errors
+from statectl.kernel.model import Chart
 
 __all__ = [
     "CODES",
@@ -100,34 +102,9 @@ def load_cell(
     """
     file = str(path)
     top = Location(file, 1)
-    try:
-        text = read_input_text(path) if text is None else text
-    except OSError as exc:
-        return None, [_d("V801", top, f"cannot read the cell file: {exc.strerror or exc}")]
-    except UnicodeDecodeError as exc:
-        return None, [
-            _d(
-                "V801",
-                top,
-                f"the cell file is not UTF-8 text (byte {exc.start})",
-                "save the file as UTF-8",
-            )
-        ]
-    try:
-        root = compose(text)
-    except YamlRefused as exc:
-        code = "V801" if exc.code == "T101" else exc.code
-        where = Location(file, exc.line or 1)
-        return None, [Diagnostic(code, Severity.ERROR, where, exc.message, exc.hint)]
-    if not isinstance(root, yaml.MappingNode):
-        return None, [
-            _d(
-                "V801",
-                top,
-                "not a cell file: the top level is not a mapping",
-                "a cell file has cell:, devices:, links:, environment:, invariants:",
-            )
-        ]
+    root = _root(path, text, file)
+    if isinstance(root, list):
+        return None, root
     r = _Reader(file)
     f = r.mapping(root, "cell file", TOP_KEYS, ("devices",)) or {}
     name = r.text(f.get("cell"), "cell") or Path(file).stem.removesuffix(".cell")
@@ -145,24 +122,9 @@ def load_cell(
     if nodes is not None:
         nodes = replace(nodes, security=security)
     environment = _environment(r, f.get("environment"), charts)
-    invariants: list[Invariant] = []
-    names: set[str] = set()
-    for inv_name, fields, _ in _named(
-        r, f.get("invariants"), "invariant", INVARIANT_FIELDS, ("holds",), names
-    ):
-        expr = _expr(r, fields.get("holds"), f"invariant {inv_name!r}", charts)
-        react, problems = violation_events(fields.get("on_violation"), file, charts)
-        r.diags.extend(problems)
-        if expr is not None:
-            invariants.append(Invariant(inv_name, expr, react))
-    recovery: list[Recovery] = []
-    for rec_name, fields, _ in _named(
-        r, f.get("recovery"), "recovery", RECOVERY_FIELDS, ("to",), names
-    ):
-        target = _expr(r, fields.get("to"), f"recovery {rec_name!r} to", charts)
-        source = _expr(r, fields.get("from"), f"recovery {rec_name!r} from", charts)
-        if target is not None and ("from" not in fields or source is not None):
-            recovery.append(Recovery(rec_name, target, source))
+    names: set[str] = set()  # invariants and recovery rules share one namespace
+    invariants = _invariants(r, f.get("invariants"), charts, names)
+    recovery = _recoveries(r, f.get("recovery"), charts, names)
     r.diags.extend(check_cross_refs(charts, file))
     if has_errors(r.diags):
         return None, r.diags
@@ -178,6 +140,69 @@ def load_cell(
         nodes,
     )
     return cell, r.diags
+
+
+def _root(
+    path: str | os.PathLike[str], text: str | None, file: str
+) -> yaml.MappingNode | list[Diagnostic]:
+    """The cell file's top mapping, or why there is none (V801, the YAML refusals)."""
+    top = Location(file, 1)
+    try:
+        text = read_input_text(path) if text is None else text
+    except OSError as exc:
+        return [_d("V801", top, f"cannot read the cell file: {exc.strerror or exc}")]
+    except UnicodeDecodeError as exc:
+        return [
+            _d(
+                "V801",
+                top,
+                f"the cell file is not UTF-8 text (byte {exc.start})",
+                "save the file as UTF-8",
+            )
+        ]
+    try:
+        root = compose(text)
+    except YamlRefused as exc:
+        code = "V801" if exc.code == "T101" else exc.code
+        where = Location(file, exc.line or 1)
+        return [Diagnostic(code, Severity.ERROR, where, exc.message, exc.hint)]
+    if not isinstance(root, yaml.MappingNode):
+        return [
+            _d(
+                "V801",
+                top,
+                "not a cell file: the top level is not a mapping",
+                "a cell file has cell:, devices:, links:, environment:, invariants:",
+            )
+        ]
+    return root
+
+
+def _invariants(
+    r: _Reader, node: yaml.Node | None, charts: Mapping[str, Chart], names: set[str]
+) -> list[Invariant]:
+    """The invariants: section, each a checked global expression and what it raises."""
+    invariants: list[Invariant] = []
+    for inv_name, fields, _ in _named(r, node, "invariant", INVARIANT_FIELDS, ("holds",), names):
+        expr = _expr(r, fields.get("holds"), f"invariant {inv_name!r}", charts)
+        react, problems = violation_events(fields.get("on_violation"), r.file, charts)
+        r.diags.extend(problems)
+        if expr is not None:
+            invariants.append(Invariant(inv_name, expr, react))
+    return invariants
+
+
+def _recoveries(
+    r: _Reader, node: yaml.Node | None, charts: Mapping[str, Chart], names: set[str]
+) -> list[Recovery]:
+    """The recovery: section; a rule whose to (or given from) does not parse is dropped."""
+    recovery: list[Recovery] = []
+    for rec_name, fields, _ in _named(r, node, "recovery", RECOVERY_FIELDS, ("to",), names):
+        target = _expr(r, fields.get("to"), f"recovery {rec_name!r} to", charts)
+        source = _expr(r, fields.get("from"), f"recovery {rec_name!r} from", charts)
+        if target is not None and ("from" not in fields or source is not None):
+            recovery.append(Recovery(rec_name, target, source))
+    return recovery
 
 
 def load_cell_or_raise(path: str | os.PathLike[str]) -> Cell:

@@ -104,39 +104,13 @@ def _load_devices(r: _Reader, node: yaml.Node | None, base: Path, at: Location) 
             )
         )
         return []
-    entries: dict[str, yaml.Node] = {}
-    for k, v in node.value:
-        key = str(k.value) if isinstance(k, yaml.ScalarNode) else ""
-        if key in entries:
-            r.diags.append(_d("V806", r.at(k), f"device name {key!r} is used twice"))
-        entries[key] = v
-    if not entries:
-        r.diags.append(_d("V815", r.at(node), "the cell has no devices"))
+    entries = _device_entries(r, node)
     loaded: dict[Path, tuple[Chart | None, list[Diagnostic]]] = {}
     out: list[DeviceRef] = []
     for name, value in entries.items():
         where = r.at(value)
-        if not name.isidentifier():
-            r.diags.append(
-                _d(
-                    "V806",
-                    where,
-                    f"device name {name!r} is not an identifier",
-                    "use letters, digits and '_' (no dots): In('arm.Moving') splits at the dot",
-                )
-            )
-            continue
-        if isinstance(value, yaml.MappingNode):
-            fields = r.mapping(value, f"device {name!r}", ("file",), ("file",))
-            file = r.text(fields.get("file"), f"device {name!r} file") if fields else None
-        else:
-            file = r.text(value, f"device {name!r}")
+        file = _device_file(r, name, value, where)
         if file is None:
-            continue
-        if "\x00" in file:  # no file system names one: resolve() would raise ValueError
-            r.diags.append(
-                _d("V805", where, f"device file {file!r} holds a NUL character", "name a file")
-            )
             continue
         path = (base / file).resolve()
         if path not in loaded:
@@ -171,6 +145,47 @@ def _load_devices(r: _Reader, node: yaml.Node | None, base: Path, at: Location) 
             continue
         out.append(DeviceRef(name, str(path), chart, where))
     return out
+
+
+def _device_entries(r: _Reader, node: yaml.MappingNode) -> dict[str, yaml.Node]:
+    """The devices: mapping by name; a repeated name is V806 and the last one counts."""
+    entries: dict[str, yaml.Node] = {}
+    for k, v in node.value:
+        key = str(k.value) if isinstance(k, yaml.ScalarNode) else ""
+        if key in entries:
+            r.diags.append(_d("V806", r.at(k), f"device name {key!r} is used twice"))
+        entries[key] = v
+    if not entries:
+        r.diags.append(_d("V815", r.at(node), "the cell has no devices"))
+    return entries
+
+
+def _device_file(r: _Reader, name: str, value: yaml.Node, where: Location) -> str | None:
+    """The file one device entry names (``arm: arm.yaml`` or ``arm: {file: ...}``), or None
+    with the reason: a name In() cannot split (V806), no text, a NUL (V805)."""
+    if not name.isidentifier():
+        r.diags.append(
+            _d(
+                "V806",
+                where,
+                f"device name {name!r} is not an identifier",
+                "use letters, digits and '_' (no dots): In('arm.Moving') splits at the dot",
+            )
+        )
+        return None
+    if isinstance(value, yaml.MappingNode):
+        fields = r.mapping(value, f"device {name!r}", ("file",), ("file",))
+        file = r.text(fields.get("file"), f"device {name!r} file") if fields else None
+    else:
+        file = r.text(value, f"device {name!r}")
+    if file is None:
+        return None
+    if "\x00" in file:  # no file system names one: resolve() would raise ValueError
+        r.diags.append(
+            _d("V805", where, f"device file {file!r} holds a NUL character", "name a file")
+        )
+        return None
+    return file
 
 
 def _expr(

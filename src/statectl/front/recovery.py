@@ -158,33 +158,49 @@ def check_recovery(
             )
             continue
         seen[r.state] = r
-        if r.redo:
-            if not redo_sources(chart, r.state):
-                diags.append(
-                    Diagnostic(
-                        "J607",
-                        Severity.ERROR,
-                        r.origin,
-                        f"redo rule for {r.state!r}, but no transition enters it with a "
-                        "device API call: there is nothing to redo",
-                        "give the entering event an api (a command or fault event), or "
-                        "name an event that leaves the state instead of redo",
-                    )
-                )
-            continue
-        leaving = _leaving(chart, r.state)  # a superstate's transition leaves it too
-        if not any(r.event in t.events for t in leaving):
-            here = sorted({e for t in leaving for e in t.events})
+        diags.extend(_rule_problems(chart, r))
+    diags.extend(_unruled(chart, seen, unruled))
+    return diags
+
+
+def _rule_problems(chart: Chart, r: RecoveryRow) -> list[Diagnostic]:
+    """What is wrong with one rule for a known state: nothing to redo (J607), an event
+    that does not leave the state (J604), data that does not fit the event."""
+    diags: list[Diagnostic] = []
+    if r.redo:
+        if not redo_sources(chart, r.state):
             diags.append(
                 Diagnostic(
-                    "J604",
+                    "J607",
                     Severity.ERROR,
                     r.origin,
-                    f"event {r.event!r} does not leave {r.state!r}",
-                    f"events leaving {r.state!r}: {', '.join(here) or 'none'}",
+                    f"redo rule for {r.state!r}, but no transition enters it with a "
+                    "device API call: there is nothing to redo",
+                    "give the entering event an api (a command or fault event), or "
+                    "name an event that leaves the state instead of redo",
                 )
             )
-        diags.extend(_data_fits(chart, r))
+        return diags
+    leaving = _leaving(chart, r.state)  # a superstate's transition leaves it too
+    if not any(r.event in t.events for t in leaving):
+        here = sorted({e for t in leaving for e in t.events})
+        diags.append(
+            Diagnostic(
+                "J604",
+                Severity.ERROR,
+                r.origin,
+                f"event {r.event!r} does not leave {r.state!r}",
+                f"events leaving {r.state!r}: {', '.join(here) or 'none'}",
+            )
+        )
+    diags.extend(_data_fits(chart, r))
+    return diags
+
+
+def _unruled(chart: Chart, seen: dict[str, RecoveryRow], unruled: Severity) -> list[Diagnostic]:
+    """States a crash would strand without a rule: monitored (J606) or waiting on a device
+    (J608), at the caller's ``unruled`` severity."""
+    diags: list[Diagnostic] = []
     for s in chart.states:
         if ControlKind.MONITORING in s.controls and s.name not in seen:
             diags.append(

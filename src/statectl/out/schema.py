@@ -45,17 +45,14 @@ from statectl.front.tables.yaml_io import TOP_KEYS as DEVICE_KEYS
 from statectl.kernel.model import EventKind
 from statectl.run.commands import CHANNELS, GRANT_KEYS
 from statectl.run.devices.config import (
-    DASHBOARD_KEYS,
-    DRIVERS,
-    MAX_STREAMS,
-    MIN_TOKEN,
-    RUN_CONFIG_KEYS,
-    SHIP_KEYS,
-)
-from statectl.run.devices.config import (
     DEVICE_KEYS as DRIVER_KEYS,
 )
+from statectl.run.devices.config import (
+    DRIVERS,
+    RUN_CONFIG_KEYS,
+)
 from statectl.run.devices.opcua_config import MIN_PASSWORD, OPCUA_KEYS, POLICIES
+from statectl.run.devices.sections import DASHBOARD_KEYS, MAX_STREAMS, MIN_TOKEN, SHIP_KEYS
 
 __all__ = ["KINDS", "schema", "schema_text"]
 

@@ -338,7 +338,6 @@ class Composed:
     def branches(self, g: int, s: Stimulus, detail: bool = False) -> list[Branch]:
         """Every way stimulus ``s`` plays out from ``g`` (rule 2); empty if it does not happen."""
         d = s.device
-        space = self.spaces[d]
         lid = self.local(g, d)
         out: list[Branch] = []
         Work = tuple[
@@ -358,21 +357,7 @@ class Composed:
             g1 = self.replace(g, d, o.target)
             log: tuple[Delivery, ...] = ()
             if detail:
-                sender = self.names[d] if s.kind is InputKind.COMPLETION else "environment"
-                log = (
-                    Delivery(
-                        sender,
-                        self.names[d],
-                        s.event,
-                        s.kind.value,
-                        space.state_of(lid),
-                        space.state_of(o.target),
-                        o.unhandled,
-                        o.notifies,
-                        o.choices,
-                        assumed=assumptions(space, o, False),
-                    ),
-                )
+                log = (self._stimulus_delivery(s, lid, o),)
             work.append((g1, self._queue(g1, d, o), log, (), 1))
         while work:
             g1, pending, log, bad, count = work.pop()
@@ -393,7 +378,6 @@ class Composed:
                     )
                 work.append((g1, later, log + lost, bad, count + (fate == "lost")))
             t, event, link, overtaken, rest = self._pop(pending)
-            tspace = self.spaces[t]
             tlid = self.local(g1, t)
             for o in self.outcomes(t, tlid, event, link):
                 cond = self.condition(t, o)
@@ -404,28 +388,55 @@ class Composed:
                 bad2 = _bad(bad, t, tlid, event, link, o.unhandled, self.harmless[link])
                 log2 = log
                 if detail:
-                    k = self.links[link]
-                    back = event != k.event  # the link's `dropped` event, to its source
-                    log2 = (
-                        *log,
-                        Delivery(
-                            k.target if back else k.source,
-                            self.names[t],
-                            event,
-                            f"{k.label} dropped" if back else k.label,
-                            tspace.state_of(tlid),
-                            tspace.state_of(o.target),
-                            o.unhandled,
-                            o.notifies,
-                            o.choices,
-                            "overtaken" if overtaken else "",
-                            assumptions(tspace, o, not k.forward_data and not back),
-                        ),
-                    )
+                    log2 = (*log, self._link_delivery(t, tlid, event, link, overtaken, o))
                 work.append((g2, rest + more, log2, bad2, count + 1))
         if not detail:
             return out
         return list(dict.fromkeys(out))
+
+    # Traces only (``branches(detail=True)``): what each delivery shows, kept out of
+    # the cascade so the search's own calls never build one.
+
+    def _stimulus_delivery(self, s: Stimulus, lid: int, o: Outcome) -> Delivery:
+        """The stimulus itself as a trace's first delivery (from the environment, or from
+        the device when it reports a completion)."""
+        d = s.device
+        space = self.spaces[d]
+        sender = self.names[d] if s.kind is InputKind.COMPLETION else "environment"
+        return Delivery(
+            sender,
+            self.names[d],
+            s.event,
+            s.kind.value,
+            space.state_of(lid),
+            space.state_of(o.target),
+            o.unhandled,
+            o.notifies,
+            o.choices,
+            assumed=assumptions(space, o, False),
+        )
+
+    def _link_delivery(
+        self, t: int, tlid: int, event: str, link: int, overtaken: bool, o: Outcome
+    ) -> Delivery:
+        """A link's delivery to device ``t`` as a trace shows it; a link's ``dropped`` event
+        goes back to its source."""
+        k = self.links[link]
+        tspace = self.spaces[t]
+        back = event != k.event  # the link's `dropped` event, to its source
+        return Delivery(
+            k.target if back else k.source,
+            self.names[t],
+            event,
+            f"{k.label} dropped" if back else k.label,
+            tspace.state_of(tlid),
+            tspace.state_of(o.target),
+            o.unhandled,
+            o.notifies,
+            o.choices,
+            "overtaken" if overtaken else "",
+            assumptions(tspace, o, not k.forward_data and not back),
+        )
 
     def moves(self, d: int, lid: int, event: str, link: int = -1) -> tuple[Move, ...]:
         """Device ``d``'s outcomes for ``event`` in ``lid``, with the links each would fire."""

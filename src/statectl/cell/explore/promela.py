@@ -162,7 +162,17 @@ class _Writer:
 def export_promela(model: Composed, *, invariants: bool = True, unhandled: bool = True) -> str:
     """The Promela text of ``model`` (rules 1-4)."""
     w = _Writer(model)
-    m = model
+    out = [
+        *_declarations(w, model),
+        *_drain(w, model, unhandled),
+        *_check(w, model, invariants),
+        *_process(w, model),
+    ]
+    return "\n".join(out) + "\n"
+
+
+def _declarations(w: _Writer, m: Composed) -> list[str]:
+    """The header and the globals: one variable per device, the pending-delivery channel."""
     out = [
         f"/* cell {m.cell.name}: composed by statectl for SPIN (statectl verify "
         "--export promela) */"
@@ -180,6 +190,12 @@ def export_promela(model: Composed, *, invariants: bool = True, unhandled: bool 
     out.append(f"chan pend = [{capacity}] of {{ byte }}; /* queued link deliveries */")
     out.append("byte code;")
     out.append("")
+    return out
+
+
+def _drain(w: _Writer, m: Composed, unhandled: bool) -> list[str]:
+    """``drain()``: deliver the queued link events, each by its target's table (rule 2)."""
+    out: list[str] = []
     out.append("inline drain() {")
     out.append("  do")
     out.append("  :: nempty(pend) -> pend?code;")
@@ -195,6 +211,12 @@ def export_promela(model: Composed, *, invariants: bool = True, unhandled: bool 
     out.append("  code = 0 /* so equal device states are one SPIN state */")
     out.append("}")
     out.append("")
+    return out
+
+
+def _check(w: _Writer, m: Composed, invariants: bool) -> list[str]:
+    """``check()``: the invariants as asserts, run after every stimulus."""
+    out: list[str] = []
     checks = (
         [f"  assert({w.expr(inv.expr)}); /* invariant {inv.name} */" for inv in m.cell.invariants]
         if invariants
@@ -204,6 +226,12 @@ def export_promela(model: Composed, *, invariants: bool = True, unhandled: bool 
     out.extend(checks or ["  skip"])
     out.append("}")
     out.append("")
+    return out
+
+
+def _process(w: _Writer, m: Composed) -> list[str]:
+    """The cell process: pick an initial state, then loop over the stimuli (rule 3)."""
+    out: list[str] = []
     out.append("active proctype cell() {")
     out.append("  atomic {")
     out.append("    if")
@@ -241,4 +269,4 @@ def export_promela(model: Composed, *, invariants: bool = True, unhandled: bool 
         out.append("     }")
     out.append("  od")
     out.append("}")
-    return "\n".join(out) + "\n"
+    return out

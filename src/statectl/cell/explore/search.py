@@ -27,12 +27,12 @@ import resource
 import time
 from array import array
 from collections.abc import Callable
-from dataclasses import dataclass
 from itertools import pairwise
 
 from statectl.cell.explore.compose import Branch, Composed, Predicate, Stimulus
 from statectl.cell.explore.report import Finding, Kind, Report, Trace, TraceStep, Unanticipated
-from statectl.cell.model import Cell, InputKind
+from statectl.cell.explore.walk import Progress, Walk
+from statectl.cell.model import Cell
 from statectl.kernel.semantics import Unhandled
 
 __all__ = ["DEFAULT_MAX_STATES", "Progress", "explore", "trace_to"]
@@ -40,14 +40,6 @@ __all__ = ["DEFAULT_MAX_STATES", "Progress", "explore", "trace_to"]
 #: The states ``statectl verify`` stores unless ``--max-states`` says otherwise: about
 #: 2 GiB at some 110 bytes a state (a 12-Motor cell has 6**12, far past any memory).
 DEFAULT_MAX_STATES = 20_000_000
-
-
-@dataclass(frozen=True, slots=True)
-class Progress:
-    states: int
-    expanded: int
-    depth: int
-    seconds: float
 
 
 def _peak_bytes() -> int:
@@ -158,144 +150,68 @@ def explore(
     """Explore every reachable global state of ``cell`` and check its properties."""
     t0 = time.perf_counter()
     model = model or Composed(cell)
-    tables = _Tables(model)
     invariants: list[tuple[str, Predicate]] = [
         (inv.name, model.predicate(inv.expr)) for inv in cell.invariants
     ]
-    keep_edges = bool(cell.recovery)
-    index: dict[int, int] = {}
-    states: list[int] = []
-    parent: array[int] = array("q")
-    violated: dict[str, int] = {}
-    violations: dict[str, int] = {}
-
-    def add(h: int, p: int) -> None:
-        index[h] = len(states)
-        states.append(h)
-        parent.append(p)
-        for name, fn in invariants:
-            if not fn(h):
-                violations[name] = violations.get(name, 0) + 1
-                violated.setdefault(name, len(states) - 1)
-
-    for g0 in model.initial:
-        if g0 not in index:
-            add(g0, -1)
-    n = len(model.names)
-    shifts, masks = model.shift, model.mask
-    simple, live, cx, unant = tables.simple, tables.live, tables.complex, tables.unant
-    deadlocks: list[int] = []
-    unhandled: dict[tuple[int, str, str], tuple[int, Stimulus, int]] = {}
-    unhandled_count: dict[tuple[int, str, str], int] = {}
-    livelocks: dict[int, tuple[int, Stimulus]] = {}
-    # (device, local state label, event) -> first (state, stimulus, target or -1,
-    # local id, link or -1)
-    errors: dict[tuple[int, str, str], tuple[int, Stimulus, int, int, int]] = {}
-    error_count: dict[tuple[int, str, str], int] = {}
-    guard_errors = tables.errors
-    unant_first: dict[tuple[int, int, str, InputKind], int] = {}
-    unant_count: dict[tuple[int, int, str, InputKind], int] = {}
-    unant_states = 0
-    src: array[int] = array("q")
-    dst: array[int] = array("q")
-    transitions = 0
-    head = 0
-    depth = 0
-    level_end = len(states)
-    complete = True
-    limit = max_states if max_states is not None else -1
-    last_report = t0
-    while head < len(states):
-        if head == level_end:
-            depth += 1
-            level_end = len(states)
-        if progress is not None and head & 0x3FFF == 0:
-            now = time.perf_counter()
-            if now - last_report >= 0.5:
-                progress(Progress(len(states), head, depth, now - t0))
-                last_report = now
-        g = states[head]
-        alive = False
-        flagged = False
-        for d in range(n):
-            lid = (g >> shifts[d]) & masks[d]
-            if live[d][lid]:
-                alive = True
-            for delta in simple[d][lid]:
-                h = g ^ delta
-                transitions += 1
-                if h not in index:
-                    if len(states) == limit:
-                        complete = False
-                        break
-                    add(h, head)
-                if keep_edges:
-                    src.append(head)
-                    dst.append(index[h])
-            for i, s in cx[d][lid]:
-                if s.when >= 0:
-                    when = model.when[s.when]
-                    if when is not None and not when(g):
-                        continue
-                for h, bad, livelock in model.successors(g, s):
-                    alive = True
-                    for t, tlid, event, link in bad:
-                        key = (t, model.spaces[t].state_of(tlid), event)
-                        if link < 0:  # the delivery's guard raised (compose._bad)
-                            error_count[key] = error_count.get(key, 0) + 1
-                            errors.setdefault(key, (head, s, h, tlid, ~link))
-                            continue
-                        unhandled_count[key] = unhandled_count.get(key, 0) + 1
-                        if key not in unhandled:
-                            unhandled[key] = (head, s, h)
-                    if livelock and i not in livelocks:
-                        livelocks[i] = (head, s)
-                    if h == g:
-                        continue
-                    transitions += 1
-                    if h not in index:
-                        if len(states) == limit:
-                            complete = False
-                            break
-                        add(h, head)
-                    if keep_edges:
-                        src.append(head)
-                        dst.append(index[h])
-            for _i, s in unant[d][lid]:
-                if s.when >= 0:
-                    when = model.when[s.when]
-                    if when is not None and not when(g):
-                        continue
-                key2 = (d, lid, s.event, s.kind)
-                unant_count[key2] = unant_count.get(key2, 0) + 1
-                unant_first.setdefault(key2, head)
-                flagged = True
-            for s in guard_errors[d][lid]:
-                if not model.offered(s, g):
-                    continue
-                key = (d, model.spaces[d].state_of(lid), s.event)
-                error_count[key] = error_count.get(key, 0) + 1
-                errors.setdefault(key, (head, s, -1, lid, -1))
-            if not complete:
-                break
-        if not complete:
-            break
-        if flagged:
-            unant_states += 1
-        if not alive:
-            deadlocks.append(head)
-        head += 1
+    walk = Walk(
+        model, _Tables(model), invariants, keep_edges=bool(cell.recovery), max_states=max_states
+    )
+    walk.run(progress, t0)
     seconds = time.perf_counter() - t0
 
     findings: list[Finding] = []
     properties: list[tuple[str, str]] = []
+    _judge_deadlock_and_invariants(cell, walk, findings, properties)
+    _judge_deliveries(walk, findings, properties)
+    _judge_recovery(cell, walk, findings, properties)
+    findings.extend(_unreached(walk))
+    states, parent = walk.states, walk.parent
+    unants = tuple(
+        Unanticipated(
+            model.names[d],
+            model.spaces[d].state_of(lid),
+            event,
+            kind,
+            walk.unant_count[(d, lid, event, kind)],
+            trace_to(model, parent, states, first),
+        )
+        for (d, lid, event, kind), first in walk.unant_first.items()
+    )
+    return Report(
+        cell=cell.name,
+        path=cell.path,
+        devices=tuple(
+            (nm, len(sp.snapshots)) for nm, sp in zip(model.names, model.spaces, strict=True)
+        ),
+        states=len(states),
+        transitions=walk.transitions,
+        depth=walk.depth,
+        complete=walk.complete,
+        seconds=seconds,
+        peak_bytes=_peak_bytes(),
+        findings=tuple(findings),
+        unanticipated=unants,
+        unanticipated_states=walk.unant_states,
+        free_guards=tuple(g for sp in model.spaces for g in sp.free_guards),
+        properties=tuple(properties),
+        relies=_relies(model, properties, findings),
+    )
 
-    def verdict(failed: bool, judged: bool = True) -> str:
-        if failed:
-            return "fails"
-        return "holds" if complete and judged else "unknown"
 
-    properties.append(("no deadlock", verdict(bool(deadlocks))))
+def _verdict(walk: Walk, failed: bool) -> str:
+    """A property fails on a witness; it holds only if the walk was complete."""
+    if failed:
+        return "fails"
+    return "holds" if walk.complete else "unknown"
+
+
+def _judge_deadlock_and_invariants(
+    cell: Cell, walk: Walk, findings: list[Finding], properties: list[tuple[str, str]]
+) -> None:
+    """Rule 3 and the cell's invariants: the first (shortest) witness of each, and a count."""
+    model, parent, states = walk.model, walk.parent, walk.states
+    deadlocks = walk.deadlocks
+    properties.append(("no deadlock", _verdict(walk, bool(deadlocks))))
     if deadlocks:
         first = deadlocks[0]
         findings.append(
@@ -307,9 +223,10 @@ def explore(
                 len(deadlocks),
             )
         )
+    violated = walk.violated
     for inv in cell.invariants:
         properties.append(
-            (f"invariant {inv.name}: {inv.expr.source}", verdict(inv.name in violated))
+            (f"invariant {inv.name}: {inv.expr.source}", _verdict(walk, inv.name in violated))
         )
         if inv.name in violated:
             at = violated[inv.name]
@@ -319,11 +236,19 @@ def explore(
                     inv.name,
                     f"{inv.expr.source} is false in {model.describe(states[at])}",
                     trace_to(model, parent, states, at),
-                    violations[inv.name],
+                    walk.violations[inv.name],
                 )
             )
+
+
+def _judge_deliveries(
+    walk: Walk, findings: list[Finding], properties: list[tuple[str, str]]
+) -> None:
+    """What links meet: an event nobody handles, a raising guard (rule 5), a livelock."""
+    model, parent, states = walk.model, walk.parent, walk.states
+    unhandled = walk.unhandled
     properties.append(
-        ("every link-delivered event is handled or ignored", verdict(bool(unhandled)))
+        ("every link-delivered event is handled or ignored", _verdict(walk, bool(unhandled)))
     )
     for key, (at, s, target) in unhandled.items():
         t, label, event = key
@@ -335,13 +260,13 @@ def explore(
                 f"a link delivers {event!r} to {name} in {label}, which neither handles nor "
                 "ignores it (a missed transition that shows only in interaction)",
                 trace_to(model, parent, states, at, s, _shows(model, key, target)),
-                unhandled_count[key],
+                walk.unhandled_count[key],
             )
         )
-    properties.append(("no guard raises", verdict(bool(errors))))
-    findings.extend(_guard_errors(model, parent, states, errors, error_count))
-    properties.append(("no link livelock", verdict(bool(livelocks))))
-    for at, s in livelocks.values():
+    properties.append(("no guard raises", _verdict(walk, bool(walk.errors))))
+    findings.extend(_guard_errors(model, parent, states, walk.errors, walk.error_count))
+    properties.append(("no link livelock", _verdict(walk, bool(walk.livelocks))))
+    for at, s in walk.livelocks.values():
         findings.append(
             Finding(
                 Kind.LIVELOCK,
@@ -351,21 +276,28 @@ def explore(
                 trace_to(model, parent, states, at),
             )
         )
+
+
+def _judge_recovery(
+    cell: Cell, walk: Walk, findings: list[Finding], properties: list[tuple[str, str]]
+) -> None:
+    """Rule 4 over the stored edges; only a complete walk has all of them to judge by."""
+    model, parent, states = walk.model, walk.parent, walk.states
     for rec in cell.recovery:
         failed_at, count = (-1, 0)
-        if complete:
+        if walk.complete:
             failed_at, count = _recovery(
                 model,
                 model.predicate(rec.target),
                 model.predicate(rec.source) if rec.source else None,
                 states,
-                src,
-                dst,
+                walk.src,
+                walk.dst,
             )
         text = f"recovery {rec.name}: always able to reach {rec.target.source}"
         if rec.source is not None:
             text += f" from {rec.source.source}"
-        properties.append((text, verdict(failed_at >= 0)))
+        properties.append((text, _verdict(walk, failed_at >= 0)))
         if failed_at >= 0:
             findings.append(
                 Finding(
@@ -377,10 +309,18 @@ def explore(
                     count,
                 )
             )
+
+
+def _unreached(walk: Walk) -> list[Finding]:
+    """Each device state no stored global state has active (within the bound, if hit)."""
+    model = walk.model
+    n = len(model.names)
+    shifts, masks = model.shift, model.mask
     reached: list[set[int]] = [set() for _ in range(n)]
-    for g in states:
+    for g in walk.states:
         for d in range(n):
             reached[d].add((g >> shifts[d]) & masks[d])
+    findings: list[Finding] = []
     for d, space in enumerate(model.spaces):
         seen = {s for lid in reached[d] for s in space.active(lid)}
         for st in space.chart.states:
@@ -390,39 +330,10 @@ def explore(
                         Kind.UNREACHED,
                         f"{model.names[d]}.{st.name}",
                         f"device {model.names[d]} never enters {st.name} in this cell"
-                        + ("" if complete else " (within the bound)"),
+                        + ("" if walk.complete else " (within the bound)"),
                     )
                 )
-    unants = tuple(
-        Unanticipated(
-            model.names[d],
-            model.spaces[d].state_of(lid),
-            event,
-            kind,
-            unant_count[(d, lid, event, kind)],
-            trace_to(model, parent, states, first),
-        )
-        for (d, lid, event, kind), first in unant_first.items()
-    )
-    return Report(
-        cell=cell.name,
-        path=cell.path,
-        devices=tuple(
-            (nm, len(sp.snapshots)) for nm, sp in zip(model.names, model.spaces, strict=True)
-        ),
-        states=len(states),
-        transitions=transitions,
-        depth=depth,
-        complete=complete,
-        seconds=seconds,
-        peak_bytes=_peak_bytes(),
-        findings=tuple(findings),
-        unanticipated=unants,
-        unanticipated_states=unant_states,
-        free_guards=tuple(g for sp in model.spaces for g in sp.free_guards),
-        properties=tuple(properties),
-        relies=_relies(model, properties, findings),
-    )
+    return findings
 
 
 def _shows(model: Composed, key: tuple[int, str, str], target: int) -> Callable[[object], bool]:

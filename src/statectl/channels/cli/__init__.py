@@ -17,7 +17,7 @@ import select
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 from statectl.channels.cli.commands import (
     PROBLEMS,
@@ -69,6 +69,32 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"statectl {__version__}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
+    _add_device_commands(sub)
+    _add_verify(sub)
+    _add_run(sub)
+    _add_journal(sub)
+    _add_scxml(sub)
+    from statectl.out.testgen.commands import register as register_testgen
+
+    register_testgen(sub)  # testgen, coverage (src/statectl/out/testgen/commands.py)
+    from statectl.channels.cli.profiles import register as register_profiles
+
+    register_profiles(sub)  # profiles, new (src/statectl/channels/cli/profiles.py)
+    from statectl.channels.cli.node import register as register_node
+
+    register_node(sub)  # node, dashboard (src/statectl/channels/cli/node.py; docs/distributed.md)
+    from statectl.channels.cli.editors import register as register_editors
+
+    register_editors(sub)  # schema, lsp (src/statectl/channels/cli/editors.py; docs/editors.md)
+    return p
+
+
+# build_parser's subcommands, one function per family so each reads as its --help does.
+
+
+def _add_device_commands(sub: Any) -> None:
+    """The commands over one device file: demo, check, build, observers, render, tables,
+    codegen."""
     s = sub.add_parser("demo", help="run the paper's Motor case study on a simulated motor")
     s.add_argument(
         "--driver",
@@ -120,6 +146,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--progress", action="store_true", help="show progress even when piped")
     s.set_defaults(func=cmd_codegen)
 
+
+def _add_verify(sub: Any) -> None:
+    """``verify``: a cell's global states, or its Promela export."""
     s = sub.add_parser("verify", help="explore every reachable global state of a cell")
     s.add_argument("cell", metavar="CELL")
     s.add_argument("--json", action="store_true", help="one JSON report on standard output")
@@ -139,6 +168,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--progress", action="store_true", help="show progress even when piped")
     s.set_defaults(func=cmd_verify)
 
+
+def _add_run(sub: Any) -> None:
+    """``run``: a device or cell live or batch, with its journal, dashboard and OPC UA."""
     s = sub.add_parser(
         "run",
         help="run a device or a cell on simulated twins or drivers (events from stdin)",
@@ -215,6 +247,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=int, default=0, help="cells: random-walk seed")
     s.set_defaults(func=cmd_run)
 
+
+def _add_journal(sub: Any) -> None:
+    """``journal``: show, export, replay and ship a run's journal."""
     journal = sub.add_parser("journal", help="read a run's journal")
     jsub = journal.add_subparsers(dest="journal_command", required=True, parser_class=_Parser)
     for name, text in (
@@ -240,6 +275,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     register_ship(jsub)  # journal ship (src/statectl/channels/cli/ship.py)
 
+
+def _add_scxml(sub: Any) -> None:
+    """``scxml``: run, import and export SCXML documents."""
     scxml = sub.add_parser("scxml", help="SCXML documents")
     ssub = scxml.add_subparsers(dest="scxml_command", required=True, parser_class=_Parser)
     s = ssub.add_parser("run", help="run a document; print 'final: <id>' at a top-level final")
@@ -262,20 +300,6 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("file", metavar="FILE")
     s.add_argument("--out", help="write to this file instead of standard output")
     s.set_defaults(func=cmd_scxml_export)
-
-    from statectl.out.testgen.commands import register as register_testgen
-
-    register_testgen(sub)  # testgen, coverage (src/statectl/out/testgen/commands.py)
-    from statectl.channels.cli.profiles import register as register_profiles
-
-    register_profiles(sub)  # profiles, new (src/statectl/channels/cli/profiles.py)
-    from statectl.channels.cli.node import register as register_node
-
-    register_node(sub)  # node, dashboard (src/statectl/channels/cli/node.py; docs/distributed.md)
-    from statectl.channels.cli.editors import register as register_editors
-
-    register_editors(sub)  # schema, lsp (src/statectl/channels/cli/editors.py; docs/editors.md)
-    return p
 
 
 def _command(args: argparse.Namespace) -> str:

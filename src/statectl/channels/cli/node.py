@@ -222,18 +222,80 @@ def node_main(
 ) -> int:
     """The whole ``statectl node``; returns the exit code (0 ok, 1 problems, 2 usage)."""
     from statectl.channels.cli import run as runcli
-    from statectl.channels.cli.outputs import output
-    from statectl.channels.cli.run_journal import (
-        JOURNAL_NAME,
-        new_journal,
-        open_journal,
-        undone_on_failure,
-    )
-    from statectl.channels.distributed import NodeSystem, Wire
-    from statectl.channels.distributed.trust import security_line
-    from statectl.run.devices import DashboardConfig, RunConfig, load_run_config
-    from statectl.run.journal import Guarantee, Sync
-    from statectl.run.runtime import TraceWriter, WallClock
+    from statectl.channels.distributed import Wire
+
+    setup = _node_setup(path, node, journal, resume, fresh, guarantee, port, err)
+    if isinstance(setup, int):
+        return setup
+    promise, cell, devices, mine = setup
+    problems = Problems()
+    system: Any = None
+    wire: Any = None
+    server: Any = None
+    failed = ""
+    halt = stop or threading.Event()
+    try:
+        system, table, drivers, journal = _node_system(
+            cell, devices, path, driver, config, journal, resume, fresh, promise, out
+        )
+        wire = Wire(
+            cell,
+            node,
+            system,
+            out=out,
+            journal=Path(journal) if journal is not None else None,
+            resume=resume,
+        )
+        _listen(system, wire, problems, drivers, quiet, out, err)
+        _announce(cell, node, mine, wire, out)
+        wire.open(states=dashboard)
+        resumed = system.start(resume=resume)
+        _say_resumed(system, resumed, out)
+        wire.listen()
+        if dashboard:
+            server, url, shown = _node_dashboard(
+                cell, system, wire, host, port, token, config, table
+            )
+            wire.refresh()  # states put before the page listened
+            out.write(f"dashboard: {url}\ntoken: {shown}\n")
+        out.write(f"node {node}: running\n")
+        out.flush()
+        _serve(system, halt, events, problems, out, err)
+        return verdict(problems, err, "node")
+    except (StatectlError, OSError) as exc:
+        failed = str(exc)
+        err.write(f"statectl node: {exc}\n")
+        return PROBLEMS
+    except Exception as exc:  # Zenoh's own errors (a port in use, a bad endpoint)
+        if type(exc).__name__ != "ZError":
+            raise
+        failed = str(exc)
+        err.write(f"statectl node: Zenoh: {exc}\n")
+        return PROBLEMS
+    finally:
+        if server is not None:
+            server.stop()
+        if wire is not None:
+            wire.close()
+        if system is not None:
+            runcli._close(system, err, failed)
+        out.flush()
+
+
+def _node_setup(
+    path: str,
+    node: str,
+    journal: str | None,
+    resume: bool,
+    fresh: bool,
+    guarantee: str,
+    port: int | None,
+    err: TextIO,
+) -> int | tuple[Any, Any, tuple[Any, ...], Any]:
+    """The exit code of a bad start (usage 2, problems 1), or what the node runs: the
+    journal's promise, the cell, this node's device setups and their names."""
+    from statectl.channels.cli import run as runcli
+    from statectl.run.journal import Guarantee
 
     if (resume or fresh) and journal is None:
         err.write(f"statectl node: {'--resume' if resume else '--fresh'} needs --journal DB\n")
@@ -268,121 +330,165 @@ def node_main(
         return USAGE
     mine = cell.nodes.node(node).devices
     devices = tuple(d for d in devices if d.name in mine)
-    problems = Problems()
-    system: Any = None
-    wire: Any = None
-    server: Any = None
-    failed = ""
-    halt = stop or threading.Event()
-    try:
-        table = RunConfig(None, DashboardConfig())
-        if config is not None:
-            table = load_run_config(config)
-        drivers = runcli._drivers(devices, driver, config, table)
-        setups = tuple(replace(d, driver=drivers.get(d.name)) for d in devices)
-        store = None
-        if journal is not None:
-            with output(
-                journal, JOURNAL_NAME, existing=False
-            ) as target:  # cli/outputs.py: the output rule
-                journal = str(target)
-                read = (path, config, *(d.source for d in devices))
-                made = new_journal(journal, resume=resume, fresh=fresh)
-                store = open_journal(
-                    journal,
-                    Sync.NORMAL,
-                    promise,
-                    resume=resume,
-                    fresh=fresh,
-                    out=out,
-                    inputs=read,
-                )
-        with undone_on_failure(store, journal if store is not None and made else None):
-            system = NodeSystem(setups, WallClock(), store, cell, commands=table.commands)
-        wire = Wire(
-            cell,
-            node,
-            system,
-            out=out,
-            journal=Path(journal) if journal is not None else None,
-            resume=resume,
-        )
-        if system.subjects:
-            width = max(len(n) for n in system.subjects)
-            if not quiet:
-                system.listen_steps(TraceWriter(out, device_width=width).step)
-                runcli._show_notes(drivers, out, width)
-        system.listen_steps(problems.step)
-        width = max((len(n) for n in system.subjects), default=4)
-        system.on_violation.append(problems.violation(out, width))  # rule 5
-        system.on_failure.append(problems.failure(err))
-        wire.on_refused.append(lambda exc: problems.refuse())
-        me = cell.nodes.node(node)
-        out.write(
-            f"node {node}: devices {', '.join(mine) or 'none'}; listen "
-            f"{', '.join(me.listen) or 'none'}; connect {', '.join(me.connect) or 'none'}; "
-            f"lease {me.lease:g} s; key expressions under {wire.keys.root}/\n"
-            f"node {node}: {security_line(cell)}\n"
-        )
-        wire.open(states=dashboard)
-        resumed = system.start(resume=resume)
-        for name, bound in system.bound.items():
-            if resumed.get(name):
-                taken = ", ".join(bound.recovered) or "none"
-                out.write(
-                    f"resumed {name} in {', '.join(sorted(system.subjects[name].configuration))}"
-                    f"; recovery: {taken}; {bound.redelivered} accepted event(s) redelivered\n"
-                )
-        wire.listen()
-        if dashboard:
-            from statectl.channels.distributed.dashboard import serve_cell
+    return promise, cell, devices, mine
 
-            host, port, token, where = runcli._dashboard_settings(
-                host, port, token, config, table.dashboard
+
+def _node_system(
+    cell: Any,
+    devices: tuple[Any, ...],
+    path: str,
+    driver: str | None,
+    config: str | None,
+    journal: str | None,
+    resume: bool,
+    fresh: bool,
+    promise: Any,
+    out: TextIO,
+) -> tuple[Any, Any, Any, str | None]:
+    """The node's System over its own devices, their drivers and journal; the run config
+    it read and the journal's path (the output rule may complete it). A journal this
+    start made is removed again if the System cannot start."""
+    from statectl.channels.cli import run as runcli
+    from statectl.channels.cli.outputs import output
+    from statectl.channels.cli.run_journal import (
+        JOURNAL_NAME,
+        new_journal,
+        open_journal,
+        undone_on_failure,
+    )
+    from statectl.channels.distributed import NodeSystem
+    from statectl.run.devices import DashboardConfig, RunConfig, load_run_config
+    from statectl.run.journal import Sync
+    from statectl.run.runtime import WallClock
+
+    table = RunConfig(None, DashboardConfig())
+    if config is not None:
+        table = load_run_config(config)
+    drivers = runcli._drivers(devices, driver, config, table)
+    setups = tuple(replace(d, driver=drivers.get(d.name)) for d in devices)
+    store = None
+    if journal is not None:
+        with output(
+            journal, JOURNAL_NAME, existing=False
+        ) as target:  # cli/outputs.py: the output rule
+            journal = str(target)
+            read = (path, config, *(d.source for d in devices))
+            made = new_journal(journal, resume=resume, fresh=fresh)
+            store = open_journal(
+                journal,
+                Sync.NORMAL,
+                promise,
+                resume=resume,
+                fresh=fresh,
+                out=out,
+                inputs=read,
             )
-            server, url = serve_cell(
-                cell,
-                system.subjects,
-                wire.on_state,
-                system.post,
-                (host, port, token),
-                table.dashboard.streams,
+    with undone_on_failure(store, journal if store is not None and made else None):
+        system = NodeSystem(setups, WallClock(), store, cell, commands=table.commands)
+    return system, table, drivers, journal
+
+
+def _listen(
+    system: Any,
+    wire: Any,
+    problems: Problems,
+    drivers: Any,
+    quiet: bool,
+    out: TextIO,
+    err: TextIO,
+) -> None:
+    """Trace each step (unless quiet) and count what the verdict counts: problem steps,
+    violations, failures and refused posts."""
+    from statectl.channels.cli import run as runcli
+    from statectl.run.runtime import TraceWriter
+
+    if system.subjects:
+        width = max(len(n) for n in system.subjects)
+        if not quiet:
+            system.listen_steps(TraceWriter(out, device_width=width).step)
+            runcli._show_notes(drivers, out, width)
+    system.listen_steps(problems.step)
+    width = max((len(n) for n in system.subjects), default=4)
+    system.on_violation.append(problems.violation(out, width))  # rule 5
+    system.on_failure.append(problems.failure(err))
+    wire.on_refused.append(lambda exc: problems.refuse())
+
+
+def _announce(cell: Any, node: str, mine: Any, wire: Any, out: TextIO) -> None:
+    """Say what this node holds and where it talks, before it connects."""
+    from statectl.channels.distributed.trust import security_line
+
+    me = cell.nodes.node(node)
+    out.write(
+        f"node {node}: devices {', '.join(mine) or 'none'}; listen "
+        f"{', '.join(me.listen) or 'none'}; connect {', '.join(me.connect) or 'none'}; "
+        f"lease {me.lease:g} s; key expressions under {wire.keys.root}/\n"
+        f"node {node}: {security_line(cell)}\n"
+    )
+
+
+def _say_resumed(system: Any, resumed: Any, out: TextIO) -> None:
+    """One line per device resumed from the journal: its states, what recovery did."""
+    for name, bound in system.bound.items():
+        if resumed.get(name):
+            taken = ", ".join(bound.recovered) or "none"
+            out.write(
+                f"resumed {name} in {', '.join(sorted(system.subjects[name].configuration))}"
+                f"; recovery: {taken}; {bound.redelivered} accepted event(s) redelivered\n"
             )
-            wire.refresh()  # states put before the page listened
-            shown = server.token if token is None else f"(from {where})"
-            out.write(f"dashboard: {url}\ntoken: {shown}\n")
-        out.write(f"node {node}: running\n")
-        out.flush()
-        if threading.current_thread() is threading.main_thread():
-            signal.signal(signal.SIGTERM, lambda *_: halt.set())
-        lines = events if events is not None else sys.stdin
-        feeder = threading.Thread(
-            target=_feed, args=(system, lines, err, problems), daemon=True, name="statectl-feed"
-        )
-        feeder.start()
-        with contextlib.suppress(KeyboardInterrupt):
-            system.serve(halt)
-        for name, subject in system.subjects.items():
-            out.write(f"final {name}: {', '.join(sorted(subject.configuration))}\n")
-        return verdict(problems, err, "node")
-    except (StatectlError, OSError) as exc:
-        failed = str(exc)
-        err.write(f"statectl node: {exc}\n")
-        return PROBLEMS
-    except Exception as exc:  # Zenoh's own errors (a port in use, a bad endpoint)
-        if type(exc).__name__ != "ZError":
-            raise
-        failed = str(exc)
-        err.write(f"statectl node: Zenoh: {exc}\n")
-        return PROBLEMS
-    finally:
-        if server is not None:
-            server.stop()
-        if wire is not None:
-            wire.close()
-        if system is not None:
-            runcli._close(system, err, failed)
-        out.flush()
+
+
+def _node_dashboard(
+    cell: Any,
+    system: Any,
+    wire: Any,
+    host: str | None,
+    port: int | None,
+    token: str | None,
+    config: str | None,
+    table: Any,
+) -> tuple[Any, str, str]:
+    """Serve the cell's dashboard over this node's view: the server, its URL, and the
+    token to show (where it came from, when the user gave it)."""
+    from statectl.channels.cli import run as runcli
+    from statectl.channels.distributed.dashboard import serve_cell
+
+    host, port, token, where = runcli._dashboard_settings(
+        host, port, token, config, table.dashboard
+    )
+    server, url = serve_cell(
+        cell,
+        system.subjects,
+        wire.on_state,
+        system.post,
+        (host, port, token),
+        table.dashboard.streams,
+    )
+    shown = server.token if token is None else f"(from {where})"
+    return server, url, shown
+
+
+def _serve(
+    system: Any,
+    halt: threading.Event,
+    events: TextIO | None,
+    problems: Problems,
+    out: TextIO,
+    err: TextIO,
+) -> None:
+    """Run until ``halt`` (SIGTERM sets it) or Ctrl-C, events fed from ``events`` or stdin
+    on their own thread; then say each device's final states."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, lambda *_: halt.set())
+    lines = events if events is not None else sys.stdin
+    feeder = threading.Thread(
+        target=_feed, args=(system, lines, err, problems), daemon=True, name="statectl-feed"
+    )
+    feeder.start()
+    with contextlib.suppress(KeyboardInterrupt):
+        system.serve(halt)
+    for name, subject in system.subjects.items():
+        out.write(f"final {name}: {', '.join(sorted(subject.configuration))}\n")
 
 
 def _bad_usage(command: str, port: int | None, connect: Sequence[str], err: TextIO) -> bool:

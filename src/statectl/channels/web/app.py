@@ -28,6 +28,7 @@ from importlib.resources import files
 from typing import TYPE_CHECKING, Any
 
 from aiohttp import web
+from aiohttp.typedefs import Middleware
 
 from statectl.channels.web.stream import Fanout
 from statectl.kernel.errors import StatectlError
@@ -103,24 +104,7 @@ Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
 def make_app(dash: Dashboard, fanout: Fanout, limits: Limits) -> web.Application:
     """The routes for ``dash``; ``fanout`` lives on the same loop as the app."""
 
-    @web.middleware
-    async def guard(request: web.Request, handler: Handler) -> web.StreamResponse:
-        hosts = request.headers.getall("Host", [])
-        if len(hosts) != 1:
-            return _refuse(HTTPStatus.BAD_REQUEST, "a request has exactly one Host header")
-        if hosts[0] not in dash.hosts:
-            return _refuse(HTTPStatus.FORBIDDEN, f"host {hosts[0]!r} is not served here")
-        origins = request.headers.getall("Origin", [])
-        if len(origins) > 1 or (origins and origins[0] not in dash.origins):
-            return _refuse(HTTPStatus.FORBIDDEN, f"origin {', '.join(origins)!r} is refused")
-        try:
-            response = await handler(request)
-        except web.HTTPException as exc:  # 404, 405, 413 from aiohttp: same shape as ours
-            allow = {"Allow": exc.headers["Allow"]} if "Allow" in exc.headers else {}
-            return _refuse(exc.status, exc.reason, **allow)
-        if response.status >= 400:
-            response.force_close()
-        return response
+    guard = _guard(dash)
 
     async def headers(request: web.Request, response: web.StreamResponse) -> None:
         for k, v in _HEADERS.items():
@@ -168,6 +152,49 @@ def make_app(dash: Dashboard, fanout: Fanout, limits: Limits) -> web.Application
         finally:
             fanout.leave(stream)
 
+    post = _post(dash, limits)
+
+    app = web.Application(middlewares=[guard], client_max_size=limits.body)
+    app.on_response_prepare.append(headers)
+    for path in _ASSETS:
+        app.router.add_get(path, asset)
+    app.router.add_get("/api/state", state)
+    app.router.add_get(r"/api/diagram/{name:.+}.svg", diagram)
+    app.router.add_get("/api/events", events)
+    app.router.add_post("/api/post", post)
+    return app
+
+
+def _guard(dash: Dashboard) -> Middleware:
+    """The middleware every request passes: one Host we serve, an Origin we trust (no
+    DNS rebinding, no cross-site posts), and aiohttp's own errors in our shape."""
+
+    @web.middleware
+    async def guard(request: web.Request, handler: Handler) -> web.StreamResponse:
+        hosts = request.headers.getall("Host", [])
+        if len(hosts) != 1:
+            return _refuse(HTTPStatus.BAD_REQUEST, "a request has exactly one Host header")
+        if hosts[0] not in dash.hosts:
+            return _refuse(HTTPStatus.FORBIDDEN, f"host {hosts[0]!r} is not served here")
+        origins = request.headers.getall("Origin", [])
+        if len(origins) > 1 or (origins and origins[0] not in dash.origins):
+            return _refuse(HTTPStatus.FORBIDDEN, f"origin {', '.join(origins)!r} is refused")
+        try:
+            response = await handler(request)
+        except web.HTTPException as exc:  # 404, 405, 413 from aiohttp: same shape as ours
+            allow = {"Allow": exc.headers["Allow"]} if "Allow" in exc.headers else {}
+            return _refuse(exc.status, exc.reason, **allow)
+        if response.status >= 400:
+            response.force_close()
+        return response
+
+    return guard
+
+
+def _post(dash: Dashboard, limits: Limits) -> Handler:
+    """``POST /api/post``: an event for the System, refused unless writable, authorised,
+    JSON, within the body limits, naming a known event and allowed by the commands policy."""
+
     async def post(request: web.Request) -> web.StreamResponse:
         send = dash.post
         if send is None:
@@ -212,15 +239,7 @@ def make_app(dash: Dashboard, fanout: Fanout, limits: Limits) -> web.Application
             return _refuse(HTTPStatus.BAD_REQUEST, str(exc))
         return web.json_response({"accepted": True, "seq": seq, "durable": durable})
 
-    app = web.Application(middlewares=[guard], client_max_size=limits.body)
-    app.on_response_prepare.append(headers)
-    for path in _ASSETS:
-        app.router.add_get(path, asset)
-    app.router.add_get("/api/state", state)
-    app.router.add_get(r"/api/diagram/{name:.+}.svg", diagram)
-    app.router.add_get("/api/events", events)
-    app.router.add_post("/api/post", post)
-    return app
+    return post
 
 
 def _parse(raw: bytes) -> tuple[str | None, str, Any]:

@@ -46,10 +46,11 @@ Rules:
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from typing import Any
 
 from statectl.front.builder.common import GUARD_NAMES, _compile, _d, _hint, _literal
-from statectl.front.builder.eventdata import assign_actions, check_guard, event_fields
+from statectl.front.builder.eventdata import Fields, assign_actions, check_guard, event_fields
 from statectl.front.builder.events import _check_invokes, _event_defs, _merge_events
 from statectl.front.builder.extras import check_apis, expand_ignore, state_extras
 from statectl.front.builder.numbers import state_numbers
@@ -58,6 +59,7 @@ from statectl.front.builder.states import (
     _history_default,
     _kind,
     _merge_states,
+    _Merged,
     _order,
     _removed,
 )
@@ -65,6 +67,7 @@ from statectl.front.observers import DRIVING_KINDS, EventSpec, derive_invokes
 from statectl.front.tables import DeviceTables
 from statectl.front.tables.schema import (
     TYPE_NAMES,
+    EventRow,
 )
 from statectl.kernel.errors import Diagnostic, Location, Severity, has_errors
 from statectl.kernel.model import (
@@ -93,6 +96,73 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
         for name in kept
     }
     numbers = state_numbers({n: (merged[n].number, merged[n].rows[0]) for n in kept}, kept, diags)
+    states = _states(kept, merged, children, removed, kinds, numbers, diags)
+    top = [n for n in kept if not merged[n].parent]
+    marked = _defaults(top, merged, source, "top-level", diags)
+    _check_leaving(tables.events, kinds, diags)
+    if not marked:
+        diags.append(
+            _d(
+                "B202",
+                Severity.ERROR,
+                source,
+                "no top-level state is marked default, so the chart has no initial state",
+                "set control: default on the state the device starts in",
+            )
+        )
+
+    data_names = [name for name, _ in tables.data]
+    fields = event_fields(tables.events, diags)
+    assigns = _check_rows(tables, merged, data_names, fields, diags)
+
+    rows = _merge_events(tables.events, diags)
+    events = tuple(
+        dataclasses.replace(e, fields=fields.get(e.name, ())) for e in _event_defs(rows, diags)
+    )
+    _check_invokes(rows, diags)
+    apis, invokes = derive_invokes(
+        [EventSpec(r.event, r.kind, r.api or None, r.new, r.invoke or None) for r in rows]
+    )
+    by_method: dict[str, Invoke] = {i.method: i for i in invokes}
+    transitions = [_transition(r, assigns, by_method) for r in rows]
+
+    event_names = [e.name for e in events]
+    extras = state_extras(merged, kinds, rows, event_names, diags)
+    states = [
+        dataclasses.replace(s, timeout=extras[s.name][0], defer=extras[s.name][1]) for s in states
+    ]
+    check_apis(merged, rows, diags)
+    ignored = _ignored(kept, merged, rows, event_names, diags)
+
+    if has_errors(diags):
+        return None, diags
+    chart = Chart(
+        name=tables.device,
+        states=tuple(states),
+        transitions=tuple(transitions),
+        initial=(marked[0],),
+        events=events,
+        apis=apis,
+        invokes=invokes,
+        ignored=frozenset(ignored),
+        data=tuple(DataItem(n, _literal(v), source) for n, v in tables.data),
+        component=tables.states[0].component if tables.states else "",
+        origin=source,
+        profile=tables.profile,
+    )
+    return chart, diags
+
+
+def _states(
+    kept: list[str],
+    merged: dict[str, _Merged],
+    children: dict[str, list[str]],
+    removed: set[str],
+    kinds: dict[str, StateKind],
+    numbers: dict[str, int],
+    diags: list[Diagnostic],
+) -> list[State]:
+    """One State per kept row (rules 1, 1a): a compound's initial child is found here."""
     states: list[State] = []
     for name in kept:
         m = merged[name]
@@ -128,9 +198,14 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
                 number=numbers.get(name),
             )
         )
-    top = [n for n in kept if not merged[n].parent]
-    marked = _defaults(top, merged, source, "top-level", diags)
-    for r in tables.events:
+    return states
+
+
+def _check_leaving(
+    events: Sequence[EventRow], kinds: dict[str, StateKind], diags: list[Diagnostic]
+) -> None:
+    """B216: a final is its parent's end and a history only points back, so no row leaves one."""
+    for r in events:
         left = kinds.get(r.old)
         if left is not None and (left.is_history or left is StateKind.FINAL):
             diags.append(
@@ -143,21 +218,21 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
                     "start the row from the parent (or another state) instead",
                 )
             )
-    if not marked:
-        diags.append(
-            _d(
-                "B202",
-                Severity.ERROR,
-                source,
-                "no top-level state is marked default, so the chart has no initial state",
-                "set control: default on the state the device starts in",
-            )
-        )
 
+
+def _check_rows(
+    tables: DeviceTables,
+    merged: dict[str, _Merged],
+    data_names: list[str],
+    fields: dict[str, Fields],
+    diags: list[Diagnostic],
+) -> dict[tuple[str, ...], tuple[Action, ...]]:
+    """Check each event row's states and guard (B201, X301-X303); its assignments by row key.
+
+    Every row is checked before the merge, so each duplicate's own location is reported.
+    """
     state_names = list(merged)
-    data_names = [name for name, _ in tables.data]
     known = set(data_names) | GUARD_NAMES
-    fields = event_fields(tables.events, diags)
     assigns: dict[tuple[str, ...], tuple[Action, ...]] = {}  # a row's assignments (eventdata)
     for r in tables.events:
         for column in ("old", "new"):
@@ -179,41 +254,37 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
                 diags.extend(check_guard(expression, r, known, fields, data_names))
         made = assign_actions(r, known, fields, data_names, diags)
         assigns.setdefault((r.event, r.old, r.new, r.guard), made)
+    return assigns
 
-    rows = _merge_events(tables.events, diags)
-    events = tuple(
-        dataclasses.replace(e, fields=fields.get(e.name, ())) for e in _event_defs(rows, diags)
-    )
-    _check_invokes(rows, diags)
-    apis, invokes = derive_invokes(
-        [EventSpec(r.event, r.kind, r.api or None, r.new, r.invoke or None) for r in rows]
-    )
-    by_method: dict[str, Invoke] = {i.method: i for i in invokes}
-    transitions: list[Transition] = []
-    for r in rows:
-        actions: tuple[Action, ...] = assigns.get((r.event, r.old, r.new, r.guard), ())
-        invoke = by_method.get(r.api)
-        if r.kind in DRIVING_KINDS and invoke is not None:
-            actions += (Notify(invoke.number, invoke.name, invoke.method, r.event),)
-        transitions.append(
-            Transition(
-                source=r.old,
-                events=(r.event,),
-                targets=(r.new,),
-                guard=r.guard or None,
-                condition=r.condition,
-                actions=actions,
-                origin=r.where,
-            )
-        )
 
-    event_names = [e.name for e in events]
+def _transition(
+    r: EventRow, assigns: dict[tuple[str, ...], tuple[Action, ...]], by_method: dict[str, Invoke]
+) -> Transition:
+    """Rule 3: ``old + event [guard] = new``, notifying the API's invoke if it drives it."""
+    actions: tuple[Action, ...] = assigns.get((r.event, r.old, r.new, r.guard), ())
+    invoke = by_method.get(r.api)
+    if r.kind in DRIVING_KINDS and invoke is not None:
+        actions += (Notify(invoke.number, invoke.name, invoke.method, r.event),)
+    return Transition(
+        source=r.old,
+        events=(r.event,),
+        targets=(r.new,),
+        guard=r.guard or None,
+        condition=r.condition,
+        actions=actions,
+        origin=r.where,
+    )
+
+
+def _ignored(
+    kept: list[str],
+    merged: dict[str, _Merged],
+    rows: Sequence[EventRow],
+    event_names: list[str],
+    diags: list[Diagnostic],
+) -> set[tuple[str, str]]:
+    """The (state, event) pairs each ignore cell names; an unknown event is B208."""
     declared = set(event_names)
-    extras = state_extras(merged, kinds, rows, event_names, diags)
-    states = [
-        dataclasses.replace(s, timeout=extras[s.name][0], defer=extras[s.name][1]) for s in states
-    ]
-    check_apis(merged, rows, diags)
     ignored: set[tuple[str, str]] = set()
     for name in kept:
         m = merged[name]
@@ -230,24 +301,7 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
                         _hint(event, event_names),
                     )
                 )
-
-    if has_errors(diags):
-        return None, diags
-    chart = Chart(
-        name=tables.device,
-        states=tuple(states),
-        transitions=tuple(transitions),
-        initial=(marked[0],),
-        events=events,
-        apis=apis,
-        invokes=invokes,
-        ignored=frozenset(ignored),
-        data=tuple(DataItem(n, _literal(v), source) for n, v in tables.data),
-        component=tables.states[0].component if tables.states else "",
-        origin=source,
-        profile=tables.profile,
-    )
-    return chart, diags
+    return ignored
 
 
 def _strip(value: Any) -> Any:

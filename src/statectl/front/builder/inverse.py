@@ -62,19 +62,27 @@ def _data_value(expr: str | None) -> tuple[bool, object]:
 
 def _misfits(chart: Chart) -> list[Diagnostic]:
     """Why a chart cannot be written as device tables (B220-B222, info); empty if it can."""
+    return [*_document_misfits(chart), *_state_misfits(chart), *_transition_misfits(chart)]
+
+
+#: What each misfit's hint opens with: the chart is fine as SCXML, just not as tables.
+_KEEP = "keep it as SCXML"
+
+
+def _document_misfits(chart: Chart) -> list[Diagnostic]:
+    """B220 for what the whole document holds beyond tables: datamodel, script, initial, data."""
     out: list[Diagnostic] = []
-    keep = "keep it as SCXML"
     if chart.datamodel not in ("safe", "null"):
         out.append(
             _info(
                 "B220",
                 chart.origin,
                 f"datamodel {chart.datamodel!r}: device tables use the safe expression language",
-                keep + "; datamodel='python' is explicit trust, which tables never grant",
+                _KEEP + "; datamodel='python' is explicit trust, which tables never grant",
             )
         )
     if chart.script:
-        out.append(_info("B220", chart.origin, "the document has a top-level <script>", keep))
+        out.append(_info("B220", chart.origin, "the document has a top-level <script>", _KEEP))
     top = [s.name for s in chart.states if s.parent is None]
     if len(chart.initial) > 1 or (chart.initial and chart.initial[0] not in top):
         out.append(
@@ -96,6 +104,12 @@ def _misfits(chart: Chart) -> list[Diagnostic]:
                     "table data holds literals: null, booleans, numbers, strings, lists",
                 )
             )
+    return out
+
+
+def _state_misfits(chart: Chart) -> list[Diagnostic]:
+    """B220 for states tables cannot say: executable content, a compound's odd initial."""
+    out: list[Diagnostic] = []
     by_name = {s.name: s for s in chart.states}
     for s in chart.states:
         content = [
@@ -117,7 +131,7 @@ def _misfits(chart: Chart) -> list[Diagnostic]:
                     "B220",
                     s.origin,
                     f"state {s.name!r} has executable content: " + ", ".join(content),
-                    keep + "; tables hold states, transitions and their notifications only",
+                    _KEEP + "; tables hold states, transitions and their notifications only",
                 )
             )
         if s.kind is StateKind.COMPOUND and (
@@ -131,6 +145,12 @@ def _misfits(chart: Chart) -> list[Diagnostic]:
                     "tables mark one child of a compound state default",
                 )
             )
+    return out
+
+
+def _transition_misfits(chart: Chart) -> list[Diagnostic]:
+    """B220-B222 for transitions that are not one event row: shape, content, guard."""
+    out: list[Diagnostic] = []
     known = {d.name for d in chart.data} | GUARD_NAMES
     for t in chart.transitions:
         shape = ""
@@ -148,7 +168,7 @@ def _misfits(chart: Chart) -> list[Diagnostic]:
                     "B220",
                     t.origin,
                     f"the transition from {t.source!r} has executable content",
-                    keep + "; an event row can only notify its API's observer",
+                    _KEEP + "; an event row can only notify its API's observer",
                 )
             )
         if shape:
@@ -170,7 +190,7 @@ def _misfits(chart: Chart) -> list[Diagnostic]:
                         "B222",
                         t.origin,
                         f"guard {t.guard!r} is not a table guard: {problems[0].message}",
-                        keep + "; table guards are safe expressions over the data names",
+                        _KEEP + "; table guards are safe expressions over the data names",
                     )
                 )
     return out
@@ -197,40 +217,8 @@ def _rows_of(chart: Chart) -> tuple[DeviceTables, Chart]:
     marked ``default``, the safe datamodel, data as literals, an event declaration
     per event (when the chart declared none).
     """
-    by_name = {s.name: s for s in chart.states}
     top = [s.name for s in chart.states if s.parent is None]
-    defaults: set[str] = {chart.initial[0] if chart.initial else top[0]}
-    for s in chart.states:
-        if s.kind is StateKind.COMPOUND:
-            kids = [c.name for c in chart.states if c.parent == s.name and not c.kind.is_history]
-            marked = [k for k in kids if ControlKind.DEFAULT in by_name[k].controls]
-            if s.initial[0] not in marked and (marked or kids[:1] != [s.initial[0]]):
-                defaults.add(s.initial[0])
-    event_names = chart.event_names
-    states: list[StateRow] = []
-    expected_states: list[State] = []
-    for s in chart.states:
-        controls = set(s.controls) | ({ControlKind.DEFAULT} if s.name in defaults else set())
-        component, api = _split_component(s.component, chart.component)
-        implied = s.kind in (StateKind.ATOMIC, StateKind.COMPOUND)
-        kind: StateKind | None = None if implied else s.kind
-        states.append(
-            StateRow(
-                component=component,
-                api=api,
-                state=s.name,
-                controls=tuple(c for c in ControlKind if c in controls),
-                description=s.description,
-                ignore=tuple(e for e in event_names if (s.name, e) in chart.ignored),
-                parent=s.parent or "",
-                type=kind,
-                default=s.history_default if s.kind.is_history else (),
-                number="" if s.number is None else str(s.number),
-                timeout=format_timeout(s.timeout.seconds, s.timeout.event) if s.timeout else "",
-                defer=s.defer,
-            )
-        )
-        expected_states.append(dataclasses.replace(s, controls=frozenset(controls)))
+    states, expected_states = _state_rows(chart, _marked_default(chart, top))
     declared = {e.name: e for e in chart.events}
     specs = [
         EventSpec(
@@ -276,6 +264,50 @@ def _rows_of(chart: Chart) -> tuple[DeviceTables, Chart]:
         data=tuple(DataItem(n, _literal(v), chart.origin) for n, v in data),
     )
     return tables, expected
+
+
+def _marked_default(chart: Chart, top: list[str]) -> set[str]:
+    """The states whose row says ``default``: the initial, and each compound's initial child
+    unless build would pick it anyway (its first non-history child, none marked)."""
+    by_name = {s.name: s for s in chart.states}
+    defaults: set[str] = {chart.initial[0] if chart.initial else top[0]}
+    for s in chart.states:
+        if s.kind is StateKind.COMPOUND:
+            kids = [c.name for c in chart.states if c.parent == s.name and not c.kind.is_history]
+            marked = [k for k in kids if ControlKind.DEFAULT in by_name[k].controls]
+            if s.initial[0] not in marked and (marked or kids[:1] != [s.initial[0]]):
+                defaults.add(s.initial[0])
+    return defaults
+
+
+def _state_rows(chart: Chart, defaults: set[str]) -> tuple[list[StateRow], list[State]]:
+    """One state row per state, and the state as build will make it (with its defaults)."""
+    event_names = chart.event_names
+    states: list[StateRow] = []
+    expected_states: list[State] = []
+    for s in chart.states:
+        controls = set(s.controls) | ({ControlKind.DEFAULT} if s.name in defaults else set())
+        component, api = _split_component(s.component, chart.component)
+        implied = s.kind in (StateKind.ATOMIC, StateKind.COMPOUND)
+        kind: StateKind | None = None if implied else s.kind
+        states.append(
+            StateRow(
+                component=component,
+                api=api,
+                state=s.name,
+                controls=tuple(c for c in ControlKind if c in controls),
+                description=s.description,
+                ignore=tuple(e for e in event_names if (s.name, e) in chart.ignored),
+                parent=s.parent or "",
+                type=kind,
+                default=s.history_default if s.kind.is_history else (),
+                number="" if s.number is None else str(s.number),
+                timeout=format_timeout(s.timeout.seconds, s.timeout.event) if s.timeout else "",
+                defer=s.defer,
+            )
+        )
+        expected_states.append(dataclasses.replace(s, controls=frozenset(controls)))
+    return states, expected_states
 
 
 def chart_to_tables(chart: Chart) -> tuple[DeviceTables | None, list[Diagnostic]]:

@@ -141,12 +141,7 @@ def _compose(parser: Any, max_depth: int) -> yaml.Node | None:
             node = scalar_node(tag, event.value, event.start_mark, event.end_mark, event.style)
         elif kind is map_start or kind is seq_start:
             if len(stack) >= max_depth:
-                raise YamlRefused(
-                    "T116",
-                    _line(event.start_mark),
-                    f"YAML nested deeper than {max_depth} levels",
-                    "flatten the value; see docs/limits.md",
-                )
+                raise _too_deep(event, max_depth)
             made = map_node if kind is map_start else seq_node
             tag = event.tag
             if tag is None or tag == "!":
@@ -165,12 +160,7 @@ def _compose(parser: Any, max_depth: int) -> yaml.Node | None:
             node = closed
             items = stack[-1][1] if stack else None
         elif kind is alias_event:
-            raise YamlRefused(
-                "T115",
-                _line(event.start_mark),
-                f"YAML alias '*{event.anchor}' refused",
-                "write the value out in full; statectl files do not use anchors and aliases",
-            )
+            raise _alias(event)
         elif isinstance(event, yaml.DocumentEndEvent):
             break
         else:
@@ -179,6 +169,35 @@ def _compose(parser: Any, max_depth: int) -> yaml.Node | None:
             items.append(node)
         else:
             root = node
+    _one_document(parser)
+    return root
+
+
+# The refusals _compose raises, kept out of its loop so the loop reads as rule 1.
+
+
+def _too_deep(event: Any, max_depth: int) -> YamlRefused:
+    """T116: nesting past ``max_depth`` is refused before it costs stack or memory."""
+    return YamlRefused(
+        "T116",
+        _line(event.start_mark),
+        f"YAML nested deeper than {max_depth} levels",
+        "flatten the value; see docs/limits.md",
+    )
+
+
+def _alias(event: Any) -> YamlRefused:
+    """T115: an alias is refused, as it is how a small file expands into a huge value."""
+    return YamlRefused(
+        "T115",
+        _line(event.start_mark),
+        f"YAML alias '*{event.anchor}' refused",
+        "write the value out in full; statectl files do not use anchors and aliases",
+    )
+
+
+def _one_document(parser: Any) -> None:
+    """T101 for a second document: a file is one model, and the rest would go unread."""
     if not parser.check_event(yaml.StreamEndEvent):
         extra: Any = parser.get_event()
         raise YamlRefused(
@@ -187,7 +206,6 @@ def _compose(parser: Any, max_depth: int) -> yaml.Node | None:
             "malformed YAML: a second document in the file",
             "remove the '---' that starts it",
         )
-    return root
 
 
 def construct(node: yaml.Node) -> object:

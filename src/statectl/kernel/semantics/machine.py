@@ -40,6 +40,48 @@ class Machine:
         self.parent: dict[str, str | None] = {s.name: s.parent for s in chart.states}
         self.initial_of: dict[str, tuple[str, ...]] = {}
         self.history_default: dict[str, tuple[str, ...]] = {}
+        self._index_hierarchy(chart)
+        for s in chart.states:
+            if s.kind is StateKind.COMPOUND:
+                kids = [c for c in self.children.get(s.name, ()) if not self.kind[c].is_history]
+                self.initial_of[s.name] = s.initial or (kids[:1] and (kids[0],)) or ()
+        for s in chart.states:
+            if s.kind.is_history:
+                self.history_default[s.name] = s.history_default or self._parent_default(s.name)
+        self.top_initial: tuple[str, ...] = chart.initial or self.children.get(None, ())[:1]
+        by_source: dict[str, list[Transition]] = {name: [] for name in self.order}
+        for t in chart.transitions:  # one pass, document order kept within each source
+            by_source[t.source].append(t)
+        self.transitions_of: dict[str, tuple[Transition, ...]] = {
+            name: tuple(ts) for name, ts in by_source.items()
+        }
+        self.histories_of: dict[str, tuple[str, ...]] = {
+            name: tuple(c for c in self.children.get(name, ()) if self.kind[c].is_history)
+            for name in self.order
+        }
+        self._compile_guards(chart, guards)
+        self.ignored = chart.ignored | chart.deferred  # a deferred event is kept, not taken
+        self._static_domain: dict[int, str | None] = {}
+        for t in chart.transitions:
+            if t.targets and not any(self.kind[x].is_history for x in t.targets):
+                self._static_domain[id(t)] = self._domain(t, t.targets)
+        self._candidates: dict[tuple[str, str | None], tuple[Transition, ...]] = {}
+        self._memo: dict[tuple[Snapshot, str], Step] = {}
+        # data-guarded steps: per (snapshot, event), the guard outcomes seen and their step
+        self._guarded: dict[tuple[Snapshot, str], list[tuple[tuple[Consult, ...], Step]]] = {}
+        self._initial: Step | None = None
+        self.event_names: frozenset[str] = frozenset(chart.event_names)
+        # interned snapshots with their plan tables, by value and by identity
+        self._tables: dict[Snapshot, tuple[Snapshot, PlanTable]] = {}
+        self._by_id: dict[int, tuple[Snapshot, PlanTable]] = {}
+        self._slots: dict[int, int] = {}  # id(Notify) -> slot; the chart keeps them alive
+        # one shared machine serves subjects on several threads: slot numbers must be unique
+        self._installing = threading.Lock()
+        #: the memoised initial step's (target, plan table) when :meth:`quiet` found it so
+        self.quiet_start: tuple[Snapshot, PlanTable] | None = None
+
+    def _index_hierarchy(self, chart: Chart) -> None:
+        """Children, ancestors and descendants of every state, so no step walks the tree."""
         children: dict[str | None, list[str]] = {}
         for s in chart.states:
             children.setdefault(s.parent, []).append(s.name)
@@ -62,24 +104,9 @@ class Machine:
         self.descendants: dict[str | None, frozenset[str]] = {None: frozenset(self.order)}
         for name, names in below.items():
             self.descendants[name] = frozenset(names)
-        for s in chart.states:
-            if s.kind is StateKind.COMPOUND:
-                kids = [c for c in self.children.get(s.name, ()) if not self.kind[c].is_history]
-                self.initial_of[s.name] = s.initial or (kids[:1] and (kids[0],)) or ()
-        for s in chart.states:
-            if s.kind.is_history:
-                self.history_default[s.name] = s.history_default or self._parent_default(s.name)
-        self.top_initial: tuple[str, ...] = chart.initial or self.children.get(None, ())[:1]
-        by_source: dict[str, list[Transition]] = {name: [] for name in self.order}
-        for t in chart.transitions:  # one pass, document order kept within each source
-            by_source[t.source].append(t)
-        self.transitions_of: dict[str, tuple[Transition, ...]] = {
-            name: tuple(ts) for name, ts in by_source.items()
-        }
-        self.histories_of: dict[str, tuple[str, ...]] = {
-            name: tuple(c for c in self.children.get(name, ()) if self.kind[c].is_history)
-            for name in self.order
-        }
+
+    def _compile_guards(self, chart: Chart, guards: bool) -> None:
+        """Compile each safe guard once, failing at load (not mid-run) on a bad one."""
         self.guards: dict[str, Expression] = {}
         problems = []
         # other datamodels' conditions are the executor's to evaluate
@@ -97,25 +124,6 @@ class Machine:
         self.snapshot_guards: frozenset[str] = frozenset(
             g for g, e in self.guards.items() if e.names <= {"previous"} and not shadowed
         )
-        self.ignored = chart.ignored | chart.deferred  # a deferred event is kept, not taken
-        self._static_domain: dict[int, str | None] = {}
-        for t in chart.transitions:
-            if t.targets and not any(self.kind[x].is_history for x in t.targets):
-                self._static_domain[id(t)] = self._domain(t, t.targets)
-        self._candidates: dict[tuple[str, str | None], tuple[Transition, ...]] = {}
-        self._memo: dict[tuple[Snapshot, str], Step] = {}
-        # data-guarded steps: per (snapshot, event), the guard outcomes seen and their step
-        self._guarded: dict[tuple[Snapshot, str], list[tuple[tuple[Consult, ...], Step]]] = {}
-        self._initial: Step | None = None
-        self.event_names: frozenset[str] = frozenset(chart.event_names)
-        # interned snapshots with their plan tables, by value and by identity
-        self._tables: dict[Snapshot, tuple[Snapshot, PlanTable]] = {}
-        self._by_id: dict[int, tuple[Snapshot, PlanTable]] = {}
-        self._slots: dict[int, int] = {}  # id(Notify) -> slot; the chart keeps them alive
-        # one shared machine serves subjects on several threads: slot numbers must be unique
-        self._installing = threading.Lock()
-        #: the memoised initial step's (target, plan table) when :meth:`quiet` found it so
-        self.quiet_start: tuple[Snapshot, PlanTable] | None = None
 
     def _parent_default(self, history: str) -> tuple[str, ...]:
         """A history state without a default transition (W3C requires one) enters what its

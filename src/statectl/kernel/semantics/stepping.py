@@ -149,18 +149,7 @@ def step(
     else:
         reason = unhandled_reason(m, snapshot, event)
     if run.failures:  # a guard raised: nothing is taken, nothing memoised (eventview rule 3)
-        return Step(
-            event,
-            snapshot,
-            snapshot,
-            (),
-            False,
-            False,
-            False,
-            True,
-            Unhandled.GUARD_ERROR,
-            run.failures[0],
-        )
+        return _guard_failed(event, snapshot, run.failures[0])
     result = Step(
         event,
         snapshot,
@@ -173,13 +162,36 @@ def step(
         reason,
     )
     if oracle is None:
-        if not run.guarded:
-            if len(m._memo) < MEMO_LIMIT:
-                m._memo[key] = result
-                if event in m.event_names and not _assigns(result):
-                    m._install(snapshot, event, result)
-        elif run.consulted is not None and len(m._guarded) < MEMO_LIMIT:
-            paths = m._guarded.setdefault(key, [])
-            if len(paths) < MAX_GUARD_PATHS:
-                paths.append((tuple(run.consulted), result))
+        _remember(m, snapshot, event, run, result)
     return result
+
+
+def _guard_failed(event: str, snapshot: Snapshot, failure: Any) -> Step:
+    """The step when a guard raised: nothing taken, the first ``failure`` reported."""
+    return Step(
+        event,
+        snapshot,
+        snapshot,
+        (),
+        False,
+        False,
+        False,
+        True,
+        Unhandled.GUARD_ERROR,
+        failure,
+    )
+
+
+def _remember(m: Machine, snapshot: Snapshot, event: str, run: Run, result: Step) -> None:
+    """Memoise a fresh step so the next same event costs a lookup: outright when no
+    guard read data (and as a plan when it assigns nothing), else per guard outcome."""
+    key = (snapshot, event)
+    if not run.guarded:
+        if len(m._memo) < MEMO_LIMIT:
+            m._memo[key] = result
+            if event in m.event_names and not _assigns(result):
+                m._install(snapshot, event, result)
+    elif run.consulted is not None and len(m._guarded) < MEMO_LIMIT:
+        paths = m._guarded.setdefault(key, [])
+        if len(paths) < MAX_GUARD_PATHS:
+            paths.append((tuple(run.consulted), result))

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 
+from statectl.kernel.model import Invoke
 from statectl.out.codegen.cpp_assign import assign_functions
 from statectl.out.codegen.cpp_rows import DENSE_CELLS, build, compact_lines, dense_lines
 from statectl.out.codegen.cpp_tables import (
@@ -65,6 +66,56 @@ def _header(flat: FlatChart, cls: str, ns: str, dense_limit: int = DENSE_CELLS) 
     add("")
     add(f"namespace {ns} {{")
     add("")
+    w.extend(_declarations(flat, st, ev, inv, invokes, n_invokes))
+    w.extend(_api_class(cls, invokes, inv, methods))
+    add("namespace detail {")
+    add("")
+    w.extend(_detail_structs())
+    w.extend(_name_tables(flat, invokes, n_invokes))
+    w.extend(_guard_functions(flat))
+    w.extend(assign_functions(flat))
+    w.extend(_step_tables(tables))
+    depth = _depth(flat)
+    add(f"inline constexpr int kMaxDepth = {depth};  // most guards one step evaluates")
+    add(f"inline constexpr std::int16_t kStart = {start};  // entering the initial configuration")
+    add("")
+    w.extend(dense_lines(flat, cells) if cells.dense else compact_lines(flat, cells))
+    add("")
+    add(f"inline constexpr std::uint64_t kActive[kConfigurationCount][{words}] = {{")
+    order = {s: i for i, s in enumerate(flat.states)}
+    for c in flat.configurations:
+        bits = [0] * words
+        for s in c.active:
+            bits[order[s] // 64] |= 1 << (order[s] % 64)
+        add("    {" + ", ".join(f"0x{b:x}u" for b in bits) + f"}},  // {c.index}")
+    add("};")
+    add("")
+    w.extend(timer_tables(flat) + defer_tables(flat))
+    add("}  // namespace detail")
+    add("")
+    body = _cases(tables, list(cells.cases))
+    has_cells = bool(flat.events) and bool(flat.configurations)
+    add(_device_class(cls, start, body, has_cells, device_parts(flat), compact=not cells.dense))
+    add("")
+    add(f"}}  // namespace {ns}")
+    add("")
+    add(f"#endif  // {guard}")
+    return "\n".join(w) + "\n"
+
+
+def _declarations(
+    flat: FlatChart,
+    st: dict[str, str],
+    ev: dict[str, str],
+    inv: dict[str, str],
+    invokes: list[Invoke],
+    n_invokes: int,
+) -> list[str]:
+    """The public names: the State, Event and Invoke enums, the counts, the guards'
+    Context and the no-op hooks."""
+    n_states, n_events, n_configs = len(flat.states), len(flat.events), len(flat.configurations)
+    w: list[str] = []
+    add = w.append
     add("/// Chart states, document order (compound and parallel states included).")
     add("enum class State : std::uint16_t {")
     for n, name in enumerate(flat.states):
@@ -104,6 +155,15 @@ def _header(flat: FlatChart, cls: str, ns: str, dense_limit: int = DENSE_CELLS) 
     add("  void on_entry(State /*state*/) noexcept {}")
     add("};")
     add("")
+    return w
+
+
+def _api_class(
+    cls: str, invokes: list[Invoke], inv: dict[str, str], methods: dict[str, str]
+) -> list[str]:
+    """The <Device>Api observer: update() dispatches an invoke number to its method."""
+    w: list[str] = []
+    add = w.append
     add("/// The device with its API: one method per invoke number.")
     add(f"class {cls}Api : public statectl::Observer<Invoke> {{")
     add(" public:")
@@ -128,8 +188,13 @@ def _header(flat: FlatChart, cls: str, ns: str, dense_limit: int = DENSE_CELLS) 
     add(f"  ~{cls}Api() = default;")
     add("};")
     add("")
-    add("namespace detail {")
-    add("")
+    return w
+
+
+def _detail_structs() -> list[str]:
+    """The fixed row types of the detail tables (the same for every device)."""
+    w: list[str] = []
+    add = w.append
     add("using V = std::int64_t;")
     add("")
     add("enum Op : std::uint8_t { kExit, kTake, kEnter, kInvoke, kAssign };")
@@ -166,6 +231,15 @@ def _header(flat: FlatChart, cls: str, ns: str, dense_limit: int = DENSE_CELLS) 
     add("  const char* method;")
     add("};")
     add("")
+    return w
+
+
+def _name_tables(flat: FlatChart, invokes: list[Invoke], n_invokes: int) -> list[str]:
+    """The names a tracer prints: device, states, events, reasons, transitions, invokes."""
+    chart = flat.chart
+    n_events = len(flat.events)
+    w: list[str] = []
+    add = w.append
     add("inline constexpr const char* kDevice = " + _c(chart.name) + ";")
     add("")
     add("inline constexpr const char* kStateNames[kStateCount] = {")
@@ -202,6 +276,13 @@ def _header(flat: FlatChart, cls: str, ns: str, dense_limit: int = DENSE_CELLS) 
             add(f"    {{{_c(found.name)}, {_c(found.method)}}},  // #{n}")
     add("};")
     add("")
+    return w
+
+
+def _guard_functions(flat: FlatChart) -> list[str]:
+    """One function per runtime guard, specialised to its configuration, and their table."""
+    w: list[str] = []
+    add = w.append
     # guards
     add("// Runtime guards, each specialised to the configuration it is evaluated in.")
     for g in flat.guards:
@@ -222,7 +303,13 @@ def _header(flat: FlatChart, cls: str, ns: str, dense_limit: int = DENSE_CELLS) 
     else:
         add("inline constexpr GuardFn kGuards[1] = {nullptr};  // unused: no runtime guards")
     add("")
-    w.extend(assign_functions(flat))
+    return w
+
+
+def _step_tables(tables: _Tables) -> list[str]:
+    """The step tables: effects, outcomes and the guard decisions between them."""
+    w: list[str] = []
+    add = w.append
     # effects
     add(f"inline constexpr Effect kEffects[{max(1, len(tables.effects))}] = {{")
     iw = _width(range(len(tables.effects)))
@@ -246,29 +333,4 @@ def _header(flat: FlatChart, cls: str, ns: str, dense_limit: int = DENSE_CELLS) 
         add("    {0, 0, 0},  // unused: no runtime guards")
     add("};")
     add("")
-    depth = _depth(flat)
-    add(f"inline constexpr int kMaxDepth = {depth};  // most guards one step evaluates")
-    add(f"inline constexpr std::int16_t kStart = {start};  // entering the initial configuration")
-    add("")
-    w.extend(dense_lines(flat, cells) if cells.dense else compact_lines(flat, cells))
-    add("")
-    add(f"inline constexpr std::uint64_t kActive[kConfigurationCount][{words}] = {{")
-    order = {s: i for i, s in enumerate(flat.states)}
-    for c in flat.configurations:
-        bits = [0] * words
-        for s in c.active:
-            bits[order[s] // 64] |= 1 << (order[s] % 64)
-        add("    {" + ", ".join(f"0x{b:x}u" for b in bits) + f"}},  // {c.index}")
-    add("};")
-    add("")
-    w.extend(timer_tables(flat) + defer_tables(flat))
-    add("}  // namespace detail")
-    add("")
-    body = _cases(tables, list(cells.cases))
-    has_cells = bool(flat.events) and bool(flat.configurations)
-    add(_device_class(cls, start, body, has_cells, device_parts(flat), compact=not cells.dense))
-    add("")
-    add(f"}}  // namespace {ns}")
-    add("")
-    add(f"#endif  // {guard}")
-    return "\n".join(w) + "\n"
+    return w

@@ -50,7 +50,7 @@ import inspect
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import yaml
 
@@ -72,9 +72,15 @@ from statectl.run.devices.modbus import ModbusIO, modbus_option_problems
 from statectl.run.devices.motor import SimMotor, motor_option_problems
 from statectl.run.devices.opcua_config import OpcuaConfig, parse_opcua
 from statectl.run.devices.protocol import DeviceDriver
+from statectl.run.devices.sections import (
+    MIN_TOKEN,
+    DashboardConfig,
+    ShipConfig,
+    parse_dashboard,
+    parse_ship,
+)
 from statectl.run.devices.stepper import SimStepper, stepper_option_problems
 from statectl.run.devices.twin import SimTwin, twin_option_problems
-from statectl.run.devices.urls import url_problem
 
 __all__ = [
     "DRIVERS",
@@ -136,37 +142,10 @@ SUPPLIED = ("chart",)
 #: device -> (driver name, options)
 DriverConfig = dict[str, tuple[str, dict[str, Any]]]
 
-#: The sections of a run config, and the keys of a device entry, the dashboard and ship
-#: (the JSON Schema, out/schema.py, reads them).
+#: The sections of a run config, and the keys of a device entry (the JSON Schema,
+#: out/schema.py, reads them; the dashboard's and ship's are in sections.py).
 RUN_CONFIG_KEYS = ("devices", "dashboard", "opcua", "ship", "commands")
 DEVICE_KEYS = ("driver", "options")
-DASHBOARD_KEYS = ("host", "port", "token", "streams")
-#: The most event streams a config file may allow (each holds a socket and a buffer).
-MAX_STREAMS = 100_000
-
-#: The shortest dashboard token a config file may set: a short one can be guessed.
-MIN_TOKEN = 16
-
-
-@dataclass(frozen=True, slots=True)
-class DashboardConfig:
-    """The ``dashboard:`` section: each field None where the file says nothing."""
-
-    host: str | None = None
-    port: int | None = None
-    token: str | None = None
-    streams: int | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class ShipConfig:
-    """The ``ship:`` section (rule 6): where the journal goes, and how often."""
-
-    to: str
-    source: str | None = None
-    interval: float = 0.5
-    retry: float = 5.0
-    batch: int = 5000
 
 
 @dataclass(frozen=True, slots=True)
@@ -350,140 +329,19 @@ def load_run_config(path: str | Path, text: str | None = None) -> RunConfig:
     def value(node: yaml.Node) -> Any:
         return safeyaml.construct(node)
 
-    result: DriverConfig = {}
-    devices_node: yaml.Node | None = None
-    dashboard_node: yaml.Node | None = None
-    opcua_node: yaml.Node | None = None
-    ship_node: yaml.Node | None = None
-    commands_node: yaml.Node | None = None
-    if not isinstance(root, yaml.MappingNode):
-        error(
-            "D503",
-            line_of(root) if root is not None else 1,
-            "a driver config must be a mapping with a 'devices' key",
-            "write 'devices: {Motor: {driver: sim-motor}}'",
-        )
-    else:
-        for key, val in root.value:
-            if value(key) == "devices":
-                devices_node = val
-            elif value(key) == "dashboard":
-                dashboard_node = val
-            elif value(key) == "opcua":
-                opcua_node = val
-            elif value(key) == "ship":
-                ship_node = val
-            elif value(key) == "commands":
-                commands_node = val
-            else:
-                error(
-                    "D507",
-                    line_of(key),
-                    f"unknown key {value(key)!r}",
-                    "a run config has 'devices', 'dashboard', 'opcua', 'ship' and 'commands'",
-                )
-        if all(
-            n is None for n in (devices_node, dashboard_node, opcua_node, ship_node, commands_node)
-        ):
-            error(
-                "D503",
-                line_of(root),
-                "no 'devices' mapping",
-                "add 'devices:' with one entry per device",
-            )
-        elif devices_node is not None and not isinstance(devices_node, yaml.MappingNode):
-            error("D503", line_of(devices_node), "'devices' must map device names to entries")
-            devices_node = None
-    for key, entry in devices_node.value if devices_node is not None else ():
-        device = str(value(key))
-        here = line_of(key)
-        if not isinstance(entry, yaml.MappingNode):
-            error(
-                "D504",
-                here,
-                f"device {device!r}: entry must be a mapping (got {value(entry)!r})",
-                "write '{driver: <name>, options: {...}}'",
-            )
-            continue
-        fields = {str(value(k)): (k, v) for k, v in entry.value}
-        for name, (k, _) in fields.items():
-            if name not in DEVICE_KEYS:
-                error(
-                    "D507",
-                    line_of(k),
-                    f"device {device!r}: unknown key {name!r}",
-                    f"an entry has {', '.join(DEVICE_KEYS)}",
-                )
-        if "driver" not in fields:
-            error("D504", here, f"device {device!r}: no 'driver'", f"name one of: {_available()}")
-            continue
-        dnode = fields["driver"][1]
-        driver = value(dnode)
-        options: dict[str, Any] = {}
-        if "options" in fields:
-            onode = fields["options"][1]
-            raw = value(onode)
-            if raw is None:
-                raw = {}
-            if not isinstance(raw, dict) or not all(isinstance(k, str) for k in raw):
-                error(
-                    "D506",
-                    line_of(onode),
-                    f"device {device!r}: options must be a mapping of names to values "
-                    f"(got {raw!r})",
-                )
-                continue
-            options = raw
-        if not isinstance(driver, str):
-            error(
-                "D505", line_of(dnode), f"device {device!r}: driver must be a name (got {driver!r})"
-            )
-            continue
-        try:
-            factory = resolve_driver(driver)
-        except StatectlError as exc:
-            error("D505", line_of(dnode), f"device {device!r}: {exc}")
-            continue
-        problem = _option_problem(factory, options)
-        if problem:
-            error("D508", line_of(fields["options"][1]), f"device {device!r}: {problem}")
-            continue
-        missing = _missing_library(driver)
-        if missing is not None:
-            error(
-                "D512",
-                line_of(dnode),
-                f"device {device!r}: driver {driver!r} needs a library that is not installed",
-                missing,
-            )
-            continue
-        if driver in BUS_OPTION_CHECKS:
-            bad = _value_problems(driver, options)
-            for text in bad:
-                error(
-                    "D511",
-                    line_of(fields["options"][1]),
-                    f"device {device!r}: {text}",
-                    "see docs/drivers.md for the driver's options",
-                )
-            if bad:
-                continue
-        bad = _value_problems(driver, options)
-        for text in bad:
-            error(
-                "D509",
-                line_of(fields["options"][1]),
-                f"device {device!r}: {text}",
-                OPTION_HINTS.get(driver, ""),
-            )
-        if bad:
-            continue
-        result[device] = (driver, options)
+    found = _sections(root, value, line_of, error)
+    devices_node, dashboard_node = found.get("devices"), found.get("dashboard")
+    opcua_node, ship_node, commands_node = (
+        found.get("opcua"),
+        found.get("ship"),
+        found.get("commands"),
+    )
+    result = _drivers(devices_node, value, line_of, error)
     dashboard = DashboardConfig()
     if dashboard_node is not None:
-        dashboard = _dashboard(dashboard_node, value, line_of, error)
+        dashboard = parse_dashboard(dashboard_node, value, line_of, error)
     opcua = OpcuaConfig() if opcua_node is None else parse_opcua(opcua_node, value, line_of, error)
-    ship = None if ship_node is None else _ship(ship_node, value, line_of, error)
+    ship = None if ship_node is None else parse_ship(ship_node, value, line_of, error)
     commands = (
         Commands()
         if commands_node is None
@@ -494,95 +352,167 @@ def load_run_config(path: str | Path, text: str | None = None) -> RunConfig:
     return RunConfig(result if devices_node is not None else None, dashboard, opcua, ship, commands)
 
 
-def _dashboard(
-    node: yaml.Node,
+class _Error(Protocol):
+    """How the sections report a problem: a code, a line, what is wrong, what to do."""
+
+    def __call__(self, code: str, line: int | None, message: str, hint: str = "") -> None: ...
+
+
+def _sections(
+    root: yaml.Node | None,
     value: Callable[[yaml.Node], Any],
     line_of: Callable[[yaml.Node], int],
-    error: Callable[[str, int | None, str, str], None],
-) -> DashboardConfig:
-    """The ``dashboard:`` section (rule 5); every problem is a D510 error."""
-    if not isinstance(node, yaml.MappingNode):
-        error("D510", line_of(node), "'dashboard' must be a mapping",
-              "write 'dashboard: {port: 8765, token: ...}'")  # fmt: skip
-        return DashboardConfig()
-    fields: dict[str, Any] = {}
-    for k, v in node.value:
-        name, val, line = value(k), value(v), line_of(v)
-        if name not in DASHBOARD_KEYS:
-            error("D510", line_of(k), f"dashboard: unknown key {name!r}",
-                  f"the dashboard has {', '.join(DASHBOARD_KEYS)}")  # fmt: skip
-        elif name == "host" and not (isinstance(val, str) and val):
-            error("D510", line, f"dashboard: host must be an address (got {val!r})",
-                  "write 'host: 127.0.0.1' (the default, loopback only)")  # fmt: skip
-        elif name == "port" and not (
-            isinstance(val, int) and not isinstance(val, bool) and 0 <= val <= 65535
-        ):
-            error("D510", line, f"dashboard: port must be a number 0-65535 (got {val!r})",
-                  "0 takes any free port")  # fmt: skip
-        elif name == "streams" and not (
-            isinstance(val, int) and not isinstance(val, bool) and 1 <= val <= MAX_STREAMS
-        ):
-            error("D510", line,
-                  f"dashboard: streams must be a number 1-{MAX_STREAMS} (got {val!r})",
-                  "the most pages that may follow the run at once; 1000 by default")  # fmt: skip
-        elif name == "token" and not (isinstance(val, str) and len(val) >= MIN_TOKEN):
-            shown = "a shorter text" if isinstance(val, str) else repr(val)  # never echo a secret
+    error: _Error,
+) -> dict[str, yaml.Node]:
+    """The file's sections by key (D503 if none or not a mapping, D507 for others)."""
+    found: dict[str, yaml.Node] = {}
+    if not isinstance(root, yaml.MappingNode):
+        error(
+            "D503",
+            line_of(root) if root is not None else 1,
+            "a driver config must be a mapping with a 'devices' key",
+            "write 'devices: {Motor: {driver: sim-motor}}'",
+        )
+    else:
+        for key, val in root.value:
+            if value(key) in RUN_CONFIG_KEYS:
+                found[value(key)] = val
+            else:
+                error(
+                    "D507",
+                    line_of(key),
+                    f"unknown key {value(key)!r}",
+                    "a run config has 'devices', 'dashboard', 'opcua', 'ship' and 'commands'",
+                )
+        if not found:
             error(
-                "D510",
-                line,
-                f"dashboard: token must be text of {MIN_TOKEN} characters or more (got {shown})",
-                "make one: python -c 'import secrets; print(secrets.token_urlsafe(18))'",
+                "D503",
+                line_of(root),
+                "no 'devices' mapping",
+                "add 'devices:' with one entry per device",
             )
-        else:
-            fields[name] = val
-    return DashboardConfig(**fields)
+        elif "devices" in found and not isinstance(found["devices"], yaml.MappingNode):
+            error("D503", line_of(found["devices"]), "'devices' must map device names to entries")
+            del found["devices"]
+    return found
 
 
-SHIP_KEYS = ("to", "source", "interval", "retry", "batch")
-
-
-def _ship(
-    node: yaml.Node,
+def _drivers(
+    devices_node: yaml.Node | None,
     value: Callable[[yaml.Node], Any],
     line_of: Callable[[yaml.Node], int],
-    error: Callable[[str, int | None, str, str], None],
-) -> ShipConfig | None:
-    """The ``ship:`` section (rule 7); every problem is a D530 error."""
-    example = "write 'ship: {to: postgresql://user@host/db}'"
-    if not isinstance(node, yaml.MappingNode):
-        error("D530", line_of(node), "'ship' must be a mapping", example)
+    error: _Error,
+) -> DriverConfig:
+    """The ``devices:`` section: each entry whose driver and options pass every check."""
+    result: DriverConfig = {}
+    for key, entry in devices_node.value if devices_node is not None else ():
+        device = str(value(key))
+        found = _device(device, key, entry, value, line_of, error)
+        if found is not None:
+            result[device] = found
+    return result
+
+
+def _device(
+    device: str,
+    key: yaml.Node,
+    entry: yaml.Node,
+    value: Callable[[yaml.Node], Any],
+    line_of: Callable[[yaml.Node], int],
+    error: _Error,
+) -> tuple[str, dict[str, Any]] | None:
+    """One device's (driver, options), or None once its first problem is reported."""
+    here = line_of(key)
+    if not isinstance(entry, yaml.MappingNode):
+        error(
+            "D504",
+            here,
+            f"device {device!r}: entry must be a mapping (got {value(entry)!r})",
+            "write '{driver: <name>, options: {...}}'",
+        )
         return None
-    fields: dict[str, Any] = {}
-    bad = False
-    for k, v in node.value:
-        name, val, line = value(k), value(v), line_of(v)
-        number = isinstance(val, int | float) and not isinstance(val, bool)
-        problem = ""
-        if name not in SHIP_KEYS:
-            error("D530", line_of(k), f"ship: unknown key {name!r}",
-                  f"the ship section has {', '.join(SHIP_KEYS)}")  # fmt: skip
-            bad = True
-            continue
-        if name == "to" and not (
-            isinstance(val, str) and val.startswith(("postgresql://", "postgres://"))
-        ):
-            shown = "a text that is not one" if isinstance(val, str) else repr(val)
-            problem = f"ship: to must be a postgresql:// URL (got {shown})"  # may hold a password
-        elif name == "to" and (why := url_problem(val)) is not None:
-            problem = f"ship: to is not a valid URL ({why})"  # the URL itself is not shown
-        elif name == "source" and not (isinstance(val, str) and val):
-            problem = f"ship: source must be a name (got {val!r})"
-        elif name in ("interval", "retry") and not (number and 0.01 <= val <= 3600):
-            problem = f"ship: {name} must be seconds from 0.01 to 3600 (got {val!r})"
-        elif name == "batch" and not (number and isinstance(val, int) and 1 <= val <= 1_000_000):
-            problem = f"ship: batch must be a number of rows 1-1000000 (got {val!r})"
-        if problem:
-            error("D530", line, problem, example)
-            bad = True
-        else:
-            fields[name] = val
-    if "to" not in fields:
-        if not bad:
-            error("D530", line_of(node), "ship: no 'to'", example)
+    fields = {str(value(k)): (k, v) for k, v in entry.value}
+    for name, (k, _) in fields.items():
+        if name not in DEVICE_KEYS:
+            error(
+                "D507",
+                line_of(k),
+                f"device {device!r}: unknown key {name!r}",
+                f"an entry has {', '.join(DEVICE_KEYS)}",
+            )
+    if "driver" not in fields:
+        error("D504", here, f"device {device!r}: no 'driver'", f"name one of: {_available()}")
         return None
-    return None if bad else ShipConfig(**fields)
+    dnode = fields["driver"][1]
+    driver = value(dnode)
+    options: dict[str, Any] = {}
+    if "options" in fields:
+        onode = fields["options"][1]
+        raw = value(onode)
+        if raw is None:
+            raw = {}
+        if not isinstance(raw, dict) or not all(isinstance(k, str) for k in raw):
+            error(
+                "D506",
+                line_of(onode),
+                f"device {device!r}: options must be a mapping of names to values (got {raw!r})",
+            )
+            return None
+        options = raw
+    if not isinstance(driver, str):
+        error("D505", line_of(dnode), f"device {device!r}: driver must be a name (got {driver!r})")
+        return None
+    if not _driver_fits(device, driver, dnode, fields, options, line_of, error):
+        return None
+    return driver, options
+
+
+def _driver_fits(
+    device: str,
+    driver: str,
+    dnode: yaml.Node,
+    fields: dict[str, tuple[yaml.Node, yaml.Node]],
+    options: dict[str, Any],
+    line_of: Callable[[yaml.Node], int],
+    error: _Error,
+) -> bool:
+    """Whether the named driver exists, takes these options with sane values (D505,
+    D508, D509, D511) and has its library installed (D512): so start-up cannot fail."""
+    try:
+        factory = resolve_driver(driver)
+    except StatectlError as exc:
+        error("D505", line_of(dnode), f"device {device!r}: {exc}")
+        return False
+    problem = _option_problem(factory, options)
+    if problem:
+        error("D508", line_of(fields["options"][1]), f"device {device!r}: {problem}")
+        return False
+    missing = _missing_library(driver)
+    if missing is not None:
+        error(
+            "D512",
+            line_of(dnode),
+            f"device {device!r}: driver {driver!r} needs a library that is not installed",
+            missing,
+        )
+        return False
+    if driver in BUS_OPTION_CHECKS:
+        bad = _value_problems(driver, options)
+        for text in bad:
+            error(
+                "D511",
+                line_of(fields["options"][1]),
+                f"device {device!r}: {text}",
+                "see docs/drivers.md for the driver's options",
+            )
+        if bad:
+            return False
+    bad = _value_problems(driver, options)
+    for text in bad:
+        error(
+            "D509",
+            line_of(fields["options"][1]),
+            f"device {device!r}: {text}",
+            OPTION_HINTS.get(driver, ""),
+        )
+    return not bad
