@@ -16,12 +16,18 @@ Rules:
    transition a step takes fires a ``TransitionEventType`` event from the device
    object. ``Invokes`` lists the device's invoke numbers, ``LastInvoke`` is the
    last one issued (-1: none yet). A machine whose states are all inactive shows
-   an empty ``CurrentState``.
+   an empty ``CurrentState``. ``AvailableTransitions`` / ``AvailableStates`` list
+   the transitions leaving the current state and the states they lead to, written
+   with it. Every variable holds a value of its type from the start (a generic
+   client reads the whole space cleanly): ``LastTransition`` is an empty text with
+   a null ``Id`` and the null DateTime until the first transition.
 3. Each command event is a method of the device object with one optional input,
-   ``Data`` (the event's data as JSON), and two outputs: ``Handled`` and ``Reason``
-   (empty when handled, else why the event changed nothing, or why it was not
-   accepted). Every call is checked (its object, its inputs, the session's user
-   against the System's commands policy) and sent through the System's door
+   ``Data`` (the event's data as JSON), or, when the event declares its data
+   fields, one typed input per field (``Movement(amount: Double)``), and two
+   outputs: ``Handled`` and ``Reason`` (empty when handled, else why the event
+   changed nothing, or why it was not accepted). Every call is checked (its
+   object, its inputs, the session's user against the System's commands policy)
+   and sent through the System's door
    (:mod:`statectl.channels.opcua.methods`). A device whose file declares
    ``profile: packml`` gets the PackML companion's names too
    (:mod:`statectl.channels.opcua.packml`).
@@ -53,7 +59,7 @@ from statectl.channels.opcua.access import discovery_only
 from statectl.channels.opcua.access import rules as _Rules
 from statectl.channels.opcua.access import ua_module as _ua
 from statectl.channels.opcua.certs import APP_URI, default_directory, ensure_certificate
-from statectl.channels.opcua.methods import DATA_ARGUMENT, MAX_DATA, Calls
+from statectl.channels.opcua.methods import DATA_ARGUMENT, FIELD_TYPES, MAX_DATA, Calls
 from statectl.channels.opcua.packml import PackmlNaming, PackmlSpace, naming, packml_call
 from statectl.channels.opcua.space import Change, Layout, changes, layout
 from statectl.kernel.errors import StatectlError
@@ -64,6 +70,8 @@ from statectl.run.system import System
 __all__ = ["NAMESPACE", "OpcuaServer", "OpcuaSettings"]
 
 NAMESPACE = "urn:statectl"
+#: A DateTime's null (OPC 10000-6: 1601-01-01, encoded 0): ``TransitionTime`` before any.
+_NEVER = datetime(1601, 1, 1, tzinfo=UTC)
 _START_TIMEOUT = 30.0
 
 
@@ -107,6 +115,8 @@ class _Machine:
     last_number: Any
     last_time: Any
     states: frozenset[str]
+    available_states: Any = None
+    available_transitions: Any = None
     shown: str | None = None
 
 
@@ -311,12 +321,14 @@ class OpcuaServer:
                 ua.ObjectIds.TransitionEventType, emitting_node=node
             )
             methods = {}
+            declared = {e.name: e.fields for e in chart.events}
             for event in device.layout.commands:
+                fields = declared.get(event, ())
                 methods[event] = await node.add_method(
                     idx,
                     _browse(event),
-                    self._calls.event(name, event, node.nodeid),
-                    [_data_argument()],
+                    self._calls.event(name, event, node.nodeid, fields),
+                    [_typed_argument(f, kind) for f, kind in fields] or [_data_argument()],
                     [ua.VariantType.Boolean, ua.VariantType.String],
                 )
             invokes = [f"{i.number} {i.name} {i.method}" for i in chart.invokes]
@@ -372,6 +384,7 @@ class OpcuaServer:
                 device.state_nodes[state] = snode
             current = await machine.get_child("0:CurrentState")
             last = await machine.get_child("0:LastTransition")
+            await _nothing_yet(last)
             device.machines.append(
                 _Machine(
                     current,
@@ -380,8 +393,10 @@ class OpcuaServer:
                     last,
                     await last.get_child("0:Id"),
                     await _optional(last, idx, "Number", ua.VariantType.UInt32, 0),
-                    await _optional(last, idx, "TransitionTime", ua.VariantType.DateTime, None),
+                    await _optional(last, idx, "TransitionTime", ua.VariantType.DateTime, _NEVER),
                     frozenset(spec.states),
+                    await _node_ids(machine, idx, "AvailableStates"),
+                    await _node_ids(machine, idx, "AvailableTransitions"),
                 )
             )
         for at, spec in enumerate(lay.machines):
@@ -450,6 +465,9 @@ class OpcuaServer:
             await put(m.current_id, sid, node_id)
             if m.current_number is not None:
                 await put(m.current_number, lay.state_numbers[shown] if shown else 0, uint)
+            states, moves = _available(device, shown)
+            await put(m.available_states, states, node_id)
+            await put(m.available_transitions, moves, node_id)
         if records:
             await asyncio.sleep(0)  # let the publisher send the new states before the rest
         for record in records:
@@ -495,6 +513,17 @@ def _initial(chart: Any, spec: Any, chart_initial: set[str]) -> str | None:
     return str(picks[0]) if picks else (str(spec.states[0]) if spec.states else None)
 
 
+def _available(device: _Device, shown: str) -> tuple[list[Any], list[Any]]:
+    """What a machine in ``shown`` offers (rule 2): the node ids of the transitions leaving
+    it and of the states they lead to in the machine, in chart order; none when empty."""
+    lay, states, moves = device.layout, device.state_nodes, device.transition_nodes
+    if not shown or states is None or moves is None:
+        return [], []
+    numbers = [n for n, (source, _) in lay.ends.items() if source == shown and n in moves]
+    targets = dict.fromkeys(t for n in numbers if (t := lay.ends[n][1]) is not None)
+    return [states[t].nodeid for t in targets], [moves[n].nodeid for n in numbers]
+
+
 def _browse(name: str) -> str:
     """A browse name: OPC UA allows most characters; ':' would read as a namespace index."""
     return name.replace(":", "_")
@@ -511,6 +540,34 @@ async def _optional(node: Any, idx: int, name: str, variant: Any, empty: Any) ->
         return await node.add_property(where, ua.QualifiedName(name, 0), ua.Variant(empty, variant))
 
 
+async def _nothing_yet(last: Any) -> None:
+    """``LastTransition`` before the first transition: an empty text with a null ``Id``, nulls
+    of their types (asyncua instances both as a Null variant, which generic clients flag)."""
+    ua = _ua()
+
+    await last.write_value(ua.Variant(ua.LocalizedText(""), ua.VariantType.LocalizedText))
+    last_id = await last.get_child("0:Id")
+    await last_id.write_value(ua.Variant(ua.NodeId(), ua.VariantType.NodeId))
+
+
+async def _node_ids(machine: Any, idx: int, name: str) -> Any:
+    """An optional ``NodeId[]`` of a machine (``AvailableStates``, ``AvailableTransitions``):
+    asyncua instances it with a null value, which becomes an empty array until the
+    machine's state is first shown (added where instancing left it out)."""
+    ua = _ua()
+
+    empty = ua.Variant([], ua.VariantType.NodeId, is_array=True)
+    try:
+        node = await machine.get_child(f"0:{name}")
+    except ua.UaError:  # BadNoMatch: the type left it out
+        where, bname = ua.NodeId(0, idx), ua.QualifiedName(name, 0)
+        node = await machine.add_variable(where, bname, empty, ua.VariantType.NodeId)
+    await node.write_value(empty)
+    await node.write_value_rank(ua.ValueRank.OneDimension)
+    await node.write_array_dimensions([0])
+    return node
+
+
 def _data_argument() -> Any:
     """A device method's one optional input (methods.py rule 2)."""
     ua = _ua()
@@ -521,5 +578,21 @@ def _data_argument() -> Any:
     arg.ValueRank = -1
     arg.Description = ua.LocalizedText(
         f"the event's data as a JSON object, at most {MAX_DATA} bytes; empty: none"
+    )
+    return arg
+
+
+def _typed_argument(name: str, kind: str) -> Any:
+    """One input of a method whose event declares its data: the field, typed (methods.py
+    rule 2); ``list``, ``dict`` and ``any`` fields are JSON text."""
+    ua = _ua()
+
+    arg = ua.Argument()
+    arg.Name = name
+    arg.DataType = ua.NodeId(getattr(ua.ObjectIds, FIELD_TYPES.get(kind, "String")))
+    arg.ValueRank = -1
+    json_text = FIELD_TYPES.get(kind) == "String" and kind != "str"
+    arg.Description = ua.LocalizedText(
+        f"{name}: {kind}" + (f", as JSON text of at most {MAX_DATA} bytes" if json_text else "")
     )
     return arg
