@@ -618,6 +618,31 @@ def test_node_whose_port_is_taken_says_so(
     assert code == 1 and "statectl node" in err and "Traceback" not in err
 
 
+def test_node_warns_only_about_its_own_devices(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A journalled node prints the recovery warnings (J606/J608) of its own devices (the
+    line's conveyor) and none of the devices that run on other nodes (arm, gripper). Its
+    port is held, so it stops right after loading (exit 1) and nothing runs."""
+    from statectl.channels.cli import main
+
+    ports = dict(zip(("line", "arm", "gripper"), free_ports(3), strict=True))
+    cell = tmp_path / "cell.yaml"
+    cell.write_text(cell_text(ports))
+    holder = socket.socket()
+    holder.bind(("127.0.0.1", ports["line"]))
+    holder.listen()
+    try:
+        journal = str(tmp_path / "line.db")
+        code = main(["node", str(cell), "--node", "line", "--journal", journal, "--quiet"])
+    finally:
+        holder.close()
+    err = capsys.readouterr().err
+    assert code == 1
+    warned = {line.split(":")[0] for line in err.splitlines() if " J60" in line}
+    assert warned == {DEVICES["conveyor"]}
+
+
 def test_node_dashboard_shows_the_devices_of_every_node(
     cluster: Callable[..., Cluster],
 ) -> None:

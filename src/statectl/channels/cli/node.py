@@ -313,7 +313,7 @@ def _node_setup(
         err.write(f"statectl node: --guarantee must be prompt or durable-first ({guarantee!r})\n")
         return USAGE
     try:
-        cell, devices = runcli._load_cell(path, err, journal is not None)
+        cell, devices = runcli._load_cell(path, err, journal is not None, node)
     except DiagnosticError as exc:
         for d in exc.diagnostics:
             err.write(f"{d}\n")

@@ -266,11 +266,19 @@ def _unknown_event(system: System, device: str | None, event: str) -> str | None
     return f"{name} has no event {event!r}; {maybe}its events: {', '.join(names)}"
 
 
-def _load_cell(path: str, err: TextIO, journalled: bool) -> tuple[Cell, tuple[DeviceSetup, ...]]:
+def _load_cell(
+    path: str, err: TextIO, journalled: bool, node: str | None = None
+) -> tuple[Cell, tuple[DeviceSetup, ...]]:
+    """The cell and its setups; the warnings printed are those of ``node``'s own devices
+    when one is named (``statectl node``: the others run on other nodes)."""
     cell, diags = load_cell(path)
     if cell is None:
         raise DiagnosticError([d for d in diags if d.severity is not Severity.INFO])
-    setups, warnings = load_setups(cell, journalled=journalled)
+    only = None
+    if node is not None and cell.nodes is not None:
+        names = {n.name for n in cell.nodes.nodes}
+        only = cell.nodes.node(node).devices if node in names else ()
+    setups, warnings = load_setups(cell, journalled=journalled, only=only)
     for d in warnings:
         err.write(f"{d}\n")
     return cell, setups

@@ -5,7 +5,7 @@ it returns setups and the warnings that apply, and prints nothing."""
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Collection, Iterable
 from pathlib import Path
 
 from statectl.cell.model import Cell
@@ -39,12 +39,13 @@ def relevant_warnings(warnings: Iterable[Diagnostic], journalled: bool) -> list[
 
 
 def load_setups(
-    cell: Cell, *, journalled: bool = True
+    cell: Cell, *, journalled: bool = True, only: Collection[str] | None = None
 ) -> tuple[tuple[DeviceSetup, ...], list[Diagnostic]]:
     """One setup per device instance of ``cell``, and the warnings that apply to the run.
 
     Raises one :class:`DiagnosticError` for every device file whose rules do not
-    load; recovery warnings are kept only for a ``journalled`` run.
+    load; recovery warnings are kept only for a ``journalled`` run, and only for the
+    devices named in ``only`` when given (a node's own: the others run elsewhere).
     """
     setups: list[DeviceSetup] = []
     problems: list[Diagnostic] = []
@@ -55,7 +56,8 @@ def load_setups(
         except DiagnosticError as exc:
             problems.extend(exc.diagnostics)
             continue
-        warnings.extend(relevant_warnings(dev.warnings, journalled))
+        if only is None or ref.name in only:
+            warnings.extend(relevant_warnings(dev.warnings, journalled))
         setups.append(DeviceSetup(ref.name, ref.chart, dev.rules, ref.path))
     if problems:
         raise DiagnosticError(problems)
