@@ -9,6 +9,7 @@ owner), and drop a payload it cannot read.
 from __future__ import annotations
 
 import io
+import json
 import threading
 import time
 from collections.abc import Callable
@@ -339,3 +340,48 @@ def test_link_data_json_cannot_carry_is_refused_not_sent_as_null(data: Any, refu
             _refuse_non_finite(data, "pong", "Hit")
     else:
         _refuse_non_finite(data, "pong", "Hit")
+
+
+class _Session:
+    """What the wire's thread puts on its session (hellos, acks): (key, payload) in order."""
+
+    def __init__(self) -> None:
+        self.puts: list[tuple[str, str]] = []
+
+    def put(self, key: str, data: str) -> None:
+        self.puts.append((key, data))
+
+
+def test_the_first_link_event_follows_the_acknowledged_hello_without_a_resend(
+    tmp_path: Path,
+) -> None:
+    """Node a's first link event to pong is kept until b acknowledged a's hello (Zenoh may
+    hand b the event before the hello, and b would refuse it), then put once; the hello is
+    said again on the next tick while unheard. No stream waits for RESEND_AFTER."""
+    system_a, wire_a = _node(tmp_path, "a")
+    pub, session = _Pub(), _Session()
+    wire_a._pubs["pong"] = pub
+    wire_a._session = session  # open, as far as send() asks
+    stream = wire_a.outbound["pong"]
+    hello = (wire_a.keys.hello("a", "pong"), f'{{"e":"{wire_a.epoch}"}}')
+    try:
+        wire_a.up.add("b")  # b came up: a hello is due
+        wire_a._hello_due.add("pong")
+        wire_a._resend(session)
+        system_a.post("ping", "Go")  # the first link event, before b answered
+        system_a.drain()
+        wire_a._resend(session)  # the same tick: not said again yet
+        assert (session.puts, pub.puts) == ([hello], [])
+        stream.hello_at -= 1.0  # a tick later, still unheard: said again
+        wire_a._resend(session)
+        assert (session.puts, pub.puts) == ([hello, hello], [])
+        ack = _Sample(f'{{"e":"{wire_a.epoch}","n":0,"r":true}}'.encode())
+        ack.key_expr = wire_a.keys.ack("a", "pong")  # type: ignore[attr-defined]
+        wire_a._on_ack(ack)  # b heard the hello: nothing applied yet, send it all
+        wire_a._resend(session)
+        system_a.post("ping", "Go")  # the second goes at once
+        system_a.drain()
+        assert [json.loads(p)[1] for p in pub.puts] == [1, 2]
+        assert wire_a.resends == 0
+    finally:
+        wire_a._session = None

@@ -56,8 +56,10 @@ class Outbound:
     unacked: deque[tuple[int, str, Any]] = field(default_factory=deque)
     lock: threading.Lock = field(default_factory=threading.Lock)
     last_send: float = 0.0  # monotonic time of the last (re)send, for the resend timer
-    #: a hello went out since the peer came up: its epoch is known there (rule 4)
+    #: the receiver acknowledged a hello since the peer came up: its epoch is known
+    #: there, so events may be put as they come (rule 4)
     greeted: bool = False
+    hello_at: float = 0.0  # monotonic time of the last hello, to say it again if unheard
 
     def add(self, event: str, data: Any) -> int:
         """Under ``lock``: number the next event and keep it until acknowledged."""

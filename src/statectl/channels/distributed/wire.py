@@ -39,8 +39,13 @@ Rules:
    hellos, posts, states) is bounded before it is decoded, and a refused one is
    one escaped log line and a journal note (``zenoh-refused/NN``, the run's last
    100, and ``zenoh-refused``, the run's count), nothing else. A sender puts a stream's
-   events only after its hello went out since the peer came up, so the receiver
-   knows the epoch before its first event.
+   events only once the receiver acknowledged its hello since the peer came up, so
+   the receiver knows the epoch before its first event (Zenoh may hand the hello and
+   the event to their subscribers in either order); until then the events are kept
+   and the hello is said again every tick (:data:`_TICK`: a hello put before the
+   peer's subscriber was known here is lost), and the hello's acknowledgement puts
+   them. The first link event after start-up so never waits for :data:`RESEND_AFTER`;
+   ``resends`` counts the streams that did (an acknowledgement lost).
 """
 
 from __future__ import annotations
@@ -121,6 +126,7 @@ class Wire:
         #: (sending node, device) -> the events links and invariants send on that stream
         self.carried = carried(cell)
         self.refused = 0  # messages refused by rule 7, for the journal's note
+        self.resends = 0  # streams asked again after RESEND_AFTER without an ack (rule 7)
         self.outbound: dict[str, Outbound] = {}
         self._acks: deque[tuple[int, str, str, str, int]] = deque()  # seq, node, device, e, n
         self._ack_due: dict[tuple[str, str], tuple[str, int, bool]] = {}
@@ -570,14 +576,19 @@ class Wire:
             if stream.node not in self.up:
                 continue
             with stream.lock:
-                if name in again:
+                if name in again:  # the receiver knows the epoch: put what it lacks
                     self._put_all(stream)
+                    stream.greeted = True  # what is sent from now on follows (rule 7)
+                elif not stream.greeted:  # unheard: say it again next tick (rule 7)
+                    if (self.me.name, name) in self.carried and now - stream.hello_at >= _TICK:
+                        hello.add(name)
                 elif stream.unacked and now - stream.last_send > RESEND_AFTER:
                     hello.add(name)
                     stream.last_send = now
+                    self.resends += 1
             if name in hello:
+                stream.hello_at = now
                 session.put(self.keys.hello(self.me.name, name), _ENC.encode({"e": stream.epoch}))
-                stream.greeted = True  # what is sent from now on follows the hello
 
     def _put_all(self, stream: Outbound) -> None:
         """Under the stream's lock: put every unacknowledged event again, in order."""
