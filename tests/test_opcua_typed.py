@@ -8,6 +8,7 @@ everything started here is stopped.
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import Iterator
 from typing import Any
 
@@ -154,3 +155,53 @@ def test_each_input_gets_its_own_status(press: Press) -> None:
             return result.StatusCode.name, [c.name for c in result.InputArgumentResults]
 
     assert run(go()) == ("BadInvalidArgument", ["BadTypeMismatch", "Good"])
+
+
+def test_data_items_are_read_only_variables_updated_after_each_step(press: Press) -> None:
+    """The press's data (strokes 0, limit 3) are Int64 variables under Press/Data; a stroke
+    counts itself, and the variable follows; nobody may write them."""
+    assert press.call("Press", 3.0, "A") == [True, ""]
+
+    async def go() -> tuple[list[tuple[str, Any, str]], str]:
+        client = Client(press.url, timeout=10)
+        client.set_user(USER)
+        client.set_password(PASSWORD)
+        async with client:
+            folder = await client.nodes.objects.get_child(["2:Press", "2:Data"])
+            strokes = await folder.get_child(["2:strokes"])
+            for _ in range(500):  # the writer updates after the step, on its own loop
+                if await strokes.read_value() == 1:
+                    break
+                await asyncio.sleep(0.01)
+            found = []
+            for variable in await folder.get_children():
+                value = await variable.read_data_value()
+                name = (await variable.read_browse_name()).Name
+                found.append((name, value.Value.Value, value.Value.VariantType.name))
+            try:
+                await strokes.write_value(ua.Variant(7, ua.VariantType.Int64))
+                refused = "written"
+            except errors.UaStatusCodeError as exc:
+                refused = type(exc).__name__
+            return sorted(found), refused
+
+    found, refused = run(go())
+    assert found == [("limit", 3, "Int64"), ("strokes", 1, "Int64")]
+    assert refused.startswith("Bad")
+    assert press.state()[1] == 1
+
+
+def test_a_data_value_shows_in_its_variables_type() -> None:
+    """Rule 5: the type comes from the initial value; lists, mappings and null are JSON
+    text; a later value that does not fit the type (text in a counter) is None, so the
+    variable keeps its last value marked uncertain."""
+    from statectl.channels.opcua.server import _data_kind, _data_variant
+
+    kinds = [_data_kind(v) for v in (True, 3, 2.5, "a", (79, 0), None, {"k": 1})]
+    assert kinds == ["Boolean", "Int64", "Double", "String", "Json", "Json", "Json"]
+    assert _data_variant((79, 0), "Json").Value == "[79, 0]"
+    assert _data_variant(4.0, "Int64").Value == 4
+    assert _data_variant(4, "Double").Value == 4.0
+    assert _data_variant("x", "Int64") is None
+    assert _data_variant(4.5, "Int64") is None
+    assert _data_variant(True, "Int64") is None

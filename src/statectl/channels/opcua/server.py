@@ -37,6 +37,10 @@ Rules:
    by default) with the server's certificate (:mod:`statectl.channels.opcua.certs`),
    and only those open a session: a None channel the config does not list serves
    discovery only (:mod:`statectl.channels.opcua.access`).
+5. A device's data items are read-only variables in a ``Data`` folder, written
+   after each step that changed them; the type comes from the initial value
+   (Boolean, Int64, Double, String; anything else JSON text), and a value that
+   fits it in no way keeps the last one, marked ``UncertainLastUsableValue``.
 """
 
 from __future__ import annotations
@@ -44,6 +48,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import functools
+import json
 import logging
 import threading
 from collections import deque
@@ -131,6 +136,8 @@ class _Device:
     last_invoke: Any = None
     events: Any = None  # the TransitionEventType generator
     pending: list[Change] | None = None
+    #: data item -> its variable, its kind (rule 5) and the variant it shows
+    data: dict[str, list[Any]] | None = None
 
 
 class OpcuaServer:
@@ -150,7 +157,9 @@ class OpcuaServer:
         }
         self._offs: list[Callable[[], None]] = []
         self._server: Any = None
-        self._updates: deque[tuple[_Device, frozenset[str], list[Change]]] = deque()
+        self._updates: deque[
+            tuple[_Device, frozenset[str], list[Change], dict[str, Any] | None]
+        ] = deque()
         self._kick: Any = None  # an asyncio.Event of the server's loop
         self._loop_thread: int | None = None
         self._packml_space: PackmlSpace | None = None  # when a device declares PackML
@@ -185,10 +194,12 @@ class OpcuaServer:
                 device.pending = []
                 loop = self._loop
                 if threading.get_ident() == self._loop_thread:
-                    self._publish(device, s.configuration, records)
+                    self._publish(device, s.configuration, records, dict(s.data))
                 elif loop is not None:
                     with contextlib.suppress(RuntimeError):  # the loop closed: stopping
-                        loop.call_soon_threadsafe(self._publish, device, s.configuration, records)
+                        loop.call_soon_threadsafe(
+                            self._publish, device, s.configuration, records, dict(s.data)
+                        )
 
             self._offs.append(subject.listen_steps(keep))
             self._offs.append(subject.on_step(stepped))
@@ -216,7 +227,8 @@ class OpcuaServer:
         if loop is None:
             return
         for name, s in self.system.subjects.items():
-            loop.call_soon_threadsafe(self._publish, self._devices[name], s.configuration, [])
+            data = dict(s.data)
+            loop.call_soon_threadsafe(self._publish, self._devices[name], s.configuration, [], data)
 
     def stop(self) -> None:
         """Unhook the devices, stop the server and its thread."""
@@ -335,6 +347,7 @@ class OpcuaServer:
             await node.add_variable(
                 idx, "Invokes", ua.Variant(invokes, ua.VariantType.String, is_array=True)
             )
+            await self._data(node, idx, device, self.system.subjects[name].data)
             device.last_invoke = await node.add_variable(
                 idx, "LastInvoke", ua.Variant(-1, ua.VariantType.Int32)
             )
@@ -423,8 +436,26 @@ class OpcuaServer:
 
     # -- updates on the loop (rule 1) ------------------------------------------------------
 
-    def _publish(self, device: _Device, active: frozenset[str], records: list[Change]) -> None:
-        self._updates.append((device, active, records))
+    async def _data(self, node: Any, idx: int, device: _Device, data: Any) -> None:
+        """Rule 5: a ``Data`` folder with one read-only variable per data item."""
+        device.data = {}
+        if not data:
+            return
+        folder = await node.add_folder(idx, "Data")
+        for item, value in data.items():
+            kind = _data_kind(value)
+            variant = _data_variant(value, kind) or _data_variant(None, "Json")
+            variable = await folder.add_variable(idx, _browse(item), variant)
+            device.data[item] = [variable, kind, variant]
+
+    def _publish(
+        self,
+        device: _Device,
+        active: frozenset[str],
+        records: list[Change],
+        data: dict[str, Any] | None = None,
+    ) -> None:
+        self._updates.append((device, active, records, data))
         self._kick.set()
 
     async def _writer(self) -> None:
@@ -436,7 +467,13 @@ class OpcuaServer:
             while updates:
                 await self._write(*updates.popleft())
 
-    async def _write(self, device: _Device, active: frozenset[str], records: list[Change]) -> None:
+    async def _write(
+        self,
+        device: _Device,
+        active: frozenset[str],
+        records: list[Change],
+        data: dict[str, Any] | None = None,
+    ) -> None:
         ua = _ua()
 
         if device.machines is None or device.state_nodes is None:
@@ -468,6 +505,8 @@ class OpcuaServer:
             states, moves = _available(device, shown)
             await put(m.available_states, states, node_id)
             await put(m.available_transitions, moves, node_id)
+        if data and device.data:
+            await _write_data(server, device.data, data, now)
         if records:
             await asyncio.sleep(0)  # let the publisher send the new states before the rest
         for record in records:
@@ -596,3 +635,64 @@ def _typed_argument(name: str, kind: str) -> Any:
         f"{name}: {kind}" + (f", as JSON text of at most {MAX_DATA} bytes" if json_text else "")
     )
     return arg
+
+
+def _data_kind(value: Any) -> str:
+    """A data item's variable type, from its initial value (rule 5)."""
+    if isinstance(value, bool):
+        return "Boolean"
+    if isinstance(value, int) and -(2**63) <= value < 2**63:
+        return "Int64"
+    if isinstance(value, float):
+        return "Double"
+    if isinstance(value, str):
+        return "String"
+    return "Json"  # null, a list, a mapping: JSON text
+
+
+def _data_variant(value: Any, kind: str) -> Any:
+    """``value`` as a variant of ``kind``; None when it does not fit (rule 5)."""
+    ua = _ua()
+
+    if kind == "Json":
+        try:
+            text = json.dumps(value, default=str, allow_nan=True)
+        except (TypeError, ValueError):
+            return None
+        return ua.Variant(text, ua.VariantType.String)
+    if isinstance(value, bool) != (kind == "Boolean"):
+        return None
+    if kind == "Int64" and isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if kind == "Double" and isinstance(value, int):
+        value = float(value)
+    fits = {"Boolean": bool, "Int64": int, "Double": float, "String": str}[kind]
+    if not isinstance(value, fits):
+        return None
+    if isinstance(value, int) and kind == "Int64" and not -(2**63) <= value < 2**63:
+        return None
+    return ua.Variant(value, getattr(ua.VariantType, kind))
+
+
+async def _write_data(
+    server: Any, shown: dict[str, list[Any]], data: dict[str, Any], now: Any
+) -> None:
+    """Rule 5: write the data items whose value changed; one that no longer fits its
+    variable's type keeps its last value, marked ``UncertainLastUsableValue``."""
+    ua = _ua()
+
+    for item, value in data.items():
+        entry = shown.get(item)
+        if entry is None:
+            continue
+        variable, kind, last = entry
+        variant = _data_variant(value, kind)
+        status = ua.StatusCode(ua.StatusCodes.Good)
+        if variant is None:
+            variant = last
+            status = ua.StatusCode(ua.StatusCodes.UncertainLastUsableValue)
+        elif variant == last:
+            continue
+        entry[2] = variant
+        data_value = ua.DataValue(variant, status, SourceTimestamp=now, ServerTimestamp=now)
+        await server.write_attribute_value(variable.nodeid, data_value)
