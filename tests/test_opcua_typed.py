@@ -195,13 +195,13 @@ def test_a_data_value_shows_in_its_variables_type() -> None:
     """Rule 5: the type comes from the initial value; lists, mappings and null are JSON
     text; a later value that does not fit the type (text in a counter) is None, so the
     variable keeps its last value marked uncertain."""
-    from statectl.channels.opcua.server import _data_kind, _data_variant
+    from statectl.channels.opcua.nodes import data_kind, data_variant
 
-    kinds = [_data_kind(v) for v in (True, 3, 2.5, "a", (79, 0), None, {"k": 1})]
+    kinds = [data_kind(v) for v in (True, 3, 2.5, "a", (79, 0), None, {"k": 1})]
     assert kinds == ["Boolean", "Int64", "Double", "String", "Json", "Json", "Json"]
-    assert _data_variant((79, 0), "Json").Value == "[79, 0]"
-    assert _data_variant(4.0, "Int64").Value == 4
-    assert _data_variant(4, "Double").Value == 4.0
-    assert _data_variant("x", "Int64") is None
-    assert _data_variant(4.5, "Int64") is None
-    assert _data_variant(True, "Int64") is None
+    assert data_variant((79, 0), "Json").Value == "[79, 0]"
+    assert data_variant(4.0, "Int64").Value == 4
+    assert data_variant(4, "Double").Value == 4.0
+    assert data_variant("x", "Int64") is None
+    assert data_variant(4.5, "Int64") is None
+    assert data_variant(True, "Int64") is None

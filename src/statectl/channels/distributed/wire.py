@@ -39,13 +39,11 @@ Rules:
    hellos, posts, states) is bounded before it is decoded, and a refused one is
    one escaped log line and a journal note (``zenoh-refused/NN``, the run's last
    100, and ``zenoh-refused``, the run's count), nothing else. A sender puts a stream's
-   events only once the receiver acknowledged its hello since the peer came up, so
-   the receiver knows the epoch before its first event (Zenoh may hand the hello and
-   the event to their subscribers in either order); until then the events are kept
-   and the hello is said again every tick (:data:`_TICK`: a hello put before the
-   peer's subscriber was known here is lost), and the hello's acknowledgement puts
-   them. The first link event after start-up so never waits for :data:`RESEND_AFTER`;
-   ``resends`` counts the streams that did (an acknowledgement lost).
+   events only once the receiver acknowledged its hello since the peer came up (Zenoh
+   may hand hello and event to their subscribers in either order); until then they
+   are kept, the hello said again each :data:`_TICK` (one put before the peer's
+   subscriber was known is lost), and its acknowledgement puts them: the first link
+   event never waits for :data:`RESEND_AFTER` (``resends`` counts streams that did).
 """
 
 from __future__ import annotations

@@ -48,7 +48,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import functools
-import json
 import logging
 import threading
 from collections import deque
@@ -64,7 +63,18 @@ from statectl.channels.opcua.access import discovery_only
 from statectl.channels.opcua.access import rules as _Rules
 from statectl.channels.opcua.access import ua_module as _ua
 from statectl.channels.opcua.certs import APP_URI, default_directory, ensure_certificate
-from statectl.channels.opcua.methods import DATA_ARGUMENT, FIELD_TYPES, MAX_DATA, Calls
+from statectl.channels.opcua.methods import Calls
+from statectl.channels.opcua.nodes import (
+    browse,
+    data_argument,
+    data_kind,
+    data_variant,
+    node_ids,
+    nothing_yet,
+    optional,
+    typed_argument,
+    write_data,
+)
 from statectl.channels.opcua.packml import PackmlNaming, PackmlSpace, naming, packml_call
 from statectl.channels.opcua.space import Change, Layout, changes, layout
 from statectl.kernel.errors import StatectlError
@@ -338,9 +348,9 @@ class OpcuaServer:
                 fields = declared.get(event, ())
                 methods[event] = await node.add_method(
                     idx,
-                    _browse(event),
+                    browse(event),
                     self._calls.event(name, event, node.nodeid, fields),
-                    [_typed_argument(f, kind) for f, kind in fields] or [_data_argument()],
+                    [typed_argument(f, kind) for f, kind in fields] or [data_argument()],
                     [ua.VariantType.Boolean, ua.VariantType.String],
                 )
             invokes = [f"{i.number} {i.name} {i.method}" for i in chart.invokes]
@@ -389,7 +399,7 @@ class OpcuaServer:
             first = _initial(self.system.subjects[device.name].chart, spec, chart_initial)
             for state in spec.states:
                 stype = ua.ObjectIds.InitialStateType if state == first else ua.ObjectIds.StateType
-                snode = await machine.add_object(idx, _browse(state), objecttype=stype)
+                snode = await machine.add_object(idx, browse(state), objecttype=stype)
                 number = await snode.get_child("0:StateNumber")
                 await number.write_value(
                     ua.Variant(lay.state_numbers[state], ua.VariantType.UInt32)
@@ -397,26 +407,26 @@ class OpcuaServer:
                 device.state_nodes[state] = snode
             current = await machine.get_child("0:CurrentState")
             last = await machine.get_child("0:LastTransition")
-            await _nothing_yet(last)
+            await nothing_yet(last)
             device.machines.append(
                 _Machine(
                     current,
                     await current.get_child("0:Id"),
-                    await _optional(current, idx, "Number", ua.VariantType.UInt32, 0),
+                    await optional(current, idx, "Number", ua.VariantType.UInt32, 0),
                     last,
                     await last.get_child("0:Id"),
-                    await _optional(last, idx, "Number", ua.VariantType.UInt32, 0),
-                    await _optional(last, idx, "TransitionTime", ua.VariantType.DateTime, _NEVER),
+                    await optional(last, idx, "Number", ua.VariantType.UInt32, 0),
+                    await optional(last, idx, "TransitionTime", ua.VariantType.DateTime, _NEVER),
                     frozenset(spec.states),
-                    await _node_ids(machine, idx, "AvailableStates"),
-                    await _node_ids(machine, idx, "AvailableTransitions"),
+                    await node_ids(machine, idx, "AvailableStates"),
+                    await node_ids(machine, idx, "AvailableTransitions"),
                 )
             )
         for at, spec in enumerate(lay.machines):
             for number in spec.transitions:
                 tnode = await made[at].add_object(
                     idx,
-                    _browse(lay.transition_names[number]),
+                    browse(lay.transition_names[number]),
                     objecttype=ua.ObjectIds.TransitionType,
                 )
                 prop = await tnode.get_child("0:TransitionNumber")
@@ -443,9 +453,9 @@ class OpcuaServer:
             return
         folder = await node.add_folder(idx, "Data")
         for item, value in data.items():
-            kind = _data_kind(value)
-            variant = _data_variant(value, kind) or _data_variant(None, "Json")
-            variable = await folder.add_variable(idx, _browse(item), variant)
+            kind = data_kind(value)
+            variant = data_variant(value, kind) or data_variant(None, "Json")
+            variable = await folder.add_variable(idx, browse(item), variant)
             device.data[item] = [variable, kind, variant]
 
     def _publish(
@@ -506,7 +516,7 @@ class OpcuaServer:
             await put(m.available_states, states, node_id)
             await put(m.available_transitions, moves, node_id)
         if data and device.data:
-            await _write_data(server, device.data, data, now)
+            await write_data(server, device.data, data, now)
         if records:
             await asyncio.sleep(0)  # let the publisher send the new states before the rest
         for record in records:
@@ -561,138 +571,3 @@ def _available(device: _Device, shown: str) -> tuple[list[Any], list[Any]]:
     numbers = [n for n, (source, _) in lay.ends.items() if source == shown and n in moves]
     targets = dict.fromkeys(t for n in numbers if (t := lay.ends[n][1]) is not None)
     return [states[t].nodeid for t in targets], [moves[n].nodeid for n in numbers]
-
-
-def _browse(name: str) -> str:
-    """A browse name: OPC UA allows most characters; ':' would read as a namespace index."""
-    return name.replace(":", "_")
-
-
-async def _optional(node: Any, idx: int, name: str, variant: Any, empty: Any) -> Any:
-    """An optional property (``Number``, ``TransitionTime``), added where instancing left it out."""
-    ua = _ua()
-
-    try:
-        return await node.get_child(f"0:{name}")
-    except ua.UaError:  # BadNoMatch: the type left it out
-        where = ua.NodeId(0, idx)  # a new numeric id in statectl's namespace
-        return await node.add_property(where, ua.QualifiedName(name, 0), ua.Variant(empty, variant))
-
-
-async def _nothing_yet(last: Any) -> None:
-    """``LastTransition`` before the first transition: an empty text with a null ``Id``, nulls
-    of their types (asyncua instances both as a Null variant, which generic clients flag)."""
-    ua = _ua()
-
-    await last.write_value(ua.Variant(ua.LocalizedText(""), ua.VariantType.LocalizedText))
-    last_id = await last.get_child("0:Id")
-    await last_id.write_value(ua.Variant(ua.NodeId(), ua.VariantType.NodeId))
-
-
-async def _node_ids(machine: Any, idx: int, name: str) -> Any:
-    """An optional ``NodeId[]`` of a machine (``AvailableStates``, ``AvailableTransitions``):
-    asyncua instances it with a null value, which becomes an empty array until the
-    machine's state is first shown (added where instancing left it out)."""
-    ua = _ua()
-
-    empty = ua.Variant([], ua.VariantType.NodeId, is_array=True)
-    try:
-        node = await machine.get_child(f"0:{name}")
-    except ua.UaError:  # BadNoMatch: the type left it out
-        where, bname = ua.NodeId(0, idx), ua.QualifiedName(name, 0)
-        node = await machine.add_variable(where, bname, empty, ua.VariantType.NodeId)
-    await node.write_value(empty)
-    await node.write_value_rank(ua.ValueRank.OneDimension)
-    await node.write_array_dimensions([0])
-    return node
-
-
-def _data_argument() -> Any:
-    """A device method's one optional input (methods.py rule 2)."""
-    ua = _ua()
-
-    arg = ua.Argument()
-    arg.Name = DATA_ARGUMENT
-    arg.DataType = ua.NodeId(ua.ObjectIds.String)
-    arg.ValueRank = -1
-    arg.Description = ua.LocalizedText(
-        f"the event's data as a JSON object, at most {MAX_DATA} bytes; empty: none"
-    )
-    return arg
-
-
-def _typed_argument(name: str, kind: str) -> Any:
-    """One input of a method whose event declares its data: the field, typed (methods.py
-    rule 2); ``list``, ``dict`` and ``any`` fields are JSON text."""
-    ua = _ua()
-
-    arg = ua.Argument()
-    arg.Name = name
-    arg.DataType = ua.NodeId(getattr(ua.ObjectIds, FIELD_TYPES.get(kind, "String")))
-    arg.ValueRank = -1
-    json_text = FIELD_TYPES.get(kind) == "String" and kind != "str"
-    arg.Description = ua.LocalizedText(
-        f"{name}: {kind}" + (f", as JSON text of at most {MAX_DATA} bytes" if json_text else "")
-    )
-    return arg
-
-
-def _data_kind(value: Any) -> str:
-    """A data item's variable type, from its initial value (rule 5)."""
-    if isinstance(value, bool):
-        return "Boolean"
-    if isinstance(value, int) and -(2**63) <= value < 2**63:
-        return "Int64"
-    if isinstance(value, float):
-        return "Double"
-    if isinstance(value, str):
-        return "String"
-    return "Json"  # null, a list, a mapping: JSON text
-
-
-def _data_variant(value: Any, kind: str) -> Any:
-    """``value`` as a variant of ``kind``; None when it does not fit (rule 5)."""
-    ua = _ua()
-
-    if kind == "Json":
-        try:
-            text = json.dumps(value, default=str, allow_nan=True)
-        except (TypeError, ValueError):
-            return None
-        return ua.Variant(text, ua.VariantType.String)
-    if isinstance(value, bool) != (kind == "Boolean"):
-        return None
-    if kind == "Int64" and isinstance(value, float) and value.is_integer():
-        value = int(value)
-    if kind == "Double" and isinstance(value, int):
-        value = float(value)
-    fits = {"Boolean": bool, "Int64": int, "Double": float, "String": str}[kind]
-    if not isinstance(value, fits):
-        return None
-    if isinstance(value, int) and kind == "Int64" and not -(2**63) <= value < 2**63:
-        return None
-    return ua.Variant(value, getattr(ua.VariantType, kind))
-
-
-async def _write_data(
-    server: Any, shown: dict[str, list[Any]], data: dict[str, Any], now: Any
-) -> None:
-    """Rule 5: write the data items whose value changed; one that no longer fits its
-    variable's type keeps its last value, marked ``UncertainLastUsableValue``."""
-    ua = _ua()
-
-    for item, value in data.items():
-        entry = shown.get(item)
-        if entry is None:
-            continue
-        variable, kind, last = entry
-        variant = _data_variant(value, kind)
-        status = ua.StatusCode(ua.StatusCodes.Good)
-        if variant is None:
-            variant = last
-            status = ua.StatusCode(ua.StatusCodes.UncertainLastUsableValue)
-        elif variant == last:
-            continue
-        entry[2] = variant
-        data_value = ua.DataValue(variant, status, SourceTimestamp=now, ServerTimestamp=now)
-        await server.write_attribute_value(variable.nodeid, data_value)
