@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from typing import Any
 
 import pytest
 
@@ -220,3 +221,68 @@ def test_value_size_counts_shared_parts_without_walking_them() -> None:
         value = [value, value]
     assert value_size(value) > MAX_SIZE
     assert value_size(["ab", [1, 2.5, None], {"k": "v"}]) == 1 + 2 + 4 + 3
+
+
+@pytest.mark.parametrize(
+    "source",
+    [
+        "_event.data.gi_frame.f_back.f_globals",
+        "_event.data.tb_frame",
+        "_event.data.cr_frame",
+        "_event.data.ag_frame",
+        "x.f_builtins",
+        "x.f_locals",
+        "x.gi_code",
+        "x.tb_next",
+        "x.f_code",
+        "x.co_consts",
+        "x.co_anything_new",
+        "x.gi_yieldfrom.cr_await",
+    ],
+)
+def test_frame_and_code_attributes_are_refused_like_dunders(source: str) -> None:
+    """Attributes that walk to frames, their globals or code objects are X302 at load."""
+    expr, diags = compile_expression(source, HERE)
+    assert expr is None
+    assert diags and all(d.code == "X302" for d in diags)
+    assert any("private attribute" in d.message for d in diags), [str(d) for d in diags]
+
+
+def test_every_frame_family_attribute_of_this_python_is_refused() -> None:
+    """Each public attribute of a frame, traceback, generator, coroutine and code object is refused.
+
+    Read from live objects, so a Python that adds one (as 3.11 added co_qualname) fails here."""
+    import sys
+    import types
+
+    def gen() -> Any:
+        yield
+
+    async def coro() -> None:
+        return None
+
+    async def agen() -> Any:
+        yield
+
+    try:
+        raise ValueError
+    except ValueError as exc:
+        tb = exc.__traceback__
+    c = coro()
+    objects = [sys._getframe(), tb, gen(), c, agen(), gen.__code__]
+    c.close()
+    allowed_methods = {"clear", "close", "send", "throw", "aclose", "asend", "athrow", "replace"}
+    for obj in objects:
+        for attr in dir(obj):
+            if attr.startswith("_") or attr in allowed_methods:
+                continue
+            expr, diags = compile_expression(f"x.{attr}", HERE)
+            assert expr is None and [d.code for d in diags] == ["X302"], (type(obj), attr)
+    assert isinstance(objects[-1], types.CodeType)
+
+
+def test_ordinary_attributes_stay_readable() -> None:
+    """Data attributes that merely look alike (fields of the user's event data) still load."""
+    for source in ("_event.data.f_speed", "_event.data.frame", "_event.data.code", "x.tb"):
+        expr, diags = compile_expression(source, HERE)
+        assert diags == [] and expr is not None, source

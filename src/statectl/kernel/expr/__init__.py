@@ -14,7 +14,9 @@ it, so guards are a checked, bounded subset of Python expressions. Rules:
    would yield a method (``'x'.join``) is refused at run time, so data never
    makes a callable reachable.
 3. Names starting with ``_`` are refused (``_event`` is the one exception, the
-   SCXML system variable), as are lambdas, comprehensions, walrus, ``**``,
+   SCXML system variable), as are attributes that reach frames and code (``f_globals``,
+   ``gi_frame``, ``tb_frame``, ``cr_frame``, ``co_*``, ...: :data:`.compiler.INTERNAL_ATTRIBUTES`)
+   and lambdas, comprehensions, walrus, ``**``,
    f-strings and starred arguments.
 4. The check happens when the model loads and reports every offending node as
    a diagnostic with its column; evaluation then runs the compiled code with no

@@ -33,6 +33,25 @@ CALLABLE_NAMES = frozenset(FUNCTIONS) | {"In"}
 
 ALLOWED_PRIVATE = frozenset({"_event"})
 
+#: Attributes that lead from a value to the interpreter's frames and code: a frame's
+#: globals hold its builtins, so they are refused at load like dunders (X302), whatever
+#: object they are read from. ``co_`` (code objects) is refused as a prefix.
+INTERNAL_ATTRIBUTES = frozenset(
+    {
+        *("f_back", "f_builtins", "f_code", "f_generator", "f_globals", "f_lasti"),
+        *("f_lineno", "f_locals", "f_trace", "f_trace_lines", "f_trace_opcodes"),
+        *("tb_frame", "tb_lasti", "tb_lineno", "tb_next"),
+        *("gi_code", "gi_frame", "gi_running", "gi_suspended", "gi_yieldfrom"),
+        *("cr_await", "cr_code", "cr_frame", "cr_origin", "cr_running", "cr_suspended"),
+        *("ag_await", "ag_code", "ag_frame", "ag_running", "ag_suspended"),
+    }
+)
+
+
+def internal_attribute(name: str) -> bool:
+    """Whether an attribute read would reach the interpreter's internals (private or frame)."""
+    return name.startswith(("_", "co_")) or name in INTERNAL_ATTRIBUTES
+
 
 _SAFE_GLOBALS: dict[str, Any] = {
     "__builtins__": {},
@@ -296,10 +315,11 @@ def _refusals(
                 )
             elif node.id not in CALLABLE_NAMES:
                 names.add(node.id)
-        elif isinstance(node, ast.Attribute) and node.attr.startswith("_"):
+        elif isinstance(node, ast.Attribute) and internal_attribute(node.attr):
             refuse(
                 f"{what} {source!r} reads the private attribute {node.attr!r}{at}",
-                "only public attributes can be read in guards",
+                "only public data attributes can be read in guards "
+                "(no '_' names, no frame, traceback, generator or code attributes)",
             )
         elif isinstance(node, ast.Call):
             ok = isinstance(node.func, ast.Name) and node.func.id in CALLABLE_NAMES
