@@ -164,6 +164,13 @@ REFUSALS: list[tuple[str, Callable[[str], bytes], int]] = [
     ("nowhere", lambda h: request(h, "POST", "/nowhere", SMUGGLED, POST_OK), 404),
     ("two hosts", lambda h: request(h, "GET", "/api/state", b"", f"Host: {h}\r\n"), 400),
     ("no host", lambda h: b"GET /api/state HTTP/1.1\r\n\r\n" + SMUGGLED, 400),
+    ("absolute-form, another host",
+     lambda h: request(h, "GET", "http://evil.example/api/state"), 400),
+    ("absolute-form https, another host",
+     lambda h: request(h, "GET", "https://evil.example/api/state"), 400),
+    ("absolute-form, another port",
+     lambda h: request(h, "GET", f"http://{h.rsplit(':', 1)[0]}:1/api/state"), 400),
+    ("asterisk-form", lambda h: request(h, "OPTIONS", "*"), 400),
     ("two origins", lambda h: request(h, "GET", "/api/state", b"",
                                       f"Origin: http://{h}\r\nOrigin: http://{h}\r\n"), 403),
     ("body too large", lambda h: request(h, "POST", "/api/post", b"{" * 5000, POST_OK), 413),
@@ -184,6 +191,16 @@ def test_a_refused_request_gets_one_answer_and_its_connection_closed(
     finally:
         sock.close()
     assert server.system.subjects["Motor"].queued == 0
+
+
+def test_an_absolute_form_target_naming_this_server_is_served(server: Server) -> None:
+    """RFC 9112 lets a client send an absolute target: naming our own Host, it is answered."""
+    sock = server.connect()
+    try:
+        sock.sendall(request(server.host, "GET", f"http://{server.host}/api/state"))
+        assert read_response(sock)[0] == 200
+    finally:
+        sock.close()
 
 
 def test_a_chunked_body_over_the_cap_is_refused_with_413(server: Server) -> None:

@@ -2,8 +2,10 @@
 
 Rules:
 1. Every request passes the guard first: exactly one ``Host`` header (else 400),
-   naming an address this server answers on (else 403, DNS rebinding); at most
-   one ``Origin``, and it must be ours (else 403).
+   naming an address this server answers on (else 403, DNS rebinding); a request
+   target that is a path, or an absolute ``http://`` URL naming that same host
+   (else 400: ``GET http://evil.example/api/state``); at most one ``Origin``, and
+   it must be ours (else 403).
 2. A refused request (any status >= 400) closes its connection, so a body it did
    not read is never taken for a second request.
 3. ``POST /api/post``: the token (``X-Statectl-Token``, 401), a JSON content type
@@ -94,6 +96,17 @@ def _refuse(status: int, message: str, **headers: str) -> web.Response:
     return response
 
 
+def _target_names(target: str, host: str) -> bool:
+    """Whether a request target is ours: origin-form (a path), or absolute-form naming
+    ``http://`` and the very authority of the Host header (RFC 9112 3.2.2); aiohttp takes
+    an absolute target's authority as the request's host, so a foreign one is refused."""
+    if target.startswith("/"):
+        return True
+    scheme, sep, rest = target.partition("://")
+    authority = rest.split("/", 1)[0].split("?", 1)[0]
+    return bool(sep) and scheme.lower() == "http" and authority.lower() == host.lower()
+
+
 def _asset(name: str) -> bytes:
     return (files("statectl.channels.web") / "assets" / name).read_bytes()
 
@@ -176,6 +189,10 @@ def _guard(dash: Dashboard) -> Middleware:
             return _refuse(HTTPStatus.BAD_REQUEST, "a request has exactly one Host header")
         if hosts[0] not in dash.hosts:
             return _refuse(HTTPStatus.FORBIDDEN, f"host {hosts[0]!r} is not served here")
+        if not _target_names(request.raw_path, hosts[0]):
+            return _refuse(
+                HTTPStatus.BAD_REQUEST, "the request target names another host than Host"
+            )
         origins = request.headers.getall("Origin", [])
         if len(origins) > 1 or (origins and origins[0] not in dash.origins):
             return _refuse(HTTPStatus.FORBIDDEN, f"origin {', '.join(origins)!r} is refused")
