@@ -1,6 +1,7 @@
 """Benchmark loading, building and checking large but legitimate inputs.
 
 Usage: python bench/check.py [--rows 20000] [--states 20000] [--keep DIR] [--flat-only]
+       python bench/check.py --scale 100000 [--keep DIR]
 
 Two generated inputs, written to a temporary directory:
 
@@ -15,6 +16,11 @@ Two generated inputs, written to a temporary directory:
 
 A baseline of 1,000 rows (and 1,000 states) is timed in the same run, so the ratio
 shows whether the work grows linearly (ratio near rows / 1,000) or worse.
+
+``--scale ROWS`` times only ``statectl check`` end to end (a new process: wall and CPU
+seconds) on the ring device of ``ROWS`` event rows as YAML and as a CSV pair, and on a
+"wide" device of ``ROWS / 4`` states each with its own event and warnings to print, with
+a tenth of the rows as baseline; issue 28's target is 100,000 rows in under 5 s.
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ import argparse
 import importlib
 import importlib.util
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -70,6 +77,73 @@ def scxml_text(states: int) -> str:
         out.append("  </state>")
     out.append("</scxml>")
     return "\n".join(out) + "\n"
+
+
+def csv_texts(rows: int) -> dict[str, str]:
+    """The ring device of :func:`device_text` as a CSV pair and its data file."""
+    states = max(2, rows // 4)
+    head = "# device: Big\n"
+    state_lines = ["state,control", "S0,default"]
+    state_lines += [f"S{s},event trigger required" for s in range(1, states)]
+    event_lines = ["event,guard,old,new"]
+    for i in range(rows):
+        s, k = divmod(i, 4)
+        s %= states
+        guard = "" if k < 2 else ("mode <= 1" if k == 2 else "mode > 1")
+        event_lines.append(f"e{min(k, 2)},{guard},S{s},S{(s + 1 + k) % states}")
+    return {
+        "states": head + "\n".join(state_lines) + "\n",
+        "events": head + "\n".join(event_lines) + "\n",
+        "data": head + "name,value\nmode,0\n",
+    }
+
+
+def wide_text(states: int) -> str:
+    """``states`` states in a ring, each left by its own event: every state misses the
+    others' events (a C404 warning each), so the end-to-end run also prints."""
+    lines = ["device: Wide", "states:", "  - {state: S0, control: default}"]
+    lines += [f"  - {{state: S{i}, control: event trigger required}}" for i in range(1, states)]
+    lines.append("events:")
+    lines += [
+        f"  - {{event: E{i}, old: S{i}, new: S{(i + 1) % states}, kind: command, api: A{i % 50}}}"
+        for i in range(states)
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def check_cli(path: Path) -> tuple[float, float, str]:
+    """Wall and CPU seconds of ``statectl check PATH`` in a new process, and its last line."""
+    cli = [sys.executable, "-m", "statectl", "check", str(path)]
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1] / "src"))
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    wall, done = timed(lambda: subprocess.run(cli, env=env, capture_output=True, check=False))
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    lines = done.stdout.decode().splitlines()  # type: ignore[attr-defined]
+    return wall, cpu, lines[-1] if lines else ""
+
+
+def scale_rows(where: Path, rows: int) -> int:
+    """Issue 28: ``statectl check`` end to end on ``rows`` event rows, target < 5 s."""
+    print(f"$ python bench/check.py --scale {rows}")
+    print(f"Python {sys.version.split()[0]}; files in {where}; load {os.getloadavg()[0]:.1f}")
+    print(f"{'statectl check on':<30} {'wall s':>7} {'cpu s':>7}  last line")
+    for n in (max(rows // 10, 8), rows):
+        ring = where / f"ring{n}.yaml"
+        ring.write_text(device_text(n), encoding="utf-8")
+        for part, text in csv_texts(n).items():
+            (where / f"ring{n}.{part}.csv").write_text(text, encoding="utf-8")
+        wide = where / f"wide{n}.yaml"
+        wide.write_text(wide_text(n // 4), encoding="utf-8")
+        for label, path in (
+            (f"ring, {n:,} rows, YAML", ring),
+            (f"ring, {n:,} rows, CSV", where / f"ring{n}.states.csv"),
+            (f"wide, {n // 4:,} rows, YAML", wide),
+        ):
+            wall, cpu, last = check_cli(path)
+            verdict = f"  target < 5 s: {'met' if cpu < 5 else 'MISSED'}" if n == rows else ""
+            print(f"{label:<30} {wall:7.2f} {cpu:7.2f}  {last}{verdict}")
+    return 0
 
 
 def timed(work: Callable[[], object]) -> tuple[float, object]:
@@ -148,9 +222,12 @@ def main() -> int:
     parser.add_argument("--states", type=int, default=20_000)
     parser.add_argument("--keep", help="write the generated files here and keep them")
     parser.add_argument("--flat-only", action="store_true", help="only the flat-chart rows")
+    parser.add_argument("--scale", type=int, help="only statectl check end to end on N rows")
     args = parser.parse_args()
     where = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="statectl-bench-"))
     where.mkdir(parents=True, exist_ok=True)
+    if args.scale:
+        return scale_rows(where, args.scale)
     if args.flat_only:
         return flat_rows(where)
     print(f"$ python bench/check.py --rows {args.rows} --states {args.states}")

@@ -24,8 +24,10 @@ Rules:
 from __future__ import annotations
 
 import ast
+import functools
 import itertools
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import replace
 
 from statectl.front.builder.common import _compile, _d, _rows_text
 from statectl.front.tables.schema import EventRow
@@ -107,16 +109,43 @@ def _reads(
     data_names: Iterable[str],
     where: Location,
 ) -> tuple[list[Diagnostic], set[str]]:
-    """Rules 2-3 for one expression; also the event words it reported (not X303 then)."""
+    """Rules 2-3 for one expression; also the event words it reported (not X303 then).
+
+    Only a name in the text can be read, so a guard that spells none of the event words
+    has nothing to report; the rest is worked out once per (text, event, declaration):
+    a table repeats its guards, and a walk of every row's tree was a third of a check."""
+    if not any(word in source for word in _READ_WORDS):
+        return [], set()
+    found, words = _reads_once(source, what, event, fields.get(event), frozenset(data_names))
+    return [replace(d, where=where) for d in found], set(words)
+
+
+_READ_WORDS = (*EVENT_WORDS, "_event")
+
+
+@functools.lru_cache(maxsize=4096)
+def _reads_once(
+    source: str, what: str, event: str, declared: Fields | None, data: frozenset[str]
+) -> tuple[tuple[Diagnostic, ...], frozenset[str]]:
+    found, words = _reads_walk(source, what, event, declared, data, Location())
+    return tuple(found), frozenset(words)
+
+
+def _reads_walk(
+    source: str,
+    what: str,
+    event: str,
+    declared: Fields | None,
+    data: frozenset[str],
+    where: Location,
+) -> tuple[list[Diagnostic], set[str]]:
     try:
         tree = ast.parse(source.strip(), mode="eval")
     except (SyntaxError, ValueError, RecursionError, MemoryError):
         return [], set()
     parents = _parents(tree)
-    data = set(data_names)
     out: list[Diagnostic] = []
     words: set[str] = set()
-    declared = fields.get(event)
     for node in ast.walk(tree):
         if not isinstance(node, ast.Name):
             continue

@@ -51,6 +51,7 @@ from statectl.front.rules.guards import guards_cover, guards_exclusive
 from statectl.front.rules.names import check_guard_names
 from statectl.front.rules.timing import check_deferred, check_timeouts, check_triggers
 from statectl.front.tables import load
+from statectl.front.tables.bulk import gc_paused
 from statectl.kernel.codes import family
 from statectl.kernel.errors import Diagnostic, Location, Severity, did_you_mean, has_errors
 from statectl.kernel.model import Chart, ControlKind, EventKind, State, StateKind, Transition
@@ -509,14 +510,21 @@ def check_paths(paths: Sequence[str], texts: Mapping[str, str] | None = None) ->
     ``texts`` holds unsaved content by absolute path (:func:`statectl.front.tables.load`).
     """
     out: list[Diagnostic] = []
-    for path in paths:
-        tables, diagnostics = load(path, texts)
-        out.extend(diagnostics)
-        if tables is None:
-            continue
-        chart, more = build(tables)  # built even after load errors: report both at once
-        out.extend(more)
-        if chart is not None and not has_errors(diagnostics):
-            out.extend(check_chart(chart))
-            out.extend(check_recovery(chart, tables.recovery))
+    with gc_paused():  # many objects, no garbage: the collector's walks grew with the file
+        for path in paths:
+            out.extend(_check_path(path, texts))
+    return out
+
+
+def _check_path(path: str, texts: Mapping[str, str] | None) -> list[Diagnostic]:
+    tables, diagnostics = load(path, texts)
+    out = list(diagnostics)
+    if tables is None:
+        return out
+    errors = has_errors(out)
+    chart, more = build(tables)  # built even after load errors: report both at once
+    out.extend(more)
+    if chart is not None and not errors:
+        out.extend(check_chart(chart))
+        out.extend(check_recovery(chart, tables.recovery))
     return out

@@ -10,7 +10,10 @@ Rules:
    it, from the pure-Python parser otherwise; the tags are resolved the same way,
    so both give the very same nodes and the very same refusals. A number with an
    exponent and no dot (``1e3``) is a float, as in YAML 1.2, not text.
-3. :func:`construct` turns a node into a plain value with the safe constructor;
+3. :func:`top_keys` answers "which sections does this file have?" from the parser's
+   events alone, building no node: telling a cell file from a device file must not
+   cost a second full load of a 100,000-row device file.
+4. :func:`construct` turns a node into a plain value with the safe constructor;
    any failure (an unknown tag, a number with too many digits, a date that does
    not exist) is a :class:`YamlRefused` carrying a line, never another exception.
 """
@@ -28,6 +31,7 @@ __all__ = [
     "compose",
     "construct",
     "load_value",
+    "top_keys",
 ]
 
 #: Deepest nesting of sequences and mappings a file or a cell may have (T116).
@@ -230,3 +234,36 @@ def load_value(text: str, loader: type[yaml.SafeLoader] | None = None) -> object
     """One YAML value (a data cell): compose with the limits, then construct."""
     node = compose(text, loader)
     return None if node is None else construct(node)
+
+
+def top_keys(text: str) -> frozenset[str] | None:
+    """The text keys of a one-document YAML mapping (rule 3); None when the text is not
+    readable YAML, holds an alias or a second document, or its root is not a mapping."""
+    parser: Any = _Loader(text)
+    keys: set[str] = set()
+    depth, at_key = 0, True  # depth of the open collections; whether a top key comes next
+    try:
+        while not isinstance(event := parser.get_event(), yaml.DocumentEndEvent | type(None)):
+            if isinstance(event, yaml.AliasEvent):
+                return None
+            if isinstance(event, yaml.ScalarEvent):
+                if depth == 0:
+                    return None
+                if depth == 1:
+                    if at_key:
+                        keys.add(event.value)
+                    at_key = not at_key
+            elif isinstance(event, yaml.CollectionStartEvent):
+                if depth == 0 and not isinstance(event, yaml.MappingStartEvent):
+                    return None
+                depth += 1
+            elif isinstance(event, yaml.CollectionEndEvent):
+                depth -= 1
+                at_key = not at_key if depth == 1 else at_key
+        if event is None or not parser.check_event(yaml.StreamEndEvent):
+            return None
+    except yaml.YAMLError:
+        return None
+    finally:
+        parser.dispose()
+    return frozenset(keys)

@@ -23,10 +23,10 @@ def is_cell(path: str) -> bool:
     if Path(path).suffix.lower() not in (".yaml", ".yml"):
         return False
     try:
-        data = safeyaml.load_value(read_input_text(path))
-    except (OSError, UnicodeDecodeError, safeyaml.YamlRefused):
+        keys = safeyaml.top_keys(read_input_text(path))  # no second full load of a device file
+    except (OSError, UnicodeDecodeError):
         return False  # loaded as a device file, whose loader says what is wrong
-    return isinstance(data, dict) and "devices" in data and "states" not in data
+    return keys is not None and "devices" in keys and "states" not in keys
 
 
 #: Recovery warnings matter only when there is a journal to recover from.

@@ -1,0 +1,96 @@
+"""statectl check does work in proportion to the rows: counted operations, not wall time.
+
+The figures (100,000 rows under 5 s) are bench/check.py --scale's; these tests hold
+the shape of the algorithm: a file is parsed once, a guard repeated on many rows is
+analysed once, and the collector does not walk the growing tables during a check.
+"""
+
+from __future__ import annotations
+
+import gc
+import io
+from pathlib import Path
+
+import pytest
+
+import statectl.front.builder.eventdata as eventdata
+import statectl.front.rules as rules
+from statectl.channels.cli import main
+from statectl.front.tables import safeyaml
+
+
+def _device(path: Path, rows: int, guard: str = "_event.data.x > 1") -> Path:
+    lines = ["device: D", "states:", "  - {state: A, control: default}"]
+    lines += ["  - {state: B, control: event trigger required}", "events:"]
+    for i in range(rows):
+        old, new = ("A", "B") if i % 2 == 0 else ("B", "A")
+        lines.append(f"  - {{event: E{i % 2}, old: {old}, new: {new}, guard: '{guard}'}}")
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+def _check(path: Path) -> int:
+    return main(["check", str(path)], out=io.StringIO(), err=io.StringIO())
+
+
+def test_check_parses_a_device_file_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Telling a cell from a device file reads the parser's events, not a second full load."""
+    composed: list[int] = []
+    real = safeyaml._compose_with
+
+    def counting(*args: object, **kw: object) -> object:
+        composed.append(1)
+        return real(*args, **kw)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(safeyaml, "_compose_with", counting)
+    _check(_device(tmp_path / "d.yaml", 40))
+    assert len(composed) == 1
+
+
+@pytest.mark.parametrize("rows", [10, 400])
+def test_a_repeated_guard_is_analysed_once_per_event(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, rows: int
+) -> None:
+    """400 rows with one guard over two events walk two trees, as 10 rows do."""
+    eventdata._reads_once.cache_clear()
+    walks: list[str] = []
+    real = eventdata._parents
+
+    def counting(tree: object) -> object:
+        walks.append("walk")
+        return real(tree)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(eventdata, "_parents", counting)
+    _check(_device(tmp_path / f"d{rows}.yaml", rows, guard=f"_event.data.x > {rows}"))
+    assert len(walks) == 2
+
+
+def test_a_guard_that_reads_no_event_data_is_not_walked(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A guard over the chart's own data cannot read the event: nothing to analyse."""
+    walks: list[str] = []
+    monkeypatch.setattr(eventdata, "_parents", lambda tree: walks.append("walk") or {})
+    path = tmp_path / "d.yaml"
+    _device(path, 20, guard="mode > 1")
+    path.write_text(path.read_text().replace("states:", "data:\n  mode: 0\nstates:", 1))
+    assert _check(path) == 0
+    assert walks == []
+
+
+def test_the_collector_is_paused_while_a_file_is_checked(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Loading, building and checking run with the cyclic collector off, and it is on after."""
+    seen: list[bool] = []
+    real = rules.build
+
+    def watching(*args: object, **kw: object) -> object:
+        seen.append(gc.isenabled())
+        return real(*args, **kw)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(rules, "build", watching)
+    assert gc.isenabled()
+    _check(_device(tmp_path / "d.yaml", 10, guard="True"))
+    assert seen == [False]
+    assert gc.isenabled()
