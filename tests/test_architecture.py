@@ -12,13 +12,16 @@ import statectl
 SRC = Path(statectl.__file__).parent
 
 #: Each layer may import only from the layers listed for it (and from itself).
-KERNEL = ("errors", "codes", "model", "expr", "semantics")
-#: ``codes`` (the registry of diagnostic codes) stands beside ``errors``: a layer that may
-#: import ``errors`` may import it too (see ``allowed_for``).
-BESIDE_ERRORS = "codes"
+KERNEL = ("errors", "codes", "text", "model", "expr", "semantics")
+#: ``codes`` (the registry of diagnostic codes) and ``text`` (the display escape of names)
+#: stand beside ``errors``: a layer that may import ``errors`` may import them too (see
+#: ``allowed_for``).
+BESIDE_ERRORS = ("codes", "text")
 ALLOWED: dict[str, tuple[str, ...]] = {
     "errors": (),
     "codes": ("errors",),
+    "text": (),
+    "escape": ("errors",),  # out/escape/: one escaping function per target, per language
     "model": ("errors",),
     "expr": ("errors",),
     "semantics": ("errors", "model", "expr"),
@@ -45,8 +48,8 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "profiles",
     ),
     "profiles": ("errors", "model", "tables"),
-    "render": ("errors", "model", "observers", "semantics"),
-    "scxml": ("errors", "model", "expr", "semantics", "observers", "runtime"),
+    "render": ("errors", "model", "observers", "semantics", "escape"),
+    "scxml": ("errors", "model", "expr", "semantics", "observers", "runtime", "escape"),
     "runtime": ("errors", "model", "expr", "semantics", "observers"),
     "commands": ("errors",),  # who may command a device: pure, asked at the System's door
     "devices": (
@@ -59,7 +62,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "tables",
         "commands",  # config.py reads the run config's commands: section
     ),
-    "codegen": ("errors", "model", "expr", "semantics", "observers", "tables", "build"),
+    "codegen": ("errors", "model", "expr", "semantics", "observers", "tables", "build", "escape"),
     "cell": ("errors", "model", "expr", "semantics", "observers", "tables", "build", "names"),
     "explore": (
         "errors",
@@ -82,6 +85,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "tables",
         "build",
         "scxml",
+        "escape",
     ),
     "journal": (
         "errors",
@@ -193,6 +197,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "cell",
         "system",
         "explore",
+        "escape",
     ),
 }
 THIRD_PARTY_FREE = (*KERNEL, "observers", "guards")
@@ -245,7 +250,7 @@ def allowed_for(layer: str) -> set[str]:
     """The layers ``layer`` may import: its own, those listed, and codes beside errors."""
     allowed = {*ALLOWED[layer], layer}
     if "errors" in allowed:
-        allowed.add(BESIDE_ERRORS)
+        allowed.update(BESIDE_ERRORS)
     return allowed
 
 

@@ -5,12 +5,9 @@ the ``kAssigns`` table the ASSIGN effects index."""
 from __future__ import annotations
 
 from statectl.out.codegen.flat import FlatChart
+from statectl.out.escape.cpp import comment as _comment
 
 __all__ = ["assign_functions"]
-
-
-def _comment(text: str) -> str:
-    return text.replace("*/", "* /").replace("\n", " ")
 
 
 def assign_functions(flat: FlatChart) -> list[str]:

@@ -6,6 +6,12 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
+from statectl.out.escape.cpp import identifier_words
+
+#: Longest identifier made from a name (before a number that makes it distinct): the
+#: namespace names the header file, and a 1 MB name must not become a 1 MB file name.
+IDENT_LIMIT = 64
+
 # -- identifiers -------------------------------------------------------------------------------
 
 _CPP_KEYWORDS = frozenset(
@@ -103,11 +109,11 @@ def identifiers(names: Iterable[str], *, lower: bool = False) -> dict[str, str]:
     out: dict[str, str] = {}
     used: set[str] = set()
     for name in names:
-        words = "".join(c if c.isalnum() else " " for c in name).split()
+        words = identifier_words(name)
         if lower:
-            base = "_".join(w.lower() for w in words) or "x"
+            base = "_".join(w.lower() for w in words)[:IDENT_LIMIT].rstrip("_") or "x"
         else:
-            base = "".join(w[:1].upper() + w[1:] for w in words) or "X"
+            base = "".join(w[:1].upper() + w[1:] for w in words)[:IDENT_LIMIT] or "X"
         if base[0].isdigit() or base in _CPP_KEYWORDS or base.startswith("_"):
             base = ("s_" if lower else "S") + base
         ident, n = base, 2

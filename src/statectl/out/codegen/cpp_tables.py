@@ -17,6 +17,7 @@ from statectl.out.codegen.flatten import (
     Tree,
     Unhandled,
 )
+from statectl.out.escape.cpp import comment as _comment
 
 #: The reasons a flattened outcome can give, by their number in the outcome's flags
 #: (``None``: handled); the C++ ``kReasons`` table is written from this tuple.
@@ -36,16 +37,6 @@ _OPS = {
     EffectKind.INVOKE: "kInvoke",
     EffectKind.ASSIGN: "kAssign",
 }
-
-
-def _c(text: str) -> str:
-    """A C++ string literal."""
-    out = text.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
-    return f'"{out}"'
-
-
-def _comment(text: str) -> str:
-    return text.replace("*/", "* /").replace("\n", " ")
 
 
 class _Tables:

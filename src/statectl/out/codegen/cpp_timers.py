@@ -32,6 +32,7 @@ from collections.abc import Mapping
 from statectl.kernel.errors import Diagnostic, Location, Severity
 from statectl.kernel.model import MAX_DEFERRED, Chart
 from statectl.out.codegen.flat import FlatChart
+from statectl.out.escape.cpp import comment
 
 __all__ = ["check_timeouts", "defer_tables", "device_parts", "timer_tables"]
 
@@ -100,10 +101,10 @@ def timer_tables(flat: FlatChart) -> list[str]:
         "// Per-state timeouts (the state table's timeout cells), counted by tick(now_ms).",
         f"inline constexpr std::size_t kTimeoutCount = {len(timeouts)};",
         "inline constexpr std::uint32_t kTimeoutMs[kTimeoutCount] = {",
-        *(f"    {ms}u,  // {name}" for name, ms, _ in timeouts),
+        *(f"    {ms}u,  // {comment(name)}" for name, ms, _ in timeouts),
         "};",
         "inline constexpr Event kTimeoutEvent[kTimeoutCount] = {",
-        *(f"    Event({e}),  // {flat.events[e]}" for _, _, e in timeouts),
+        *(f"    Event({e}),  // {comment(flat.events[e])}" for _, _, e in timeouts),
         "};",
         "// The timeout slot of each state, -1 for none.",
         "inline constexpr std::int16_t kTimeoutOf[kStateCount] = {",

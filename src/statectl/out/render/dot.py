@@ -15,6 +15,7 @@ Rules:
 
 from __future__ import annotations
 
+from statectl.out.escape import diagram as diagram_escape
 from statectl.out.render.diagram import Diagram, Node, NodeKind
 
 __all__ = ["ACTIVE_FILL", "quote", "write"]
@@ -23,11 +24,8 @@ ACTIVE_FILL = "#ffd54f"
 _ACTIVE_CLUSTER_FILL = "#fff3c4"
 
 
-def quote(text: str) -> str:
-    """``text`` as a DOT double-quoted string."""
-    body = text.replace("\\", "\\\\").replace('"', '\\"')
-    body = body.replace("\r\n", "\n").replace("\r", "\n").replace("\n", "\\n")
-    return f'"{body}"'
+#: ``text`` as a DOT double-quoted string: the one DOT escape (statectl.out.escape.diagram).
+quote = diagram_escape.dot
 
 
 def _anchor(node_id: str) -> str:

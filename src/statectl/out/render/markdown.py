@@ -13,24 +13,18 @@ Rules:
 
 from __future__ import annotations
 
-import re
 from collections.abc import Sequence
 
 from statectl.kernel.model import Chart, ControlKind, State
+from statectl.out.escape.diagram import markdown_cell
 from statectl.out.render import mermaid
 from statectl.out.render.diagram import Diagram, duration
 
 __all__ = ["cell", "table", "write"]
 
 
-#: A ``<`` that Markdown would open raw HTML with (a tag, a comment, a declaration).
-_HTML_OPEN = re.compile(r"<(?=[A-Za-z/!?])")
-
-
-def cell(text: str) -> str:
-    """``text`` safe in one Markdown table cell: a name such as ``<script>`` stays text."""
-    text = " ".join(text.split()).replace("\\", "\\\\").replace("|", "\\|")
-    return _HTML_OPEN.sub("&lt;", text)
+#: ``text`` safe in one Markdown table cell: the one Markdown escape (out.escape.diagram).
+cell = markdown_cell
 
 
 def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:

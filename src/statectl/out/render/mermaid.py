@@ -15,17 +15,15 @@ Rules:
 
 from __future__ import annotations
 
+from statectl.out.escape import diagram as diagram_escape
 from statectl.out.render.diagram import Diagram, Node, NodeKind
 
 __all__ = ["ACTIVE_STYLE", "escape", "write"]
 
 ACTIVE_STYLE = "fill:#ffd54f,stroke:#b28704,stroke-width:3px"
-_ENTITIES = {c: f"#{ord(c)};" for c in '"#;:<>{}%'}
 
-
-def escape(text: str) -> str:
-    """Text safe in a Mermaid label (quoted state label, transition label or note)."""
-    return "".join(_ENTITIES.get(c, c) for c in " ".join(text.split()))
+#: Text safe in a Mermaid label: the one Mermaid escape (statectl.out.escape.diagram).
+escape = diagram_escape.mermaid
 
 
 def _declare(node: Node) -> str:
@@ -61,7 +59,7 @@ def _block(d: Diagram, parent: str | None, depth: int, out: list[str]) -> None:
 
 def write(d: Diagram) -> str:
     """The diagram as Mermaid ``stateDiagram-v2`` source."""
-    out = [f"%% {' '.join(d.name.split())}", "stateDiagram-v2"]
+    out = [f"%% {diagram_escape.comment(d.name)}", "stateDiagram-v2"]
     _block(d, None, 1, out)
     for note in d.notes:
         out.append(f"    note right of {note.node}")

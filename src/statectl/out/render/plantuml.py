@@ -15,6 +15,7 @@ Rules:
 
 from __future__ import annotations
 
+from statectl.out.escape import diagram as diagram_escape
 from statectl.out.render.diagram import Diagram, Node, NodeKind
 
 __all__ = ["ACTIVE_COLOR", "label", "write"]
@@ -22,9 +23,8 @@ __all__ = ["ACTIVE_COLOR", "label", "write"]
 ACTIVE_COLOR = "#FFD54F"
 
 
-def label(text: str) -> str:
-    """Text safe in a PlantUML quoted state label, transition label or note."""
-    return " ".join(text.replace('"', "'").split())
+#: Text safe in a PlantUML quoted label: the one PlantUML escape (statectl.out.escape.diagram).
+label = diagram_escape.plantuml
 
 
 def _head(node: Node) -> str:

@@ -25,7 +25,6 @@ from __future__ import annotations
 import dataclasses
 import os
 from pathlib import Path
-from xml.sax.saxutils import quoteattr
 
 from statectl.front.builder.build import chart_to_tables, load_chart
 from statectl.front.tables import DeviceTables, load, save
@@ -39,6 +38,7 @@ from statectl.front.tables.schema import (
 )
 from statectl.kernel.errors import Diagnostic, DiagnosticError, Location, Severity, has_errors
 from statectl.kernel.model import Chart
+from statectl.out.escape.xml import attribute as quoteattr
 from statectl.out.scxml import read_scxml, write_scxml
 from statectl.out.scxml.reader import statectl_elements
 

@@ -18,9 +18,9 @@ Rules:
 from __future__ import annotations
 
 from collections.abc import Iterator
-from xml.sax.saxutils import quoteattr
 
 from statectl.kernel.model import Cancel, Send, State, Timeout
+from statectl.out.escape.xml import attribute as quoteattr
 from statectl.out.scxml.xmltree import STATECTL_NS, _Node
 
 __all__ = ["cancel_of", "read_defer", "read_timeout", "send_of", "timeout_lines"]

@@ -20,8 +20,6 @@ Rules:
 
 from __future__ import annotations
 
-from xml.sax.saxutils import escape, quoteattr
-
 from statectl.kernel.model import (
     Action,
     Assign,
@@ -43,6 +41,8 @@ from statectl.kernel.model import (
     StateKind,
     Transition,
 )
+from statectl.out.escape.xml import attribute as quoteattr
+from statectl.out.escape.xml import text as escape
 from statectl.out.scxml.reader import SCXML_NS, STATECTL_NS
 from statectl.out.scxml.timeouts import timeout_lines
 

@@ -17,7 +17,6 @@ Rules:
 
 from __future__ import annotations
 
-import re
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +25,7 @@ from typing import Any
 from statectl.kernel.errors import StatectlError
 from statectl.kernel.model import Chart, Transition
 from statectl.kernel.semantics import Step, Unhandled
+from statectl.out.escape.python import identifier
 from statectl.out.testgen.paths import Edge, Graph, Node, leaves, notifies
 
 __all__ = ["CRITERIA", "Case", "Expect", "Suite", "Table", "cases_for"]
@@ -109,7 +109,7 @@ class Suite:
 
 
 def _slug(text: str) -> str:
-    return re.sub(r"[^0-9a-z]+", "_", text.lower()).strip("_") or "x"
+    return identifier(text)
 
 
 def where(t: Transition) -> str:

@@ -20,7 +20,6 @@ Rules:
 from __future__ import annotations
 
 import os
-import re
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,6 +30,7 @@ from statectl.cell.model import Cell, Trigger, load_cell_or_raise
 from statectl.kernel.model import Chart
 from statectl.kernel.semantics import compiled
 from statectl.kernel.semantics import step as kernel_step
+from statectl.out.escape.python import NAME_LIMIT, docstring, identifier
 from statectl.out.testgen.cases import describe, where
 from statectl.out.testgen.cellharness import CellState, reference_step
 from statectl.out.testgen.generator import Generated, generate, write_atomic
@@ -64,7 +64,7 @@ class CellGenerated:
 
 
 def _slug(text: str) -> str:
-    return re.sub(r"[^0-9a-z]+", "_", text.lower()).strip("_") or "x"
+    return identifier(text)
 
 
 def _key(state: CellState) -> tuple[Any, ...]:
@@ -249,10 +249,10 @@ def generate_cell(file: str | Path, criterion: str, out_dir: str | Path) -> Cell
             devices.append(generate(path, criterion, out))
     cases, notes = cell_cases(cell)
     text = _HEADER.format(
-        cell=cell.name,
-        source=str(file),
-        out=out.as_posix(),
-        notes="".join(f"\n\nNote: {n}." for n in notes),
+        cell=docstring(cell.name),
+        source=docstring(str(file)),
+        out=docstring(out.as_posix()),
+        notes=docstring("".join(f"\n\nNote: {n}." for n in notes)),
         tables=_lit(_rel(source, out)),
     )
     body = "".join(_cell_case(c) for c in cases)
@@ -262,7 +262,7 @@ def generate_cell(file: str | Path, criterion: str, out_dir: str | Path) -> Cell
             '    """No row of this cell fires a link: the cell starts."""\n'
             "    assert statectl_cell.devices\n"
         )
-    path = out / f"test_{_slug(cell.name)}_links.py"
+    path = out / f"test_{identifier(cell.name, 'cell', NAME_LIMIT)}_links.py"
     write_atomic(path, text + "\n\n" + body.rstrip("\n") + "\n")
     return CellGenerated(path, tuple(cases), tuple(notes), tuple(devices))
 
@@ -324,13 +324,13 @@ def generate_cell_hypothesis(file: str | Path, out_dir: str | Path) -> Path:
     source = Path(file)
     cell = load_cell_or_raise(source)
     out = Path(out_dir)
-    path = out / f"test_{_slug(cell.name)}_hypothesis.py"
+    path = out / f"test_{identifier(cell.name, 'cell', NAME_LIMIT)}_hypothesis.py"
     text = _HYPOTHESIS.format(
-        cell=cell.name,
-        source=str(file),
-        out=out.as_posix(),
+        cell=docstring(cell.name),
+        source=docstring(str(file)),
+        out=docstring(out.as_posix()),
         tables=_lit(_rel(source, out)),
-        slug=_slug(cell.name),
+        slug=identifier(cell.name, "cell", NAME_LIMIT),
     )
     write_atomic(path, text)
     return path

@@ -25,6 +25,7 @@ from statectl.front.tables.inputs import read_input_text
 from statectl.kernel.errors import StatectlError
 from statectl.kernel.model import Chart, StateKind, Transition
 from statectl.kernel.semantics import Snapshot, compiled, step
+from statectl.out.escape import diagram as diagram_escape
 from statectl.out.render import dot
 from statectl.out.render.diagram import from_chart
 from statectl.out.render.svg import dot_to_svg
@@ -258,12 +259,13 @@ def mermaid(c: Coverage) -> str:
     out = ["flowchart LR"]
     shown = [s for s in chart.states if not s.kind.is_history]
     for s in shown:
-        shape = f"(({s.name}))" if s.kind is StateKind.FINAL else f'["{s.name}"]'
+        name = diagram_escape.mermaid(s.name)
+        shape = f'(("{name}"))' if s.kind is StateKind.FINAL else f'["{name}"]'
         out.append(f"  {_node(s.name)}{shape}")
     styles: list[str] = []
     for n, (t, times) in enumerate(zip(chart.transitions, c.rows, strict=True)):
         label = " ".join(t.events) or "(eventless)"
-        label = label.replace('"', "'")
+        label = diagram_escape.mermaid(label)
         target = t.targets[0] if t.targets else t.source
         out.append(f'  {_node(t.source)} -->|"{label} x{times}"| {_node(target)}')
         style = "stroke:#2a2,stroke-width:3px" if times else "stroke:#c33,stroke-dasharray:4"

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -10,6 +9,7 @@ from pathlib import Path
 from statectl.front.builder.build import load_chart
 from statectl.front.tables import write_files
 from statectl.kernel.errors import DiagnosticError, StatectlError
+from statectl.out.escape.python import NAME_LIMIT, identifier
 from statectl.out.testgen.cases import CRITERIA, Suite, cases_for, count_steps
 from statectl.out.testgen.compact import is_big
 from statectl.out.testgen.graphwalker import graphwalker_model
@@ -36,8 +36,7 @@ class Generated:
 
 
 def module_name(device: str, criterion: str) -> str:
-    slug = re.sub(r"[^0-9a-z]+", "_", device.lower()).strip("_") or "device"
-    return f"test_{slug}_{criterion}.py"
+    return f"test_{identifier(device, 'device', NAME_LIMIT)}_{criterion}.py"
 
 
 def write_atomic(path: Path, text: str) -> None:
@@ -54,8 +53,7 @@ def write_atomic(path: Path, text: str) -> None:
 def export_graphwalker(file: str | Path, out_dir: str | Path) -> Path:
     """Write ``DEVICE.graphwalker.json``: the state graph as a GraphWalker model."""
     chart = load_chart(Path(file))
-    slug = re.sub(r"[^0-9a-z]+", "_", chart.name.lower()).strip("_") or "device"
-    path = Path(out_dir) / f"{slug}.graphwalker.json"
+    path = Path(out_dir) / f"{identifier(chart.name, 'device', NAME_LIMIT)}.graphwalker.json"
     write_atomic(path, graphwalker_model(explore(chart)))
     return path
 
@@ -63,8 +61,7 @@ def export_graphwalker(file: str | Path, out_dir: str | Path) -> Path:
 def export_xstate(file: str | Path, out_dir: str | Path) -> Path:
     """Write ``DEVICE.xstate.json``: the chart as an XState machine config."""
     chart = load_chart(Path(file))
-    slug = re.sub(r"[^0-9a-z]+", "_", chart.name.lower()).strip("_") or "device"
-    path = Path(out_dir) / f"{slug}.xstate.json"
+    path = Path(out_dir) / f"{identifier(chart.name, 'device', NAME_LIMIT)}.xstate.json"
     write_atomic(path, xstate_config(chart))
     return path
 

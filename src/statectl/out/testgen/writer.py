@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import math
 import os
-import re
 import textwrap
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from statectl.kernel.model import Chart
+from statectl.out.escape.python import NAME_LIMIT, class_name, docstring, identifier, string
 from statectl.out.testgen.cases import Case, Expect, Suite, Table
 from statectl.out.testgen.compact import (
     LOOP_ROWS,
@@ -52,8 +52,11 @@ STATECTL_TABLES = {tables}
 
 
 def _doc(text: str, indent: str = "    ") -> str:
-    """A docstring that fits in 100 columns: one line, else a wrapped paragraph."""
-    body = text.replace("\\", "\\\\").replace('"""', '\\"\\"\\"')
+    """A docstring that fits in 100 columns: one line, else a wrapped paragraph.
+
+    The text goes through the one docstring escape (:func:`statectl.out.escape.python.docstring`):
+    a name holding triple quotes or a newline stays text."""
+    body = docstring(text)
     if len(indent) + 6 + len(body) <= 100:
         return f'{indent}"""{body}"""\n'
     lines = textwrap.wrap(body, 100 - len(indent) - 3, break_long_words=False)
@@ -65,8 +68,8 @@ def _doc(text: str, indent: str = "    ") -> str:
 
 def _lit(value: Any) -> str:
     """A literal as ruff would format it: double quotes where the text allows."""
-    if isinstance(value, str) and '"' not in value and "\\" not in value and value.isprintable():
-        return f'"{value}"'
+    if isinstance(value, str):
+        return string(value)
     if isinstance(value, list | tuple):
         inner = ", ".join(_lit(v) for v in value)
         return (
@@ -173,13 +176,13 @@ def module_text(
             "and the paths are written once in _TREE (docs/testing.md)."
         )
     text = _HEADER.format(
-        device=device,
+        device=docstring(device),
         criterion=suite.criterion,
-        source=shown,
+        source=docstring(shown),
         counts=counts,
-        notes=notes,
+        notes=docstring(notes),
         tables=_lit(tables),
-        out=out_dir.as_posix(),
+        out=docstring(out_dir.as_posix()),
     )
     if not big:
         body = "".join(_case(c) for c in suite.cases) + "".join(_table(t) for t in suite.tables)
@@ -252,15 +255,13 @@ def test_{slug}_follows_the_kernel(statectl_device_factory):
 def hypothesis_text(chart: Chart, source: Path, out_dir: Path, shown: str) -> str:
     """The Hypothesis module of ``chart`` (its tables at ``source``, written into ``out_dir``)."""
     tables = Path(os.path.relpath(source.resolve(), out_dir.resolve())).as_posix()
-    slug = re.sub(r"[^0-9a-z]+", "_", chart.name.lower()).strip("_") or "device"
     events = "[\n" + "".join(f"    {_lit(e)},\n" for e in sendable_events(chart)) + "]"
-    cls = re.sub(r"\W", "", chart.name.title()) or "Device"
     return _HYPOTHESIS.format(
-        device=chart.name,
-        source=shown,
-        out=out_dir.as_posix(),
+        device=docstring(chart.name),
+        source=docstring(shown),
+        out=docstring(out_dir.as_posix()),
         tables=_lit(tables),
         events=events,
-        slug=slug,
-        cls=f"{cls}Machine" if cls[0].isalpha() else f"D{cls}Machine",
+        slug=identifier(chart.name, "device", NAME_LIMIT),
+        cls=class_name(chart.name, "Machine"),
     )
