@@ -20,6 +20,7 @@ from statectl.channels.cli.commands import OK, PROBLEMS, USAGE
 from statectl.channels.cli.outputs import output, wrote
 from statectl.kernel.errors import DiagnosticError, StatectlError, did_you_mean
 from statectl.kernel.model import Chart
+from statectl.kernel.text import shown
 from statectl.run.journal import (
     JournalError,
     JournalReader,
@@ -157,7 +158,7 @@ def journal_show(
         # Both come in journal order, which is wall-clock order: merged as they stream, so
         # a journal of millions of rows is shown without being held in memory.
         for wall, _, text in heapq.merge(accepted(), steps(), key=lambda x: (x[0], x[1])):
-            out.write(f"{_stamp(wall)}  {text}\n")
+            out.write(f"{_stamp(wall)}  {shown(text)}\n")  # a name cannot forge a line
     return code[0]
 
 

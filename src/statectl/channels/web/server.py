@@ -53,6 +53,7 @@ from statectl.channels.web.stream import Fanout
 from statectl.channels.web.svg import fallback_svg
 from statectl.front.observers import extract
 from statectl.kernel.errors import StatectlError, did_you_mean
+from statectl.kernel.text import shown
 from statectl.out.render import render
 from statectl.out.render.diagram import from_chart
 from statectl.run.commands import Origin
@@ -153,8 +154,8 @@ class _Device:
             invokes.append(
                 {
                     "number": i.number,
-                    "name": i.name,
-                    "method": i.method,
+                    "name": shown(i.name),
+                    "method": shown(i.method),
                     "observer": type(observer).__name__ if observer is not None else None,
                 }
             )
@@ -162,6 +163,7 @@ class _Device:
             **self.live(),
             "chart": s.chart.name,
             "events": list(s.chart.event_names),
+            "events_shown": [shown(e) for e in s.chart.event_names],
             "invokes": invokes,
         }
 
@@ -186,7 +188,9 @@ class _Device:
             "name": self.subject.name,
             "active": active,
             "active_ids": [self.ids[a] for a in active if a in self.ids],
-            "monitors": [{"state": k, "status": v} for k, v in monitors],
+            # what the page prints: names as kernel.text.shown writes them (keys stay raw)
+            "shown": {"name": shown(self.subject.name), "active": [shown(a) for a in active]},
+            "monitors": [{"state": shown(k), "status": shown(v)} for k, v in monitors],
             "events_processed": events,
             "invokes_issued": invokes,
             "observer_calls": calls,

@@ -9,6 +9,9 @@ Rules:
    the call (``SimMotor.move_to(10.0)``).
 3. No colour codes unless asked for (``colour=True``), so a trace can be
    diffed, logged and pasted.
+4. Names are the user's and may hold a newline, an ANSI escape or a bidi control:
+   every text column and device name goes through :func:`statectl.kernel.text.shown`,
+   so one record is one line each and shows what the name holds.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from statectl.kernel.model import Notify
 from statectl.kernel.semantics import Unhandled
+from statectl.kernel.text import shown
 
 if TYPE_CHECKING:
     from statectl.kernel.semantics import Step
@@ -105,7 +109,7 @@ def kind_of(record: Record) -> str:
 
 
 def _event_text(r: Any) -> str:
-    return r.event if r.data is None else f"{r.event} {format_data(r.data)}"
+    return shown(r.event if r.data is None else f"{r.event} {format_data(r.data)}")
 
 
 def _transition_text(t: Taken) -> str:
@@ -137,11 +141,11 @@ def _lines(record: Record, kinds: Mapping[str, str]) -> list[str]:
     """The lines of ``record`` after the time and device column, each with its kind
     column (``kinds`` maps a kind to it) and ending in a newline."""
     if type(record) is not MicrostepTaken:
-        return [kinds[KINDS[type(record)]] + _TEXTS[type(record)](record) + "\n"]
+        return [kinds[KINDS[type(record)]] + shown(_TEXTS[type(record)](record)) + "\n"]
     return [
-        *[kinds["exit"] + s + "\n" for s in record.exited],
-        *[kinds["state"] + _transition_text(t) + "\n" for t in record.transitions],
-        *[kinds["enter"] + s + "\n" for s in record.entered],
+        *[kinds["exit"] + shown(s) + "\n" for s in record.exited],
+        *[kinds["state"] + shown(_transition_text(t)) + "\n" for t in record.transitions],
+        *[kinds["enter"] + shown(s) + "\n" for s in record.entered],
     ]
 
 
@@ -164,7 +168,7 @@ def format_record(record: Record, *, device_width: int = 0, colour: bool = False
     ``MicrostepTaken``), without a final newline:
     ``t=   0.00  Motor  event    Movement {amount: 10}``."""
     kinds = _kind_columns(True) if colour else _PLAIN
-    prefix = f"t={record.time:7.2f}  {record.device:<{device_width}} "
+    prefix = f"t={record.time:7.2f}  {shown(record.device):<{device_width}} "
     return "".join([prefix + line for line in _lines(record, kinds)])[:-1]
 
 
@@ -223,7 +227,7 @@ class TraceWriter:
         at = (time, device)
         if at != self._at:
             self._at = at
-            self._prefix = f"t={time:7.2f}  {device:<{self.device_width}} "
+            self._prefix = f"t={time:7.2f}  {shown(device):<{self.device_width}} "
         return self._prefix
 
     def __call__(self, record: Record) -> None:
@@ -344,5 +348,5 @@ class TraceWriter:
         if rest is None:
             if len(self._calls) >= _REST_MAX:
                 self._calls.clear()
-            rest = self._calls[key] = f"{self._kinds['api']}{method}() -> {api}\n"
+            rest = self._calls[key] = f"{self._kinds['api']}{shown(f'{method}() -> {api}')}\n"
         return rest

@@ -14,7 +14,7 @@ function card(state) {
   const safe = state.name.replace(/[^A-Za-z0-9_-]/g, "_");
   const section = el("section", { class: "device", "data-device": state.name });
   const active = el("span", { class: "active-states", id: "state-" + safe });
-  section.append(el("h2", {}, state.name + " ", active));
+  section.append(el("h2", {}, state.shown.name + " ", active));
   const diagram = el("div", { class: "diagram", title: "click: whole chart / readable size" });
   diagram.addEventListener("click", () => diagram.classList.toggle("fit"));
   section.append(diagram);
@@ -36,7 +36,7 @@ function card(state) {
   section.append(el("div", { class: "counts" }));
   document.getElementById("devices").append(section);
   const option = el("option", { value: state.name });
-  option.textContent = state.name;
+  option.textContent = state.shown.name;
   document.getElementById("post-device").append(option);
   return { card: section, active, diagram, state };
 }
@@ -59,7 +59,7 @@ function show(state) {
     devices.set(state.name, entry);
   }
   entry.state = state;
-  entry.active.textContent = state.active.join(", ");
+  entry.active.textContent = state.shown.active.join(", ");
   entry.card.dataset.active = state.active.join(",");
   const table = entry.card.querySelector("table.invokes");
   table.replaceChildren(el("tr", {}, el("th", {}, "invoke"), el("th", {}, "name"),
@@ -81,7 +81,8 @@ function show(state) {
   highlight(entry);
   const list = document.getElementById("post-events");
   if (document.getElementById("post-device").value === state.name || devices.size === 1) {
-    list.replaceChildren(...state.events.map((e) => el("option", { value: e })));
+    const shown = state.events_shown || state.events;
+    list.replaceChildren(...state.events.map((e, k) => el("option", { value: e, label: shown[k] })));
   }
 }
 
