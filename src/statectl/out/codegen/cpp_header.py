@@ -15,7 +15,6 @@ from statectl.out.codegen.cpp_tables import (
     _OPS,
     REASONS,
     _cases,
-    _comment,
     _depth,
     _device_class,
     _Tables,
@@ -26,6 +25,7 @@ from statectl.out.codegen.flatten import (
     FlatChart,
     identifiers,
 )
+from statectl.out.escape.cpp import comment as _comment
 from statectl.out.escape.cpp import string as _c
 
 

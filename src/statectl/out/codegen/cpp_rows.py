@@ -20,8 +20,9 @@ from collections import Counter
 from dataclasses import dataclass
 
 from statectl.kernel.semantics import Unhandled
-from statectl.out.codegen.cpp_tables import _comment, _Tables, _width
+from statectl.out.codegen.cpp_tables import _Tables, _width
 from statectl.out.codegen.flat import FlatChart, Outcome
+from statectl.out.escape.cpp import comment as _comment
 
 #: Cells (configurations x events) up to which the dense ``kCells`` table is written:
 #: 64 Ki cells is 64 KiB of flash at one byte a cell (128 KiB at two).
