@@ -40,13 +40,15 @@ HOSTILE_DEVICE = 'Dev"""\nimport os  # \\\x00\u202e'
 
 def device_file(path: Path, names: list[str], device: str = HOSTILE_DEVICE) -> Path:
     """A device file: ``A`` default; per name a state reached from A by the name as an
-    event (a command with an API) and left by ``back``; JSON is YAML, so any text fits."""
+    event (a command with an API) and left by ``back``, the first also by a timeout
+    (testgen writes a timing test); JSON is YAML, so any text fits."""
     states = [{"state": "A", "control": "default"}]
     events = []
     for i, name in enumerate(names):
         states.append({"state": name, "control": "event trigger required"})
         events.append({"event": name, "old": "A", "new": name, "kind": "command", "api": f"Go{i}"})
         events.append({"event": "back", "old": name, "new": "A", "kind": "command", "api": "Back"})
+    states[1] |= {"timeout": "2s -> back"}  # the first state times out: timing tests too
     doc = {"device": device, "states": states, "events": events}
     path.write_text(json.dumps(doc), encoding="utf-8")
     return path

@@ -18,12 +18,11 @@ Rules:
 
 from __future__ import annotations
 
-import json
-import re
 from collections.abc import Callable
 from pathlib import Path
 
 from statectl.kernel.model import State
+from statectl.out.escape.python import identifier, string
 from statectl.out.testgen.cases import Case, Expect
 from statectl.out.testgen.paths import Edge, Graph, Node, leaves, notifies
 
@@ -34,7 +33,7 @@ BEFORE = 0.999
 
 
 def slug(text: str) -> str:
-    return re.sub(r"[^0-9a-z]+", "_", text.lower()).strip("_") or "x"
+    return identifier(text)
 
 
 def describe_state(s: State) -> str:
@@ -170,5 +169,5 @@ def timing_body(c: Case) -> str:
 
 
 def _quoted(text: str) -> str:
-    """A string literal as ruff writes it (double quotes)."""
-    return json.dumps(text, ensure_ascii=False)
+    """A string literal as ruff writes it (double quotes where the text allows)."""
+    return string(text)
