@@ -81,8 +81,11 @@ def cmd_check(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
             return USAGE
     from statectl.channels.cli.kinds import cell_given_to_check
 
-    cells = {p: d for p in args.files if (d := cell_given_to_check(p)) is not None}  # C415
-    diags = [*cells.values(), *check_paths([p for p in args.files if p not in cells])]
+    found = {p: check_paths([p]) for p in args.files}
+    cells = {  # C415; asked only of a file that does not load, so a device file is read once
+        p: d for p, ds in found.items() if has_errors(ds) and (d := cell_given_to_check(p))
+    }
+    diags = [*cells.values(), *(d for p, ds in found.items() if p not in cells for d in ds)]
     shown = [d for d in diags if args.verbose or d.severity is not Severity.INFO]
     _print_diagnostics(shown, out, args.json)
     failed = has_errors(diags) or (
