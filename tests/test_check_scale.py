@@ -94,3 +94,31 @@ def test_the_collector_is_paused_while_a_file_is_checked(
     _check(_device(tmp_path / "d.yaml", 10, guard="True"))
     assert seen == [False]
     assert gc.isenabled()
+
+
+def test_each_rows_entry_set_is_asked_of_the_kernel_once(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """C401 and the timing rules share one entry set per transition (and one for the start)."""
+    import statectl.front.rules.timing as timing
+
+    asked: list[int] = []
+    real = rules.entry_set
+
+    def counting(m: object, transitions: list[object]) -> object:
+        asked.append(len(transitions))
+        return real(m, transitions)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(rules, "entry_set", counting)
+    monkeypatch.setattr(timing, "entry_set", counting, raising=False)
+    lines = ["device: R", "states:", "  - {state: S0, control: default}"]
+    lines += [f"  - {{state: S{i}, control: event trigger required}}" for i in range(1, 30)]
+    lines.append("events:")
+    lines += [
+        f"  - {{event: e{i}, old: S{i}, new: S{(i + 1) % 30}, kind: command, api: Go}}"
+        for i in range(30)
+    ]
+    path = tmp_path / "ring.yaml"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    assert _check(path) == 0
+    assert asked.count(1) == 30 and asked.count(0) == 1

@@ -41,7 +41,7 @@ Recovery table with :func:`statectl.front.recovery.check_recovery` (J603-J605 er
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from statectl.front.builder.build import build
 from statectl.front.profiles import PROFILES, find
@@ -55,7 +55,7 @@ from statectl.front.tables.bulk import gc_paused
 from statectl.kernel.codes import family
 from statectl.kernel.errors import Diagnostic, Location, Severity, did_you_mean, has_errors
 from statectl.kernel.model import Chart, ControlKind, EventKind, State, StateKind, Transition
-from statectl.kernel.semantics import entry_set, structural
+from statectl.kernel.semantics import Machine, entry_set, structural
 
 __all__ = ["CODES", "check_chart", "check_paths", "guards_exclusive"]
 
@@ -76,6 +76,9 @@ class _Structure:
     ancestors: dict[str, tuple[str, ...]]
     outgoing: dict[str, tuple[Transition, ...]]  # a state's own transitions, in chart order
     descriptors: dict[str, frozenset[str]]  # event descriptors of a state and its ancestors
+    #: What each transition enters (by id), asked of the kernel once per check: C401 and
+    #: the timing rules each asked it for every row, the bulk of a 100,000-row check.
+    entry_sets: dict[int, tuple[str, ...]] = field(default_factory=dict)
 
     @classmethod
     def of(cls, chart: Chart) -> _Structure:
@@ -107,6 +110,13 @@ class _Structure:
             {k: tuple(v) for k, v in outgoing.items()},
             descriptors,
         )
+
+    def entered(self, m: Machine, t: Transition) -> tuple[str, ...]:
+        """The kernel's entry set of taking ``t`` alone (cached for this check)."""
+        got = self.entry_sets.get(id(t))
+        if got is None:
+            got = self.entry_sets[id(t)] = tuple(entry_set(m, [t]))
+        return got
 
     def out(self, name: str) -> tuple[Transition, ...]:
         return self.outgoing.get(name, ())
@@ -175,7 +185,7 @@ def _reachable(st: _Structure) -> set[str]:
         for t in st.out(name):
             if not t.targets or not all(x in st.by_name for x in t.targets):
                 continue
-            for entered in entry_set(m, [t]):
+            for entered in st.entered(m, t):
                 if entered not in reached:
                     reached.add(entered)
                     work.append(entered)

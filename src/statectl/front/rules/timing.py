@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 from statectl.kernel.errors import Diagnostic, Severity
 from statectl.kernel.model import ControlKind, EventKind, StateKind, Transition
-from statectl.kernel.semantics import Machine, entry_set, structural
+from statectl.kernel.semantics import Machine, structural
 
 if TYPE_CHECKING:
     from statectl.front.rules import _Structure
@@ -29,7 +29,7 @@ def _entered(st: _Structure, m: Machine, t: Transition) -> tuple[str, ...]:
     targets, their ancestors, default children and every region of a parallel state."""
     if not t.targets or not all(x in st.by_name for x in (t.source, *t.targets)):
         return ()
-    return entry_set(m, [t])
+    return st.entered(m, t)
 
 
 #: An unhandled configuration inside a state, as leaf names in region order: any one,
