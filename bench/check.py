@@ -133,7 +133,7 @@ def scale_rows(where: Path, rows: int) -> int:
         ring.write_text(device_text(n), encoding="utf-8")
         for part, text in csv_texts(n).items():
             (where / f"ring{n}.{part}.csv").write_text(text, encoding="utf-8")
-        wide = where / f"wide{n}.yaml"
+        wide = where / f"wide{n // 4}.yaml"
         wide.write_text(wide_text(n // 4), encoding="utf-8")
         for label, path in (
             (f"ring, {n:,} rows, YAML", ring),
