@@ -30,6 +30,7 @@ from typing import Any
 from statectl.cell.model import Cell
 from statectl.channels.distributed.keys import Keys
 from statectl.kernel.errors import StatectlError
+from statectl.kernel.text import shown as display
 
 __all__ = [
     "MAX_DEPTH",
@@ -104,7 +105,7 @@ def printable(text: str, limit: int = 400) -> str:
     a name from the wire cannot end the line, reorder it (U+202E) or flood the log."""
     if text.isprintable() and len(text) <= limit:
         return text
-    out = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text[:limit])
+    out = display(text[:limit])  # the one display escape (kernel/text.py)
     return out if len(text) <= limit else f"{out}... ({len(text)} characters)"
 
 
