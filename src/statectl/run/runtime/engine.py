@@ -31,7 +31,7 @@ Rules:
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from functools import partial
 from typing import Any, cast
 
@@ -42,10 +42,16 @@ from statectl.kernel.semantics import Machine, Outcome, PlanTable, Snapshot, Ste
 from statectl.kernel.semantics.eventview import GuardError, GuardFailure
 from statectl.run.runtime.clock import Clock
 from statectl.run.runtime.eventdata import AssignError, assignments_of
-from statectl.run.runtime.hooks import ApiLogging, Hooks, Policy, Route, StepListener
+from statectl.run.runtime.hooks import (
+    Hooks,
+    Policy,
+    Route,
+    StepListener,
+    api_calls_since,
+    api_count,
+)
 from statectl.run.runtime.program import Enter, Exit, Program, Transit, program_of, unstepped
 from statectl.run.runtime.records import (
-    ApiCall,
     EventIgnored,
     EventReceived,
     EventRejected,
@@ -61,7 +67,7 @@ from statectl.run.runtime.records import (
     update_api,
 )
 
-__all__ = ["RECORDS", "STEPS", "UNHEARD", "Bound", "Engine", "api_calls_since", "api_count"]
+__all__ = ["RECORDS", "STEPS", "UNHEARD", "Bound", "Engine"]
 
 #: How a step is heard (rule 2): by nobody, as typed records, as one step record.
 UNHEARD, RECORDS, STEPS = 0, 1, 2
@@ -75,30 +81,6 @@ Call = tuple[Callable[[Any], object], Any]
 _NONE_YET: list[tuple[int, Record]] = []
 #: Bound programs kept per device before they are all bound again.
 _BOUND_MAX = 4096
-
-
-def api_count(observer: object) -> int:
-    """How many API calls ``observer`` (an :class:`ApiLogging`) has made so far."""
-    made = getattr(observer, "api_calls", None)
-    return made if type(made) is int else len(cast(ApiLogging, observer).api_log)
-
-
-def api_calls_since(observer: object, before: int) -> Sequence[ApiCall]:
-    """The API calls made since :func:`api_count` said ``before``.
-
-    A driver that keeps only its recent calls counts them all in ``api_calls``
-    (devices/protocol.py rule 4), so the new ones are the log's last ones.
-    """
-    since = getattr(observer, "api_since", None)
-    if since is not None:  # the driver says it (devices/base.py)
-        calls: Sequence[ApiCall] = since(before)
-        return calls
-    log = cast(ApiLogging, observer).api_log
-    made = getattr(observer, "api_calls", None)
-    if type(made) is not int:
-        return log[before:]
-    new = made - before
-    return log[max(0, len(log) - new) :] if new > 0 else ()
 
 
 class Bound:

@@ -9,7 +9,7 @@ it watches. None of them builds a record it did not ask for.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Sequence
-from typing import Any, Literal, Protocol, runtime_checkable
+from typing import Any, Literal, Protocol, cast, runtime_checkable
 
 from statectl.front.observers import Observer
 from statectl.kernel.errors import StatectlError
@@ -27,6 +27,8 @@ __all__ = [
     "StateWatcher",
     "StepListener",
     "StepRecordListener",
+    "api_calls_since",
+    "api_count",
 ]
 
 Policy = Literal["ignore", "error"]
@@ -57,6 +59,30 @@ class ApiLogging(Protocol):
 
     @property
     def api_log(self) -> Sequence[ApiCall]: ...
+
+
+def api_count(observer: object) -> int:
+    """How many API calls ``observer`` (an :class:`ApiLogging`) has made so far."""
+    made = getattr(observer, "api_calls", None)
+    return made if type(made) is int else len(cast(ApiLogging, observer).api_log)
+
+
+def api_calls_since(observer: object, before: int) -> Sequence[ApiCall]:
+    """The API calls made since :func:`api_count` said ``before``.
+
+    A driver that keeps only its recent calls counts them all in ``api_calls``
+    (devices/protocol.py rule 4), so the new ones are the log's last ones.
+    """
+    since = getattr(observer, "api_since", None)
+    if since is not None:  # the driver says it (devices/base.py)
+        calls: Sequence[ApiCall] = since(before)
+        return calls
+    log = cast(ApiLogging, observer).api_log
+    made = getattr(observer, "api_calls", None)
+    if type(made) is not int:
+        return log[before:]
+    new = made - before
+    return log[max(0, len(log) - new) :] if new > 0 else ()
 
 
 class Route:
