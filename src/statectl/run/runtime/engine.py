@@ -140,7 +140,7 @@ class Engine:
         "table",
     )
 
-    # set as a heard step begins (:meth:`_open`): the clock then; for step listeners
+    # set as a heard step begins (in :meth:`perform`): the clock then; for step listeners
     # (STEPS) what each observer did, the typed records before one made now, the
     # ObserverCalled records so far, and whether the step ended the run
     _now: float
@@ -170,6 +170,14 @@ class Engine:
         self._emitting = False
         self._handing = False
         self._later: list[StepRecord] | None = None
+
+    def use(self, machine: Machine) -> None:
+        """Step with ``machine`` from now on: what was bound for the old one is dropped."""
+        self.machine = machine
+        self._bound.clear()
+        if self.snapshot is not None:
+            self.snapshot = machine.intern(self.snapshot)
+            self.table = machine.plans(self.snapshot)
 
     def rename(self, name: str) -> None:
         self.name = self.hooks.device = name
@@ -322,8 +330,17 @@ class Engine:
         if program.outcome is not HANDLED:
             return self._refuse(bound, event, data, steppers)
         mode = bound.mode
-        if mode:
-            self._open(bound, event, data)
+        if mode:  # heard: EventReceived for listeners, a step record's start for step ones
+            now = self._now = self.clock.now()
+            if mode == STEPS:
+                self._extras = _NONE_YET  # emit() makes a list if anything is recorded now
+                self._cursor = bound.cursor
+                self._shift = 0
+                self._final = False
+                if bound.made is None:
+                    self._made = []
+            elif event is not None:
+                self.emit(EventReceived(self.name, now, event, data))
         self.snapshot = program.target
         self.table = program.table
         self.invokes += program.invokes
@@ -349,21 +366,6 @@ class Engine:
             for callback in steppers:
                 callback(event, data, HANDLED)  # type: ignore[arg-type]
         return HANDLED
-
-    def _open(self, bound: Bound, event: str | None, data: Any) -> None:
-        """A heard step begins: ``EventReceived`` for listeners, or a step record's
-        bookkeeping for step listeners (rule 2)."""
-        now = self._now = self.clock.now()
-        if bound.mode == RECORDS:
-            if event is not None:
-                self.emit(EventReceived(self.name, now, event, data))
-            return
-        self._extras = _NONE_YET  # emit() makes the list if anything is recorded meanwhile
-        self._cursor = bound.cursor
-        self._shift = 0
-        self._final = False
-        if bound.made is None:
-            self._made = []
 
     def _refuse(
         self, bound: Bound, event: str | None, data: Any, steppers: tuple[StepListener, ...]
@@ -512,7 +514,6 @@ class Engine:
             later.append(step)
             return
         self._handing = True
-        done = False
         try:
             for callback in self.hooks.recorders:
                 callback(step)
@@ -521,11 +522,12 @@ class Engine:
                 step = later.pop(0)
                 for callback in self.hooks.recorders:
                     callback(step)
-            done = True
+        except BaseException:
+            if self._later:
+                self._later.clear()
+            raise
         finally:
             self._handing = False
-            if not done and self._later:
-                self._later.clear()
 
     # -- starting, restoring, reissuing, closing -------------------------------------------
 

@@ -46,7 +46,7 @@ from statectl.front.observers import Observer
 from statectl.kernel.errors import StatectlError
 from statectl.kernel.expr import compile_expression
 from statectl.kernel.model import Action, Chart, Notify
-from statectl.kernel.semantics import Outcome, Snapshot, Step, compiled
+from statectl.kernel.semantics import Machine, Outcome, Snapshot, Step, compiled
 from statectl.run.runtime.clock import Clock, SimClock
 from statectl.run.runtime.defer import attach_defer
 from statectl.run.runtime.engine import Engine
@@ -88,7 +88,6 @@ class Subject:
         "_worker",
         "chart",
         "clock",
-        "machine",
     )
 
     def __init__(
@@ -103,12 +102,11 @@ class Subject:
         if policy != "ignore" and policy != "error":
             raise StatectlError(f"policy must be 'ignore' or 'error' (got {policy!r})")
         self.chart = chart
-        self.machine = compiled(chart)
         self.clock = clock
         values = self._initial_data(chart, data) if chart.data else dict(data) if data else {}
         self._declared = declared_fields(chart)  # event -> declared data fields, or None
         self._hooks = Hooks(chart, name or chart.name)
-        self._engine = Engine(self.machine, self._hooks, clock, policy, values)
+        self._engine = Engine(compiled(chart), self._hooks, clock, policy, values)
         self._inbox = Inbox(self)
         self._fast = False  # dispatch may process at once: started, nothing queued, no loop
         self._busy = False
@@ -138,6 +136,17 @@ class Subject:
         return data
 
     # -- state -----------------------------------------------------------------------------
+
+    @property
+    def machine(self) -> Machine:
+        """The compiled chart the device steps with (shared by the chart's devices)."""
+        return self._engine.machine
+
+    @machine.setter
+    def machine(self, machine: Machine) -> None:
+        """Step with another compiled machine of the chart (a cell's guards that read
+        other devices: cell/explore/conditions.py)."""
+        self._engine.use(machine)
 
     @property
     def policy(self) -> Policy:
