@@ -99,26 +99,22 @@ def _describe_invoke(i: Invoke) -> str:
     return f"#{i.number} {i.name} ({i.method}())"
 
 
-def _nothing() -> None:
-    """What a change of hooks does before an engine takes them."""
-
-
 def _without(hooks: tuple[Any, ...], hook: object) -> tuple[Any, ...]:
     return tuple(h for h in hooks if h is not hook)
 
 
 class Hooks:
     """Everything wired to one device: observers per invoke number and the sinks of its
-    steps. Attaching only records the hook; every change of what a step calls tells the
-    engine (:attr:`stale`), which binds its programs again (runtime/engine.py)."""
+    steps. Attaching only records the hook; every change of what a step calls drops the
+    programs the engine bound to them (:attr:`bound`), so it binds them again."""
 
     __slots__ = (
+        "bound",
         "chart",
         "device",
         "listeners",
         "recorders",
         "routes",
-        "stale",
         "steppers",
         "watch",
         "watchers",
@@ -133,12 +129,13 @@ class Hooks:
         self.steppers: tuple[StepListener, ...] = ()
         self.watch: dict[str, tuple[StateWatcher, ...]] = {}  # state -> its watchers
         self.watchers: tuple[StateWatcher, ...] = ()
-        #: called when what a step calls changes (the engine drops its bound programs)
-        self.stale: Callable[[], object] = _nothing
+        #: the engine's programs bound to these hooks (runtime/engine.py), per plan or
+        #: program; dropped whenever what a step calls changes
+        self.bound: dict[object, Any] = {}
 
     def changed(self) -> None:
         """What a step calls has changed: bound programs are stale."""
-        self.stale()
+        self.bound.clear()
 
     def attach(self, observer: Observer, invokes: Iterable[int] | None = None) -> None:
         """Route these invoke numbers (default: every invoke of the chart) to ``observer``."""

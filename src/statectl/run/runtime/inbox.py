@@ -1,8 +1,8 @@
 """A device's inbox: the queue of events and owner work, and who is told of new items.
 
-Any thread puts; only the owner takes (the Subject's rule 1). Putting never blocks:
-it appends, wakes a worker waiting on :attr:`Inbox.wake` (made only when an owner loop
-first needs it), and tells the host's hook (a System's ready list).
+Any thread appends; only the owner takes (the Subject's rule 1). Appending never
+blocks; :meth:`Inbox.told` then wakes a worker waiting on :attr:`Inbox.wake` (made only
+when an owner loop first needs it) and tells the host's hook (a System's ready list).
 """
 
 from __future__ import annotations
@@ -19,28 +19,20 @@ __all__ = ["Inbox", "Item"]
 Item = tuple[str | None, Any, Callable[..., object] | None]
 
 
-class Inbox:
-    """The queue of one device, its worker's wake-up event and its host's hook."""
+class Inbox(deque[Item]):
+    """The queue of one device (a deque: the owner pops it), its worker's wake-up event
+    and its host's hook (class defaults until set: a new device makes no more than the
+    deque)."""
 
-    __slots__ = ("hook", "items", "owner", "wake")
+    wake: threading.Event | None = None
+    hook: Callable[[Any], object] | None = None
+    owner: object = None  # what the hook is given: the Subject
 
-    def __init__(self, owner: object) -> None:
-        self.owner = owner  # what the hook is given: the Subject
-        self.items: deque[Item] = deque()
-        self.wake: threading.Event | None = None
-        self.hook: Callable[[Any], object] | None = None
+    def told(self) -> None:
+        """After an item was appended, from any thread: wake the worker, tell the host.
 
-    def put(self, item: Item) -> None:
-        """Queue ``item`` last, from any thread."""
-        self.items.append(item)
-        self._told()
-
-    def put_first(self, item: Item) -> None:
-        """Queue ``item`` before anything queued (the owner only, who will take it: nobody
-        is told)."""
-        self.items.appendleft(item)
-
-    def _told(self) -> None:
+        The Subject appends, marks itself not idle, then calls this only when there is
+        a worker or a host to tell (runtime/subject.py, ``post``)."""
         wake = self.wake
         if wake is not None:
             wake.set()
@@ -51,12 +43,12 @@ class Inbox:
     def waker(self) -> threading.Event:
         """The worker's wake-up event, made when an owner loop first needs it.
 
-        A put that found no event queued its item first, so an inbox that is not
-        empty here sets the new event and nothing put is slept through.
+        An append that found no event queued its item first, so an inbox that is not
+        empty here sets the new event and nothing appended is slept through.
         """
         wake = self.wake
         if wake is None:
             wake = self.wake = threading.Event()
-            if self.items:
+            if self:
                 wake.set()
         return wake

@@ -107,7 +107,7 @@ class Subject:
         self._declared = declared_fields(chart)  # event -> declared data fields, or None
         self._hooks = Hooks(chart, name or chart.name)
         self._engine = Engine(compiled(chart), self._hooks, clock, policy, values)
-        self._inbox = Inbox(self)
+        self._inbox = Inbox()
         self._fast = False  # dispatch may process at once: started, nothing queued, no loop
         self._busy = False
         self._closed = False
@@ -196,7 +196,7 @@ class Subject:
 
     @property
     def queued(self) -> int:
-        return len(self._inbox.items)
+        return len(self._inbox)
 
     @property
     def listening(self) -> bool:
@@ -217,7 +217,7 @@ class Subject:
             and not self._serving
             and not self._closed
         )
-        if self._inbox.items:
+        if self._inbox:
             self._fast = False
 
     # -- wiring (runtime/hooks.py) ---------------------------------------------------------
@@ -282,9 +282,12 @@ class Subject:
         if self._closed:
             raise StatectlError(f"{self.name} is closed; event {event!r} cannot be posted")
         if data is not None and self._declared is not None:
-            check_event_data(self._declared, self.name, event, data)
-        self._inbox.put((event, data, then))
+            check_event_data(self._declared, self._engine.name, event, data)
+        inbox = self._inbox
+        inbox.append((event, data, then))
         self._fast = False  # after the append: see _refresh()
+        if inbox.wake is not None or inbox.hook is not None:
+            inbox.told()
 
     def on_queued(self, hook: Callable[[Subject], object] | None) -> None:
         """Call ``hook(subject)`` after every post or call_soon (from the posting thread).
@@ -292,18 +295,22 @@ class Subject:
         A host that owns many devices (a :class:`~statectl.run.system.System`) learns
         which ones have work instead of asking them all; ``None`` removes it.
         """
+        self._inbox.owner = self
         self._inbox.hook = hook
 
     def call_soon(self, fn: Callable[[], object]) -> None:
         """Run ``fn`` on the owner, in queue order with the events (monitors use this)."""
         if self._closed:
             return
-        self._inbox.put((None, None, fn))
+        inbox = self._inbox
+        inbox.append((None, None, fn))
         self._fast = False  # after the append: see _refresh()
+        if inbox.wake is not None or inbox.hook is not None:
+            inbox.told()
 
     def call_next(self, fn: Callable[[], object]) -> None:
         """On the owner: run ``fn`` before anything queued (a deferred event's release)."""
-        self._inbox.put_first((None, None, fn))
+        self._inbox.appendleft((None, None, fn))  # nobody is told: the owner takes it
         self._fast = False
 
     # -- owning ------------------------------------------------------------------------------
@@ -358,7 +365,8 @@ class Subject:
     def run_until_idle(self) -> int:
         """Process queued events until the queue is empty; returns how many events ran."""
         self._check_owner()
-        if self._engine.snapshot is None:
+        engine = self._engine
+        if engine.snapshot is None:
             raise StatectlError(f"{self.name}: call start() before processing events")
         if self._busy:
             raise StatectlError(
@@ -366,8 +374,7 @@ class Subject:
                 "(from an observer or listener?); post() the event instead"
             )
         count = 0
-        queue = self._inbox.items
-        perform = self._engine.perform
+        queue = self._inbox
         self._busy = True
         try:
             while queue and not self._stopping:
@@ -378,7 +385,7 @@ class Subject:
                     continue
                 count += 1
                 if fn is None:
-                    perform(event, data)
+                    engine.perform(event, data)
                     continue
                 self._process_then(event, data, fn)
         finally:
@@ -407,14 +414,14 @@ class Subject:
         path, records, observer calls and errors; returns how many events ran.
         """
         if data is not None and self._declared is not None:
-            check_event_data(self._declared, self.name, event, data)
+            check_event_data(self._declared, self._engine.name, event, data)
         if self._fast and not self._busy and type(event) is str:  # _fast: nothing queued
             self._busy = True
             try:
                 self._engine.perform(event, data)
             finally:
                 self._busy = False
-            if self._inbox.items:  # posted meanwhile (an observer's completion)
+            if self._inbox:  # posted meanwhile (an observer's completion)
                 return 1 + self.run_until_idle()
             return 1
         self.post(event, data)
@@ -458,7 +465,7 @@ class Subject:
             while not self._stopping:
                 wake.wait()
                 wake.clear()
-                while self._inbox.items and not self._stopping:
+                while self._inbox and not self._stopping:
                     try:
                         self.run_until_idle()
                     except Exception as exc:  # record + callback; a worker never dies of an event
