@@ -11,9 +11,8 @@ Rules:
    only takes up its target.
 2. A program is bound once to the device's sinks (:class:`Bound`, kept per plan until
    the wiring changes): each effect becomes the calls of the sinks that hear it, in
-   order. A watched state's :class:`~statectl.run.runtime.program.Enter` calls its
-   watchers (a monitor, a timer), a notification the one observer of its invoke
-   number. How records are made depends on who listens (the bound's mode):
+   order (an ``Enter`` calls the state's watchers: a monitor, a timer; a notification
+   its one observer). How records are made depends on who listens (the bound's mode):
    ``UNHEARD`` makes none; ``RECORDS`` (a :meth:`listen` listener) emits each typed
    record as it happens; ``STEPS`` (only :meth:`listen_steps` listeners) keeps what
    each observer did and hands one :class:`StepRecord` per event, whose typed records
@@ -23,15 +22,15 @@ Rules:
    when an observer raised (the transition was committed first), and before its record
    when it changed nothing. An unhandled event under policy ``error`` (all but declared
    ignores) and a guard that raised are refused with an error after their records.
-4. A record emitted while listeners run is delivered after the current one, so every
-   listener sees one order; one made during a step for step listeners (a monitor
-   starting) takes its place among the step's records.
+4. A record emitted while listeners run is delivered after the current one; one made
+   during a step for step listeners (a monitor starting) takes its place in the step.
 """
 
 from __future__ import annotations
 
 from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass
 from functools import partial
 from typing import Any, cast
 
@@ -83,6 +82,7 @@ _NONE_YET: list[tuple[int, Record]] = []
 _BOUND_MAX = 4096
 
 
+@dataclass(frozen=True, slots=True, eq=False)
 class Bound:
     """A program bound to one device's sinks (rule 2).
 
@@ -93,23 +93,12 @@ class Bound:
     unknown count apart).
     """
 
-    __slots__ = ("calls", "cursor", "end", "made", "mode", "program")
-
-    def __init__(
-        self,
-        program: Program,
-        mode: int,
-        calls: tuple[Call, ...] = (),
-        made: tuple[_Made, ...] | None = None,
-        cursor: int = 1,
-        end: int = 1,
-    ) -> None:
-        self.program = program
-        self.mode = mode
-        self.calls = calls
-        self.made = made
-        self.cursor = cursor
-        self.end = end
+    program: Program
+    mode: int
+    calls: tuple[Call, ...] = ()
+    made: tuple[_Made, ...] | None = None
+    cursor: int = 1
+    end: int = 1
 
 
 class Engine:
