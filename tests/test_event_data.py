@@ -347,3 +347,22 @@ def test_a_guard_or_assignment_that_fails_counts_once_either_way(
     said = err.getvalue()
     assert (code, says in said) == (1, True), said
     assert "statectl run: 1 event(s) unknown to the device or rejected: exit 1" in said
+
+
+def test_a_guard_that_raises_gives_step_listeners_the_records_listen_gets() -> None:
+    """A step listener hears a guard error as a step record of its own (reason guard
+    error, rejected), whose typed records are those a listen() listener gets."""
+    steps: list[Any] = []
+    typed: list[Any] = []
+    for hear in ("steps", "typed"):
+        subject = Subject(_press(), clock=SimClock())
+        if hear == "steps":
+            subject.listen_steps(steps.append)
+        else:
+            subject.listen(typed.append)
+        subject.start()
+        with pytest.raises(GuardError):
+            subject.dispatch("Press", {"part": "A"})
+    last = steps[-1]
+    assert (last.event, last.reason, last.rejected) == ("Press", Unhandled.GUARD_ERROR, True)
+    assert [r for s in steps for r in s.records] == typed

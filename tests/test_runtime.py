@@ -243,13 +243,13 @@ def test_no_records_are_built_when_nobody_listens(
     motor: Chart, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The hot path builds no record without a listener."""
-    import statectl.run.runtime.perform as perform
+    import statectl.run.runtime.engine as engine
     import statectl.run.runtime.subject as mod
 
     def refuse(*args: object) -> None:
         raise AssertionError("record built")
 
-    for module in (mod, perform):  # the Subject decides, its Performer half performs
+    for module in (mod, engine):  # the Subject owns, its engine performs
         for name in ("EventReceived", "MicrostepTaken", "Taken", "taken"):
             if hasattr(module, name):
                 monkeypatch.setattr(module, name, refuse)

@@ -11,12 +11,14 @@ from typing import Any
 
 import pytest
 
-import statectl.run.runtime.subject as subject_module
+import statectl.run.runtime.engine as engine_module
 from statectl.kernel.model import Chart
+from statectl.kernel.semantics import Outcome, Unhandled
 from statectl.run.devices import connect, make_driver
 from statectl.run.journal import Journal
 from statectl.run.journal.device import JournalledDevice
 from statectl.run.runtime import SimClock, Subject, attach_monitors
+from statectl.run.runtime.program import program_of
 from support import QuietFaults, Recorder
 
 #: The paper's cycle without its guarded event: every step is plannable today.
@@ -41,13 +43,13 @@ class Watcher:
 
 def _count_kernel_steps(monkeypatch: pytest.MonkeyPatch) -> list[str]:
     asked: list[str] = []
-    real = subject_module.step
+    real = engine_module.step
 
     def counting(machine: Any, snapshot: Any, event: str, *args: Any, **kw: Any) -> Any:
         asked.append(event)
         return real(machine, snapshot, event, *args, **kw)
 
-    monkeypatch.setattr(subject_module, "step", counting)
+    monkeypatch.setattr(engine_module, "step", counting)
     return asked
 
 
@@ -167,8 +169,71 @@ def test_a_step_whose_observer_raises_is_still_heard_as_taken(
     subject.on_step(lambda event, data, outcome: heard.append((event, str(outcome))))
     subject.start()
     if path == "kernel":
-        subject._table = {}  # no plan: the kernel decides the step
+        subject._engine.table = {}  # no plan: the kernel decides the step
     with pytest.raises(ValueError, match="refused"):
         subject.dispatch("Movement")
     assert subject.configuration == {"Moving"}
     assert heard == [("Movement", "handled")]
+
+
+def test_every_step_is_performed_by_the_one_engine_method(
+    motor: Chart, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The start, dispatch(), post() + run_until_idle(), a timer's deliver() and a
+    recovery's reissue() all perform their step through Engine.perform, heard or not
+    (but for a start that only moves, unheard: the Motor's notifies nobody)."""
+    performed: list[str | None] = []
+    real = engine_module.Engine.perform
+
+    def counting(self: Any, event: str | None, *args: Any, **kw: Any) -> Any:
+        performed.append(event)
+        return real(self, event, *args, **kw)
+
+    monkeypatch.setattr(engine_module.Engine, "perform", counting)
+    for listen in (False, True):
+        performed.clear()
+        subject = Subject(motor, clock=SimClock())
+        subject.attach(Recorder())
+        if listen:
+            subject.listen_steps(lambda step: None)
+        subject.start()
+        subject.dispatch("Movement")
+        subject.post("Movement completion")
+        subject.run_until_idle()
+        subject.deliver("Jump")
+        subject.reissue(subject.machine.plans(subject.snapshot)["Movement"].step)  # type: ignore[arg-type]
+        start = [None] if listen else []
+        assert performed == [*start, "Movement", "Movement completion", "Jump", None]
+
+
+def test_a_step_compiles_once_into_a_program_every_device_shares(motor: Chart) -> None:
+    """Two devices of one chart perform a planned step from the same Program, whose
+    effects are the step's in order: transition, exits, entries, notifications."""
+    devices = [Subject(motor, clock=SimClock()) for _ in range(2)]
+    for subject in devices:
+        subject.attach(Recorder())
+        subject.start()
+    plan = devices[0].machine.plans(devices[0].snapshot)["Movement"]  # type: ignore[arg-type]
+    for subject in devices:
+        subject.dispatch("Movement")
+    first, second = (d._engine._bound[plan].program for d in devices)
+    assert first is second is program_of(plan.step, plan.table)
+    kinds = [type(e).__name__ for e in first.effects]
+    assert kinds == ["Transit", "Exit", "Enter", "Notify"]
+    assert (first.outcome, first.invokes) == (Outcome.HANDLED, 1)
+
+
+def test_the_outcome_is_one_enum_that_says_handled(motor: Chart) -> None:
+    """Step listeners and then() hear an Outcome: HANDLED or the reason; each equals the
+    string users see and the journal stores."""
+    heard: list[object] = []
+    subject = Subject(motor, clock=SimClock())
+    subject.on_step(lambda event, data, outcome: heard.append(outcome))
+    subject.start()
+    subject.post("Initialization")  # declared ignored in Blocked
+    subject.post("Movement", then=heard.append)
+    subject.run_until_idle()
+    assert heard == [Outcome.DECLARED_IGNORED, Outcome.HANDLED, Outcome.HANDLED]
+    assert all(type(o) is Outcome for o in heard)
+    assert heard[1] == "handled" and str(heard[0]) == "declared ignored"
+    assert Unhandled is Outcome

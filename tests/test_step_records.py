@@ -27,7 +27,7 @@ from statectl.run.runtime import (
     StepRecord,
     Subject,
 )
-from support import PAPER_CYCLE, Recorder, record_keys, wire_motor
+from support import PAPER_CYCLE, Recorder, wire_motor
 
 STRAYS = (("Movement completion", None), ("No such event", None), ("Movement", {"amount": 1}))
 
@@ -267,41 +267,3 @@ def test_records_of_repeated_steps_are_listens_however_observers_log(
     calls = sum(isinstance(r, ObserverCalled) for r in runs[0])
     each = [{"plain": 1, "calls": 2, "none": 0}[k] for k in observers]
     assert calls == 5 * sum(each) + 4 * each[1]  # five go, four stop
-
-
-def _heard(motor: Chart, wiring: str, monkeypatch: pytest.MonkeyPatch, kernel: bool) -> list[Any]:
-    """listen()'s records of three doubled paper cycles; ``kernel``: every step asked of
-    the kernel (no plans), else the last cycle refuses the slow path."""
-    subject = Subject(motor, clock=SimClock())
-    wire_motor(subject, wiring)
-    heard: list[Record] = []
-    subject.listen(heard.append)
-    subject.start()
-    with monkeypatch.context() as patch:
-        if kernel:
-            patch.setattr(Subject, "_process", lambda self, e, d: self._process_slow(e, d))
-        for n in range(3):
-            if n == 2 and not kernel:  # every step of the cycle is planned by now
-                patch.setattr(Subject, "_process_slow", _refused)
-            for event, data in PAPER_CYCLE * 2:
-                subject.dispatch(event, data)
-    return record_keys(heard)
-
-
-def _refused(*args: object) -> None:
-    raise AssertionError("a planned step went the slow path")
-
-
-@pytest.mark.parametrize("wiring", ["bare", "monitor", "driver"])
-def test_listen_hears_a_planned_step_as_the_kernels(
-    motor: Chart, wiring: str, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """A listen() listener hears a step taken from its plan (no kernel, no slow path)
-    exactly as it hears the kernel's answer: same records in the same order, a monitor's
-    records and every API call in place."""
-    want = _heard(motor, wiring, monkeypatch, kernel=True)
-    got = _heard(motor, wiring, monkeypatch, kernel=False)
-    assert got == want
-    kinds = {k[0] for k in got}
-    assert {"EventReceived", "MicrostepTaken", "InvokeIssued", "ObserverCalled"} <= kinds
-    assert ("MonitorStarted" in kinds) == (wiring != "bare")  # the driver brings monitors

@@ -32,7 +32,7 @@ from typing import Any
 
 from statectl.channels.opcua.space import Layout
 from statectl.kernel.model import Chart
-from statectl.kernel.semantics import Unhandled
+from statectl.kernel.semantics import Outcome
 
 __all__ = ["PACKML_URI", "PROFILE", "PackmlNaming", "PackmlSpace", "naming", "status_of"]
 
@@ -80,9 +80,9 @@ def naming(chart: Chart, lay: Layout) -> PackmlNaming | None:
 def status_of(outcome: str) -> int | None:
     """The OPC UA status code of a PackML method's outcome (rule 4); None for Good."""
     ua = _ua()
-    if outcome == "handled":
+    if outcome == Outcome.HANDLED:
         return None
-    if outcome in {u.value for u in Unhandled}:
+    if outcome in {u.value for u in Outcome}:  # why the event changed nothing
         return int(ua.StatusCodes.BadInvalidState)
     return int(ua.StatusCodes.BadResourceUnavailable)
 

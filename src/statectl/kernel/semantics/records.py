@@ -27,6 +27,7 @@ __all__ = [
     "GuardOracle",
     "LivelockError",
     "Microstep",
+    "Outcome",
     "Plan",
     "PlanTable",
     "Run",
@@ -49,17 +50,25 @@ class LivelockError(StatectlError):
     """Eventless or raised transitions that never settle."""
 
 
-class Unhandled(enum.StrEnum):
-    """Why an event changed nothing: the one answer the runtime, explorer, C++ and journal give.
+class Outcome(enum.StrEnum):
+    """What an event did: :attr:`HANDLED`, or why it changed nothing.
 
-    A ``str`` enum: its value is what records, reports and journals show and store.
+    The one answer the runtime, explorer, C++ and journal give. A ``str`` enum: its value
+    is what records, reports and journals show and store (``"handled"``, ``"guard
+    false"``...), so it compares equal to those strings.
     """
 
+    HANDLED = "handled"  # a transition was taken for the event
     DECLARED_IGNORED = "declared ignored"  # the state table lists it in an active state
     GUARD_FALSE = "guard false"  # a transition exists for it, but no guard held
     NO_TRANSITION = "no transition"  # no transition and not declared ignored
     UNKNOWN_EVENT = "unknown event"  # not an event of the chart (decided by the host)
     GUARD_ERROR = "guard error"  # a guard raised: refused, never a silent false (eventview)
+
+
+#: Why an event changed nothing: an :class:`Outcome` other than ``HANDLED`` (the name
+#: the kernel's ``Step.unhandled``, records and reports use for the reasons).
+Unhandled = Outcome
 
 
 @dataclass(frozen=True, slots=True)

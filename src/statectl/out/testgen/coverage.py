@@ -24,7 +24,7 @@ from typing import Any
 from statectl.front.tables.inputs import read_input_text
 from statectl.kernel.errors import StatectlError
 from statectl.kernel.model import Chart, StateKind, Transition
-from statectl.kernel.semantics import Snapshot, compiled, step
+from statectl.kernel.semantics import Outcome, Snapshot, compiled, step
 from statectl.out.escape import diagram as diagram_escape
 from statectl.out.render import dot
 from statectl.out.render.diagram import from_chart
@@ -201,7 +201,7 @@ def journal_coverage(journal: str | Path, chart: Chart, device: str | None = Non
                     tally.start(s.snapshot)
                 elif (
                     s.kind in (StepKind.EVENT, StepKind.RECOVERY)
-                    and s.outcome == "handled"
+                    and s.outcome == Outcome.HANDLED
                     and s.event is not None
                     and before is not None
                 ):

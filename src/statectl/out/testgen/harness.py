@@ -23,7 +23,7 @@ from typing import Any
 
 from statectl.front.observers import Observer
 from statectl.kernel.model import Chart, Notify, StateKind
-from statectl.kernel.semantics import Unhandled
+from statectl.kernel.semantics import Outcome, Unhandled
 from statectl.kernel.semantics import step as kernel_step
 from statectl.out.testgen.coverage import Tally
 from statectl.run.devices import SimTwin, connect
@@ -116,7 +116,7 @@ class DeviceUnderTest:
             after = subject.snapshot
             if after is None:
                 return
-            if outcome == "handled":
+            if outcome == Outcome.HANDLED:
                 tally.event(last[0], event, subject.data, data, after, where)
             last[0] = after
 

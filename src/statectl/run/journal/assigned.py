@@ -12,7 +12,7 @@ assign nothing skip this entirely.
 from __future__ import annotations
 
 from statectl.kernel.model import Assign
-from statectl.kernel.semantics import Snapshot, step
+from statectl.kernel.semantics import Outcome, Snapshot, step
 from statectl.run.journal.format import StepKind
 from statectl.run.journal.read import JournalReader
 from statectl.run.runtime import Subject
@@ -34,7 +34,7 @@ def replay_assigned_data(subject: Subject, reader: JournalReader, upto: int) -> 
     before: Snapshot | None = None
     changed = 0
     for row in reader.steps(subject.name, upto=upto):
-        taken = row.kind in (StepKind.EVENT, StepKind.RECOVERY) and row.outcome == "handled"
+        taken = row.kind in (StepKind.EVENT, StepKind.RECOVERY) and row.outcome == Outcome.HANDLED
         if taken and before is not None and row.event is not None:
             decision = step(subject.machine, before, row.event, data, row.data)
             updates = assignments_of(decision, data, row.event, row.data, subject.name)
@@ -42,5 +42,5 @@ def replay_assigned_data(subject: Subject, reader: JournalReader, upto: int) -> 
                 data.update(updates)
                 changed += 1
         before = row.snapshot
-    subject._data.update(data)  # the owner's data, before it processes anything
+    subject._engine.data.update(data)  # the owner's data, before it processes anything
     return changed

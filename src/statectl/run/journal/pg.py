@@ -28,6 +28,7 @@ from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
 
 from statectl.kernel.errors import require
+from statectl.kernel.semantics import Outcome
 from statectl.run.devices.urls import url_problem as url_syntax
 from statectl.run.journal.format import JournalError
 from statectl.run.journal.read import DeviceRow, InboxRow, StepRow, _datamodel, _json, _step
@@ -330,7 +331,7 @@ class PgJournalReader:
         rows = list(self.steps(device, upto=upto))
         for row in reversed(rows):
             if state not in row.snapshot.active:
-                if later is None or later.outcome != "handled" or later.event is None:
+                if later is None or later.outcome != Outcome.HANDLED or later.event is None:
                     return None
                 if later.kind in (StepKind.EVENT, StepKind.RECOVERY):
                     return row, later

@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Any, Protocol, TextIO
 
 from statectl.kernel.model import Chart
-from statectl.kernel.semantics import Snapshot
+from statectl.kernel.semantics import Outcome, Snapshot
 from statectl.run.journal.check import check_journal, connect_ro, sqlite_problem
 from statectl.run.journal.format import JournalError, StepKind, decode_snapshot
 from statectl.run.journal.subjects import restore_subject
@@ -248,7 +248,7 @@ class JournalReader:
         for raw in self._db.execute(sql + " ORDER BY id DESC", args):
             row = _step(raw)
             if state not in row.snapshot.active:
-                if later is None or later.outcome != "handled" or later.event is None:
+                if later is None or later.outcome != Outcome.HANDLED or later.event is None:
                     return None  # not active at the newest step, or entered by a restore
                 if later.kind in (StepKind.EVENT, StepKind.RECOVERY):
                     return row, later

@@ -1,4 +1,4 @@
-"""Event data at run time: fields checked as an event arrives, assignments, failed guards.
+"""Event data at run time: fields checked as an event arrives, assignments.
 
 Rules:
 1. An event that declares its data (the Event Definition table's ``data``
@@ -14,7 +14,8 @@ Rules:
    the data takes the new values, then the step is performed.
 3. A guard that raised (:class:`~statectl.kernel.semantics.eventview.GuardFailure`) is
    recorded as ``EventRejected`` with reason ``guard error`` whatever the policy,
-   and raised as :class:`~statectl.kernel.semantics.eventview.GuardError`.
+   and raised as :class:`~statectl.kernel.semantics.eventview.GuardError` (the engine's
+   refusal, runtime/engine.py rule 3).
 """
 
 from __future__ import annotations
@@ -26,8 +27,8 @@ from typing import TYPE_CHECKING, Any
 from statectl.kernel.errors import StatectlError, UnhandledEventError
 from statectl.kernel.expr import Expression, compile_expression
 from statectl.kernel.model import Assign, Chart
-from statectl.kernel.semantics import Step, Unhandled
-from statectl.kernel.semantics.eventview import EventView, GuardError, GuardFailure, field_accepts
+from statectl.kernel.semantics import Step
+from statectl.kernel.semantics.eventview import EventView, field_accepts
 
 if TYPE_CHECKING:
     from statectl.run.runtime.subject import Subject
@@ -40,7 +41,6 @@ __all__ = [
     "check_event_data",
     "check_posted",
     "declared_fields",
-    "refuse_failure",
 ]
 
 
@@ -135,16 +135,3 @@ def apply_assignments(
 ) -> dict[str, Any] | None:
     """The data after the step's assignments (rule 2); ``None`` when it has none."""
     return assignments_of(decision, subject.data, event, event_data, subject.name)
-
-
-def refuse_failure(
-    subject: Subject, event: str, data: Any, failure: GuardFailure, now: float
-) -> None:
-    """A guard raised: record ``EventRejected`` (reason guard error) and raise (rule 3)."""
-    from statectl.run.runtime.records import EventRejected
-
-    for callback in subject._steppers:
-        callback(event, data, Unhandled.GUARD_ERROR)
-    if subject._listeners:
-        subject.emit(EventRejected(subject.name, now, event, Unhandled.GUARD_ERROR))
-    raise GuardError(failure.message(subject.name))

@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any
 import msgspec
 
 from statectl.kernel.model import Notify
-from statectl.kernel.semantics import Step, Unhandled  # at run time: the fields' types resolve
+from statectl.kernel.semantics import Outcome, Step, Unhandled  # at run time: fields resolve
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
@@ -231,7 +231,7 @@ class StepRecord(msgspec.Struct, eq=False):
     _made: tuple[_Made, ...] | list[_Made] = ()  # per notification performed, in order
     _tail: _Tail | None = None  # what most steps do not have, or None
     _records: tuple[Record, ...] | None = None  # made when first read (``records``)
-    _builder: Builder | None = None  # the plan's, when the step came from a plan
+    _builder: Builder | None = None  # its program's, which makes its typed records
 
     @property
     def reason(self) -> Unhandled | None:
@@ -254,11 +254,12 @@ class StepRecord(msgspec.Struct, eq=False):
         return cls(record.device, record.time, None, None, None, (), None, (record,))
 
     @property
-    def outcome(self) -> str:
-        """``handled``, why the event changed nothing, or ``""`` outside an event."""
+    def outcome(self) -> Outcome | str:
+        """What the event did (an :class:`~statectl.kernel.semantics.Outcome`, a ``str``
+        enum: ``"handled"`` or why it changed nothing), or ``""`` outside an event."""
         if self.step is not None:
-            return "handled"
-        return self.reason.value if self.reason is not None else ""
+            return Outcome.HANDLED
+        return self.reason if self.reason is not None else ""
 
     @property
     def entered(self) -> tuple[str, ...]:
@@ -300,11 +301,8 @@ class StepRecord(msgspec.Struct, eq=False):
         records = self._records
         if records is None:  # not read yet
             builder = self._builder
-            if builder is not None and self._tail is None:  # a plan's usual step
-                build = builder.build
-                if build is None:
-                    build = builder.build = _compiled(self.step)  # type: ignore[arg-type]
-                records = self._records = build(self)
+            if builder is not None and self._tail is None:  # a program's usual step
+                records = self._records = builder.build(self)
             else:
                 records = self._records = _typed(self)
         return records
@@ -313,27 +311,21 @@ class StepRecord(msgspec.Struct, eq=False):
         return iter(self.records)
 
     def __repr__(self) -> str:
-        return f"StepRecord({self.device!r}, {self.time!r}, {self.event!r}, {self.outcome!r})"
+        return f"StepRecord({self.device!r}, {self.time!r}, {self.event!r}, {str(self.outcome)!r})"
 
 
 #: Builds rule 3's records of one step record whose step is known (rule 3).
 _Build = Callable[["StepRecord"], "tuple[Record, ...]"]
-#: Per step seen once (by identity): the step and its records' kinds and fields
-#: (notifications as ``Notify``); bounded, for the steps that are not memoised.
-_TEMPLATES: dict[int, tuple[Step, list[tuple[Any, tuple[Any, ...]] | Notify]]] = {}
-_TEMPLATES_MAX = 4096
-#: Per step seen twice: the step and its compiled builder. Plans keep their steps, so a
-#: memoised step is compiled once; bounded as well.
-_BUILT: dict[int, tuple[Step, _Build]] = {}
 #: ``ObserverCalled.api`` of an observer that logs no API calls, per (its type, invoke).
 _UPDATES: dict[tuple[type, int], str] = {}
+_UPDATES_MAX = 4096
 
 
 def update_api(observer: object, invoke: int) -> str:
     """``ObserverCalled.api`` of an observer that logs no API calls: ``Counter.update(#0)``."""
     api = _UPDATES.get((type(observer), invoke))
     if api is None:
-        if len(_UPDATES) >= _TEMPLATES_MAX:
+        if len(_UPDATES) >= _UPDATES_MAX:
             _UPDATES.clear()
         api = _UPDATES[type(observer), invoke] = f"{type(observer).__name__}.update(#{invoke})"
     return api
@@ -358,7 +350,7 @@ def taken(micro: Microstep) -> tuple[Taken, ...]:
     if hit is not None and hit[0] is micro:
         return hit[1]
     made = tuple(Taken(x.source, x.targets, x.label) for x in micro.transitions)
-    if len(_TAKEN) >= _TEMPLATES_MAX:
+    if len(_TAKEN) >= _UPDATES_MAX:
         _TAKEN.clear()
     _TAKEN[id(micro)] = (micro, made)
     return made
@@ -436,48 +428,29 @@ def _compile(plan: list[tuple[Any, tuple[Any, ...]] | Notify]) -> _Build:
 
 
 class Builder:
-    """A plan's slot for the builder of its step's records, filled when first read.
+    """The builder of one step's typed records: its program keeps it, its step records
+    carry it, so reading them costs no lookup.
 
-    The Subject keeps one per plan it has run; a step record of that plan carries it,
-    so reading its records costs no lookup.
+    ``build(record)`` reads the step's records plan the first time; the second time it
+    compiles the plan (:func:`_compile`) and uses that from then on, so a step that is
+    not memoised (seen once) never pays for compiling.
     """
 
-    __slots__ = ("build",)
+    __slots__ = ("_plan", "build")
 
     def __init__(self) -> None:
-        self.build: _Build | None = None
+        self._plan: list[tuple[Any, tuple[Any, ...]] | Notify] | None = None
+        self.build: _Build = self._first
 
+    def _first(self, r: StepRecord) -> tuple[Record, ...]:
+        plan = self._plan = records_plan(r.step)  # type: ignore[arg-type]
+        self.build = self._again
+        return _interpret(plan)(r)
 
-def _keep(step: Step, build: _Build) -> _Build:
-    """Keep ``step``'s compiled builder (bounded: the table starts again when full)."""
-    if len(_BUILT) >= _TEMPLATES_MAX:
-        _BUILT.clear()
-    _BUILT[id(step)] = (step, build)
-    return build
-
-
-def _compiled(step: Step) -> _Build:
-    """``step``'s compiled builder, shared by every plan (and Subject) with that step."""
-    hit = _BUILT.get(id(step))
-    if hit is not None and hit[0] is step:
-        return hit[1]
-    return _keep(step, _compile(records_plan(step)))
-
-
-def _builder(step: Step) -> _Build:
-    """The builder of any step's records: compiled once it is seen twice, read from
-    its plan the first time (a step that is not memoised is seen once)."""
-    hit = _BUILT.get(id(step))
-    if hit is not None and hit[0] is step:
-        return hit[1]
-    seen = _TEMPLATES.pop(id(step), None)  # pop: another thread may take it too
-    if seen is not None and seen[0] is step:
-        return _keep(step, _compile(seen[1]))
-    if len(_TEMPLATES) >= _TEMPLATES_MAX:
-        _TEMPLATES.clear()
-    plan = records_plan(step)
-    _TEMPLATES[id(step)] = (step, plan)
-    return _interpret(plan)
+    def _again(self, r: StepRecord) -> tuple[Record, ...]:
+        plan = self._plan if self._plan is not None else records_plan(r.step)  # type: ignore[arg-type]
+        build = self.build = _compile(plan)
+        return build(r)
 
 
 def _typed(r: StepRecord) -> tuple[Record, ...]:
@@ -485,7 +458,8 @@ def _typed(r: StepRecord) -> tuple[Record, ...]:
     step, tail = r.step, r._tail
     out: list[Record]
     if step is not None:
-        built = _builder(step)(r)
+        builder = r._builder
+        built = builder.build(r) if builder is not None else _interpret(records_plan(step))(r)
         if tail is None:
             return tuple(built)
         d, t = r.device, r.time

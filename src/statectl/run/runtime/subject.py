@@ -6,36 +6,29 @@ Rules:
    blocking; the owner is whoever calls :meth:`Subject.run_until_idle` (or the
    worker thread of :meth:`Subject.start_worker`), never two at once.
 2. What an event does is decided by :func:`statectl.kernel.semantics.step`, which is
-   pure; the Subject performs the decision: it commits the new snapshot, emits
-   the records, and for each ``Notify`` calls the one observer registered for
-   that invoke number (the paper's specific notification).
+   pure; the Subject's :class:`~statectl.run.runtime.engine.Engine` performs the
+   decision on one path: the step compiled once into a
+   :class:`~statectl.run.runtime.program.Program`, bound to the device's sinks, run by
+   :meth:`~statectl.run.runtime.engine.Engine.perform` (watchers, the notifications in
+   order, each to the one observer registered for its invoke number, records only
+   for listeners).
 3. An event that changes nothing is never lost silently. The reason is the
-   kernel's :class:`~statectl.kernel.semantics.Unhandled`: ``declared ignored`` (the state
+   kernel's :class:`~statectl.kernel.semantics.Outcome`: ``declared ignored`` (the state
    table says so), ``guard false`` (a transition existed but its guard did not
    hold), ``no transition``, or ``unknown event`` (said here, before stepping).
    Declared-ignored events are always just recorded; the others are recorded as
    ``EventIgnored`` under policy ``ignore`` and as ``EventRejected`` plus an
    :class:`~statectl.kernel.errors.UnhandledEventError` under policy ``error`` (raised
    from ``run_until_idle``; a worker hands it to its error callback and goes on).
-4. Records are built only when someone listens; a record emitted while
-   listeners run is delivered after the current one, so every listener sees one
-   order. Those who need less than records hook the step itself: a
-   :class:`StateWatcher` (monitors) hears the states it watches entered and
-   exited, a step listener (the journal) hears each event's outcome; neither
-   builds a record.
+4. A Subject is made of three parts: its :class:`~statectl.run.runtime.inbox.Inbox`
+   (the queue), its :class:`~statectl.run.runtime.hooks.Hooks` (observers, listeners,
+   watchers) and its engine; it adds who owns the device and when.
 5. Work that must run on the owner (a monitor's poll) is queued with
    :meth:`Subject.call_soon`, so records are only ever emitted by the owner.
-6. One path, fast because it is the only one: every event (from
-   :meth:`Subject.dispatch`, :meth:`Subject.run_until_idle` or a worker) goes
-   through ``_process``, which takes the kernel's memoised plan for the current
-   snapshot when there is one (commit its target, then perform its step: the
-   watchers, the notifications in order, records only for listeners) and asks
-   :func:`statectl.kernel.semantics.step` only for a step it has not planned yet. What
-   the plan path calls for a plan is worked out once per plan and instance.
-   :meth:`Subject.dispatch` is the synchronous owner-side form of ``post`` +
-   ``run_until_idle``. Instances of one chart share its compiled
-   :class:`~statectl.kernel.semantics.Machine`; a Subject allocates its worker's wake-up
-   event and record queue only when they are first needed.
+6. :meth:`Subject.dispatch` is the synchronous owner-side form of ``post`` +
+   ``run_until_idle``: with nothing queued it processes the event at once. Instances
+   of one chart share its compiled :class:`~statectl.kernel.semantics.Machine` and the
+   programs of its steps.
 7. :meth:`Subject.reissue` performs only the notifications of a step already
    taken, with the usual records and no state change: a restarted device's
    recovery ``redo`` gives it the device work of the step that entered its state.
@@ -43,8 +36,9 @@ Rules:
 
 from __future__ import annotations
 
+import sys
 import threading
-from collections import deque
+import traceback
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
@@ -52,65 +46,48 @@ from statectl.front.observers import Observer
 from statectl.kernel.errors import StatectlError
 from statectl.kernel.expr import compile_expression
 from statectl.kernel.model import Action, Chart, Notify
-from statectl.kernel.semantics import Plan, Snapshot, Step, Unhandled, compiled, initial, step
+from statectl.kernel.semantics import Machine, Outcome, Snapshot, Step, compiled
 from statectl.run.runtime.clock import Clock, SimClock
 from statectl.run.runtime.defer import attach_defer
-from statectl.run.runtime.eventdata import (
-    apply_assignments,
-    check_event_data,
-    declared_fields,
-    refuse_failure,
-)
+from statectl.run.runtime.engine import Engine
+from statectl.run.runtime.eventdata import check_event_data, declared_fields
 from statectl.run.runtime.hooks import (
     ApiLogging,
+    ErrorHandler,
+    Hooks,
     Listener,
     Policy,
     StateWatcher,
     StepListener,
+    StepRecordListener,
 )
-from statectl.run.runtime.perform import _EVENTS, _INVOKES, _Call
-from statectl.run.runtime.recording import StepListener as StepRecordListener
-from statectl.run.runtime.records import (
-    EventReceived,
-    Finished,
-    MicrostepTaken,
-    Record,
-    Started,
-    StepRecord,
-    _Tail,
-)
+from statectl.run.runtime.inbox import Inbox
+from statectl.run.runtime.records import Record
 from statectl.run.runtime.timers import attach_timers
-from statectl.run.runtime.wiring import Wiring
 
 __all__ = ["ApiLogging", "Listener", "Policy", "StateWatcher", "StepListener", "Subject"]
 
-#: The plan table of a Subject not started yet: empty, never written.
-_NO_PLANS: dict[str, Plan] = {}
 
-#: A queued event ``(name, data, then)`` (``then(outcome)`` once it ran, or None), or
-#: ``(None, None, fn)`` to run ``fn`` on the owner.
-_Item = tuple[str | None, Any, Callable[..., object] | None]
+def _print_error(exc: BaseException) -> None:
+    traceback.print_exception(exc, file=sys.stderr)
 
 
-class Subject(Wiring):
+class Subject:
     """A device's chart running on a clock; observers get the notifications meant for them."""
 
     __slots__ = (
         "_busy",
         "_closed",
-        "_data",
         "_declared",
-        "_name",
-        "_queue",
-        "_queued_hook",
-        "_routes",
-        "_snapshot",
-        "_table",
-        "_watch",
+        "_engine",
+        "_fast",
+        "_hooks",
+        "_inbox",
+        "_serving",
+        "_stopping",
+        "_worker",
         "chart",
         "clock",
-        "machine",
-        "policy",
     )
 
     def __init__(
@@ -125,44 +102,18 @@ class Subject(Wiring):
         if policy != "ignore" and policy != "error":
             raise StatectlError(f"policy must be 'ignore' or 'error' (got {policy!r})")
         self.chart = chart
-        self.machine = compiled(chart)
         self.clock = clock
-        self._name = name or chart.name
-        self.policy = policy
-        if chart.data:
-            self._data = self._initial_data(chart, data)
-        else:
-            self._data = dict(data) if data else {}
+        values = self._initial_data(chart, data) if chart.data else dict(data) if data else {}
         self._declared = declared_fields(chart)  # event -> declared data fields, or None
-        # invoke number -> (observer, it keeps an api_log: checked once at attach)
-        self._routes: dict[int, tuple[Observer, bool]] = {}
-        # plan -> (invokes it counts, callable, argument): what the plan path calls for it;
-        # made as plans are first taken, dropped by attach and rename
-        self._calls: dict[Plan, _Call] | None = None
-        self._listeners: tuple[Listener, ...] = ()
-        self._recorders: tuple[StepRecordListener, ...] = ()  # listen_steps (recording.py)
-        self._recording: list[tuple[int, Record]] | None = None
-        self._cursor = 0
-        self._handing = False
-        self._later: list[StepRecord] | None = None
-        self._steppers: tuple[StepListener, ...] = ()
-        self._watch: dict[str, tuple[StateWatcher, ...]] = {}  # state -> its watchers
-        self._watchers: tuple[StateWatcher, ...] = ()
-        self._pending: deque[Record] | None = None
-        self._emitting = False
-        self._queue: deque[_Item] = deque()
-        self._queued_hook: Callable[[Subject], object] | None = None
-        self._wake: threading.Event | None = None
-        self._snapshot: Snapshot | None = None
-        self._table: dict[str, Plan] = _NO_PLANS  # plans of the current snapshot
+        self._hooks = Hooks(chart, name or chart.name)
+        self._engine = Engine(compiled(chart), self._hooks, clock, policy, values)
+        self._inbox = Inbox()
         self._fast = False  # dispatch may process at once: started, nothing queued, no loop
         self._busy = False
-        self._finished = False
         self._closed = False
         self._stopping = False
         self._serving = False
         self._worker: threading.Thread | None = None
-        self._counts = 0  # events processed + invokes issued << _INVOKES, one add per event
         if any(s.timeout is not None for s in chart.states):
             attach_timers(self)  # per-state timeouts (runtime/timers.py)
         if any(s.defer for s in chart.states):
@@ -184,33 +135,73 @@ class Subject(Wiring):
             data[item.name] = value
         return data
 
+    # -- state -----------------------------------------------------------------------------
+
+    @property
+    def machine(self) -> Machine:
+        """The compiled chart the device steps with (shared by the chart's devices)."""
+        return self._engine.machine
+
+    @machine.setter
+    def machine(self, machine: Machine) -> None:
+        """Step with another compiled machine of the chart (a cell's guards that read
+        other devices: cell/explore/conditions.py)."""
+        self._engine.use(machine)
+
+    @property
+    def policy(self) -> Policy:
+        """What an unhandled event is: ``ignore`` (recorded) or ``error`` (raised too)."""
+        return self._engine.policy
+
     @property
     def events_processed(self) -> int:
         """Events taken off the queue (or dispatched) and processed, handled or not."""
-        return self._counts & _EVENTS
-
-    @events_processed.setter
-    def events_processed(self, value: int) -> None:
-        self._counts = (self._counts & ~_EVENTS) | value
+        return self._engine.events
 
     @property
     def invokes_issued(self) -> int:
         """Notifications issued (counted whether or not an observer was attached)."""
-        return self._counts >> _INVOKES
-
-    @invokes_issued.setter
-    def invokes_issued(self, value: int) -> None:
-        self._counts = (self._counts & _EVENTS) | (value << _INVOKES)
+        return self._engine.invokes
 
     @property
     def name(self) -> str:
         """The device name every record and notification carries."""
-        return self._name
+        return self._engine.name
 
     @name.setter
     def name(self, value: str) -> None:
-        self._name = value
-        self._calls = None
+        self._engine.rename(value)
+
+    @property
+    def configuration(self) -> frozenset[str]:
+        """The active states (empty before :meth:`start`)."""
+        snapshot = self._engine.snapshot
+        return snapshot.active if snapshot is not None else frozenset()
+
+    @property
+    def snapshot(self) -> Snapshot | None:
+        return self._engine.snapshot
+
+    @property
+    def data(self) -> Mapping[str, Any]:
+        return self._engine.data
+
+    @property
+    def started(self) -> bool:
+        return self._engine.snapshot is not None
+
+    @property
+    def finished(self) -> bool:
+        return self._engine.finished
+
+    @property
+    def queued(self) -> int:
+        return len(self._inbox)
+
+    @property
+    def listening(self) -> bool:
+        """Whether anyone receives records (build one only then)."""
+        return self._engine.listening
 
     def _refresh(self) -> None:
         """Recompute whether :meth:`dispatch` may process an event at once, without the queue.
@@ -221,65 +212,82 @@ class Subject(Wiring):
         instead of a queue test before and after).
         """
         self._fast = (
-            self._snapshot is not None
+            self._engine.snapshot is not None
             and self._worker is None
             and not self._serving
             and not self._closed
         )
-        if self._queue:
+        if self._inbox:
             self._fast = False
 
-    # -- state -----------------------------------------------------------------------------
+    # -- wiring (runtime/hooks.py) ---------------------------------------------------------
 
-    @property
-    def configuration(self) -> frozenset[str]:
-        """The active states (empty before :meth:`start`)."""
-        return self._snapshot.active if self._snapshot is not None else frozenset()
+    def attach(self, observer: Observer, invokes: Iterable[int] | None = None) -> None:
+        """Register ``observer`` for these invoke numbers (default: every invoke of the chart)."""
+        self._hooks.attach(observer, invokes)
 
-    @property
-    def snapshot(self) -> Snapshot | None:
-        return self._snapshot
+    def observer_for(self, invoke: int) -> Observer | None:
+        route = self._hooks.routes.get(invoke)
+        return route.observer if route is not None else None
 
-    @property
-    def data(self) -> Mapping[str, Any]:
-        return self._data
+    def listen(self, callback: Listener) -> Callable[[], None]:
+        """Receive every record from now on; returns a function that stops it."""
+        return self._hooks.listen(callback)
 
-    @property
-    def started(self) -> bool:
-        return self._snapshot is not None
+    def listen_steps(self, callback: StepRecordListener) -> Callable[[], None]:
+        """Receive one :class:`StepRecord` per event from now on; returns the undo.
 
-    @property
-    def finished(self) -> bool:
-        return self._finished
+        Cheaper than :meth:`listen` when the typed records are not all read: they are
+        built only when ``record.records`` (or iterating the record) asks for them.
+        """
+        return self._hooks.listen_steps(callback)
 
-    @property
-    def queued(self) -> int:
-        return len(self._queue)
+    def on_step(self, callback: StepListener) -> Callable[[], None]:
+        """Hear ``(event, data, outcome)`` on the owner after each event; returns the undo.
+
+        Unlike :meth:`listen` it builds no records. The outcome is an
+        :class:`~statectl.kernel.semantics.Outcome`: ``handled`` or why the event
+        changed nothing.
+        """
+        return self._hooks.on_step(callback)
+
+    def watch(self, states: Iterable[str], watcher: StateWatcher) -> Callable[[], None]:
+        """Tell ``watcher`` when one of ``states`` is entered or exited; returns the undo.
+
+        Only the steps that enter or exit a watched state call it. Watch before
+        :meth:`start` to hear the initial states entered.
+        """
+        names = tuple(dict.fromkeys(states))
+        unknown = [n for n in names if n not in self.machine.order]
+        if unknown:
+            raise StatectlError(f"{self.name}: no state {unknown} in chart {self.chart.name!r}")
+        return self._hooks.add_watcher(names, watcher)
+
+    def emit(self, record: Record) -> None:
+        """Deliver ``record`` to the listeners, in order with the step's own records."""
+        self._engine.emit(record)
 
     # -- posting (any thread) ----------------------------------------------------------------
 
     def post(
-        self, event: str, data: Any = None, *, then: Callable[[str], object] | None = None
+        self, event: str, data: Any = None, *, then: Callable[[Outcome], object] | None = None
     ) -> None:
         """Queue ``event`` for the owner; never blocks, safe from any thread.
 
-        ``then(outcome)`` is called on the owner right after the event ran, with
-        ``"handled"`` or the :class:`~statectl.kernel.semantics.Unhandled` reason.
+        ``then(outcome)`` is called on the owner right after the event ran, with its
+        :class:`~statectl.kernel.semantics.Outcome`.
         """
         if not isinstance(event, str):
             raise StatectlError(f"an event name must be a str (got {event!r})")
         if self._closed:
             raise StatectlError(f"{self.name} is closed; event {event!r} cannot be posted")
         if data is not None and self._declared is not None:
-            check_event_data(self._declared, self._name, event, data)
-        self._queue.append((event, data, then))
+            check_event_data(self._declared, self._engine.name, event, data)
+        inbox = self._inbox
+        inbox.append((event, data, then))
         self._fast = False  # after the append: see _refresh()
-        wake = self._wake
-        if wake is not None:
-            wake.set()
-        hook = self._queued_hook
-        if hook is not None:
-            hook(self)
+        if inbox.wake is not None or inbox.hook is not None:
+            inbox.told()
 
     def on_queued(self, hook: Callable[[Subject], object] | None) -> None:
         """Call ``hook(subject)`` after every post or call_soon (from the posting thread).
@@ -287,46 +295,34 @@ class Subject(Wiring):
         A host that owns many devices (a :class:`~statectl.run.system.System`) learns
         which ones have work instead of asking them all; ``None`` removes it.
         """
-        self._queued_hook = hook
+        self._inbox.owner = self
+        self._inbox.hook = hook
 
     def call_soon(self, fn: Callable[[], object]) -> None:
         """Run ``fn`` on the owner, in queue order with the events (monitors use this)."""
         if self._closed:
             return
-        self._queue.append((None, None, fn))
+        inbox = self._inbox
+        inbox.append((None, None, fn))
         self._fast = False  # after the append: see _refresh()
-        wake = self._wake
-        if wake is not None:
-            wake.set()
-        hook = self._queued_hook
-        if hook is not None:
-            hook(self)
+        if inbox.wake is not None or inbox.hook is not None:
+            inbox.told()
 
-    # -- owning (one thread; the worker loop is in runtime/worker.py) ------------------------
+    def call_next(self, fn: Callable[[], object]) -> None:
+        """On the owner: run ``fn`` before anything queued (a deferred event's release)."""
+        self._inbox.appendleft((None, None, fn))  # nobody is told: the owner takes it
+        self._fast = False
+
+    # -- owning ------------------------------------------------------------------------------
 
     def start(self) -> None:
         """Enter the initial configuration (records ``Started`` and the entered states)."""
-        if self._snapshot is not None:
+        if self._engine.snapshot is not None:
             raise StatectlError(f"{self.name} was started already")
         if self._worker is not None:
             self._check_owner()
-        machine = self.machine
-        if not self._listeners and not self._recorders and not self._watch:
-            entry = machine.quiet_start
-            if entry is None:
-                first = initial(machine, self._data)
-                entry = machine.quiet(first)
-            if entry is not None:  # nothing to notify or record: take up the target
-                self._snapshot, self._table = entry
-                self._refresh()
-                return
-        first = initial(machine, self._data)
-        now = self.clock.now()
-        listening = self.listening
-        if listening:
-            self.emit(Started(self.name, now))
-        self._commit(first.target)
-        self._perform(first, None, now, listening)
+        self._engine.begin()
+        self._refresh()
 
     def restore(self, snapshot: Snapshot) -> None:
         """Take up ``snapshot`` (a journal's) instead of :meth:`start`; nothing is notified.
@@ -334,22 +330,14 @@ class Subject(Wiring):
         Listeners get ``Started`` and a ``MicrostepTaken`` entering the active states in
         document order (no transition), and the monitors of active states run again.
         """
-        if self._snapshot is not None:
+        if self._engine.snapshot is not None:
             raise StatectlError(f"{self.name} was started already; restore before start()")
         self._check_owner()
-        order = self.machine.order
-        unknown = sorted(snapshot.active - order.keys())
+        unknown = sorted(snapshot.active - self.machine.order.keys())
         if unknown:
             raise StatectlError(f"{self.name}: states {unknown} are not in {self.chart.name!r}")
-        self._commit(self.machine.intern(snapshot))
-        now = self.clock.now()
-        active = tuple(sorted(snapshot.active, key=order.__getitem__))
-        if self.listening:
-            self.emit(Started(self.name, now))
-            self.emit(MicrostepTaken(self.name, now, None, (), (), active))
-        for state in active:
-            for w in self._watch.get(state, ()):
-                w.entered(state)
+        self._engine.restore(snapshot)
+        self._refresh()
 
     def reissue(self, actions: Step | Iterable[Action], data: Any = None) -> tuple[Notify, ...]:
         """Issue the notifications of a step again, changing no state; returns those issued.
@@ -362,17 +350,14 @@ class Subject(Wiring):
         history and previous state stay as they are. Call it as the owner.
         """
         self._check_owner()
-        if self._snapshot is None:
+        if self._engine.snapshot is None:
             raise StatectlError(f"{self.name}: start() or restore() before reissue()")
         found = actions.actions if isinstance(actions, Step) else tuple(actions)
         notifies = tuple(a for a in found if isinstance(a, Notify))
-        now = self.clock.now()
-        listening = self.listening
         busy = self._busy
         self._busy = True  # an observer must post(), not process, as during a step
         try:
-            for action in notifies:
-                self._notify(action, data, now, listening)
+            self._engine.reissue(notifies, data)
         finally:
             self._busy = busy
         return notifies
@@ -380,7 +365,8 @@ class Subject(Wiring):
     def run_until_idle(self) -> int:
         """Process queued events until the queue is empty; returns how many events ran."""
         self._check_owner()
-        if self._snapshot is None:
+        engine = self._engine
+        if engine.snapshot is None:
             raise StatectlError(f"{self.name}: call start() before processing events")
         if self._busy:
             raise StatectlError(
@@ -388,7 +374,7 @@ class Subject(Wiring):
                 "(from an observer or listener?); post() the event instead"
             )
         count = 0
-        queue = self._queue
+        queue = self._inbox
         self._busy = True
         try:
             while queue and not self._stopping:
@@ -399,14 +385,27 @@ class Subject(Wiring):
                     continue
                 count += 1
                 if fn is None:
-                    self._process(event, data)
-                else:
-                    self._process_then(event, data, fn)
+                    engine.perform(event, data)
+                    continue
+                self._process_then(event, data, fn)
         finally:
             self._busy = False
             if not self._fast:
                 self._refresh()
         return count
+
+    def _process_then(self, event: str, data: Any, then: Callable[[Outcome], object]) -> None:
+        """Process ``event``, then ``then(outcome)``: what the step listeners heard (also
+        when the step raised)."""
+        heard: list[Outcome] = []
+
+        def hear(_event: str, _data: Any, outcome: Outcome) -> None:
+            heard.append(outcome)
+
+        try:
+            self._engine.perform(event, data, None, (hear, *self._hooks.steppers))
+        finally:
+            then(heard[0] if heard else Outcome.HANDLED)
 
     def dispatch(self, event: str, data: Any = None) -> int:
         """Process ``event`` now, on the calling thread as the owner, after anything queued.
@@ -415,14 +414,14 @@ class Subject(Wiring):
         path, records, observer calls and errors; returns how many events ran.
         """
         if data is not None and self._declared is not None:
-            check_event_data(self._declared, self._name, event, data)
+            check_event_data(self._declared, self._engine.name, event, data)
         if self._fast and not self._busy and type(event) is str:  # _fast: nothing queued
             self._busy = True
             try:
-                self._process(event, data)
+                self._engine.perform(event, data)
             finally:
                 self._busy = False
-            if self._queue:  # posted meanwhile (an observer's completion): run-to-completion
+            if self._inbox:  # posted meanwhile (an observer's completion)
                 return 1 + self.run_until_idle()
             return 1
         self.post(event, data)
@@ -434,12 +433,7 @@ class Subject(Wiring):
         if not self._busy:
             self.dispatch(event, data)
             return
-        self._process(event, data)
-
-    def call_next(self, fn: Callable[[], object]) -> None:
-        """On the owner: run ``fn`` before anything queued (a deferred event's release)."""
-        self._queue.appendleft((None, None, fn))
-        self._fast = False
+        self._engine.perform(event, data)
 
     def advance(self, seconds: float) -> int:
         """On a :class:`SimClock`: move time on, draining the queue after every timer."""
@@ -456,127 +450,59 @@ class Subject(Wiring):
         self.stop()
         self._closed = True
         self._fast = False
-        if not self._finished:
-            self._finished = True
-            for w in self._watchers:
-                w.finished()
-            if self.listening:
-                self.emit(Finished(self.name, self.clock.now()))
+        self._engine.close()
 
-    # -- one event -------------------------------------------------------------------------
+    # -- an owner loop on a thread of its own ------------------------------------------------
 
-    def _commit(self, target: Snapshot) -> None:
-        self._snapshot = target
-        self._table = self.machine.plans(target)
+    def serve_forever(self, on_error: ErrorHandler = _print_error) -> None:
+        """Be the owner on this thread until :meth:`stop`; errors go to ``on_error``."""
+        if self._engine.snapshot is None:
+            self.start()
+        wake = self._inbox.waker()
+        self._serving = True
+        self._fast = False
+        try:
+            while not self._stopping:
+                wake.wait()
+                wake.clear()
+                while self._inbox and not self._stopping:
+                    try:
+                        self.run_until_idle()
+                    except Exception as exc:  # record + callback; a worker never dies of an event
+                        on_error(exc)
+        finally:
+            self._serving = False
+            self._stopping = False
+            self._refresh()
+
+    def start_worker(self, on_error: ErrorHandler = _print_error) -> threading.Thread:
+        """Run :meth:`serve_forever` on a daemon thread, which becomes the owner."""
+        if self._worker is not None:
+            raise StatectlError(f"{self.name} has a worker already")
+        self._inbox.waker()
+        self._serving = True  # so a stop() before the thread runs is not lost
+        self._fast = False
+        self._worker = threading.Thread(
+            target=self.serve_forever, args=(on_error,), name=f"statectl-{self.name}", daemon=True
+        )
+        self._worker.start()
+        return self._worker
+
+    def stop(self, timeout: float | None = 1.0) -> None:
+        """Stop the owner loop after the event in progress; queued events stay queued."""
+        if self._serving:
+            self._stopping = True
+            self._inbox.waker().set()
+        worker = self._worker
+        if worker is not None and worker is not threading.current_thread():
+            worker.join(timeout)
+        self._worker = None
         self._refresh()
 
-    def _process(self, event: str, data: Any) -> None:
-        """The one path of an event (rule 6): the plan if there is one, else the kernel."""
-        plan = self._table.get(event)
-        if plan is None:
-            self._process_slow(event, data)
-            return
-        if not plan.handled:
-            reason = plan.unhandled
-            if (
-                self._listeners
-                or reason is None
-                or (self.policy == "error" and reason is not Unhandled.DECLARED_IGNORED)
-            ):
-                self._process_slow(event, data, plan)  # records, and the rejection's error
-            else:
-                self._counts += 1
-                for callback in self._steppers:
-                    callback(event, data, reason)
-                if self._recorders:
-                    now = self.clock.now()
-                    self._hand(StepRecord(self._name, now, event, data, None, (), _Tail(reason)))
-            return
-        if self._listeners:  # the records as they happen, from the plan's step
-            if self._recorders:
-                self._process_slow(event, data, plan)
-                return
-            self._counts += 1
-            now = self.clock.now()
-            self.emit(EventReceived(self._name, now, event, data))
-            self._snapshot = plan.target
-            self._table = plan.table
-            try:
-                self._perform(plan.step, data, now, True)
-            finally:  # taken, even when an observer raised: the journal must hear it
-                for callback in self._steppers:
-                    callback(event, data, "handled")
-            return
-        self._snapshot = plan.target
-        self._table = plan.table
-        calls = self._calls
-        entry = calls.get(plan) if calls is not None else None
-        if entry is None:
-            entry = self._call_for(plan)
-        try:
-            if self._recorders:  # one step record for the step listeners (recording.py)
-                self._record_plan(event, data, plan, entry)
-            else:
-                self._counts += entry[0]
-                if data is None:
-                    call = entry[1]
-                    if call is not None:
-                        call(entry[2])
-                else:
-                    run = entry[3]
-                    if run is not None:
-                        run(data)
-                if plan.final and not self._finished:
-                    self._finish(0.0, False)
-        finally:  # taken, even when an observer raised: the journal must hear it
-            for callback in self._steppers:
-                callback(event, data, "handled")
-
-    def _process_then(self, event: str, data: Any, then: Callable[[str], object]) -> None:
-        """:meth:`_process`, then ``then(outcome)``: the outcome a step listener would hear."""
-        heard: list[str] = []
-
-        def hear(_event: str, _data: Any, outcome: str) -> None:
-            heard.append(outcome)
-
-        self._steppers = (hear, *self._steppers)
-        try:
-            self._process(event, data)
-        finally:
-            self._steppers = tuple(c for c in self._steppers if c is not hear)
-            then(heard[0] if heard else "handled")
-
-    def _process_slow(self, event: str, data: Any, plan: Plan | None = None) -> None:
-        """The full path: records for listeners, reasons named; the kernel asked only
-        when there is no ``plan`` to take the step from."""
-        snapshot = self._snapshot
-        assert snapshot is not None
-        self._counts += 1
-        now = self.clock.now()
-        listening = bool(self._listeners)
-        if listening:
-            self.emit(EventReceived(self.name, now, event, data))
-        if plan is None and event not in self.machine.event_names:
-            self._unhandled(event, data, Unhandled.UNKNOWN_EVENT, now, snapshot)
-            return
-        if plan is not None and (plan.handled or plan.step.unhandled is not None):
-            decision = plan.step
-        else:
-            decision = step(self.machine, snapshot, event, self._data, data)
-        if decision.unhandled is not None:
-            if decision.failure is not None:
-                refuse_failure(self, event, data, decision.failure, now)
-            self._unhandled(event, data, decision.unhandled, now, snapshot)
-            return
-        updates = apply_assignments(self, decision, event, data) if self._data else None
-        if updates:
-            self._data.update(updates)
-        self._commit(plan.target if plan is not None else decision.target)
-        try:
-            if listening or not self._recorders:
-                self._perform(decision, data, now, listening)
-            else:  # only step listeners: one step record (recording.py)
-                self._record_step(event, data, decision, now)
-        finally:  # taken, even when an observer raised: the journal must hear it
-            for callback in self._steppers:
-                callback(event, data, "handled")
+    def _check_owner(self) -> None:
+        worker = self._worker
+        if worker is not None and worker.is_alive() and worker is not threading.current_thread():
+            raise StatectlError(
+                f"{self.name} is owned by its worker thread; post() events instead of "
+                "processing them here"
+            )
