@@ -122,3 +122,38 @@ def test_each_rows_entry_set_is_asked_of_the_kernel_once(
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     assert _check(path) == 0
     assert asked.count(1) == 30 and asked.count(0) == 1
+
+
+def _wide(path: Path, states: int) -> Path:
+    """``states`` states, each entered by its own command of one API with its own completion."""
+    lines = ["device: W", "states:", "  - {state: S0, control: default}"]
+    lines += [f"  - {{state: S{i}, control: event trigger required}}" for i in range(1, states)]
+    lines.append("events:")
+    for i in range(1, states):
+        lines.append(f"  - {{event: Go{i}, old: S0, new: S{i}, kind: command, api: Run}}")
+        lines.append(f"  - {{event: Done{i}, old: S{i}, new: S0, kind: completion, api: Run}}")
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+def test_completions_of_a_call_are_found_without_scanning_every_row(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """C422's call model asks about each event a bounded number of times, not once per call."""
+    from statectl.kernel.model import Chart
+
+    asked: list[int] = []
+    real = Chart.event
+
+    def counting(self: Chart, name: str) -> object:
+        asked.append(1)
+        return real(self, name)
+
+    monkeypatch.setattr(Chart, "event", counting)
+    counts = []
+    for states in (50, 200):
+        asked.clear()
+        _check(_wide(tmp_path / f"w{states}.yaml", states))
+        counts.append(len(asked))
+    # linear: 4x the rows asks at most ~4x as often (a scan per call made it 16x)
+    assert counts[1] <= 5 * counts[0], counts

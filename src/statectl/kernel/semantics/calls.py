@@ -31,7 +31,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from statectl.kernel.model import Chart, EventKind, Notify, StateKind, Transition
+from statectl.kernel.model import Api, Chart, EventKind, Notify, StateKind, Transition
 from statectl.kernel.semantics.algorithm import entry_set
 from statectl.kernel.semantics.machine import Machine, structural
 
@@ -83,6 +83,16 @@ class DeviceCalls:
         self.chart = chart
         self.machine = machine if machine is not None else structural(chart)
         self._calls: dict[CallKey, Call] = {}
+        # indexed once, so a call's derivation reads only the transitions on its events
+        # (a scan of every transition per call made check quadratic in the rows)
+        self._on: dict[str, list[Transition]] = {}
+        for t in chart.transitions:
+            for e in t.events:
+                self._on.setdefault(e, []).append(t)
+        self._apis: dict[str, Api] = {}
+        for a in chart.apis:
+            self._apis.setdefault(a.method, a)
+        self._candidates: dict[str, tuple[tuple[str, ...], dict[str, int]]] = {}
         self.unasked: frozenset[str] = frozenset(
             e.name for e in chart.events if e.kind is EventKind.COMPLETION and e.unasked
         )
@@ -102,9 +112,24 @@ class DeviceCalls:
             found = self._calls[key] = self._derive(method, event)
         return found
 
+    def _completions_of(self, method: str) -> tuple[tuple[str, ...], dict[str, int]]:
+        """The completion events of ``method``'s observer in table order, and their ranks."""
+        found = self._candidates.get(method)
+        if found is None:
+            api = self._apis.get(method)
+            events = api.events if api is not None else ()
+            chart = self.chart
+            names = tuple(
+                e
+                for e in events
+                if (d := chart.event(e)) is not None and d.kind is EventKind.COMPLETION
+            )
+            found = self._candidates[method] = (names, {e: i for i, e in enumerate(names)})
+        return found
+
     def _derive(self, method: str, event: str) -> Call:
         chart = self.chart
-        on_event = tuple(t for t in chart.transitions if event in t.events)
+        on_event = tuple(self._on.get(event, ()))
         notifying = tuple(
             t
             for t in on_event
@@ -117,18 +142,11 @@ class DeviceCalls:
             left |= _descendants(chart, t.source) if chart.has_state(t.source) else {t.source}
             entered |= _entered(self.machine, t)
         leaves = self.around(entered)
-        api = next((a for a in chart.apis if a.method == method), None)
-        events = api.events if api is not None else ()
-        candidates = tuple(
-            e
-            for e in events
-            if (d := chart.event(e)) is not None and d.kind is EventKind.COMPLETION
-        )
-        completions = tuple(
-            e
-            for e in candidates
-            if any(e in t.events and t.source in leaves for t in chart.transitions)
-        )
+        candidates, rank = self._completions_of(method)
+        found = {
+            e for s in leaves for t in chart.transitions_from(s) for e in t.events if e in rank
+        }
+        completions = tuple(sorted(found, key=rank.__getitem__))  # in table order
         where = ", ".join(sorted(entered)) or "no known state"
         reason = ""
         if not candidates:
@@ -147,8 +165,8 @@ class DeviceCalls:
         """What ``completion`` of a call that entered ``entered`` enters when reported."""
         leaves = self.around(entered)
         out: set[str] = set()
-        for t in self.chart.transitions:
-            if completion in t.events and t.source in leaves and t.targets:
+        for t in self._on.get(completion, ()):
+            if t.source in leaves and t.targets:
                 out |= _entered(self.machine, t)
         return out
 
