@@ -157,3 +157,22 @@ def test_completions_of_a_call_are_found_without_scanning_every_row(
         counts.append(len(asked))
     # linear: 4x the rows asks at most ~4x as often (a scan per call made it 16x)
     assert counts[1] <= 5 * counts[0], counts
+
+
+def test_a_repeated_guard_is_read_for_names_once(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """C420/C421 read a guard repeated on 400 rows once, not once per row."""
+    import statectl.front.rules.names as names
+
+    names._names_in.cache_clear()
+    reads: list[int] = []
+    real = names._named
+
+    def counting(tree: object) -> object:
+        reads.append(1)
+        return real(tree)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(names, "_named", counting)
+    _check(_device(tmp_path / "d.yaml", 400, guard="previous == 'A'"))
+    assert len(reads) == 1

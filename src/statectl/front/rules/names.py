@@ -19,6 +19,7 @@ Kept in its own module, apart from the structural rules, so each can change alon
 from __future__ import annotations
 
 import ast
+import functools
 from collections.abc import Iterator
 
 from statectl.front.tables.rows import did_you_mean
@@ -77,11 +78,22 @@ def _named(tree: ast.AST) -> Iterator[tuple[str, str]]:
                             yield from ((kind, name) for name in _texts(o))
 
 
+@functools.lru_cache(maxsize=4096)
+def _names_in(guard: str) -> tuple[tuple[str, str], ...]:
+    """:func:`_named` of a guard's text, parsed once however many rows repeat it."""
+    try:
+        tree = ast.parse(guard.strip(), mode="eval")
+    except SyntaxError:
+        return ()  # the builder reports a guard that does not parse (X3xx)
+    return tuple(dict.fromkeys(_named(tree)))
+
+
 def _problem(chart: Chart, t: Transition, kind: str, name: str) -> Diagnostic | None:
-    states = [s.name for s in chart.states]
+    # the lists for the message are made only for a problem: a check per name stays O(1)
     if kind == "in":
         if chart.has_state(name) or "." in name:
             return None
+        states = [s.name for s in chart.states]
         return Diagnostic(
             "C420",
             Severity.ERROR,
@@ -93,6 +105,7 @@ def _problem(chart: Chart, t: Transition, kind: str, name: str) -> Diagnostic | 
     if kind == "state":
         if chart.has_state(name):
             return None
+        states = [s.name for s in chart.states]
         return Diagnostic(
             "C420",
             Severity.ERROR,
@@ -101,9 +114,9 @@ def _problem(chart: Chart, t: Transition, kind: str, name: str) -> Diagnostic | 
             f"state {name!r}",
             did_you_mean(name, states) + "states: " + ", ".join(states),
         )
-    events = list(chart.event_names)
-    if name in events or name.startswith(("done.", "error.")):
+    if chart.event(name) is not None or name.startswith(("done.", "error.")):
         return None
+    events = list(chart.event_names)
     return Diagnostic(
         "C421",
         Severity.ERROR,
@@ -119,11 +132,7 @@ def check_guard_names(chart: Chart) -> Iterator[Diagnostic]:
     for t in chart.transitions:
         if not t.guard:
             continue
-        try:
-            tree = ast.parse(t.guard.strip(), mode="eval")
-        except SyntaxError:
-            continue  # the builder reports a guard that does not parse (X3xx)
-        for kind, name in dict.fromkeys(_named(tree)):
+        for kind, name in _names_in(t.guard):
             found = _problem(chart, t, kind, name)
             if found is not None:
                 yield found
