@@ -174,5 +174,5 @@ def test_a_repeated_guard_is_read_for_names_once(
         return real(tree)  # type: ignore[arg-type]
 
     monkeypatch.setattr(names, "_named", counting)
-    _check(_device(tmp_path / "d.yaml", 400, guard="previous == 'A'"))
+    _check(_device(tmp_path / "d.yaml", 400, guard='previous == "A"'))
     assert len(reads) == 1
