@@ -88,8 +88,8 @@ def test_mistake_ends_cleanly(
 LONG_NAMED = MOTOR.read_text(encoding="utf-8").replace("device: Motor", "device: " + "M" * 300)
 
 BAD_FILES = [
-    ("m.yaml", LONG_NAMED, ["codegen", "{input}", "--out", "out/cpp"], 1, "T110"),
-    ("m.yaml", LONG_NAMED, ["testgen", "{input}", "--out", "out/tests"], 1, "cannot write"),
+    # codegen and testgen cap the file names they make from a name at 64 characters
+    # (docs/limits.md), so a long device name writes there: tests/test_escape.py
     ("m.yaml", LONG_NAMED, ["render", "{input}", "--out", "out/diagrams/"], 1, "T110"),
     ("m.yaml", LONG_NAMED, ["tables", "{input}", "--to", "csv", "--out", "out/csv/"], 1, "T108"),
     # (name, content of an input file in tmp, argv naming it as {input}, exit code, stderr says)
