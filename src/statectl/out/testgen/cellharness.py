@@ -22,7 +22,8 @@ from typing import Any
 
 from statectl.cell.explore import Composed
 from statectl.cell.explore.conditions import bind_cross_guards
-from statectl.cell.explore.replay import CellLinks, link_data
+from statectl.cell.explore.replay import CellLinks
+from statectl.cell.links import sent_data
 from statectl.cell.model import Cell, GlobalExpr
 from statectl.kernel.errors import StatectlError
 from statectl.kernel.model import ControlKind, EventKind, StateKind
@@ -101,7 +102,7 @@ def _settle(subjects: Mapping[str, Subject], links: CellLinks, ready: deque[Subj
 
     def deliver(_event: str, data: Any, _outcome: str) -> None:
         for link in links.due():
-            subjects[link.target].post(link.event, link_data(link, data))
+            subjects[link.target].post(link.event, sent_data(link, data))
 
     offs = [s.on_step(deliver) for s in subjects.values()]
     while ready:
