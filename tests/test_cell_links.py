@@ -115,7 +115,8 @@ class _Taken:
 
 class _Host:
     """A System (or NodeSystem) of the cell as wired by its own code: each step it runs,
-    and the links its firing function (``links.due``, asked after each step) returned."""
+    and the links its firing function (``links.due_links``, asked after each step)
+    returned."""
 
     def __init__(self, system: System) -> None:
         self.system = system
@@ -124,16 +125,15 @@ class _Host:
         assert links is not None
         self.links = links
         self.lids: dict[str, int] = {}
-        due = links.due
-        index = {id(k): i for i, k in enumerate(links.cell.links)}  # equal links are two
+        due = links.due_links
 
-        def sent() -> list[Link]:
+        def sent() -> tuple[int, ...]:
             out = due()
             if self.steps:
-                self.steps[-1].sent.extend(index[id(k)] for k in out)
+                self.steps[-1].sent.extend(out)
             return out
 
-        links.due = sent  # type: ignore[method-assign]
+        links.due_links = sent  # type: ignore[method-assign]
         for name, subject in system.subjects.items():
             subject.listen_steps(self._heard(name))
 

@@ -38,7 +38,7 @@ from typing import Any
 from statectl.cell.explore.compose import Composed, Stimulus
 from statectl.cell.explore.conditions import bind_cross_guards
 from statectl.cell.explore.timeouts import timing_out
-from statectl.cell.links import sent_data
+from statectl.cell.links import Send, sent_data
 from statectl.cell.model import Cell, InputKind, Link
 from statectl.front.tables import safeyaml
 from statectl.front.tables.inputs import read_input_text
@@ -165,15 +165,23 @@ class CellLinks:
             g = self.model.replace(g, d, lid)
         return g
 
-    def due(self) -> list[Link]:
-        """The links fired since the last call whose guards hold now (rule 1); the global
-        state is packed only when one of them has a guard."""
+    def due_links(self) -> tuple[int, ...]:
+        """The links (indices) fired since the last call whose guards hold now (rule 1),
+        forgotten; the global state is packed only when one of them has a guard."""
         if not self.fired:
-            return []
+            return ()
         fired = sorted(set(self.fired))
         self.fired.clear()
+        return self.rules.holding(fired, self.model.link_guard, self.state)
+
+    def due(self) -> list[Link]:
+        """:meth:`due_links` as the links themselves."""
         links = self.cell.links
-        return [links[i] for i in self.rules.holding(fired, self.model.link_guard, self.state)]
+        return [links[i] for i in self.due_links()]
+
+    def sends(self, data: Any) -> list[Send]:
+        """:meth:`due_links` as what each sends after a step whose event had ``data``."""
+        return [self.rules.send(i, data) for i in self.due_links()]
 
 
 class _Runner:

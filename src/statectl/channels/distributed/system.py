@@ -177,12 +177,11 @@ class NodeSystem(System):
         self._remote = {
             d.name: RemoteDevice(d.name, wire) for d in cell.devices if d.name not in self.subjects
         }
-        #: by the link's id: (its target here or None, forwards the step's data?, may drop?),
-        #: worked out once (the hot path of a link event, _link_step)
-        self._routes: dict[int, tuple[Subject | None, bool, bool]] = {
+        #: by the link's id: (its target here or None, may drop?), worked out once (the
+        #: hot path of a link event, _link_step)
+        self._routes: dict[int, tuple[Subject | None, bool]] = {
             id(k): (
                 self.subjects.get(k.target),
-                k.forward_data,
                 self._policy.get(id(k), _QUEUE).on_peer_down is PeerDown.DROP,
             )
             for k in cell.links
@@ -275,7 +274,7 @@ class NodeSystem(System):
 
     def _dropping(self, link: Link) -> bool:
         """A ``drop`` link (its route says so) whose peer is down now."""
-        return self._routes[id(link)][2] and self._wire.down(link)
+        return self._routes[id(link)][1] and self._wire.down(link)
 
     def _link_step(self, event: str, data: Any, outcome: str) -> None:
         """Rules 1 and 4 without a journal, on the owner after a device's step."""
@@ -283,18 +282,18 @@ class NodeSystem(System):
         if not self._live:
             self.links.fired.clear()
             return
-        routes = self._routes
-        for link in self.links.due():
-            target, forward, _ = routes[id(link)]
-            sent = data if forward else link.data
+        routes, links = self._routes, self.links.cell.links
+        for send in self.links.sends(data):  # what each sends: statectl.cell.links
+            link = links[send.link]
+            target = routes[id(link)][0]
             if target is not None:
-                target.post(link.event, sent)
+                target.post(send.event, send.data)
             elif self._dropping(link):
                 dropped = self._policy[id(link)].dropped
                 if dropped is not None:
                     self.subjects[link.source].post(dropped)
             else:
-                self._wire.send(link.target, link.event, sent)
+                self._wire.send(send.target, send.event, send.data)
         if self.rules is not None and self.rules.watching:
             for device, event in self._violations():
                 self._send(device, event)
