@@ -33,6 +33,8 @@ from statectl.cell.values import Link, Trigger
 __all__ = ["CellLinkRules", "Micro", "Send", "Triggers", "sent_data", "triggers"]
 
 S = TypeVar("S")
+#: steps whose fired links are kept (:meth:`CellLinkRules.fired`); then the memo starts over
+_SEEN_MAX = 4096
 
 
 class Micro(Protocol):
@@ -92,6 +94,7 @@ class CellLinkRules:
             table = self._enters if k.trigger is Trigger.ENTERS else self._raises
             table.setdefault(k.source, {}).setdefault(k.what, []).append(i)
         self.sources = frozenset(k.source for k in self.links)
+        self._seen: dict[tuple[str, int], tuple[tuple[Micro, ...], tuple[int, ...]]] = {}
 
     def matching(self, source: str, found: Triggers) -> tuple[int, ...]:
         """Rules 2-4: the links a step of ``source`` that offers ``found`` fires."""
@@ -104,10 +107,24 @@ class CellLinkRules:
         return tuple(sorted(out))
 
     def fired(self, source: str, microsteps: Iterable[Micro]) -> tuple[int, ...]:
-        """Rules 1-4 for a step of ``source`` given as its microsteps."""
+        """Rules 1-4 for a step of ``source`` given as its microsteps.
+
+        The kernel hands out one ``Step`` per plan, so a step's microsteps repeat as
+        the same tuple: its answer is kept (with the tuple, so its id is not reused).
+        """
         if source not in self.sources:
             return ()
-        return self.matching(source, triggers(microsteps))
+        if type(microsteps) is not tuple:
+            return self.matching(source, triggers(microsteps))
+        key = (source, id(microsteps))
+        hit = self._seen.get(key)
+        if hit is not None and hit[0] is microsteps:
+            return hit[1]
+        found = self.matching(source, triggers(microsteps))
+        if len(self._seen) >= _SEEN_MAX:
+            self._seen.clear()
+        self._seen[key] = (microsteps, found)
+        return found
 
     @staticmethod
     def holding(
