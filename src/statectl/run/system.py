@@ -75,7 +75,7 @@ from typing import Any
 
 from statectl.cell.explore.conditions import bind_cross_guards
 from statectl.cell.explore.enforce import CellRules, Violation
-from statectl.cell.explore.replay import CellLinks, link_data
+from statectl.cell.explore.replay import CellLinks
 from statectl.cell.model import Cell
 from statectl.kernel.errors import StatectlError, did_you_mean
 from statectl.kernel.model import Chart
@@ -207,8 +207,8 @@ class System:
         if not self._live:
             self.links.fired.clear()  # entering the initial states fires nothing
             return
-        for link in self.links.due():
-            self.subjects[link.target].post(link.event, link_data(link, data))
+        for send in self.links.sends(data):
+            self.subjects[send.target].post(send.event, send.data)
         self._unchecked = self.rules is not None  # rule 6: once the cascade settles
 
     def _link_sends(self) -> list[tuple[JournalledDevice, str]]:

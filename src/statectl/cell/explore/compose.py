@@ -37,7 +37,8 @@ from statectl.cell.explore.deferred import DEFERRED
 from statectl.cell.explore.local import LocalSpace, Outcome
 from statectl.cell.explore.nodes import crossing, peer_lost
 from statectl.cell.explore.timeouts import timeout_events, timing_out
-from statectl.cell.model import Cell, GlobalExpr, InputKind, Link, Trigger
+from statectl.cell.links import CellLinkRules, Triggers
+from statectl.cell.model import Cell, GlobalExpr, InputKind
 from statectl.kernel.model import EventKind
 from statectl.kernel.semantics import Unhandled
 
@@ -97,11 +98,11 @@ class Branch:
 
 
 #: One outcome of a device step: target local id, handled, why not handled (the
-#: kernel's reason; None: handled), the links it fires as (target device, event, link,
-#: guard), and the condition on the global state before the step under which the
-#: outcome is possible (another device's state a guard read; None: always).
-Fired = tuple[tuple[int, str, int, Predicate | None], ...]
-Move = tuple[int, bool, Unhandled | None, Fired, Predicate | None]
+#: kernel's reason; None: handled), the links whose trigger it matches (their guards
+#: still to be asked, :meth:`Composed.sends`), and the condition on the global state
+#: before the step under which the outcome is possible (another device's state a
+#: guard read; None: always).
+Move = tuple[int, bool, Unhandled | None, tuple[int, ...], Predicate | None]
 
 
 class _InRewriter(ast.NodeTransformer):
@@ -145,6 +146,8 @@ class Composed:
         self.mask = tuple((1 << b) - 1 for b in self.bits)
         self.width = at
         self.links = cell.links
+        self.rules = CellLinkRules(cell.links)  # whether a link fires: statectl.cell.links
+        self.link_target = tuple(self.position[k.target] for k in cell.links)
         self.link_guard: tuple[Predicate | None, ...] = tuple(
             self.predicate(k.guard) if k.guard else None for k in cell.links
         )
@@ -247,32 +250,29 @@ class Composed:
         return reports
 
     def fires(self, d: int, outcome: Outcome) -> tuple[int, ...]:
-        """Indices of the links whose trigger matches device ``d``'s step ``outcome``."""
+        """Indices of the links whose trigger matches device ``d``'s step ``outcome``
+        (statectl.cell.links rules 1-4, as every host of the cell decides it)."""
         key = (d, outcome)
         found = self._fires.get(key)
         if found is None:
-            name = self.names[d]
-            found = tuple(
-                i
-                for i, k in enumerate(self.links)
-                if outcome.handled
-                and k.source == name
-                and (
-                    (k.trigger is Trigger.ENTERS and k.what in outcome.entered)
-                    or (k.trigger is Trigger.RAISES and k.what in outcome.events)
-                )
-            )
+            found = ()
+            if outcome.handled:
+                offered = Triggers(outcome.entered, outcome.events)
+                found = self.rules.matching(self.names[d], offered)
             self._fires[key] = found
         return found
 
+    def sends(self, fired: tuple[int, ...], g: int) -> tuple[tuple[int, str, int], ...]:
+        """The deliveries (target, event, link) the links ``fired`` queue in the state
+        ``g`` after the step: those whose guards hold (statectl.cell.links rule 5)."""
+        if not fired:
+            return ()
+        due = self.rules.holding(fired, self.link_guard, lambda: g)
+        return tuple((self.link_target[i], self.links[i].event, i) for i in due)
+
     def _queue(self, g: int, d: int, outcome: Outcome) -> tuple[tuple[int, str, int], ...]:
-        out: list[tuple[int, str, int]] = []
-        for i in self.fires(d, outcome):
-            guard = self.link_guard[i]
-            if guard is None or guard(g):
-                k: Link = self.links[i]
-                out.append((self.position[k.target], k.event, i))
-        return tuple(out)
+        """The deliveries device ``d``'s step ``outcome`` queues, ``g`` the state after it."""
+        return self.sends(self.fires(d, outcome), g)
 
     def condition(self, d: int, o: Outcome) -> Predicate | None:
         """When outcome ``o`` of device ``d`` is possible: the other devices' states its
@@ -450,17 +450,7 @@ class Composed:
                     o.target,
                     o.happens,
                     o.unhandled,
-                    tuple(
-                        (
-                            self.position[self.links[i].target],
-                            self.links[i].event,
-                            i,
-                            self.link_guard[i],
-                        )
-                        for i in self.fires(d, o)
-                    )
-                    if o.handled
-                    else (),
+                    self.fires(d, o),
                     self.condition(d, o),
                 )
                 for o in self.outcomes(d, lid, event, link)
@@ -487,7 +477,7 @@ class Composed:
         for target, handled, _unhandled, fired, cond in self.moves(d, lid, s.event, self.via(s)):
             if handled and (cond is None or cond(g)):
                 g1 = (g & ~(mask[d] << shift[d])) | (target << shift[d])
-                pending = tuple((t, e, i) for t, e, i, guard in fired if guard is None or guard(g1))
+                pending = self.sends(fired, g1)
                 work.append((g1, pending, (), 1))
         while work:
             g1, pending, bad, count = work.pop()
@@ -509,9 +499,7 @@ class Composed:
                     continue
                 if handled:
                     g2 = (g1 & ~(mask[t] << shift[t])) | (target << shift[t])
-                    more = tuple(
-                        (u, e, i) for u, e, i, guard in fired if guard is None or guard(g2)
-                    )
+                    more = self.sends(fired, g2)
                 else:
                     g2, more = g1, ()
                 bad2 = _bad(bad, t, tlid, event, link, unhandled, harmless[link])

@@ -42,6 +42,7 @@ from typing import Any
 
 from statectl.cell.explore.data import MAX_LOCAL_STATES, DataTracker
 from statectl.cell.explore.deferred import released
+from statectl.cell.links import triggers
 from statectl.front.observers import extract
 from statectl.kernel.errors import Location
 from statectl.kernel.expr import Expression
@@ -333,13 +334,13 @@ class LocalSpace:
         if self.calls is not None and calls and result.handled:
             pending = self.calls.after_calls(pending, calls)
         target = self._id(result.target, after, queue, pending)
-        events = frozenset(m.event for m in result.microsteps if m.event and m.transitions)
+        found = triggers(result.microsteps)  # what the step offers links (cell/links.py)
         notifies = tuple(c[0] for c in calls)
         return Outcome(
             target,
             result.unhandled,
-            frozenset(result.entered),
-            events,
+            found.entered,
+            found.events,
             result.exited,
             result.entered,
             notifies,

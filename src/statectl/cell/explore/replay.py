@@ -38,7 +38,8 @@ from typing import Any
 from statectl.cell.explore.compose import Composed, Stimulus
 from statectl.cell.explore.conditions import bind_cross_guards
 from statectl.cell.explore.timeouts import timing_out
-from statectl.cell.model import Cell, InputKind, Link, Trigger
+from statectl.cell.links import Send, sent_data
+from statectl.cell.model import Cell, InputKind, Link
 from statectl.front.tables import safeyaml
 from statectl.front.tables.inputs import read_input_text
 from statectl.kernel.errors import StatectlError
@@ -54,9 +55,8 @@ from statectl.run.runtime import (
     Subject,
     format_record,
 )
-from statectl.run.runtime.records import taken
 
-__all__ = ["CellLinks", "CellRun", "ReplayStep", "fires", "link_data", "load_replay", "run_cell"]
+__all__ = ["CellLinks", "CellRun", "ReplayStep", "load_replay", "run_cell"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -112,20 +112,13 @@ class CellRun:
     unhandled: tuple[str, ...]
 
 
-def fires(link: Link, r: MicrostepTaken) -> bool:
-    """Whether ``link`` of ``r``'s device fires on that microstep: it entered the link's
-    state (``enters``), or took a transition on the link's event (``raises``)."""
-    if link.trigger is Trigger.ENTERS:
-        return link.what in r.entered
-    return bool(r.transitions) and r.event == link.what
-
-
 class CellLinks:
     """A cell's links over running Subjects: which links a step fired, and whether they hold.
 
-    Listen with :meth:`watch` on every device; after a device's step, :meth:`due`
-    gives the links that step fired whose guards hold in the global state now, in
-    the cell file's order, and forgets them.
+    Listen with :meth:`watch_step` (or :meth:`watch`) on every device; after a
+    device's step, :meth:`due` gives the links that step fired whose guards hold in
+    the global state now, in the cell file's order, and forgets them. Both
+    questions are :mod:`statectl.cell.links`'s, asked as the explorer asks them.
     """
 
     def __init__(
@@ -133,29 +126,26 @@ class CellLinks:
     ) -> None:
         self.cell = cell
         self.model = model if model is not None else Composed(cell)
+        self.rules = self.model.rules
         self.subjects = subjects
         self.fired: list[int] = []
 
     def watch(self, r: Record) -> None:
-        if type(r) is not MicrostepTaken:
-            return
-        for i, k in enumerate(self.cell.links):
-            if k.source == r.device and fires(k, r):
-                self.fired.append(i)
+        """Note the links a microstep's record fires (records a failing observer cut short)."""
+        if type(r) is MicrostepTaken and r.device in self.rules.sources:
+            self.fired.extend(self.rules.fired(r.device, (r,)))
 
     def watch_step(self, step: StepRecord) -> None:
-        """:meth:`watch` as a step listener: only the states a step entered and the
-        transitions it took become records (a failed step's own records are read)."""
+        """:meth:`watch` as a step listener: the kernel's step is read as it is (a failed
+        step's own records are read: they end where the step did)."""
         decided = step.step
         if decided is None or step.failed:
             if decided is not None or step.event is None:  # else nothing entered or taken
                 for record in step.records:
                     self.watch(record)
             return
-        device, time = step.device, step.time
-        for micro in decided.microsteps:
-            took = taken(micro)
-            self.watch(MicrostepTaken(device, time, micro.event, micro.exited, took, micro.entered))
+        if step.device in self.rules.sources:
+            self.fired.extend(self.rules.fired(step.device, decided.microsteps))
 
     def state(self) -> int:
         """The explorer's packed global state for the subjects' snapshots."""
@@ -175,24 +165,23 @@ class CellLinks:
             g = self.model.replace(g, d, lid)
         return g
 
-    def due(self) -> list[Link]:
-        """The links fired since the last call whose guards hold now (rule 1)."""
+    def due_links(self) -> tuple[int, ...]:
+        """The links (indices) fired since the last call whose guards hold now (rule 1),
+        forgotten; the global state is packed only when one of them has a guard."""
         if not self.fired:
-            return []
+            return ()
         fired = sorted(set(self.fired))
         self.fired.clear()
-        g = self.state()
-        out = []
-        for i in fired:
-            guard = self.model.link_guard[i]
-            if guard is None or guard(g):
-                out.append(self.cell.links[i])
-        return out
+        return self.rules.holding(fired, self.model.link_guard, self.state)
 
+    def due(self) -> list[Link]:
+        """:meth:`due_links` as the links themselves."""
+        links = self.cell.links
+        return [links[i] for i in self.due_links()]
 
-def link_data(link: Link, data: Any) -> Any:
-    """The event data ``link`` sends when the triggering step had ``data``."""
-    return data if link.forward_data else link.data
+    def sends(self, data: Any) -> list[Send]:
+        """:meth:`due_links` as what each sends after a step whose event had ``data``."""
+        return [self.rules.send(i, data) for i in self.due_links()]
 
 
 class _Runner:
@@ -322,7 +311,7 @@ class _Runner:
         out = []
         for k in self.links.due():
             self.out(f"          link: {k.label}\n")
-            out.append((k, link_data(k, data)))
+            out.append((k, sent_data(k, data)))
         return out
 
 

@@ -42,13 +42,13 @@ from typing import Any, Protocol, cast
 from statectl.cell.explore.conditions import bind_cross_guards
 from statectl.cell.explore.enforce import CellRules
 from statectl.cell.explore.replay import CellLinks
-from statectl.cell.model import Cell, Link, Trigger
+from statectl.cell.model import Cell, Link
 from statectl.cell.nodes import LinkDelivery, PeerDown
 from statectl.cell.options import cross_refs
 from statectl.kernel.errors import StatectlError
 from statectl.kernel.semantics import Snapshot
 from statectl.run.journal import JournalledDevice, Ticket
-from statectl.run.runtime import MicrostepTaken, Record, Subject
+from statectl.run.runtime import Subject
 from statectl.run.system import System
 
 __all__ = ["NodeLinks", "NodeSystem", "RemoteDevice", "WireSide"]
@@ -68,64 +68,6 @@ class NodeLinks(CellLinks):
     def __init__(self, cell: Cell, subjects: Mapping[str, Subject], mirror: dict[str, int]):
         super().__init__(cell, subjects)
         self.mirror = mirror  # device on another node -> local id of its last published state
-        # per source device: (link index, fires on entering?, state or event); one look-up
-        # per record instead of a walk over every link of the cell
-        self._by_source: dict[str, list[tuple[int, bool, str]]] = {}
-        for i, k in enumerate(cell.links):
-            entry = (i, k.trigger is Trigger.ENTERS, k.what)
-            self._by_source.setdefault(k.source, []).append(entry)
-        self._guarded = tuple(g is not None for g in self.model.link_guard)
-
-    def hook(self, name: str, subject: Subject) -> None:
-        """Hear ``subject``'s steps that fire a link, without records: a watcher for the
-        states ``enters`` links name, a step listener for ``raises`` links (register it
-        before the step listener that sends the links)."""
-        entries = self._by_source.get(name, [])
-        enters: dict[str, list[int]] = {}
-        raises: dict[str, list[int]] = {}
-        for i, on_entry, what in entries:
-            (enters if on_entry else raises).setdefault(what, []).append(i)
-        fired = self.fired
-        if enters:
-            subject.watch(enters, _Entered(enters, fired))
-        if raises:
-
-            def took(event: str, data: Any, outcome: str) -> None:
-                if outcome == "handled":
-                    links = raises.get(event)
-                    if links is not None:
-                        fired.extend(links)
-
-            subject.on_step(took)
-
-    def watch(self, r: Record) -> None:
-        links = self._by_source.get(r.device)
-        if links is None:
-            return
-        if type(r) is not MicrostepTaken:
-            return
-        took = r.event if r.transitions else None
-        for i, enters, what in links:
-            if what in r.entered if enters else what == took:
-                self.fired.append(i)
-
-    def due(self) -> list[Link]:
-        """As :meth:`CellLinks.due`; the global state is packed only for a guarded link."""
-        pending = self.fired
-        if not pending:
-            return []
-        fired = (pending[0],) if len(pending) == 1 else sorted(set(pending))
-        pending.clear()
-        if not any(self._guarded[i] for i in fired):
-            return [self.cell.links[i] for i in fired]
-        g = self.state()
-        guards = self.model.link_guard
-        out = []
-        for i in fired:
-            guard = guards[i]
-            if guard is None or guard(g):
-                out.append(self.cell.links[i])
-        return out
 
     def seen(self, name: str) -> int:
         """The local id of a device on another node: its last published state, else initial."""
@@ -150,23 +92,6 @@ class NodeLinks(CellLinks):
                     raise StatectlError(f"{name} is in a state the explorer never saw")
             g = model.replace(g, d, lid)
         return g
-
-
-class _Entered:
-    """A state watcher that notes the ``enters`` links a state's entry fires (no records)."""
-
-    def __init__(self, links: dict[str, list[int]], fired: list[int]) -> None:
-        self._links = links
-        self._fired = fired
-
-    def entered(self, state: str) -> None:
-        self._fired.extend(self._links[state])
-
-    def exited(self, state: str) -> None:
-        pass
-
-    def finished(self) -> None:
-        pass
 
 
 class _Mirrored:
@@ -252,12 +177,11 @@ class NodeSystem(System):
         self._remote = {
             d.name: RemoteDevice(d.name, wire) for d in cell.devices if d.name not in self.subjects
         }
-        #: by the link's id: (its target here or None, forwards the step's data?, may drop?),
-        #: worked out once (the hot path of a link event, _link_step)
-        self._routes: dict[int, tuple[Subject | None, bool, bool]] = {
+        #: by the link's id: (its target here or None, may drop?), worked out once (the
+        #: hot path of a link event, _link_step)
+        self._routes: dict[int, tuple[Subject | None, bool]] = {
             id(k): (
                 self.subjects.get(k.target),
-                k.forward_data,
                 self._policy.get(id(k), _QUEUE).on_peer_down is PeerDown.DROP,
             )
             for k in cell.links
@@ -269,12 +193,9 @@ class NodeSystem(System):
         if self.enforce:
             watched = tuple(i for i in cell.invariants if self._watches(i.expr.refs))
             self.rules = CellRules(replace(cell, invariants=watched), links)
-        sources = {k.source for k in cell.links}
         for name, s in self.subjects.items():
-            if name in self.bound and name in sources:  # heard before the journal's step hook
+            if name in links.rules.sources:  # heard before the step hook that sends the links
                 s.listen_steps(links.watch_step)
-            elif name in sources:  # heard without records (NodeLinks.hook)
-                links.hook(name, s)
             if name in self.bound:
                 self.bound[name].sends = self._link_sends
             else:
@@ -353,7 +274,7 @@ class NodeSystem(System):
 
     def _dropping(self, link: Link) -> bool:
         """A ``drop`` link (its route says so) whose peer is down now."""
-        return self._routes[id(link)][2] and self._wire.down(link)
+        return self._routes[id(link)][1] and self._wire.down(link)
 
     def _link_step(self, event: str, data: Any, outcome: str) -> None:
         """Rules 1 and 4 without a journal, on the owner after a device's step."""
@@ -361,18 +282,18 @@ class NodeSystem(System):
         if not self._live:
             self.links.fired.clear()
             return
-        routes = self._routes
-        for link in self.links.due():
-            target, forward, _ = routes[id(link)]
-            sent = data if forward else link.data
+        routes, links = self._routes, self.links.cell.links
+        for send in self.links.sends(data):  # what each sends: statectl.cell.links
+            link = links[send.link]
+            target = routes[id(link)][0]
             if target is not None:
-                target.post(link.event, sent)
+                target.post(send.event, send.data)
             elif self._dropping(link):
                 dropped = self._policy[id(link)].dropped
                 if dropped is not None:
                     self.subjects[link.source].post(dropped)
             else:
-                self._wire.send(link.target, link.event, sent)
+                self._wire.send(send.target, send.event, send.data)
         if self.rules is not None and self.rules.watching:
             for device, event in self._violations():
                 self._send(device, event)

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from statectl.cell.explore.replay import fires
+from statectl.cell.links import CellLinkRules
 from statectl.cell.model import Cell, Trigger, load_cell_or_raise
 from statectl.kernel.model import Chart
 from statectl.kernel.semantics import compiled
@@ -85,12 +85,9 @@ def _first_step(records: list[Record]) -> list[Record]:
 
 
 def _fired(cell: Cell, device: str, first: list[Record]) -> list[int]:
-    out = []
-    steps = [r for r in first if type(r) is MicrostepTaken]
-    for i, k in enumerate(cell.links):
-        if k.source == device and any(fires(k, r) for r in steps):
-            out.append(i)
-    return out
+    """The links the step recorded in ``first`` fires (statectl.cell.links)."""
+    steps = [r for r in first if type(r) is MicrostepTaken and r.device == device]
+    return list(CellLinkRules(cell.links).fired(device, steps))
 
 
 def _within(chart: Chart, state: str, outer: str) -> bool:

@@ -22,7 +22,7 @@ from typing import Any
 
 from statectl.cell.explore import Composed
 from statectl.cell.explore.conditions import bind_cross_guards
-from statectl.cell.explore.replay import CellLinks, link_data
+from statectl.cell.explore.replay import CellLinks
 from statectl.cell.model import Cell, GlobalExpr
 from statectl.kernel.errors import StatectlError
 from statectl.kernel.model import ControlKind, EventKind, StateKind
@@ -100,8 +100,8 @@ def _settle(subjects: Mapping[str, Subject], links: CellLinks, ready: deque[Subj
     """Run the devices with work until none has; deliver the links each step fires."""
 
     def deliver(_event: str, data: Any, _outcome: str) -> None:
-        for link in links.due():
-            subjects[link.target].post(link.event, link_data(link, data))
+        for send in links.sends(data):
+            subjects[send.target].post(send.event, send.data)
 
     offs = [s.on_step(deliver) for s in subjects.values()]
     while ready:
