@@ -10,8 +10,7 @@ import ast
 from collections.abc import Mapping
 
 from statectl.cell.values import GlobalExpr
-from statectl.front.tables.rows import did_you_mean
-from statectl.kernel.errors import Diagnostic, Location, Severity
+from statectl.kernel.errors import Diagnostic, Location, Severity, did_you_mean
 from statectl.kernel.expr import compile_expression
 from statectl.kernel.model import Chart
 

@@ -17,8 +17,7 @@ from statectl.cell.options import LINK_OPTION_KEYS, link_options, send_and_data
 from statectl.cell.values import DeviceRef, EnvInput, GlobalExpr, InputKind, Link, Trigger
 from statectl.front.builder.build import load_and_build
 from statectl.front.rules.names import check_guard_names
-from statectl.front.tables.rows import did_you_mean
-from statectl.kernel.errors import Diagnostic, Location, Severity, has_errors
+from statectl.kernel.errors import Diagnostic, Location, Severity, did_you_mean, has_errors
 from statectl.kernel.model import Chart, ControlKind, EventKind
 
 #: The keys of an entry in each of a cell's lists (the JSON Schema, out/schema.py, reads them).

@@ -22,8 +22,7 @@ import ast
 import functools
 from collections.abc import Iterator
 
-from statectl.front.tables.rows import did_you_mean
-from statectl.kernel.errors import Diagnostic, Severity
+from statectl.kernel.errors import Diagnostic, Severity, did_you_mean
 from statectl.kernel.model import Chart, Transition
 
 __all__ = ["check_guard_names"]
