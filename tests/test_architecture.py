@@ -12,14 +12,15 @@ import statectl
 SRC = Path(statectl.__file__).parent
 
 #: Each layer may import only from the layers listed for it (and from itself).
-KERNEL = ("errors", "codes", "text", "model", "expr", "semantics")
-#: ``codes`` (the registry of diagnostic codes) and ``text`` (the display escape of names)
-#: stand beside ``errors``: a layer that may import ``errors`` may import them too (see
-#: ``allowed_for``).
-BESIDE_ERRORS = ("codes", "text")
+KERNEL = ("errors", "codes", "exits", "text", "model", "expr", "semantics")
+#: ``codes`` (the registry of diagnostic codes), ``exits`` (the exit statuses) and ``text``
+#: (the display escape of names) stand beside ``errors``: a layer that may import ``errors``
+#: may import them too (see ``allowed_for``).
+BESIDE_ERRORS = ("codes", "exits", "text")
 ALLOWED: dict[str, tuple[str, ...]] = {
     "errors": (),
     "codes": ("errors",),
+    "exits": (),
     "text": (),
     "escape": ("errors",),  # out/escape/: one escaping function per target, per language
     "model": ("errors",),

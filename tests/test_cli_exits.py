@@ -7,6 +7,7 @@ a failed run, 2 for a usage error, never a traceback, nothing half-written.
 
 from __future__ import annotations
 
+import ast
 import os
 import subprocess
 import sys
@@ -477,3 +478,74 @@ def test_a_driver_module_that_fails_is_one_line_naming_its_file_and_line(
     done = statectl(argv, tmp_path, "Grip\n")
     assert (done.returncode, "Traceback" in done.stderr) == (1, False), done.stderr
     assert says in done.stderr, done.stderr
+
+
+SRC = ROOT / "src" / "statectl"
+#: Functions that return an int literal that is not an exit status, with why.
+NOT_EXIT_STATUSES = {
+    "channels/cli/kinds.py:_line_of",  # a line number in the file, 1 when unknown
+}
+
+
+_EXIT_NAMES = {"OK", "PROBLEMS", "USAGE", "INTERRUPTED", "BROKEN_PIPE"}
+
+
+def _literal_int(node: ast.expr | None) -> bool:
+    """``node`` is an int literal (``True``/``False`` are not exit statuses)."""
+    return isinstance(node, ast.Constant) and type(node.value) is int
+
+
+def _literal_exit_statuses(path: Path) -> list[str]:
+    """Where ``path`` writes an exit status as a number instead of a kernel/exits.py name.
+
+    Calls: ``sys.exit(2)``, ``SystemExit(2)``, ``os._exit(1)``, ``parser.exit(2, ...)``,
+    anywhere. Returns: ``return 1`` in a function annotated ``-> int`` of a command-line
+    module (channels/cli/, or any module that uses kernel/exits.py's names). Assignments:
+    ``USAGE = 2`` (or ``OK, PROBLEMS, USAGE = 0, 1, 2``) outside kernel/exits.py.
+    """
+    rel = path.relative_to(SRC).as_posix()
+    text = path.read_text(encoding="utf-8")
+    tree = ast.parse(text)
+    commands = rel.startswith("channels/cli/") or "statectl.kernel.exits" in text
+    found: list[str] = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Assign | ast.AnnAssign) and rel != "kernel/exits.py":
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            names = {n.id for t in targets for n in ast.walk(t) if isinstance(n, ast.Name)}
+            values = (
+                [v for v in ast.walk(node.value) if isinstance(v, ast.expr)] if node.value else []
+            )
+            if names & _EXIT_NAMES and any(_literal_int(v) for v in values):
+                found.append(f"{rel}:{node.lineno}")
+        if isinstance(node, ast.Call) and node.args and _literal_int(node.args[0]):
+            func = node.func
+            name = func.id if isinstance(func, ast.Name) else getattr(func, "attr", "")
+            if name in {"exit", "_exit", "SystemExit"}:
+                found.append(f"{rel}:{node.lineno}")
+        if commands and isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+            returns_int = isinstance(node.returns, ast.Name) and node.returns.id == "int"
+            if not returns_int or f"{rel}:{node.name}" in NOT_EXIT_STATUSES:
+                continue
+            found += [
+                f"{rel}:{r.lineno}"
+                for r in ast.walk(node)
+                if isinstance(r, ast.Return) and _literal_int(r.value)
+            ]
+    return found
+
+
+def test_exit_statuses_are_named_once() -> None:
+    """Every exit status in src/ is a name from kernel/exits.py, never a number written again."""
+    found = [where for path in sorted(SRC.rglob("*.py")) for where in _literal_exit_statuses(path)]
+    assert found == [], "use OK/PROBLEMS/USAGE/... from statectl.kernel.exits"
+
+
+def test_exit_statuses_are_what_shells_expect() -> None:
+    """0/1/2 as the docs say; 130 and 141 are 128 + SIGINT and 128 + SIGPIPE."""
+    import signal
+
+    from statectl.kernel import exits
+
+    assert (exits.OK, exits.PROBLEMS, exits.USAGE) == (0, 1, 2)
+    assert exits.INTERRUPTED == 128 + signal.SIGINT
+    assert exits.BROKEN_PIPE == 128 + signal.SIGPIPE

@@ -24,8 +24,9 @@ from pathlib import Path
 
 import pytest
 
-from statectl.channels.cli import BROKEN_PIPE, main
+from statectl.channels.cli import main
 from statectl.channels.cli.run import run
+from statectl.kernel.exits import BROKEN_PIPE
 from statectl.kernel.semantics import Snapshot
 from statectl.run.journal import (
     Journal,

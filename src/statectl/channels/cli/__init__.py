@@ -1,6 +1,7 @@
 """The ``statectl`` command: parse, call one function, print, exit code.
 
-Exit codes: 0 success, 1 problems found (diagnostics, a failed run), 2 usage error.
+Exit codes (:mod:`statectl.kernel.exits`): 0 success, 1 problems found (diagnostics, a
+failed run), 2 usage error.
 Every command takes ``argv`` so tests call :func:`main` in-process. Imports of the
 pipeline happen inside each command so ``statectl --help`` stays fast.
 
@@ -20,8 +21,6 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from statectl.channels.cli.commands import (
-    PROBLEMS,
-    USAGE,
     _print_diagnostics,
     cmd_build,
     cmd_check,
@@ -40,6 +39,7 @@ from statectl.channels.cli.commands import (
 )
 from statectl.channels.cli.extras import check_extras
 from statectl.kernel.errors import DiagnosticError, MissingExtra, StatectlError
+from statectl.kernel.exits import BROKEN_PIPE, INTERRUPTED, PROBLEMS, USAGE
 
 __all__ = ["main"]
 
@@ -390,7 +390,7 @@ def main(
         return PROBLEMS
     except KeyboardInterrupt:
         err.write("statectl: interrupted\n")
-        return 130
+        return INTERRUPTED
     except BrokenPipeError as exc:
         if not _reader_gone(out):  # another pipe (a driver's): an error like any other
             err.write(f"statectl: {exc}\n")
@@ -401,11 +401,6 @@ def main(
         err.write(f"statectl {_command(args)}: {where}{exc.strerror or exc}\n")
         return PROBLEMS
     return code
-
-
-#: The exit status of a command whose reader went away (``statectl journal show DB | head``),
-#: as if SIGPIPE had ended it: 128 + 13, what a shell reports for such a tool.
-BROKEN_PIPE = 141
 
 
 def _reader_gone(out: TextIO) -> bool:

@@ -10,6 +10,7 @@ from typing import TextIO
 from statectl.channels.cli.outputs import output, wrote
 from statectl.channels.cli.progress import CountProgress
 from statectl.kernel.errors import DiagnosticError, Severity
+from statectl.kernel.exits import OK, PROBLEMS, USAGE
 from statectl.out.codegen.cpp import generate
 
 
@@ -19,7 +20,7 @@ def run_codegen(
     """``statectl codegen FILE --target cpp --out DIR``: 0 written, 1 diagnostics, 2 usage."""
     if target != "cpp":
         err.write(f"statectl codegen: unknown target {target!r} (available: cpp)\n")
-        return 2
+        return USAGE
     from statectl.front.builder.build import (
         load_and_build,  # outer ring: codegen reads tables via build
     )
@@ -30,13 +31,13 @@ def run_codegen(
         chart, diags = None, list(exc.diagnostics)
     except OSError as exc:
         err.write(f"statectl codegen: cannot read {path}: {exc.strerror or exc}\n")
-        return 2
+        return USAGE
     if chart is None:
         from statectl.channels.cli.kinds import cell_instead
 
         for d in cell_instead(path, diags):  # C415: a cell file given for a device file
             err.write(f"{d}\n")
-        return 1
+        return PROBLEMS
     show = err.isatty() if progress is None else progress  # as verify --progress
     printer = CountProgress("codegen", "configurations stepped", err) if show else None
     with output(out_dir, directory=True) as folder:  # cli/outputs.py: the one output rule
@@ -47,7 +48,7 @@ def run_codegen(
         if d.severity is not Severity.INFO:
             err.write(f"{d}\n")
     if not written:
-        return 1
+        return PROBLEMS
     for p in written:
         wrote(out, p)
-    return 0
+    return OK

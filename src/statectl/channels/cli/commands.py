@@ -16,12 +16,10 @@ from typing import TYPE_CHECKING, TextIO
 
 from statectl.channels.cli.outputs import output, wrote
 from statectl.kernel.errors import Diagnostic, Severity, StatectlError, has_errors
+from statectl.kernel.exits import OK, PROBLEMS, USAGE
 
 if TYPE_CHECKING:  # the pipeline is imported inside each command, to keep --help fast
     from statectl.kernel.model import Chart
-
-
-OK, PROBLEMS, USAGE = 0, 1, 2
 
 
 def input_exists(path: Path) -> bool:

@@ -11,7 +11,8 @@ import argparse
 import importlib.util
 from typing import Any, TextIO
 
-from statectl.channels.cli.commands import OK, USAGE, _emit
+from statectl.channels.cli.commands import _emit
+from statectl.kernel.exits import OK, USAGE
 
 __all__ = ["register"]
 

@@ -16,9 +16,9 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any, TextIO
 
-from statectl.channels.cli.commands import OK, PROBLEMS, USAGE
 from statectl.channels.cli.outputs import output, wrote
 from statectl.kernel.errors import DiagnosticError, StatectlError, did_you_mean
+from statectl.kernel.exits import OK, PROBLEMS, USAGE
 from statectl.kernel.model import Chart
 from statectl.kernel.text import shown
 from statectl.run.journal import (

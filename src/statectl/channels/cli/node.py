@@ -35,9 +35,9 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, TextIO
 
-from statectl.channels.cli.commands import PROBLEMS, USAGE
 from statectl.channels.cli.problems import Problems, verdict
 from statectl.kernel.errors import DiagnosticError, StatectlError, did_you_mean
+from statectl.kernel.exits import OK, PROBLEMS, USAGE
 
 __all__ = ["dashboard_main", "node_main", "register"]
 
@@ -169,7 +169,7 @@ def dashboard_main(
                 streams=table.dashboard.streams,
                 station=as_station,
             )
-        return 0
+        return OK
     except (StatectlError, OSError) as exc:
         err.write(f"statectl dashboard: {exc}\n")
         return PROBLEMS

@@ -12,8 +12,8 @@ from collections.abc import Callable
 from typing import Any, TextIO
 
 from statectl.cell.explore.enforce import Refused, Violation
-from statectl.channels.cli.commands import OK, PROBLEMS
 from statectl.kernel.errors import UnhandledEventError
+from statectl.kernel.exits import OK, PROBLEMS
 from statectl.kernel.semantics import Unhandled
 from statectl.run.runtime.records import EventIgnored, EventRejected, StepRecord
 

@@ -15,10 +15,10 @@ from typing import Any, TextIO
 
 from statectl.channels.cli.outputs import output, wrote
 from statectl.kernel.errors import did_you_mean
+from statectl.kernel.exits import OK, PROBLEMS, USAGE
 
 __all__ = ["cmd_new", "cmd_profiles", "register"]
 
-OK, PROBLEMS, USAGE = 0, 1, 2
 FORMATS = ("yaml", "csv", "xlsx", "md")
 
 

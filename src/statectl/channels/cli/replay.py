@@ -11,8 +11,8 @@ from typing import TextIO
 
 from statectl.cell.explore.replay import load_replay, run_cell
 from statectl.cell.model import load_cell
-from statectl.channels.cli.commands import OK, PROBLEMS, USAGE
 from statectl.kernel.errors import Severity, StatectlError
+from statectl.kernel.exits import OK, PROBLEMS, USAGE
 
 
 def run_main(

@@ -72,7 +72,7 @@ from urllib.parse import urlparse
 
 from statectl.cell.explore.enforce import Refused
 from statectl.cell.model import Cell, load_cell
-from statectl.channels.cli.commands import PROBLEMS, USAGE, input_exists
+from statectl.channels.cli.commands import input_exists
 from statectl.channels.cli.outputs import output, wrote
 from statectl.channels.cli.problems import Problems, verdict
 from statectl.channels.cli.run_journal import (
@@ -90,6 +90,7 @@ from statectl.kernel.errors import (
     StatectlError,
     did_you_mean,
 )
+from statectl.kernel.exits import PROBLEMS, USAGE
 from statectl.run.commands import Origin
 from statectl.run.devices import (
     MIN_TOKEN,

@@ -14,7 +14,7 @@ import threading
 from pathlib import Path
 from typing import Any, TextIO
 
-from statectl.channels.cli.commands import OK, PROBLEMS, USAGE
+from statectl.kernel.exits import OK, PROBLEMS, USAGE
 
 __all__ = ["journal_ship", "register"]
 

@@ -22,10 +22,10 @@ from statectl.cell.explore.search import DEFAULT_MAX_STATES, explore
 from statectl.cell.explore.verify import write_traces
 from statectl.cell.model import Cell, load_cell
 from statectl.channels.cli import outputs
-from statectl.channels.cli.commands import OK, PROBLEMS, USAGE
 from statectl.channels.cli.progress import ProgressPrinter
 from statectl.front.tables import write_files
 from statectl.kernel.errors import Severity
+from statectl.kernel.exits import OK, PROBLEMS, USAGE
 
 
 def verify_main(

@@ -19,6 +19,7 @@ from typing import Any, TextIO, cast
 
 from statectl.cell.model import Cell
 from statectl.kernel.errors import MissingExtra, StatectlError
+from statectl.kernel.exits import OK
 from statectl.kernel.model import Chart
 from statectl.kernel.semantics import Snapshot
 from statectl.run.runtime import Subject
@@ -139,7 +140,7 @@ def station(
         if ready is not None:
             ready(url)
         stop.wait()
-        return 0
+        return OK
     finally:
         if server is not None:
             server.stop()

@@ -11,9 +11,10 @@ import argparse
 from pathlib import Path
 from typing import Any, TextIO
 
+from statectl.kernel.exits import OK, PROBLEMS, USAGE
+
 __all__ = ["cmd_coverage", "cmd_testgen", "register"]
 
-OK, PROBLEMS, USAGE = 0, 1, 2
 CRITERIA = ("rows", "transitions", "states", "pairs")  # testgen.cases.CRITERIA, kept light
 
 
