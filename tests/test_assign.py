@@ -241,7 +241,7 @@ def _counter(assign_swap: str = "count = other; other = count") -> Chart:
 
 def test_codegen_turns_assignments_into_assign_effects() -> None:
     """Each transition's assignments become one ASSIGN effect, first in its step."""
-    from statectl.out.codegen.flat import EffectKind, Outcome
+    from statectl.out.codegen.flat import EffectKind, FlatStep
     from statectl.out.codegen.flatten import flatten
 
     flat, diags = flatten(_counter())
@@ -252,8 +252,8 @@ def test_codegen_turns_assignments_into_assign_effects() -> None:
     ]
     assert flat.assignments[1].stores == (("count", "c.other"), ("other", "c.count"))
     go = flat.dispatch[0][flat.events.index("Go")]
-    leaves = [go] if isinstance(go, Outcome) else [go.if_true, go.if_false]
-    taken = next(o for o in leaves if isinstance(o, Outcome) and o.handled)
+    leaves = [go] if isinstance(go, FlatStep) else [go.if_true, go.if_false]
+    taken = next(o for o in leaves if isinstance(o, FlatStep) and o.handled)
     assert taken.effects[0].kind is EffectKind.ASSIGN
 
 

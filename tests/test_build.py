@@ -10,7 +10,7 @@ from statectl.front.builder.build import build, load_and_build, load_chart
 from statectl.front.tables import DeviceTables
 from statectl.front.tables.yaml_io import read_yaml
 from statectl.kernel.errors import DiagnosticError, Severity
-from statectl.kernel.model import Chart, ControlKind, EventKind, Invoke, Notify, StateKind
+from statectl.kernel.model import Chart, ControlKind, EventKind, InvokeNumber, Notify, StateKind
 
 MOTOR_YAML = Path(__file__).resolve().parent.parent / "examples" / "motor" / "motor.yaml"
 
@@ -69,9 +69,9 @@ def test_motor_has_the_papers_states_and_transitions() -> None:
 def test_motor_invokes_are_the_papers() -> None:
     """Invoke numbers: Moving = 0, Returning = 1, Error = 2, as in the paper."""
     assert motor().invokes == (
-        Invoke(0, "Moving", "Movement"),
-        Invoke(1, "Returning", "Initialization"),
-        Invoke(2, "Error", "Error"),
+        InvokeNumber(0, "Moving", "Movement"),
+        InvokeNumber(1, "Returning", "Initialization"),
+        InvokeNumber(2, "Error", "Error"),
     )
 
 
@@ -327,7 +327,7 @@ def test_explicit_invoke_name_wins() -> None:
         )
     )
     assert chart is not None
-    assert chart.invokes == (Invoke(0, "Start", "Go"),)
+    assert chart.invokes == (InvokeNumber(0, "Start", "Go"),)
     assert chart.transitions[0].actions == (Notify(0, "Start", "Go", "go"),)
 
 

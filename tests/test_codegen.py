@@ -20,15 +20,17 @@ from statectl.kernel.model import (
     Chart,
     DataItem,
     EventDef,
-    Invoke,
+    InvokeNumber,
     Log,
     Notify,
     Script,
     State,
     Transition,
 )
+from statectl.kernel.semantics import Unhandled
 from statectl.out.codegen import flatten, generate
-from statectl.out.codegen.flatten import Decision, Outcome, Unhandled, identifiers
+from statectl.out.codegen.cpp_names import identifiers
+from statectl.out.codegen.flat import Decision, FlatStep
 
 ROOT = Path(__file__).resolve().parent.parent
 MOTOR = ROOT / "examples" / "motor" / "motor.yaml"
@@ -78,7 +80,7 @@ def test_motor_outcomes_say_why_unhandled(
     flat, _ = flatten(load_chart(MOTOR))
     assert flat is not None
     cell = flat.dispatch[config][flat.events.index(event)]
-    assert isinstance(cell, Outcome) and cell.unhandled is expected
+    assert isinstance(cell, FlatStep) and cell.unhandled is expected
 
 
 def test_guard_over_context_becomes_a_runtime_decision() -> None:
@@ -128,7 +130,7 @@ def test_guard_over_context_becomes_a_runtime_decision() -> None:
                 "transitions": (
                     Transition("A", ("go",), ("B",), actions=(Notify(7, "X", "Y", "go"),)),
                 ),
-                "invokes": (Invoke(0, "Z", "Zed"),),
+                "invokes": (InvokeNumber(0, "Z", "Zed"),),
             },
             "G709",
         ),

@@ -29,7 +29,7 @@ from statectl.kernel.model import (
     Chart,
     DataItem,
     EventDef,
-    Invoke,
+    InvokeNumber,
     Notify,
     Raise,
     State,
@@ -44,7 +44,7 @@ MOTOR = ROOT / "examples" / "motor" / "motor.yaml"
 
 pytestmark = needs_gxx
 
-INVOKES = (Invoke(0, "Alpha", "Start"), Invoke(1, "Beta", "Stop"))
+INVOKES = (InvokeNumber(0, "Alpha", "Start"), InvokeNumber(1, "Beta", "Stop"))
 EVENTS = ("go", "stop", "tick", "go fast")
 #: Events only the chart raises (transitions may still wait for them).
 RAISED = ("ping", "pong")

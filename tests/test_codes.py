@@ -210,7 +210,6 @@ VIEWS = [
     ("statectl.front.builder.build", "B2"),
     ("statectl.front.rules", "C4"),
     ("statectl.front.recovery", "J6"),
-    ("statectl.run.journal", "J6"),
     ("statectl.out.codegen", "G7"),
     ("statectl.out.codegen.flatten", "G7"),
     ("statectl.cell.model", "V8"),

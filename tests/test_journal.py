@@ -14,6 +14,7 @@ import pytest
 from statectl.channels.cli.demo import motor_chart
 from statectl.channels.cli.journal import journal_export, journal_replay, journal_show
 from statectl.channels.cli.run import run
+from statectl.front.recovery import check_recovery
 from statectl.front.tables import load
 from statectl.kernel.errors import DiagnosticError
 from statectl.run.devices import SimMotor
@@ -24,7 +25,6 @@ from statectl.run.journal import (
     JournalReader,
     StepKind,
     Sync,
-    check_recovery,
     export_jsonl,
     load_device,
     replay,

@@ -15,7 +15,7 @@ import pytest
 
 from statectl.front.observers import Notification
 from statectl.kernel.errors import UnhandledEventError
-from statectl.kernel.model import Chart, Invoke, Notify, State, StateKind, Transition
+from statectl.kernel.model import Chart, InvokeNumber, Notify, State, StateKind, Transition
 from statectl.kernel.semantics import Unhandled
 from statectl.run.runtime import (
     ApiCall,
@@ -204,7 +204,7 @@ def _rig() -> Chart:
             Transition("On", ("stop",), ("Off",), actions=(Notify(1, "Run", "Run", "stop"),)),
         ),
         ("Off",),
-        invokes=(Invoke(0, "Reach", "Reach"), Invoke(1, "Run", "Run")),
+        invokes=(InvokeNumber(0, "Reach", "Reach"), InvokeNumber(1, "Run", "Run")),
     )
 
 

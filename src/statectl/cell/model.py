@@ -67,7 +67,7 @@ from statectl.cell.values import (
     InputKind,
     Invariant,
     Link,
-    Recovery,
+    RecoveryGoal,
     Trigger,
 )
 from statectl.front.tables.inputs import read_input_text
@@ -84,7 +84,7 @@ __all__ = [
     "InputKind",
     "Invariant",
     "Link",
-    "Recovery",
+    "RecoveryGoal",
     "Trigger",
     "load_cell",
     "load_cell_or_raise",
@@ -194,14 +194,14 @@ def _invariants(
 
 def _recoveries(
     r: _Reader, node: yaml.Node | None, charts: Mapping[str, Chart], names: set[str]
-) -> list[Recovery]:
+) -> list[RecoveryGoal]:
     """The recovery: section; a rule whose to (or given from) does not parse is dropped."""
-    recovery: list[Recovery] = []
+    recovery: list[RecoveryGoal] = []
     for rec_name, fields, _ in _named(r, node, "recovery", RECOVERY_FIELDS, ("to",), names):
         target = _expr(r, fields.get("to"), f"recovery {rec_name!r} to", charts)
         source = _expr(r, fields.get("from"), f"recovery {rec_name!r} from", charts)
         if target is not None and ("from" not in fields or source is not None):
-            recovery.append(Recovery(rec_name, target, source))
+            recovery.append(RecoveryGoal(rec_name, target, source))
     return recovery
 
 

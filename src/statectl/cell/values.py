@@ -104,8 +104,10 @@ class Invariant:
 
 
 @dataclass(frozen=True, slots=True)
-class Recovery:
-    """From every reachable state where ``source`` holds, some path must reach ``target``."""
+class RecoveryGoal:
+    """A cell's recovery goal (its ``recovery:``), a property verify checks: from every
+    reachable state where ``source`` holds, some path must reach ``target``. Not a device's
+    Recovery table (``front/recovery.py``), which says what a restarted device does first."""
 
     name: str
     target: GlobalExpr
@@ -120,7 +122,7 @@ class Cell:
     links: tuple[Link, ...] = ()
     environment: tuple[EnvInput, ...] = ()
     invariants: tuple[Invariant, ...] = ()
-    recovery: tuple[Recovery, ...] = ()
+    recovery: tuple[RecoveryGoal, ...] = ()
     completions: bool = True
     nodes: Nodes | None = None  # cell/nodes.py; None: one process
 

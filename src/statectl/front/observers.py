@@ -25,7 +25,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple, Protocol
 
-from statectl.kernel.model import Api, Chart, ControlKind, EventKind, Invoke
+from statectl.kernel.model import Api, Chart, ControlKind, EventKind, InvokeNumber
 
 __all__ = [
     "DRIVING_KINDS",
@@ -52,7 +52,7 @@ class EventSpec:
     invoke: str | None = None  # explicit invoke name from the table, if any
 
 
-def derive_invokes(rows: Sequence[EventSpec]) -> tuple[tuple[Api, ...], tuple[Invoke, ...]]:
+def derive_invokes(rows: Sequence[EventSpec]) -> tuple[tuple[Api, ...], tuple[InvokeNumber, ...]]:
     """Group events by API into observer methods and number them (rules 2 and 5)."""
     methods: dict[str, dict[str, None]] = {}  # method -> its events, first-seen order
     driving_target: dict[str, str] = {}
@@ -67,14 +67,14 @@ def derive_invokes(rows: Sequence[EventSpec]) -> tuple[tuple[Api, ...], tuple[In
             explicit.setdefault(r.api, r.invoke)
     apis = tuple(Api(method, tuple(events)) for method, events in methods.items())
     used = set(explicit.values())
-    invokes: list[Invoke] = []
+    invokes: list[InvokeNumber] = []
     for number, api in enumerate(apis):
         name = explicit.get(api.method)
         if name is None:
             target = driving_target.get(api.method)
             name = target if target is not None and target not in used else api.method
             used.add(name)
-        invokes.append(Invoke(number, name, api.method))
+        invokes.append(InvokeNumber(number, name, api.method))
     return apis, tuple(invokes)
 
 
@@ -113,12 +113,12 @@ class ObserverModel:
     """Everything step 3 derives from a chart; printed by ``statectl observers``."""
 
     subject: str
-    invokes: tuple[Invoke, ...]
+    invokes: tuple[InvokeNumber, ...]
     apis: tuple[Api, ...]
     monitors: tuple[MonitorSpec, ...]
     notifying: tuple[tuple[str, int], ...]  # (event, invoke number) for driving events
 
-    def invoke_for_method(self, method: str) -> Invoke:
+    def invoke_for_method(self, method: str) -> InvokeNumber:
         for i in self.invokes:
             if i.method == method:
                 return i

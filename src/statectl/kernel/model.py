@@ -30,6 +30,7 @@ __all__ = [
     "Block",
     "Cancel",
     "Chart",
+    "ChildInvoke",
     "Content",
     "ControlKind",
     "DataItem",
@@ -38,8 +39,7 @@ __all__ = [
     "EventKind",
     "Foreach",
     "If",
-    "Invoke",
-    "InvokeDef",
+    "InvokeNumber",
     "Log",
     "Notify",
     "Param",
@@ -213,7 +213,7 @@ class Cancel(Action):
 
 
 @dataclass(frozen=True, slots=True)
-class InvokeDef:
+class ChildInvoke:
     """``<invoke>`` of a state: a child session started when the state settles active."""
 
     type: str | None = None
@@ -262,7 +262,7 @@ class State:
     initial_actions: tuple[Action, ...] = ()  # content of an ``<initial>`` transition
     history_actions: tuple[Action, ...] = ()  # content of a history state's default transition
     data: tuple[DataItem, ...] = ()  # ``<datamodel>`` declared in this state
-    invokes: tuple[InvokeDef, ...] = ()
+    invokes: tuple[ChildInvoke, ...] = ()
     donedata: DoneData | None = None  # of a final state
     number: int | None = None  # the standard's state number (tables' ``number`` column)
     timeout: Timeout | None = None  # the state table's ``timeout`` cell
@@ -338,7 +338,7 @@ class Api:
 
 
 @dataclass(frozen=True, slots=True)
-class Invoke:
+class InvokeNumber:
     """An invoke number: the enumerated value a notification carries."""
 
     number: int
@@ -367,7 +367,7 @@ class Chart:
     initial: tuple[str, ...]
     events: tuple[EventDef, ...] = ()
     apis: tuple[Api, ...] = ()
-    invokes: tuple[Invoke, ...] = ()
+    invokes: tuple[InvokeNumber, ...] = ()
     ignored: frozenset[tuple[str, str]] = frozenset()  # (state, event) declared ignored
     data: tuple[DataItem, ...] = ()
     datamodel: str = "safe"

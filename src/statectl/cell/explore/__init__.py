@@ -6,7 +6,7 @@
 
 from statectl.cell.explore.compose import MAX_DELIVERIES, Branch, Composed, Delivery, Stimulus
 from statectl.cell.explore.diagrams import to_mermaid, to_plantuml
-from statectl.cell.explore.local import FreeGuard, LocalSpace, Outcome
+from statectl.cell.explore.local import FreeGuard, LocalSpace, Reaction
 from statectl.cell.explore.promela import export_promela
 from statectl.cell.explore.report import (
     FAILURES,
@@ -30,8 +30,8 @@ __all__ = [
     "FreeGuard",
     "Kind",
     "LocalSpace",
-    "Outcome",
     "Progress",
+    "Reaction",
     "Report",
     "Stimulus",
     "Trace",

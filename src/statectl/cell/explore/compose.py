@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 from statectl.cell.explore.conditions import UNTRACKED, assumptions, foreign_leaf, under_link
 from statectl.cell.explore.deferred import DEFERRED
-from statectl.cell.explore.local import LocalSpace, Outcome
+from statectl.cell.explore.local import LocalSpace, Reaction
 from statectl.cell.explore.nodes import crossing, peer_lost
 from statectl.cell.explore.timeouts import timeout_events, timing_out
 from statectl.cell.links import CellLinkRules, Triggers
@@ -154,9 +154,9 @@ class Composed:
         self.when: tuple[Predicate | None, ...] = tuple(
             self.predicate(e.when) if e.when else None for e in cell.environment
         )
-        self._fires: dict[tuple[int, Outcome], tuple[int, ...]] = {}
+        self._fires: dict[tuple[int, Reaction], tuple[int, ...]] = {}
         self._moves: dict[tuple[int, int, str, int], tuple[Move, ...]] = {}
-        self._conds: dict[tuple[int, Outcome], Predicate | None] = {}
+        self._conds: dict[tuple[int, Reaction], Predicate | None] = {}
         self.harmless = tuple(k.ignore_if_unhandled for k in cell.links)
         # nodes: (cell/nodes.py): a link to another node with on_peer_down: drop may lose
         # its event, and then sends its `dropped` event to the source (explore/nodes.py)
@@ -237,7 +237,7 @@ class Composed:
         """The ``link`` argument of :meth:`outcomes` for stimulus ``s``."""
         return REPORT if s.kind is InputKind.COMPLETION else -1
 
-    def _reported(self, d: int, lid: int, event: str) -> tuple[Outcome, ...]:
+    def _reported(self, d: int, lid: int, event: str) -> tuple[Reaction, ...]:
         """Rule 3: ``event`` as device ``d`` raises it itself in ``lid``."""
         space = self.spaces[d]
         if timing_out(space, lid, event):
@@ -249,7 +249,7 @@ class Composed:
             return tuple(dict.fromkeys((*reports, *space.outcomes(lid, event))))
         return reports
 
-    def fires(self, d: int, outcome: Outcome) -> tuple[int, ...]:
+    def fires(self, d: int, outcome: Reaction) -> tuple[int, ...]:
         """Indices of the links whose trigger matches device ``d``'s step ``outcome``
         (statectl.cell.links rules 1-4, as every host of the cell decides it)."""
         key = (d, outcome)
@@ -270,11 +270,11 @@ class Composed:
         due = self.rules.holding(fired, self.link_guard, lambda: g)
         return tuple((self.link_target[i], self.links[i].event, i) for i in due)
 
-    def _queue(self, g: int, d: int, outcome: Outcome) -> tuple[tuple[int, str, int], ...]:
+    def _queue(self, g: int, d: int, outcome: Reaction) -> tuple[tuple[int, str, int], ...]:
         """The deliveries device ``d``'s step ``outcome`` queues, ``g`` the state after it."""
         return self.sends(self.fires(d, outcome), g)
 
-    def condition(self, d: int, o: Outcome) -> Predicate | None:
+    def condition(self, d: int, o: Reaction) -> Predicate | None:
         """When outcome ``o`` of device ``d`` is possible: the other devices' states its
         guards read (explore/conditions.py rule 1), as a function of the state before."""
         key = (d, o)
@@ -298,7 +298,7 @@ class Composed:
         self._conds[key] = fn
         return fn
 
-    def outcomes(self, d: int, lid: int, event: str, link: int = -1) -> tuple[Outcome, ...]:
+    def outcomes(self, d: int, lid: int, event: str, link: int = -1) -> tuple[Reaction, ...]:
         """Device ``d``'s outcomes; delivered by ``link``, those its data rules out dropped
         (explore/conditions.py rule 2)."""
         if link == REPORT:
@@ -397,7 +397,7 @@ class Composed:
     # Traces only (``branches(detail=True)``): what each delivery shows, kept out of
     # the cascade so the search's own calls never build one.
 
-    def _stimulus_delivery(self, s: Stimulus, lid: int, o: Outcome) -> Delivery:
+    def _stimulus_delivery(self, s: Stimulus, lid: int, o: Reaction) -> Delivery:
         """The stimulus itself as a trace's first delivery (from the environment, or from
         the device when it reports a completion)."""
         d = s.device
@@ -417,7 +417,7 @@ class Composed:
         )
 
     def _link_delivery(
-        self, t: int, tlid: int, event: str, link: int, overtaken: bool, o: Outcome
+        self, t: int, tlid: int, event: str, link: int, overtaken: bool, o: Reaction
     ) -> Delivery:
         """A link's delivery to device ``t`` as a trace shows it; a link's ``dropped`` event
         goes back to its source."""

@@ -25,7 +25,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from statectl.cell.explore.local import LocalSpace, Outcome
+from statectl.cell.explore.local import LocalSpace, Reaction
 from statectl.kernel.errors import Location
 from statectl.kernel.expr import Expression, compile_expression
 from statectl.kernel.semantics import Machine, Unhandled
@@ -69,7 +69,7 @@ def _decidable(leaf: str, tracked: frozenset[str]) -> Expression | None:
     return _leaf_cache[key]
 
 
-def under_link(space: LocalSpace, lid: int, o: Outcome, event: str, data: Any) -> Outcome | None:
+def under_link(space: LocalSpace, lid: int, o: Reaction, event: str, data: Any) -> Reaction | None:
     """Rule 2: ``o`` as a link sending ``data`` leaves it: ``o``, ``None`` when its free
     choices disagree with the data, or a guard error where a decided part raises (the
     runtime refuses the event; the explorer never reads that as false)."""
@@ -87,7 +87,7 @@ def under_link(space: LocalSpace, lid: int, o: Outcome, event: str, data: Any) -
         except Exception as exc:
             rows = (f"{g.guard!r} ({g.where})" for g in space.free_guards if leaf in g.parts)
             where = next(rows, "")
-            return Outcome(
+            return Reaction(
                 lid,
                 Unhandled.GUARD_ERROR,
                 frozenset(),
@@ -100,7 +100,7 @@ def under_link(space: LocalSpace, lid: int, o: Outcome, event: str, data: Any) -
     return o
 
 
-def assumptions(space: LocalSpace, o: Outcome, data_sent: bool) -> tuple[str, ...]:
+def assumptions(space: LocalSpace, o: Reaction, data_sent: bool) -> tuple[str, ...]:
     """What outcome ``o`` assumes beyond the model: its own (a deferred release) and a free
     choice over untracked data, unless the cell decides it (another device's state, or
     the data a link sends: ``data_sent``)."""

@@ -22,13 +22,13 @@ from typing import TYPE_CHECKING, Any
 from statectl.kernel.semantics import Snapshot
 
 if TYPE_CHECKING:
-    from statectl.cell.explore.local import LocalSpace, Outcome
+    from statectl.cell.explore.local import LocalSpace, Reaction
 
 __all__ = ["DEFERRED", "MAX_RELEASED", "released"]
 
 #: Distinct deferred events explored as released together after one step, at most.
 MAX_RELEASED = 3
-#: What a released outcome assumes (``Outcome.assumed``; the report names it).
+#: What a released outcome assumes (``Reaction.assumed``; the report names it).
 DEFERRED = "events the device may have kept (deferred) released at once"
 
 
@@ -44,15 +44,15 @@ def _values(space: LocalSpace, lid: int) -> tuple[Any, ...]:
 
 
 def released(
-    space: LocalSpace, snap: Snapshot, outs: tuple[Outcome, ...], queue: deque[int]
-) -> list[Outcome]:
+    space: LocalSpace, snap: Snapshot, outs: tuple[Reaction, ...], queue: deque[int]
+) -> list[Reaction]:
     """Outcomes of ``outs``' handled steps followed by the release of kept events."""
-    from statectl.cell.explore.local import Outcome
+    from statectl.cell.explore.local import Reaction
 
     kept = _deferring(space, snap)
     if not kept:
         return []
-    found: list[Outcome] = []
+    found: list[Reaction] = []
     for first in outs:
         if not first.handled:
             continue
@@ -62,7 +62,7 @@ def released(
             for order in itertools.permutations(free, n):
                 paths = [first]
                 for event in order:
-                    nxt: list[Outcome] = []
+                    nxt: list[Reaction] = []
                     for o in paths:
                         here = space.snapshots[o.target]
                         values = _values(space, o.target)
@@ -74,7 +74,7 @@ def released(
                                 nxt.append(o)
                                 continue
                             nxt.append(
-                                Outcome(
+                                Reaction(
                                     r.target,
                                     None,
                                     o.entered | r.entered,

@@ -24,7 +24,7 @@ Rules:
    outcome's target carries the calls after its notifications, and
    :meth:`LocalSpace.reports` are the device's own completions, each settling one
    pending call it completes. A report the device's state ignores still settles
-   its call (``Outcome.settles``): the twin did report it.
+   its call (``Reaction.settles``): the twin did report it.
 5. Each outcome says how the device reacted: handled, or the kernel's
    :class:`~statectl.kernel.semantics.Unhandled` reason (declared ignored, guard false,
    no transition: the missed transition the cell checks for, guard error: a guard
@@ -59,7 +59,7 @@ from statectl.kernel.semantics import (
 )
 from statectl.kernel.semantics.calls import DeviceCalls, Pending
 
-__all__ = ["FreeGuard", "LocalSpace", "Outcome"]
+__all__ = ["FreeGuard", "LocalSpace", "Reaction"]
 
 ORACLE = "_statectl_choose"
 Choices = tuple[tuple[str, bool], ...]
@@ -67,8 +67,12 @@ TRACKED = frozenset({"previous", "In"})
 
 
 @dataclass(frozen=True, slots=True)
-class Outcome:
-    """One way a device can react to one event in one local state."""
+class Reaction:
+    """One way a device can react to one event in one local state (JSON reports' ``reaction``).
+
+    Not the kernel's :class:`~statectl.kernel.semantics.Outcome` enum: ``unhandled`` holds
+    that answer; this adds what the explorer needs of the step (target, entered, choices).
+    """
 
     target: int
     unhandled: Unhandled | None  # None: handled
@@ -251,9 +255,9 @@ class LocalSpace:
         self.pending: list[Pending] = []  # calls not completed per local id (rule 4)
         self.index: dict[tuple[Snapshot, tuple[Any, ...], Pending], int] = {}
         self.first: dict[tuple[Snapshot, tuple[Any, ...]], int] = {}  # any calls
-        self.table: dict[tuple[int, str], tuple[Outcome, ...]] = {}
-        self.report_table: dict[tuple[int, str], tuple[Outcome, ...]] = {}
-        self.initial: tuple[Outcome, ...] = self._close()
+        self.table: dict[tuple[int, str], tuple[Reaction, ...]] = {}
+        self.report_table: dict[tuple[int, str], tuple[Reaction, ...]] = {}
+        self.initial: tuple[Reaction, ...] = self._close()
         self.monitored: tuple[bool, ...] = tuple(
             any(ControlKind.MONITORING in chart.state(s).controls for s in snap.active)
             for snap in self.snapshots
@@ -326,7 +330,7 @@ class LocalSpace:
         values: tuple[Any, ...] = (),
         pending: Pending = (),
         settled: bool = False,
-    ) -> Outcome:
+    ) -> Reaction:
         after = values
         if self.tracker.dynamic and result.handled:
             after = self.tracker.after(result, self.tracker.values(self.data, values))
@@ -336,7 +340,7 @@ class LocalSpace:
         target = self._id(result.target, after, queue, pending)
         found = triggers(result.microsteps)  # what the step offers links (cell/links.py)
         notifies = tuple(c[0] for c in calls)
-        return Outcome(
+        return Reaction(
             target,
             result.unhandled,
             found.entered,
@@ -351,7 +355,7 @@ class LocalSpace:
             and result.unhandled is not Unhandled.GUARD_ERROR,
         )
 
-    def _close(self) -> tuple[Outcome, ...]:
+    def _close(self) -> tuple[Reaction, ...]:
         """Number every snapshot reachable from the initial ones under every event."""
         queue: deque[int] = deque()
         first = self.tracker.initial
@@ -379,7 +383,7 @@ class LocalSpace:
         assert self.calls is not None
         snap, values, pending = self.snapshots[lid], self.valuations[lid], self.pending[lid]
         for event in dict.fromkeys(c for key in pending for c in self.calls.call(*key).completions):
-            outs: dict[Outcome, None] = {}
+            outs: dict[Reaction, None] = {}
             for rest in self.calls.settled_by(pending, event):
                 for r, c in self._runs(event, snap, values):
                     outs[self._outcome(r, c, queue, values, rest, settled=True)] = None
@@ -403,10 +407,10 @@ class LocalSpace:
             return self.first.get((self._canon(snap), values))
         return self.index.get((self._canon(snap), values, calls))
 
-    def outcomes(self, lid: int, event: str) -> tuple[Outcome, ...]:
+    def outcomes(self, lid: int, event: str) -> tuple[Reaction, ...]:
         return self.table.get((lid, event), ())
 
-    def reports(self, lid: int, event: str) -> tuple[Outcome, ...]:
+    def reports(self, lid: int, event: str) -> tuple[Reaction, ...]:
         """Rule 4: ``event`` reported by the device itself, settling a call; empty when no
         call pending in ``lid`` is completed by it."""
         return self.report_table.get((lid, event), ())

@@ -25,7 +25,7 @@ import ast
 
 from statectl.cell.explore.compose import Composed
 from statectl.cell.explore.conditions import foreign_leaf
-from statectl.cell.explore.local import Outcome
+from statectl.cell.explore.local import Reaction
 from statectl.cell.model import GlobalExpr
 from statectl.kernel.semantics import Unhandled
 
@@ -91,7 +91,7 @@ class _Writer:
             return "false"
         return "(" + " || ".join(f"{self.var[d]} == {i}" for i in lids) + ")"
 
-    def condition(self, o: Outcome) -> str:
+    def condition(self, o: Reaction) -> str:
         """Another device's state the outcome's guard read (explore/conditions.py rule 1)."""
         parts = []
         for leaf, value in o.choices:
@@ -104,7 +104,7 @@ class _Writer:
             parts.append(test if value else f"!{test}")
         return " && ".join(parts)
 
-    def outcome(self, d: int, o: Outcome, indent: str) -> list[str]:
+    def outcome(self, d: int, o: Reaction, indent: str) -> list[str]:
         lines = [f"{indent}{self.var[d]} = {o.target};"]
         for i in self.m.fires(d, o):
             k = self.m.links[i]

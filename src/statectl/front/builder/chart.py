@@ -74,7 +74,7 @@ from statectl.kernel.model import (
     Action,
     Chart,
     DataItem,
-    Invoke,
+    InvokeNumber,
     Notify,
     State,
     StateKind,
@@ -123,7 +123,7 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
     apis, invokes = derive_invokes(
         [EventSpec(r.event, r.kind, r.api or None, r.new, r.invoke or None) for r in rows]
     )
-    by_method: dict[str, Invoke] = {i.method: i for i in invokes}
+    by_method: dict[str, InvokeNumber] = {i.method: i for i in invokes}
     transitions = [_transition(r, assigns, by_method) for r in rows]
 
     event_names = [e.name for e in events]
@@ -258,7 +258,9 @@ def _check_rows(
 
 
 def _transition(
-    r: EventRow, assigns: dict[tuple[str, ...], tuple[Action, ...]], by_method: dict[str, Invoke]
+    r: EventRow,
+    assigns: dict[tuple[str, ...], tuple[Action, ...]],
+    by_method: dict[str, InvokeNumber],
 ) -> Transition:
     """Rule 3: ``old + event [guard] = new``, notifying the API's invoke if it drives it."""
     actions: tuple[Action, ...] = assigns.get((r.event, r.old, r.new, r.guard), ())

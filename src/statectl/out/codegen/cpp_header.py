@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 
-from statectl.kernel.model import Invoke
+from statectl.kernel.model import InvokeNumber
 from statectl.out.codegen.cpp_assign import assign_functions
 from statectl.out.codegen.cpp_rows import DENSE_CELLS, build, compact_lines, dense_lines
 from statectl.out.codegen.cpp_tables import (
@@ -108,7 +108,7 @@ def _declarations(
     st: dict[str, str],
     ev: dict[str, str],
     inv: dict[str, str],
-    invokes: list[Invoke],
+    invokes: list[InvokeNumber],
     n_invokes: int,
 ) -> list[str]:
     """The public names: the State, Event and Invoke enums, the counts, the guards'
@@ -159,7 +159,7 @@ def _declarations(
 
 
 def _api_class(
-    cls: str, invokes: list[Invoke], inv: dict[str, str], methods: dict[str, str]
+    cls: str, invokes: list[InvokeNumber], inv: dict[str, str], methods: dict[str, str]
 ) -> list[str]:
     """The <Device>Api observer: update() dispatches an invoke number to its method."""
     w: list[str] = []
@@ -234,7 +234,7 @@ def _detail_structs() -> list[str]:
     return w
 
 
-def _name_tables(flat: FlatChart, invokes: list[Invoke], n_invokes: int) -> list[str]:
+def _name_tables(flat: FlatChart, invokes: list[InvokeNumber], n_invokes: int) -> list[str]:
     """The names a tracer prints: device, states, events, reasons, transitions, invokes."""
     chart = flat.chart
     n_events = len(flat.events)

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 from statectl.kernel.semantics import Unhandled
 from statectl.out.codegen.cpp_tables import _Tables, _width
-from statectl.out.codegen.flat import FlatChart, Outcome
+from statectl.out.codegen.flat import FlatChart, FlatStep
 from statectl.out.escape.cpp import comment as _comment
 
 #: Cells (configurations x events) up to which the dense ``kCells`` table is written:
@@ -82,7 +82,7 @@ def _compact(tables: _Tables, flat: FlatChart) -> Cells:
 
     def unhandled(reason: Unhandled) -> int:  # coded at first use, as the dense form does
         if reason not in coded:
-            coded[reason] = tables.code(Outcome(False, 0, (), reason))
+            coded[reason] = tables.code(FlatStep(False, 0, (), reason))
         return coded[reason]
 
     by_event: list[dict[int, int]] = [{} for _ in range(n_events)]  # configuration -> code

@@ -13,7 +13,7 @@ from statectl.out.codegen.flatten import (
     Effect,
     EffectKind,
     FlatChart,
-    Outcome,
+    FlatStep,
     Tree,
     Unhandled,
 )
@@ -72,7 +72,7 @@ class _Tables:
             return ~found
         return self._outcome(tree)
 
-    def _outcome(self, o: Outcome) -> int:
+    def _outcome(self, o: FlatStep) -> int:
         flags = (1 if o.handled else 0) | (2 if o.final else 0) | (_REASON_BITS[o.unhandled] << 2)
         target = o.target if o.handled else 0
         key = (target, self.run(o.effects), len(o.effects), flags)
@@ -82,7 +82,7 @@ class _Tables:
             self.outcomes.append((*key, self._describe(o)))
         return found
 
-    def _describe(self, o: Outcome) -> str:
+    def _describe(self, o: FlatStep) -> str:
         flat = self.flat
         if not o.handled:
             return f"unhandled: {o.unhandled}"

@@ -37,7 +37,10 @@ class Effect:
 
 
 @dataclass(frozen=True, slots=True)
-class Outcome:
+class FlatStep:
+    """A kernel step as the flat tables hold it (a row of the C++ ``kOutcomes``): not the
+    kernel's :class:`~statectl.kernel.semantics.Outcome` enum, which ``unhandled`` carries."""
+
     handled: bool
     target: int  # configuration index; the source itself when not handled
     effects: tuple[Effect, ...]
@@ -54,7 +57,7 @@ class Decision:
     if_false: Tree
 
 
-Tree = Outcome | Decision
+Tree = FlatStep | Decision
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,10 +94,10 @@ class Row(Sequence[Tree]):
         self.explicit = explicit  # event index -> the kernel's tree, ascending events
         self.ignored = ignored  # event indices declared ignored here, none in explicit
 
-    def unhandled(self, event: int) -> Outcome:
+    def unhandled(self, event: int) -> FlatStep:
         """The outcome of an event no active state has a transition for."""
         reason = Unhandled.DECLARED_IGNORED if event in self.ignored else Unhandled.NO_TRANSITION
-        return Outcome(False, self.source, (), reason)
+        return FlatStep(False, self.source, (), reason)
 
     @overload
     def __getitem__(self, index: int) -> Tree: ...

@@ -8,10 +8,10 @@ here, at generation time, and the C++ only looks the decision up. Rules:
    They are found breadth-first from :func:`~statectl.kernel.semantics.initial` by
    :func:`~statectl.kernel.semantics.step` for every event the chart knows, and numbered
    in that order (0 is the start).
-2. A step is an :class:`Outcome`: handled or not (and why not, as the Python
-   Subject says it), the target configuration, and its *effects* in the order the
-   Python runtime reports them, per microstep: states exited, transitions taken,
-   states entered, invoke numbers notified.
+2. A step is a :class:`FlatStep` (a row of the C++ ``kOutcomes`` table): handled or
+   not (and why not, as the Python Subject says it), the target configuration, and its
+   *effects* in the order the Python runtime reports them, per microstep: states
+   exited, transitions taken, states entered, invoke numbers notified.
 3. A guard that reads no context field (``previous == 'Moving'``, ``In('X')``) is
    decided here by the semantics itself, because ``previous`` and the active states
    are part of the configuration. A guard that reads a context field (an ``int``
@@ -80,7 +80,7 @@ from statectl.out.codegen.flat import (
     Effect,
     EffectKind,
     FlatChart,
-    Outcome,
+    FlatStep,
     Row,
     RuntimeGuard,
     Tree,
@@ -97,7 +97,7 @@ __all__ = [
     "Effect",
     "EffectKind",
     "FlatChart",
-    "Outcome",
+    "FlatStep",
     "RuntimeGuard",
     "Tree",
     "Unhandled",
@@ -261,7 +261,7 @@ class _Flattener:
             ]
         return tuple(out)
 
-    def outcome_of(self, source: Snapshot | None, result: Step) -> Outcome:
+    def outcome_of(self, source: Snapshot | None, result: Step) -> FlatStep:
         failure = result.failure
         if failure is not None:  # a guard that raises: the runtime refuses the event
             self._report(
@@ -271,15 +271,15 @@ class _Flattener:
                 "the runtime refuses such an event (guard error); make the guard total",
             )
             assert source is not None
-            return Outcome(False, self.snapshots[source], (), Unhandled.GUARD_FALSE)
+            return FlatStep(False, self.snapshots[source], (), Unhandled.GUARD_FALSE)
         if source is not None and not result.handled:
-            return Outcome(False, self.snapshots[source], (), result.unhandled)
+            return FlatStep(False, self.snapshots[source], (), result.unhandled)
         target = self.index(result.target)
-        return Outcome(True, target, self.effects(result.microsteps), final=result.final)
+        return FlatStep(True, target, self.effects(result.microsteps), final=result.final)
 
     def oracle_step(
         self, source: Snapshot | None, event: str | None, choices: list[bool]
-    ) -> tuple[list[tuple[int, bool]], Outcome]:
+    ) -> tuple[list[tuple[int, bool]], FlatStep]:
         """One step of the kernel with runtime guards answered from ``choices``."""
         oracle = _Oracle(self, choices)
         if source is None:
@@ -291,7 +291,7 @@ class _Flattener:
 
     def tree(self, source: Snapshot | None, event: str | None) -> Tree:
         """Every guard path of one step, depth first (rule 3)."""
-        leaves: list[tuple[list[tuple[int, bool]], Outcome]] = []
+        leaves: list[tuple[list[tuple[int, bool]], FlatStep]] = []
 
         def visit(prefix: list[bool]) -> None:
             if len(leaves) >= MAX_PATHS:
@@ -325,7 +325,7 @@ class _Flattener:
         return self.tree(source, event)
 
 
-def _build_tree(leaves: list[tuple[list[tuple[int, bool]], Outcome]], depth: int) -> Tree:
+def _build_tree(leaves: list[tuple[list[tuple[int, bool]], FlatStep]], depth: int) -> Tree:
     if len(leaves) == 1 and len(leaves[0][0]) == depth:
         return leaves[0][1]
     gid = leaves[0][0][depth][0]

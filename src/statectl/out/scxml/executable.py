@@ -15,11 +15,11 @@ from statectl.kernel.model import (
     Assign,
     Block,
     Cancel,
+    ChildInvoke,
     Content,
     DataItem,
     Foreach,
     If,
-    InvokeDef,
     Log,
     Notify,
     Param,
@@ -231,10 +231,10 @@ class ContentReader:
                 )
         return tuple(items)
 
-    def invoke_def(self, c: _Node) -> InvokeDef:
+    def invoke_def(self, c: _Node) -> ChildInvoke:
         content = c.scxml_children("content")
         finalize = c.scxml_children("finalize")
-        return InvokeDef(
+        return ChildInvoke(
             type=c.get("type"),
             typeexpr=c.get("typeexpr"),
             src=c.get("src"),

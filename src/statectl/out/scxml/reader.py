@@ -47,7 +47,7 @@ from statectl.kernel.model import (
     DoneData,
     EventDef,
     EventKind,
-    Invoke,
+    InvokeNumber,
     Script,
     State,
     StateKind,
@@ -263,11 +263,11 @@ class _Reader(ContentReader):
 
     def device_facts(
         self, root: _Node
-    ) -> tuple[tuple[EventDef, ...], tuple[Api, ...], tuple[Invoke, ...]]:
+    ) -> tuple[tuple[EventDef, ...], tuple[Api, ...], tuple[InvokeNumber, ...]]:
         """The ``statectl`` declarations of events, APIs and invoke numbers (rule 5)."""
         events: list[EventDef] = []
         apis: list[Api] = []
-        invokes: list[Invoke] = []
+        invokes: list[InvokeNumber] = []
         for c in root.children:
             if c.ns != STATECTL_NS:
                 continue
@@ -306,7 +306,7 @@ class _Reader(ContentReader):
                 if number is None:
                     self.problem("S603", c, f"invoke number {text[:20]!r} is not a number", "0, 1")
                     number = 0
-                invokes.append(Invoke(number, self.need(c, "name"), self.need(c, "method")))
+                invokes.append(InvokeNumber(number, self.need(c, "name"), self.need(c, "method")))
         return tuple(events), tuple(apis), tuple(invokes)
 
     def chart(self, root: _Node, default_name: str) -> Chart:

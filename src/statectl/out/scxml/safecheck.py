@@ -36,10 +36,10 @@ from statectl.kernel.model import (
     Block,
     Cancel,
     Chart,
+    ChildInvoke,
     Content,
     Foreach,
     If,
-    InvokeDef,
     Log,
     Param,
     Script,
@@ -239,7 +239,7 @@ class _Checker:
         elif isinstance(a, Cancel):
             self.expr(a.sendidexpr, a.origin, "cancel sendidexpr")
 
-    def invoke(self, d: InvokeDef) -> None:
+    def invoke(self, d: ChildInvoke) -> None:
         self.src(d.src, d.origin, "invoke src")
         self.expr(d.typeexpr, d.origin, "invoke typeexpr")
         self.expr(d.srcexpr, d.origin, "invoke srcexpr")

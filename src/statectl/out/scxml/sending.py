@@ -11,7 +11,7 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
-from statectl.kernel.model import InvokeDef, Send
+from statectl.kernel.model import ChildInvoke, Send
 from statectl.kernel.semantics import Event
 from statectl.out.scxml.datamodel import EvaluationError
 from statectl.out.scxml.reader import read_scxml
@@ -135,7 +135,7 @@ def check_invoke_bounds(session: Session) -> None:
         raise EvaluationError(f"more than {MAX_SESSIONS} sessions would run at once")
 
 
-def invoke(session: Session, state: str, d: InvokeDef) -> None:
+def invoke(session: Session, state: str, d: ChildInvoke) -> None:
     """Start an invoked child session for ``state`` (errors become ``error.execution``)."""
     from statectl.out.scxml.session import Session
 

@@ -49,10 +49,10 @@ from statectl.kernel.model import (
     Block,
     Cancel,
     Chart,
+    ChildInvoke,
     Content,
     Foreach,
     If,
-    InvokeDef,
     Log,
     Param,
     Raise,
@@ -162,7 +162,7 @@ class Session:
         #: The latest microsteps (for inspection); the livelock bound counts one macrostep.
         self.microsteps: deque[Microstep] = deque(maxlen=1000)
         self.to_invoke: list[str] = []
-        self.invocations: dict[str, tuple[str, InvokeDef, Session | None]] = {}  # id -> state
+        self.invocations: dict[str, tuple[str, ChildInvoke, Session | None]] = {}  # id -> state
         self.bound: set[str] = set()
         self.initial_data = dict(initial_data or {})
         self._ids = itertools.count(1)
@@ -487,5 +487,5 @@ class Session:
     def check_invoke_bounds(self) -> None:
         sending.check_invoke_bounds(self)
 
-    def invoke(self, state: str, d: InvokeDef) -> None:
+    def invoke(self, state: str, d: ChildInvoke) -> None:
         sending.invoke(self, state, d)

@@ -26,11 +26,11 @@ from statectl.kernel.model import (
     Block,
     Cancel,
     Chart,
+    ChildInvoke,
     Content,
     DataItem,
     Foreach,
     If,
-    InvokeDef,
     Log,
     Notify,
     Param,
@@ -201,7 +201,7 @@ class _Writer:
                 self.emit(depth + 1, f"<data{attrs}/>")
         self.emit(depth, "</datamodel>")
 
-    def invoke(self, depth: int, d: InvokeDef) -> None:
+    def invoke(self, depth: int, d: ChildInvoke) -> None:
         attrs = _attrs(
             type=d.type,
             typeexpr=d.typeexpr,

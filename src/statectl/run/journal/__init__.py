@@ -7,6 +7,7 @@ to both, :func:`load_device` reads a device file with its Recovery table.
 
 from statectl.run.journal.check import JournalDamaged, check_journal, set_aside
 from statectl.run.journal.device import JournalledDevice
+from statectl.run.journal.device_file import DeviceFile, RecoveryRule, load_device
 from statectl.run.journal.read import (
     REDO,
     REFUSED,
@@ -19,18 +20,10 @@ from statectl.run.journal.read import (
     export_jsonl,
     replay,
 )
-from statectl.run.journal.recovery import (
-    CODES,
-    DeviceFile,
-    RecoveryRule,
-    check_recovery,
-    load_device,
-)
 from statectl.run.journal.store import Guarantee, Journal, JournalError, StepKind, Sync, Ticket
 from statectl.run.journal.subjects import restore_subject
 
 __all__ = [
-    "CODES",
     "REDO",
     "REFUSED",
     "DeviceFile",
@@ -50,7 +43,6 @@ __all__ = [
     "Sync",
     "Ticket",
     "check_journal",
-    "check_recovery",
     "export_jsonl",
     "load_device",
     "replay",

@@ -13,7 +13,7 @@ from typing import Any, Literal, Protocol, cast, runtime_checkable
 
 from statectl.front.observers import Observer
 from statectl.kernel.errors import StatectlError
-from statectl.kernel.model import Chart, Invoke
+from statectl.kernel.model import Chart, InvokeNumber
 from statectl.kernel.semantics import Outcome
 from statectl.run.runtime.records import ApiCall, Record, StepRecord
 
@@ -95,7 +95,7 @@ class Route:
         self.logging = isinstance(observer, ApiLogging)
 
 
-def _describe_invoke(i: Invoke) -> str:
+def _describe_invoke(i: InvokeNumber) -> str:
     return f"#{i.number} {i.name} ({i.method}())"
 
 

@@ -1,4 +1,8 @@
-"""A device file loaded for a journalled run: its chart and its Recovery table.
+"""A device file loaded for a journalled run: its chart and its Recovery table's rules.
+
+The Recovery table is checked in :mod:`statectl.front.recovery`; the rules are acted on
+when a journalled device resumes, in :mod:`statectl.run.journal.device`. (A cell's
+``recovery:`` goals are something else: properties verify checks, ``RecoveryGoal``.)
 
 The Recovery table is the device file's third table (docs/tables.md): per state,
 what a device does first when it resumes there, because a state such as Moving
@@ -32,13 +36,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from statectl.front.builder.build import build
-from statectl.front.recovery import CODES, check_recovery
+from statectl.front.recovery import check_recovery
 from statectl.front.tables import RecoveryRow
 from statectl.front.tables import load as load_tables
 from statectl.kernel.errors import Diagnostic, DiagnosticError, Severity, has_errors
 from statectl.kernel.model import Chart
 
-__all__ = ["CODES", "DeviceFile", "RecoveryRule", "check_recovery", "load_device"]
+__all__ = ["DeviceFile", "RecoveryRule", "load_device"]
 
 #: On resume in ``state``, post ``event`` with ``data`` (or redo) before any other event.
 RecoveryRule = RecoveryRow
