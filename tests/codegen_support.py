@@ -21,8 +21,9 @@ from statectl.front.observers import Notification
 from statectl.kernel.errors import Diagnostic, Severity, has_errors
 from statectl.kernel.model import Chart
 from statectl.out.codegen.cpp import render, runtime_files
+from statectl.out.codegen.cpp_names import identifiers
 from statectl.out.codegen.cpp_rows import DENSE_CELLS
-from statectl.out.codegen.flatten import flatten, identifiers
+from statectl.out.codegen.flatten import flatten
 from statectl.run.runtime import SimClock, Subject
 from statectl.run.runtime.records import (
     EventIgnored,

@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 
 from codegen_support import CLANG, GXX, CppDevice, assert_equivalent, needs_gxx
+from statectl.cell.explore.progress import CountProgress
 from statectl.channels.cli import main
-from statectl.channels.cli.progress import CountProgress
 from statectl.front.builder.build import load_chart
 from statectl.kernel.semantics import Machine, step
 from statectl.out.codegen.cpp import render

@@ -206,7 +206,6 @@ def test_slug_is_githubs_anchor(heading: str, anchor: str) -> None:
 
 VIEWS = [
     ("statectl.front.tables", "T1"),
-    ("statectl.front.tables.schema", "T1"),
     ("statectl.front.builder.build", "B2"),
     ("statectl.front.rules", "C4"),
     ("statectl.front.recovery", "J6"),

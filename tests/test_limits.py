@@ -22,7 +22,8 @@ from statectl.channels.cli import main
 from statectl.front.builder.build import MAX_STATE_DEPTH, load_and_build
 from statectl.front.tables.safeyaml import MAX_DEPTH, YamlRefused, compose, load_value
 from statectl.kernel.errors import Severity
-from statectl.out.scxml.reader import MAX_SRC_BYTES, MAX_XML_DEPTH, read_scxml
+from statectl.out.scxml.reader import read_scxml
+from statectl.out.scxml.xmltree import MAX_SRC_BYTES, MAX_XML_DEPTH
 
 ROOT = Path(__file__).resolve().parents[1]
 

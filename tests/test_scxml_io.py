@@ -13,8 +13,8 @@ from statectl.front.tables import DeviceTables, EventRow, StateRow
 from statectl.kernel.errors import DiagnosticError, Severity
 from statectl.kernel.model import Chart, ControlKind, EventKind, StateKind
 from statectl.out.scxml import read_scxml, write_scxml
-from statectl.out.scxml.reader import SCXML_NS
 from statectl.out.scxml.tables_io import export_file, import_file, import_text
+from statectl.out.scxml.xmltree import SCXML_NS
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = [

@@ -6,8 +6,8 @@ import pytest
 
 from statectl.kernel.model import Block, If, Raise, Send, StateKind
 from statectl.out.scxml import read_scxml
-from statectl.out.scxml.reader import SCXML_NS
 from statectl.out.scxml.writer import write_scxml
+from statectl.out.scxml.xmltree import SCXML_NS
 
 HEAD = f'<scxml xmlns="{SCXML_NS}" version="1.0" datamodel="python"'
 

@@ -6,7 +6,7 @@ import pytest
 
 from statectl.kernel.semantics import Event
 from statectl.out.scxml import Scheduler, Session, SimulatedClock, read_scxml
-from statectl.out.scxml.reader import SCXML_NS
+from statectl.out.scxml.xmltree import SCXML_NS
 
 #: A wrapper state that logs the name of every event no inner state handles.
 LOGGER = '<transition event="*"><log expr="_event.name"/></transition>'

@@ -8,7 +8,7 @@ from xml.sax.saxutils import quoteattr
 import pytest
 
 from statectl.out.scxml import Scheduler, Session, SimulatedClock, read_scxml
-from statectl.out.scxml.reader import SCXML_NS
+from statectl.out.scxml.xmltree import SCXML_NS
 
 
 def _child(marker: Path) -> str:

@@ -14,8 +14,8 @@ import pytest
 from statectl.channels.cli import main
 from statectl.out.scxml import Scheduler, Session, SimulatedClock, read_scxml
 from statectl.out.scxml.datamodel import EvaluationError, SafeDatamodel
-from statectl.out.scxml.reader import SCXML_NS
-from statectl.out.scxml.session import MAX_INVOKE_DEPTH, MAX_SRC_BYTES
+from statectl.out.scxml.sending import MAX_INVOKE_DEPTH
+from statectl.out.scxml.xmltree import MAX_SRC_BYTES, SCXML_NS
 
 HEAD = f'<scxml xmlns="{SCXML_NS}" version="1.0"'
 OUTCOME = (

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from statectl.out.scxml import read_scxml
-from statectl.out.scxml.reader import SCXML_NS
+from statectl.out.scxml.xmltree import SCXML_NS
 
 
 def _doc(datamodel: str, element: str) -> str:

@@ -18,8 +18,8 @@ from statectl.front.tables import (
     save,
     strip_locations,
 )
+from statectl.front.tables.literals import format_literal, parse_literal
 from statectl.front.tables.md_io import escape, split_row, unescape
-from statectl.front.tables.schema import format_literal, parse_literal
 from statectl.kernel.errors import Location
 from statectl.kernel.model import ControlKind, EventKind
 

@@ -22,7 +22,8 @@ from statectl.kernel.errors import Severity
 from statectl.kernel.model import Chart, Timeout
 from statectl.kernel.semantics import Event
 from statectl.out.scxml import Scheduler, Session, SimulatedClock
-from statectl.out.scxml.tables_io import read_scxml, write_scxml
+from statectl.out.scxml.reader import read_scxml
+from statectl.out.scxml.writer import write_scxml
 from statectl.run.runtime import SimClock, Subject
 from statectl.run.runtime.clock import WallClock
 from statectl.run.runtime.records import EventReceived, Record

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-from statectl.front.tables.schema import RecoveryRow
+from statectl.front.tables.rows import RecoveryRow
 from statectl.kernel.codes import family
 from statectl.kernel.errors import Diagnostic, Severity
 from statectl.kernel.model import (
@@ -40,9 +40,9 @@ from statectl.kernel.model import (
     If,
     Notify,
     Transition,
+    field_accepts,
 )
 from statectl.kernel.semantics import entry_set, structural
-from statectl.kernel.semantics.eventview import field_accepts
 
 __all__ = ["CODES", "check_recovery", "redo_sources", "waits_for_device"]
 

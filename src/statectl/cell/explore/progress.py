@@ -1,7 +1,7 @@
 """A count-style progress line for long explorations (codegen's rows, testgen's nodes).
 
 Lives beside the explorer so the testgen command (an inner ring) can show it as the
-CLI does; :mod:`statectl.channels.cli.progress` re-exports it.
+CLI does (the CLI's codegen imports it from here).
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ from statectl.cell.explore.report import Report
 from statectl.cell.explore.search import Progress, explore
 from statectl.cell.model import load_cell
 from statectl.front.tables import write_files
-from statectl.front.tables.schema import diag
+from statectl.front.tables.rows import diag
 from statectl.kernel.errors import Diagnostic, DiagnosticError, Location
 
 __all__ = ["verify_cell", "write_traces"]

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 from typing import TextIO
 
+from statectl.cell.explore.progress import CountProgress
 from statectl.channels.cli.outputs import output, wrote
-from statectl.channels.cli.progress import CountProgress
 from statectl.kernel.errors import DiagnosticError, Severity
 from statectl.kernel.exits import OK, PROBLEMS, USAGE
 from statectl.out.codegen.cpp import generate

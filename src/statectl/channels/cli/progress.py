@@ -7,9 +7,9 @@ prints nothing itself; showing them is the command line's concern.
 from __future__ import annotations
 
 from statectl.cell.explore import Progress
-from statectl.cell.explore.progress import CountProgress, ProgressLine
+from statectl.cell.explore.progress import ProgressLine
 
-__all__ = ["CountProgress", "ProgressPrinter"]
+__all__ = ["ProgressPrinter"]
 
 
 class ProgressPrinter(ProgressLine):

@@ -65,10 +65,7 @@ from statectl.front.builder.states import (
 )
 from statectl.front.observers import DRIVING_KINDS, EventSpec, derive_invokes
 from statectl.front.tables import DeviceTables
-from statectl.front.tables.schema import (
-    TYPE_NAMES,
-    EventRow,
-)
+from statectl.front.tables.rows import TYPE_NAMES, EventRow
 from statectl.kernel.errors import Diagnostic, Location, Severity, has_errors
 from statectl.kernel.model import (
     Action,

@@ -30,7 +30,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import replace
 
 from statectl.front.builder.common import _compile, _d, _rows_text
-from statectl.front.tables.schema import EventRow
+from statectl.front.tables.rows import EventRow
 from statectl.kernel.errors import Diagnostic, Location, Severity
 from statectl.kernel.expr import Expression, check_names
 from statectl.kernel.model import Action, Assign, field_accepts

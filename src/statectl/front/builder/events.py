@@ -10,9 +10,7 @@ from collections.abc import Sequence
 
 from statectl.front.builder.common import _d, _rows_text, _unique
 from statectl.front.builder.eventdata import merge_conflicts
-from statectl.front.tables.schema import (
-    EventRow,
-)
+from statectl.front.tables.rows import EventRow
 from statectl.kernel.errors import Diagnostic, Severity
 from statectl.kernel.model import (
     EventDef,

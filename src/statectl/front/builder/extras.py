@@ -23,7 +23,7 @@ from collections.abc import Mapping, Sequence
 from typing import Protocol
 
 from statectl.front.builder.common import _d, _hint
-from statectl.front.tables.schema import EventRow
+from statectl.front.tables.rows import EventRow
 from statectl.front.tables.timeouts import is_all_others, parse_timeout
 from statectl.kernel.errors import Diagnostic, Location, Severity
 from statectl.kernel.model import StateKind, Timeout

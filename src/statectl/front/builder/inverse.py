@@ -13,13 +13,9 @@ from statectl.front.builder.chart import build, strip_origins
 from statectl.front.builder.common import GUARD_NAMES, _compile, _literal
 from statectl.front.observers import EventSpec, derive_invokes
 from statectl.front.tables import DeviceTables
-from statectl.front.tables.schema import (
-    Bad,
-    EventRow,
-    StateRow,
-    normalize_value,
-    validate_for_writing,
-)
+from statectl.front.tables.literals import normalize_value
+from statectl.front.tables.rows import Bad, EventRow, StateRow
+from statectl.front.tables.schema import validate_for_writing
 from statectl.front.tables.timeouts import format_timeout
 from statectl.kernel.errors import Diagnostic, Location, Severity
 from statectl.kernel.expr import check_names

@@ -10,10 +10,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from statectl.front.builder.common import MAX_STATE_DEPTH, _d, _hint, _rows_text, _unique
-from statectl.front.tables.schema import (
-    EventRow,
-    StateRow,
-)
+from statectl.front.tables.rows import EventRow, StateRow
 from statectl.kernel.errors import Diagnostic, Location, Severity
 from statectl.kernel.model import (
     ControlKind,

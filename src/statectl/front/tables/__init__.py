@@ -29,7 +29,7 @@ from pathlib import Path
 from statectl.front.tables.csv_io import csv_paths, dump_csv, read_csv
 from statectl.front.tables.inputs import read_input
 from statectl.front.tables.md_io import dump_md, read_md
-from statectl.front.tables.schema import (
+from statectl.front.tables.rows import (
     CODES,
     DeviceTables,
     EventRow,
@@ -37,8 +37,8 @@ from statectl.front.tables.schema import (
     StateRow,
     diag,
     strip_locations,
-    validate_for_writing,
 )
+from statectl.front.tables.schema import validate_for_writing
 from statectl.front.tables.xlsx_io import dump_xlsx, read_xlsx
 from statectl.front.tables.yaml_io import dump_yaml, read_yaml
 from statectl.kernel.errors import Diagnostic, DiagnosticError, Location

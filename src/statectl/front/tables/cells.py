@@ -23,12 +23,11 @@ from statectl.front.tables.rows import (
     RecoveryRow,
     StateRow,
     diag,
-    did_you_mean,
     normalize_column,
     unknown_column,
 )
 from statectl.front.tables.timeouts import timeout_cell
-from statectl.kernel.errors import Diagnostic, Location
+from statectl.kernel.errors import Diagnostic, Location, did_you_mean
 from statectl.kernel.model import ControlKind, EventKind, StateKind
 
 

@@ -10,8 +10,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 
 from statectl.kernel.codes import family
-from statectl.kernel.errors import Diagnostic, Location, Severity
-from statectl.kernel.errors import did_you_mean as did_you_mean  # re-exported: cells, schema
+from statectl.kernel.errors import Diagnostic, Location, Severity, did_you_mean
 from statectl.kernel.model import ControlKind, EventKind, StateKind
 
 NOWHERE = Location()

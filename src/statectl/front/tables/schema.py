@@ -36,9 +36,8 @@ Rules:
    reports every problem as a T1xx diagnostic, never stopping at the first.
 
 This module assembles whole tables and checks them for writing; the values live in
-:mod:`statectl.front.tables.rows`, the data literals in :mod:`statectl.front.tables.literals` and
-the cell checks in :mod:`statectl.front.tables.cells`. Every name is re-exported here, so
-``from statectl.front.tables.schema import ...`` works as before the split.
+:mod:`statectl.front.tables.rows`, the data literals in :mod:`statectl.front.tables.literals`
+and the cell checks in :mod:`statectl.front.tables.cells`: import each from where it lives.
 """
 
 from __future__ import annotations
@@ -46,7 +45,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from statectl.front.tables.cells import (
-    check_header,
     event_row,
     recovery_row,
     state_row,
@@ -56,93 +54,29 @@ from statectl.front.tables.literals import (
     make_data,
     normalize_payload,
     normalize_value,
-    parse_literal,
-    parse_payload,
-    to_plain,
 )
 from statectl.front.tables.rows import (
-    ALIASES,
-    CODES,
-    COLUMNS,
-    CONTROL_WORDS,
-    DATA_COLUMNS,
-    EVENT_COLUMNS,
-    FLAT_EVENT_COLUMNS,
     FLAT_RECOVERY_COLUMNS,
     FLAT_STATE_COLUMNS,
-    NOWHERE,
     RECOVERY_COLUMNS,
-    REDO_WORDS,
-    REQUIRED,
-    STATE_COLUMNS,
-    TYPE_NAMES,
-    TYPE_WORDS,
     Bad,
-    Cell,
-    DataValue,
     DeviceTables,
     EventRow,
-    RawRow,
     RawTable,
     RecoveryRow,
     StateRow,
     diag,
-    did_you_mean,
-    normalize_column,
-    strip_locations,
-    unknown_column,
 )
 from statectl.front.tables.timeouts import optional_state_columns
 from statectl.kernel.errors import Diagnostic, Location
 
-#: Every public name, those defined in rows, literals and cells too (re-exported).
+#: The names this module defines (the values are in rows, literals and cells).
 __all__ = [
-    "ALIASES",
-    "CODES",
-    "COLUMNS",
-    "CONTROL_WORDS",
-    "DATA_COLUMNS",
-    "EVENT_COLUMNS",
-    "FLAT_EVENT_COLUMNS",
-    "FLAT_RECOVERY_COLUMNS",
-    "FLAT_STATE_COLUMNS",
-    "NOWHERE",
-    "RECOVERY_COLUMNS",
-    "REDO_WORDS",
-    "REQUIRED",
-    "STATE_COLUMNS",
-    "TYPE_NAMES",
-    "TYPE_WORDS",
-    "Bad",
-    "Cell",
-    "DataValue",
-    "DeviceTables",
-    "EventRow",
-    "RawRow",
-    "RawTable",
-    "RecoveryRow",
-    "StateRow",
-    "check_header",
-    "diag",
-    "did_you_mean",
-    "event_row",
-    "format_literal",
-    "make_data",
     "make_tables",
-    "normalize_column",
-    "normalize_payload",
-    "normalize_value",
-    "parse_literal",
-    "parse_payload",
     "recovery_cells",
     "recovery_columns",
-    "recovery_row",
     "state_cells",
     "state_columns",
-    "state_row",
-    "strip_locations",
-    "to_plain",
-    "unknown_column",
     "validate_for_writing",
 ]
 

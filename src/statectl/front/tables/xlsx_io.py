@@ -29,8 +29,10 @@ from openpyxl.worksheet.worksheet import (  # type: ignore[import-untyped, unuse
     Worksheet,
 )
 
+from statectl.front.tables.cells import check_header
 from statectl.front.tables.eventdata import event_cells, event_columns
-from statectl.front.tables.schema import (
+from statectl.front.tables.literals import format_literal, parse_literal
+from statectl.front.tables.rows import (
     DATA_COLUMNS,
     FLAT_EVENT_COLUMNS,
     Bad,
@@ -38,11 +40,10 @@ from statectl.front.tables.schema import (
     DeviceTables,
     RawRow,
     RawTable,
-    check_header,
     diag,
-    format_literal,
+)
+from statectl.front.tables.schema import (
     make_tables,
-    parse_literal,
     recovery_cells,
     recovery_columns,
     state_cells,

@@ -24,21 +24,23 @@ from typing import Any
 import yaml
 
 from statectl.front.tables.eventdata import format_assign, format_fields, yaml_event_cell
-from statectl.front.tables.safeyaml import YamlRefused, compose, construct
-from statectl.front.tables.schema import (
+from statectl.front.tables.literals import (
+    format_literal,
+    normalize_payload,
+    normalize_value,
+    to_plain,
+)
+from statectl.front.tables.rows import (
     Bad,
     Cell,
     DeviceTables,
     RawRow,
     RawTable,
     diag,
-    format_literal,
-    make_tables,
     normalize_column,
-    normalize_payload,
-    normalize_value,
-    to_plain,
 )
+from statectl.front.tables.safeyaml import YamlRefused, compose, construct
+from statectl.front.tables.schema import make_tables
 from statectl.kernel.errors import Diagnostic, Location
 
 __all__ = ["dump_yaml", "read_yaml"]

@@ -21,18 +21,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from statectl.kernel.errors import Location, UnhandledEventError
-from statectl.kernel.model import FIELD_TYPES as FIELD_ACCEPTS
-from statectl.kernel.model import field_accepts
 
-__all__ = [
-    "FIELD_ACCEPTS",
-    "EventView",
-    "GuardError",
-    "GuardFailure",
-    "Record",
-    "event_view",
-    "field_accepts",
-]
+__all__ = ["EventView", "GuardError", "GuardFailure", "Record", "event_view"]
 
 
 class Record:

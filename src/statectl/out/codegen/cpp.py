@@ -29,18 +29,16 @@ from importlib.resources import files
 from pathlib import Path
 
 from statectl.front.tables import write_files
-from statectl.front.tables.schema import diag
+from statectl.front.tables.rows import diag
 from statectl.kernel.errors import Diagnostic, DiagnosticError, Location, has_errors
 from statectl.kernel.model import Chart
 from statectl.out.codegen.cpp_header import (
     _header,
 )
+from statectl.out.codegen.cpp_names import identifiers
 from statectl.out.codegen.cpp_rows import DENSE_CELLS
-from statectl.out.codegen.flatten import (
-    FlatChart,
-    flatten,
-    identifiers,
-)
+from statectl.out.codegen.flat import FlatChart
+from statectl.out.codegen.flatten import flatten
 
 __all__ = ["RUNTIME_HEADERS", "generate", "render"]
 

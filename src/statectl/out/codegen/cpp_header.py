@@ -10,6 +10,7 @@ import os
 
 from statectl.kernel.model import InvokeNumber
 from statectl.out.codegen.cpp_assign import assign_functions
+from statectl.out.codegen.cpp_names import identifiers
 from statectl.out.codegen.cpp_rows import DENSE_CELLS, build, compact_lines, dense_lines
 from statectl.out.codegen.cpp_tables import (
     _OPS,
@@ -21,10 +22,7 @@ from statectl.out.codegen.cpp_tables import (
     _width,
 )
 from statectl.out.codegen.cpp_timers import defer_tables, device_parts, timer_tables
-from statectl.out.codegen.flatten import (
-    FlatChart,
-    identifiers,
-)
+from statectl.out.codegen.flat import FlatChart
 from statectl.out.escape.cpp import comment as _comment
 from statectl.out.escape.cpp import string as _c
 

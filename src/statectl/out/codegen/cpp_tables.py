@@ -8,15 +8,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-from statectl.out.codegen.flatten import (
-    Decision,
-    Effect,
-    EffectKind,
-    FlatChart,
-    FlatStep,
-    Tree,
-    Unhandled,
-)
+from statectl.kernel.semantics import Unhandled
+from statectl.out.codegen.flat import Decision, Effect, EffectKind, FlatChart, FlatStep, Tree
 from statectl.out.escape.cpp import comment as _comment
 
 #: The reasons a flattened outcome can give, by their number in the outcome's flags

@@ -38,8 +38,8 @@ here, at generation time, and the C++ only looks the decision up. Rules:
 
 This module explores; the values it produces are in :mod:`statectl.out.codegen.flat`, the
 checks before exploring in :mod:`~statectl.out.codegen.checks`, guard translation in
-:mod:`~statectl.out.codegen.translate` and C++ names in :mod:`~statectl.out.codegen.cpp_names`.
-Their public names are re-exported here as before the split.
+:mod:`~statectl.out.codegen.translate` and C++ names in
+:mod:`~statectl.out.codegen.cpp_names`: import each from where it lives.
 """
 
 from __future__ import annotations
@@ -71,7 +71,6 @@ from statectl.kernel.semantics import (
 from statectl.kernel.semantics.offers import Offers
 from statectl.out.codegen.assign import AssignTable
 from statectl.out.codegen.checks import _check_actions, _context
-from statectl.out.codegen.cpp_names import identifiers
 from statectl.out.codegen.cpp_timers import check_timeouts
 from statectl.out.codegen.flat import (
     Configuration,
@@ -87,23 +86,7 @@ from statectl.out.codegen.flat import (
 )
 from statectl.out.codegen.translate import _Translator, _Untranslatable
 
-__all__ = [
-    "CODES",
-    "MAX_CONFIGURATIONS",
-    "MAX_PATHS",
-    "Configuration",
-    "ContextField",
-    "Decision",
-    "Effect",
-    "EffectKind",
-    "FlatChart",
-    "FlatStep",
-    "RuntimeGuard",
-    "Tree",
-    "Unhandled",
-    "flatten",
-    "identifiers",
-]
+__all__ = ["CODES", "MAX_CONFIGURATIONS", "MAX_PATHS", "flatten"]
 
 #: Bound on reachable configurations; beyond it the flat tables would not be small.
 MAX_CONFIGURATIONS = 4096

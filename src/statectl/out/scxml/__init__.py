@@ -13,7 +13,8 @@ import time
 from pathlib import Path
 
 from statectl.out.scxml.reader import read_scxml, read_scxml_file
-from statectl.out.scxml.session import RealClock, Scheduler, Session, SessionTimeout, SimulatedClock
+from statectl.out.scxml.scheduler import RealClock, Scheduler, SessionTimeout, SimulatedClock
+from statectl.out.scxml.session import Session
 from statectl.out.scxml.writer import write_scxml
 
 __all__ = [

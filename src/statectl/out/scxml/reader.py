@@ -57,26 +57,14 @@ from statectl.out.scxml.executable import ContentReader
 from statectl.out.scxml.safecheck import check_safe
 from statectl.out.scxml.timeouts import read_defer, read_timeout
 from statectl.out.scxml.xmltree import (
-    MAX_SRC_BYTES,
-    MAX_XML_DEPTH,
     SCXML_NS,
     STATECTL_NS,
     _Node,
     _number,
     _parse_xml,
-    read_src_text,
 )
 
-__all__ = [
-    "MAX_SRC_BYTES",
-    "MAX_XML_DEPTH",
-    "SCXML_NS",
-    "STATECTL_NS",
-    "read_scxml",
-    "read_scxml_file",
-    "read_src_text",
-    "statectl_elements",
-]
+__all__ = ["read_scxml", "read_scxml_file", "statectl_elements"]
 
 
 def _fields(text: str) -> tuple[tuple[str, str], ...]:

@@ -36,7 +36,7 @@ SimulatedClock = SimClock
 #: The old name of :class:`~statectl.run.runtime.clock.WallClock` for SCXML runs.
 RealClock = WallClock
 
-__all__ = ["Clock", "RealClock", "Scheduler", "SessionTimeout", "SimulatedClock", "parse_delay"]
+__all__ = ["RealClock", "Scheduler", "SessionTimeout", "SimulatedClock", "parse_delay"]
 
 
 class SessionTimeout(StatectlError):

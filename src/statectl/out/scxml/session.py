@@ -79,34 +79,15 @@ from statectl.out.scxml.datamodel import (
     make_datamodel,
 )
 from statectl.out.scxml.safecheck import src_outside
-from statectl.out.scxml.scheduler import (
-    Clock,
-    RealClock,
-    Scheduler,
-    SessionTimeout,
-    SimulatedClock,
-)
+from statectl.out.scxml.scheduler import Scheduler
 from statectl.out.scxml.sending import (
-    MAX_INVOKE_DEPTH,
-    MAX_SESSIONS,
     SCXML_IO,
     SendError,
 )
 from statectl.out.scxml.timeouts import cancel_of, send_of
-from statectl.out.scxml.xmltree import MAX_SRC_BYTES, read_src_text
+from statectl.out.scxml.xmltree import read_src_text
 
-__all__ = [
-    "MAX_INVOKE_DEPTH",
-    "MAX_SESSIONS",
-    "MAX_SRC_BYTES",
-    "SCXML_IO",
-    "Clock",
-    "RealClock",
-    "Scheduler",
-    "Session",
-    "SessionTimeout",
-    "SimulatedClock",
-]
+__all__ = ["Session"]
 
 
 class EventData(dict[str, Any]):

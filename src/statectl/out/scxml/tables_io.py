@@ -28,14 +28,10 @@ from pathlib import Path
 
 from statectl.front.builder.build import chart_to_tables, load_chart
 from statectl.front.tables import DeviceTables, load, save
+from statectl.front.tables.cells import recovery_row
 from statectl.front.tables.inputs import read_input
-from statectl.front.tables.schema import (
-    RECOVERY_COLUMNS,
-    RawRow,
-    RecoveryRow,
-    format_literal,
-    recovery_row,
-)
+from statectl.front.tables.literals import format_literal
+from statectl.front.tables.rows import RECOVERY_COLUMNS, RawRow, RecoveryRow
 from statectl.kernel.errors import Diagnostic, DiagnosticError, Location, Severity, has_errors
 from statectl.kernel.model import Chart
 from statectl.out.escape.xml import attribute as quoteattr

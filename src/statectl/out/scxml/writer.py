@@ -43,8 +43,8 @@ from statectl.kernel.model import (
 )
 from statectl.out.escape.xml import attribute as quoteattr
 from statectl.out.escape.xml import text as escape
-from statectl.out.scxml.reader import SCXML_NS, STATECTL_NS
 from statectl.out.scxml.timeouts import timeout_lines
+from statectl.out.scxml.xmltree import SCXML_NS, STATECTL_NS
 
 __all__ = ["write_scxml"]
 

@@ -31,7 +31,7 @@ from typing import Any
 
 from statectl.kernel.errors import StatectlError
 from statectl.kernel.expr import compile_expression
-from statectl.kernel.model import Chart, EventKind, Notify, StateKind, Transition
+from statectl.kernel.model import Chart, EventKind, Notify, StateKind, Transition, field_accepts
 from statectl.kernel.semantics import (
     Machine,
     Run,
@@ -43,7 +43,6 @@ from statectl.kernel.semantics import (
     initial,
     step,
 )
-from statectl.kernel.semantics.eventview import field_accepts
 from statectl.kernel.semantics.offers import Offers
 
 __all__ = ["MAX_DATA", "MAX_NODES", "Edge", "Graph", "Node", "explore"]

@@ -14,9 +14,10 @@ from statectl.run.devices.config import (
     resolve_driver,
 )
 from statectl.run.devices.motor import SimMotor
-from statectl.run.devices.protocol import ApiCall, DeviceDriver, Report
+from statectl.run.devices.protocol import DeviceDriver, Report
 from statectl.run.devices.stepper import SimStepper
 from statectl.run.devices.twin import SimTwin, TwinNote
+from statectl.run.runtime.records import ApiCall
 
 __all__ = [
     "DRIVERS",

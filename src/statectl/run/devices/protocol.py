@@ -25,7 +25,7 @@ from statectl.front.observers import Observer
 from statectl.run.runtime.clock import Clock
 from statectl.run.runtime.records import ApiCall
 
-__all__ = ["ApiCall", "DeviceDriver", "Report"]
+__all__ = ["DeviceDriver", "Report"]
 
 #: Posts an event (with its data) back to the Subject; safe from any thread.
 Report = Callable[[str, Any], None]

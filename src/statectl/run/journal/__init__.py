@@ -8,6 +8,7 @@ to both, :func:`load_device` reads a device file with its Recovery table.
 from statectl.run.journal.check import JournalDamaged, check_journal, set_aside
 from statectl.run.journal.device import JournalledDevice
 from statectl.run.journal.device_file import DeviceFile, RecoveryRule, load_device
+from statectl.run.journal.format import Guarantee, JournalError, StepKind, Sync
 from statectl.run.journal.read import (
     REDO,
     REFUSED,
@@ -20,7 +21,7 @@ from statectl.run.journal.read import (
     export_jsonl,
     replay,
 )
-from statectl.run.journal.store import Guarantee, Journal, JournalError, StepKind, Sync, Ticket
+from statectl.run.journal.store import Journal, Ticket
 from statectl.run.journal.subjects import restore_subject
 
 __all__ = [

@@ -65,9 +65,9 @@ from statectl.kernel.model import Notify
 from statectl.kernel.semantics import Step, step
 from statectl.run.journal.assigned import replay_assigned_data
 from statectl.run.journal.device_file import RecoveryRule
-from statectl.run.journal.format import JournalError, encode_data
+from statectl.run.journal.format import Guarantee, JournalError, StepKind, encode_data
 from statectl.run.journal.read import REDO, REFUSED, JournalReader, StepRow
-from statectl.run.journal.store import Guarantee, Journal, Send, StepKind, Ticket
+from statectl.run.journal.store import Journal, Send, Ticket
 from statectl.run.journal.subjects import restore_subject
 from statectl.run.runtime.eventdata import check_posted
 from statectl.run.runtime.subject import Subject

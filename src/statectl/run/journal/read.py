@@ -40,7 +40,8 @@ from statectl.run.journal.check import check_journal, connect_ro, sqlite_problem
 from statectl.run.journal.format import JournalError, StepKind, decode_snapshot
 from statectl.run.journal.subjects import restore_subject
 from statectl.run.runtime.clock import SimClock
-from statectl.run.runtime.subject import Listener, Subject
+from statectl.run.runtime.hooks import Listener
+from statectl.run.runtime.subject import Subject
 
 __all__ = [
     "REDO",

@@ -54,32 +54,17 @@ from typing import Any
 
 from statectl.kernel.semantics import Snapshot
 from statectl.run.journal.format import (
-    SCHEMA_VERSION,
     Guarantee,
     JournalError,
     StepKind,
     Sync,
     _problem,
     connect_db,
-    decode_snapshot,
     encode_data,
     encode_snapshot,
 )
 
-__all__ = [
-    "SCHEMA_VERSION",
-    "Guarantee",
-    "Journal",
-    "JournalError",
-    "Send",
-    "StepKind",
-    "Sync",
-    "Ticket",
-    "connect_db",
-    "decode_snapshot",
-    "encode_data",
-    "encode_snapshot",
-]
+__all__ = ["Journal", "Send", "Ticket"]
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,6 +1,7 @@
 """The runtime around the pure kernel: clock, Subject (owner + queue), monitors, trace records."""
 
 from statectl.run.runtime.clock import Clock, SimClock, Timer, WallClock
+from statectl.run.runtime.hooks import ApiLogging, Listener, Policy, StateWatcher
 from statectl.run.runtime.monitors import DEFAULT_PERIOD, FaultSource, Monitor, attach_monitors
 from statectl.run.runtime.records import (
     ApiCall,
@@ -20,7 +21,7 @@ from statectl.run.runtime.records import (
     StepRecord,
     Taken,
 )
-from statectl.run.runtime.subject import ApiLogging, Listener, Policy, StateWatcher, Subject
+from statectl.run.runtime.subject import Subject
 from statectl.run.runtime.trace import TraceWriter, format_data, format_record
 
 __all__ = [

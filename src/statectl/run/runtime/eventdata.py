@@ -26,9 +26,9 @@ from typing import TYPE_CHECKING, Any
 
 from statectl.kernel.errors import StatectlError, UnhandledEventError
 from statectl.kernel.expr import Expression, compile_expression
-from statectl.kernel.model import Assign, Chart
+from statectl.kernel.model import Assign, Chart, field_accepts
 from statectl.kernel.semantics import Step
-from statectl.kernel.semantics.eventview import EventView, field_accepts
+from statectl.kernel.semantics.eventview import EventView
 
 if TYPE_CHECKING:
     from statectl.run.runtime.subject import Subject

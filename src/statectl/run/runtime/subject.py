@@ -52,7 +52,6 @@ from statectl.run.runtime.defer import attach_defer
 from statectl.run.runtime.engine import Engine
 from statectl.run.runtime.eventdata import check_event_data, declared_fields
 from statectl.run.runtime.hooks import (
-    ApiLogging,
     ErrorHandler,
     Hooks,
     Listener,
@@ -65,7 +64,7 @@ from statectl.run.runtime.inbox import Inbox
 from statectl.run.runtime.records import Record
 from statectl.run.runtime.timers import attach_timers
 
-__all__ = ["ApiLogging", "Listener", "Policy", "StateWatcher", "StepListener", "Subject"]
+__all__ = ["Subject"]
 
 
 def _print_error(exc: BaseException) -> None:
