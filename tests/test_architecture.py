@@ -356,3 +356,53 @@ def test_no_function_is_over_the_line_limit() -> None:
     }
     assert long - LONG_FUNCTIONS_TO_SPLIT == set(), "split these into helpers, each one job"
     assert LONG_FUNCTIONS_TO_SPLIT - long == set(), "now short: drop them from the list above"
+
+
+#: Modules whose ``__all__`` still names what another module defines, with why. A module
+#: that only passes names on is a second address for them: importers drift between the
+#: two and nobody can tell which one owns the name (issue 26).
+PASSES_NAMES_ON: dict[str, str] = {
+    "front/builder/build.py": "step 2's one door: the 'build' layer every later stage imports",
+    "cell/model.py": "the cell's values, re-exported for cell/explore (its importers move later)",
+    "cell/explore/search.py": "Progress, for cell/explore's own modules",
+    "run/devices/config.py": "the run config's sections (issue 26 item 4)",
+}
+
+
+def defined_names(tree: ast.Module) -> set[str]:
+    """The names a module binds at its top level itself (not by importing them)."""
+    names: set[str] = set()
+    for node in tree.body:
+        for sub in ast.walk(node) if isinstance(node, ast.If | ast.Try) else [node]:
+            if isinstance(sub, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+                names.add(sub.name)
+            elif isinstance(sub, ast.Assign | ast.AnnAssign):
+                targets = sub.targets if isinstance(sub, ast.Assign) else [sub.target]
+                names |= {n.id for t in targets for n in ast.walk(t) if isinstance(n, ast.Name)}
+    return names
+
+
+def passed_on(path: Path) -> list[str]:
+    """Names in ``path``'s ``__all__`` that it imports instead of defining."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    listed: list[str] = []
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(
+            isinstance(t, ast.Name) and t.id == "__all__" for t in node.targets
+        ):
+            listed = [e.value for e in ast.walk(node.value) if isinstance(e, ast.Constant)]
+    return sorted(set(listed) - defined_names(tree))
+
+
+def test_modules_export_only_what_they_define() -> None:
+    """A module's ``__all__`` lists its own names; a package's ``__init__`` gathers its API."""
+    found = {
+        rel: names
+        for p in sorted(SRC.rglob("*.py"))
+        if p.name != "__init__.py"
+        and (rel := p.relative_to(SRC).as_posix()) not in PASSES_NAMES_ON
+        and (names := passed_on(p))
+    }
+    assert found == {}, "import these from the module that defines them"
+    still = {rel for rel in PASSES_NAMES_ON if passed_on(SRC / rel)}
+    assert still == set(PASSES_NAMES_ON), "no longer passes names on: drop it from the list"

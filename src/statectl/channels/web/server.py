@@ -68,7 +68,7 @@ from statectl.run.runtime.records import (
 from statectl.run.runtime.subject import Subject
 from statectl.run.runtime.trace import format_record, kind_of
 
-__all__ = ["LOG_SIZE", "PENDING_MAX", "Dashboard", "Limits", "PostFn"]
+__all__ = ["LOG_SIZE", "PENDING_MAX", "Dashboard", "PostFn"]
 
 #: Messages kept for a page that connects later.
 LOG_SIZE = 500

@@ -30,7 +30,6 @@ from statectl.kernel.errors import Diagnostic, Location
 from statectl.kernel.model import FIELD_TYPES
 
 __all__ = [
-    "FIELD_TYPES",
     "Assignments",
     "Fields",
     "assign_cell",

@@ -72,7 +72,7 @@ from statectl.run.journal.subjects import restore_subject
 from statectl.run.runtime.eventdata import check_posted
 from statectl.run.runtime.subject import Subject
 
-__all__ = ["JournalledDevice", "restore_subject"]
+__all__ = ["JournalledDevice"]
 
 _RECOVERY = -1  # the seq slot of a recovery event: it has no inbox row
 

@@ -30,7 +30,7 @@ from statectl.run.runtime.records import EventRejected
 if TYPE_CHECKING:
     from statectl.run.runtime.subject import Subject
 
-__all__ = ["MAX_DEFERRED", "Deferrer", "attach_defer"]
+__all__ = ["Deferrer", "attach_defer"]
 
 
 class Deferrer:
