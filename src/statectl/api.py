@@ -36,7 +36,7 @@ def check(*paths: str | os.PathLike[str]) -> list[Diagnostic]:
     A cell file or a run config is C415 (use verify, or run --config), as on the
     command line, not the device loader's T102.
     """
-    from statectl.channels.cli.kinds import cell_given_to_check
+    from statectl.front.kinds import cell_given_to_check
     from statectl.front.rules import check_paths
 
     found: list[Diagnostic] = []

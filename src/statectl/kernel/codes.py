@@ -266,7 +266,7 @@ ALL: tuple[Code, ...] = (
         "an 'event trigger required' state that no command or fault event enters",
         _check("c411--trigger-state-entered-by-no-command-warning"),
     ),
-    # C415-C416: a file of the other kind (statectl.channels.cli.kinds)
+    # C415-C416: a file of the other kind (statectl.front.kinds)
     _c(
         "C415",
         _E,

@@ -33,7 +33,7 @@ def run_codegen(
         err.write(f"statectl codegen: cannot read {path}: {exc.strerror or exc}\n")
         return USAGE
     if chart is None:
-        from statectl.channels.cli.kinds import cell_instead
+        from statectl.front.kinds import cell_instead
 
         for d in cell_instead(path, diags):  # C415: a cell file given for a device file
             err.write(f"{d}\n")

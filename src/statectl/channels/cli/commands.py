@@ -46,8 +46,8 @@ def _summary(diags: Sequence[Diagnostic]) -> str:
 
 def _load_chart(path: str, err: TextIO) -> Chart | None:
     """Load and build a device file; print every diagnostic on failure."""
-    from statectl.channels.cli.kinds import cell_instead
     from statectl.front.builder.build import load_and_build
+    from statectl.front.kinds import cell_instead
 
     chart, diags = load_and_build(path)
     if chart is None or has_errors(diags):
@@ -77,7 +77,7 @@ def cmd_check(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         if not input_exists(Path(p)):
             err.write(f"statectl check: {p}: no such file\n")
             return USAGE
-    from statectl.channels.cli.kinds import cell_given_to_check
+    from statectl.front.kinds import cell_given_to_check
 
     found = {p: check_paths([p]) for p in args.files}
     cells = {  # C415; asked only of a file that does not load, so a device file is read once
@@ -100,8 +100,8 @@ def _without_explain(args: argparse.Namespace) -> argparse.Namespace:
 
 
 def cmd_build(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
-    from statectl.channels.cli.kinds import cell_instead
     from statectl.front.builder.build import load_and_build
+    from statectl.front.kinds import cell_instead
 
     chart, diags = load_and_build(args.file)
     if chart is None:

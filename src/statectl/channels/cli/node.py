@@ -531,7 +531,7 @@ def _plain_off_loopback(cell: Any, connect: Sequence[str], err: TextIO) -> bool:
 
 def _not_a_cell(path: str, err: TextIO) -> bool:
     """C416 (as verify says it) when ``path`` is a device file or SCXML, not a cell file."""
-    from statectl.channels.cli.kinds import device_given_to_verify
+    from statectl.front.kinds import device_given_to_verify
 
     other = device_given_to_verify(path)
     if other is not None:

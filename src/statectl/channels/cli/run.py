@@ -83,6 +83,7 @@ from statectl.channels.cli.run_journal import (
 )
 from statectl.channels.cli.settle import unsettled_note
 from statectl.channels.cli.steps import StepLog
+from statectl.front.kinds import is_cell
 from statectl.kernel.errors import (
     DiagnosticError,
     MissingExtra,
@@ -111,7 +112,7 @@ from statectl.run.journal import (
     Sync,
     load_device,
 )
-from statectl.run.runner.cells import is_cell, load_setups, relevant_warnings
+from statectl.run.runner.cells import load_setups, relevant_warnings
 from statectl.run.runner.events import parse_event_line
 from statectl.run.runtime import Clock, SimClock, TraceWriter, WallClock
 from statectl.run.system import DeviceSetup, System

@@ -58,7 +58,7 @@ def verify_main(
         err.write("statectl verify: --max-states must be 0 (no bound) or more\n")
         return USAGE
     bound = DEFAULT_MAX_STATES if max_states is None else (max_states or None)
-    from statectl.channels.cli.kinds import device_given_to_verify
+    from statectl.front.kinds import device_given_to_verify
 
     other = device_given_to_verify(cell)  # C416: a device file, not a cell
     if other is not None:

@@ -2,7 +2,7 @@
 
 Rules:
 1. A file's kind is decided as ``statectl check`` decides it
-   (:mod:`statectl.channels.cli.kinds`): YAML with ``devices:`` and no
+   (:mod:`statectl.front.kinds`): YAML with ``devices:`` and no
    ``states:`` is a cell, unless every device entry names a ``driver`` (a run
    config); a mapping of run-config sections only is a run config too;
    anything else, and every CSV or Markdown file, is device tables.

@@ -10,7 +10,8 @@ setups of their devices).
 
 from __future__ import annotations
 
-from statectl.run.runner.cells import cell_setups, is_cell, load_setups, relevant_warnings
+from statectl.front.kinds import is_cell
+from statectl.run.runner.cells import cell_setups, load_setups, relevant_warnings
 from statectl.run.runner.events import parse_event_line, parse_time
 from statectl.run.system import DeviceSetup, System
 

@@ -1,4 +1,6 @@
-"""Which files are cells, and the device setups of a cell's instances with their recovery rules.
+"""The device setups of a cell's instances with their recovery rules.
+
+Which files are cells is :func:`statectl.front.kinds.is_cell`.
 
 Library code under the run command (:mod:`statectl.channels.cli.run`) and the tests:
 it returns setups and the warnings that apply, and prints nothing."""
@@ -6,28 +8,13 @@ it returns setups and the warnings that apply, and prints nothing."""
 from __future__ import annotations
 
 from collections.abc import Collection, Iterable
-from pathlib import Path
 
 from statectl.cell.model import Cell
-from statectl.front.tables import safeyaml
-from statectl.front.tables.inputs import read_input_text
 from statectl.kernel.errors import Diagnostic, DiagnosticError
 from statectl.run.journal import (
     load_device,
 )
 from statectl.run.system import DeviceSetup
-
-
-def is_cell(path: str) -> bool:
-    """A YAML file with a ``devices`` section and no ``states`` table is a cell file."""
-    if Path(path).suffix.lower() not in (".yaml", ".yml"):
-        return False
-    try:
-        keys = safeyaml.top_keys(read_input_text(path))  # no second full load of a device file
-    except (OSError, UnicodeDecodeError):
-        return False  # loaded as a device file, whose loader says what is wrong
-    return keys is not None and "devices" in keys and "states" not in keys
-
 
 #: Recovery warnings matter only when there is a journal to recover from.
 JOURNAL_ONLY_WARNINGS = frozenset({"J606", "J608"})

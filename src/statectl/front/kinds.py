@@ -1,4 +1,8 @@
-"""A file given to the command for the other kind: ``check`` takes device files, ``verify`` cells.
+"""Which kind of file a path is, and a file given to a command for the other kind.
+
+``check`` takes device files, ``verify`` cells; :func:`is_cell` tells them apart (by the
+top-level keys, without loading a device file twice). Below the CLI so that
+:func:`statectl.api.check` says what ``statectl check`` says.
 
 Rules:
 1. ``statectl check`` on a cell file (``devices:`` and no ``states:``) reports
@@ -20,11 +24,21 @@ from pathlib import Path
 from statectl.front.tables import safeyaml
 from statectl.front.tables.inputs import read_input_text
 from statectl.kernel.errors import Diagnostic, Location, Severity
-from statectl.run.runner.cells import is_cell
 
-__all__ = ["cell_given_to_check", "device_given_to_verify"]
+__all__ = ["cell_given_to_check", "cell_instead", "device_given_to_verify", "is_cell"]
 
 _TABLE_FORMATS = (".csv", ".xlsx", ".md", ".markdown")
+
+
+def is_cell(path: str) -> bool:
+    """A YAML file with a ``devices`` section and no ``states`` table is a cell file."""
+    if Path(path).suffix.lower() not in (".yaml", ".yml"):
+        return False
+    try:
+        keys = safeyaml.top_keys(read_input_text(path))  # no second full load of a device file
+    except (OSError, UnicodeDecodeError):
+        return False  # loaded as a device file, whose loader says what is wrong
+    return keys is not None and "devices" in keys and "states" not in keys
 
 
 def _line_of(path: str, key: str) -> int:
