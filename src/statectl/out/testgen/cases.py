@@ -9,7 +9,10 @@ Rules:
    state also one per other configuration the history resumes. ``transitions``: per
    distinct edge of the state graph (configuration, event, configuration, rows).
    ``states``: per reachable configuration. ``pairs``: per transition, each
-   transition that can follow it. Every criterion ends with the :class:`Table` of
+   transition that can follow it; then the guards' parts
+   (:mod:`~statectl.out.testgen.guardcases`): a guard over ``previous`` at every
+   previous state its row meets, every guard to MC/DC, every comparison over
+   numbers at its boundary values. Every criterion ends with the :class:`Table` of
    each reachable configuration's unhandled events and the kernel's reason.
 3. A case's name and docstring say what it covers in the paper's words: row
    number, file:line, ``event [condition]: old -> new``.
@@ -18,7 +21,7 @@ Rules:
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -106,6 +109,8 @@ class Suite:
     cases: tuple[Case, ...]
     tables: tuple[Table, ...]
     notes: tuple[str, ...]  # what the module docstring must admit
+    #: (part, cases it adds) when the criterion has parts (pairs: guardcases rule 5)
+    parts: tuple[tuple[str, int], ...] = ()
 
 
 def _slug(text: str) -> str:
@@ -385,6 +390,7 @@ def cases_for(g: Graph, criterion: str) -> Suite:
     """The cases of one criterion (rule 2), with the unhandled tables."""
     names = _Names()
     notes: list[str] = []
+    parts: list[tuple[str, int]] = []
     if criterion == "rows":
         cases, notes = _rows(g, names)
     elif criterion == "transitions":
@@ -393,6 +399,8 @@ def cases_for(g: Graph, criterion: str) -> Suite:
         cases = _states(g, names)
     elif criterion == "pairs":
         cases = _pairs(g, names)
+        parts, more = _guard_parts(g, names, cases)
+        notes += more
     else:
         raise StatectlError(f"unknown criterion {criterion!r}; choose one of {', '.join(CRITERIA)}")
     from statectl.out.testgen.timing import timing_cases  # it builds Cases: imported here
@@ -401,7 +409,36 @@ def cases_for(g: Graph, criterion: str) -> Suite:
     cases, notes = [*cases, *timed], [*notes, *timing_notes]
     if not g.complete:
         notes.append("the search stopped at its bound on nodes: some paths are missing")
-    return Suite(criterion, tuple(cases), tuple(_tables(g, names)), tuple(notes))
+    return Suite(criterion, tuple(cases), tuple(_tables(g, names)), tuple(notes), tuple(parts))
+
+
+def _key(c: Case) -> tuple[Any, ...]:
+    """What a case sends: two cases with one key are one test (guardcases rule 5)."""
+    return (c.data, c.given, repr(c.given_data), c.event, repr(c.event_data))
+
+
+def _guard_parts(
+    g: Graph, names: _Names, cases: list[Case]
+) -> tuple[list[tuple[str, int]], list[str]]:
+    """Append the guard parts' cases to ``cases`` (pairs); what each part added."""
+    from statectl.out.testgen.guardcases import guard_parts  # it builds Cases: imported here
+
+    taken = {_key(c) for c in cases}
+    first = len(cases)
+
+    def add(base: str, doc: str, edge: Edge) -> bool:
+        new = _case(g, _Names(), base, doc, edge)
+        if _key(new) in taken:
+            return False
+        taken.add(_key(new))
+        cases.append(replace(new, name=names(base)))
+        return True
+
+    def words(i: int, t: Transition) -> tuple[str, str]:
+        return f"Row {i}, {where(t)}: {describe(t)}", where(t)
+
+    counts, notes = guard_parts(g, add, words)
+    return [("pairs", first), *counts], notes
 
 
 def count_steps(cases: Iterable[Case]) -> int:

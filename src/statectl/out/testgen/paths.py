@@ -44,6 +44,7 @@ from statectl.kernel.semantics import (
     step,
 )
 from statectl.kernel.semantics.offers import Offers
+from statectl.out.testgen.conditions import input_values
 
 __all__ = ["MAX_DATA", "MAX_NODES", "Edge", "Graph", "Node", "explore"]
 
@@ -166,17 +167,23 @@ def _literals(source: str) -> list[Any]:
 
 
 def candidate_data(chart: Chart, m: Machine) -> tuple[Data, ...]:
-    """The default datamodel first, then assignments that may flip the guards over data."""
+    """The default datamodel first, then assignments that may flip the guards over data.
+
+    Each name a guard reads takes its default and the values the guard's conditions
+    compare it with (:func:`~statectl.out.testgen.conditions.input_values`): literals
+    and their neighbours, both booleans for a bare read, another name's default and
+    its neighbours; a name compared otherwise takes every literal of the guard."""
     defaults = default_data(chart)
     names = [k for k, _ in defaults]
     read = {n for g in m.guards.values() for n in g.names} & set(names)
     if not read:
         return (defaults,)
     values: dict[str, list[Any]] = {n: [v] for n, v in defaults if n in read}
+    known = frozenset(names)
     for guard in m.guards:
-        g = m.guards[guard]
-        lits = _literals(guard)
-        for n in g.names & read:
+        found = input_values(guard, known, dict(defaults))
+        for n in m.guards[guard].names & read:
+            lits = found.get(("data", n)) or _literals(guard)
             for v in lits:
                 if not any(type(v) is type(w) and v == w for w in values[n]):
                     values[n].append(v)
@@ -239,38 +246,78 @@ def fits_declared(declared: dict[str, str], value: Any) -> bool:
     return all(k in declared and field_accepts(declared[k], v) for k, v in value.items())
 
 
+#: A value of each declared field type, for a field a guard reads but compares with nothing.
+_TYPE_VALUES: dict[str, list[Any]] = {
+    "int": [0, 1],
+    "float": [0.0, 1.0],
+    "str": ["x"],
+    "bool": [True, False],
+    "list": [[]],
+    "dict": [{}],
+}
+
+
+def _field_values(chart: Chart, guards: list[str], key: str, declared: dict[str, str]) -> list[Any]:
+    """The values tried for the event field ``key``: what its conditions compare it with,
+    fitting its declared type (rule 2)."""
+    defaults = dict(default_data(chart)) if chart.data else {}
+    names = frozenset(defaults)
+    found: list[Any] = []
+    for guard in guards:
+        found += input_values(guard, names, defaults).get(("event", key), [])
+    if not found:
+        found = [v for g in guards for v in _literals(g)]
+    kind = declared.get(key)
+    if kind is not None:
+        found = [v for v in found if field_accepts(kind, v)] or _TYPE_VALUES.get(kind, [])
+    out: list[Any] = []
+    for v in found:
+        if not any(type(v) is type(w) and v == w for w in out):
+            out.append(v)
+    return out
+
+
 def candidate_event_data(chart: Chart) -> dict[str, tuple[Any, ...]]:
     """Per event, the data a test sends with it: none first, then data for its guards.
 
-    A guard reading ``_event['data']['x']`` (the kernel's spelling: ``_event`` is
-    ``{"name": ..., "data": ...}``) gets ``{"x": v}`` for each literal it compares
-    against and its neighbours (as for the datamodel, rule 2); one reading
-    ``_event['data']`` whole gets the values themselves.
+    A guard reading ``_event.data.x`` gets ``{"x": v, ...}`` for each combination of
+    the values its conditions compare each field with (rule 2,
+    :func:`~statectl.out.testgen.conditions.input_values`: literals and their
+    neighbours, both booleans for a bare read), fitting the event's declared field
+    types; one reading ``_event.data`` whole gets the literals themselves.
     """
     out: dict[str, tuple[Any, ...]] = {}
+    guards: dict[str, list[str]] = {}
     for t in chart.transitions:
-        if not t.guard or "_event" not in t.guard:
-            continue
-        keys, whole = _event_data_reads(t.guard)
-        lits = _literals(t.guard)
-        for event in t.events:
-            found = list(out.get(event, (None,)))
-            values: list[Any] = []
-            if keys:
-                for combo in itertools.product(lits, repeat=len(keys)):
-                    values.append(dict(zip(sorted(keys), combo, strict=True)))
-                    if len(values) >= MAX_DATA:
-                        break
-            if whole:
-                values += lits
-            known = chart.event(event)
-            declared = dict(known.fields) if known is not None else {}
-            for v in values:
-                if declared and not fits_declared(declared, v):
-                    continue  # the runtime would refuse it as it is posted
-                if not any(type(v) is type(w) and v == w for w in found):
-                    found.append(v)
-            out[event] = tuple(found[:MAX_DATA])
+        if t.guard and "_event" in t.guard:
+            for event in t.events:
+                guards.setdefault(event, []).append(t.guard)
+    for event, sources in guards.items():
+        keys: set[str] = set()
+        whole = False
+        for g in sources:
+            k, w = _event_data_reads(g)
+            keys |= k
+            whole = whole or w
+        known = chart.event(event)
+        declared = dict(known.fields) if known is not None else {}
+        values: list[Any] = []
+        if keys:
+            ordered = sorted(keys)
+            per_key = [_field_values(chart, sources, k, declared) for k in ordered]
+            for combo in itertools.product(*per_key):
+                values.append(dict(zip(ordered, combo, strict=True)))
+                if len(values) >= MAX_DATA:
+                    break
+        if whole:
+            values += [v for g in sources for v in _literals(g)]
+        found: list[Any] = [None]
+        for v in values:
+            if declared and not fits_declared(declared, v):
+                continue  # the runtime would refuse it as it is posted
+            if not any(type(v) is type(w) and v == w for w in found):
+                found.append(v)
+        out[event] = tuple(found[:MAX_DATA])
     return out
 
 

@@ -21,6 +21,11 @@ these fixtures available to every test suite; generated modules use nothing else
 - ``statectl_device_factory``: makes a new started device with a fresh driver per
   call (what a Hypothesis state machine needs for each example).
 - ``statectl_recorder``: that device's record list, in order.
+- ``statectl_spec``: makes the specification of the module's ``STATECTL_TABLES``,
+  the kernel stepping the tables' chart on its own
+  (:class:`~statectl.out.testgen.oracle.Specification`): the Hypothesis module's
+  oracle. It reads the file itself, so a ``statectl_chart`` override (the chart the
+  implementation runs) does not change it.
 - ``statectl_cell``: a started :class:`~statectl.out.testgen.cellharness.CellUnderTest`,
   the devices of the module's ``STATECTL_CELL`` on one System with the cell's links
   (``send(device, event)``, ``given``, ``expect``, ``advance``, ``assert_state``,
@@ -47,6 +52,7 @@ from statectl.out.testgen.cellharness import CellUnderTest
 from statectl.out.testgen.coverage import Tally
 from statectl.out.testgen.generator import write_atomic
 from statectl.out.testgen.harness import DeviceUnderTest
+from statectl.out.testgen.oracle import Specification
 from statectl.run.runtime import Record
 
 __all__ = [
@@ -68,6 +74,7 @@ __all__ = [
     "statectl_event_data",
     "statectl_new_driver",
     "statectl_recorder",
+    "statectl_spec",
 ]
 
 
@@ -287,6 +294,21 @@ def statectl_device_factory(
         )
 
     return make
+
+
+@pytest.fixture
+def statectl_spec(request: pytest.FixtureRequest) -> Callable[[], Specification]:
+    """Makes a fresh specification of ``STATECTL_TABLES`` per call (a Hypothesis example
+    each): the oracle the implementation is compared with after every event."""
+    tables = _module_path(request, "STATECTL_TABLES", "the device file's path")
+    if tables is None:
+        pytest.fail(
+            f"{request.module.__name__}: set STATECTL_TABLES to the device file "
+            "(relative to the module): it is the specification",
+            pytrace=False,
+        )
+    chart = _chart_of(request, tables, "STATECTL_TABLES")
+    return lambda: Specification(chart)
 
 
 @pytest.fixture

@@ -28,7 +28,7 @@ from statectl.out.testgen.compact import (
     preamble,
     tree_given,
 )
-from statectl.out.testgen.paths import sendable_events
+from statectl.out.testgen.paths import candidate_event_data, sendable_events
 from statectl.out.testgen.timing import timing_body
 
 __all__ = ["hypothesis_text", "module_text"]
@@ -169,6 +169,9 @@ def module_text(
     n = tests_in(suite, big)
     counts = f"{len(suite.cases)} cases and {len(suite.tables)} tables of unhandled events."
     counts += f" {n} tests in all."
+    if suite.parts:
+        each = ", ".join(f"{part} {k}" for part, k in suite.parts)
+        counts += f"\nCases each part adds: {each}."
     notes = "".join(f"\n\nNote: {n_}." for n_ in suite.notes)
     if big:
         notes += (
@@ -209,10 +212,13 @@ _HYPOTHESIS = '''"""{device} against its tables under random event sequences (st
 
 Tables: {source}
 Regenerate: statectl testgen {source} --hypothesis --out {out}
-Hypothesis sends the chart's events in any order; after every event the device must
-be where the kernel puts it, with the invokes the kernel issues and the driver's API
-call for each, or unhandled for the kernel's reason. A failure shrinks to a short
-sequence. The driver is the simulated twin unless a conftest.py overrides
+Hypothesis sends the chart's events in any order, each with the data its guards are
+tested with. The oracle is the specification: the tables' chart stepped by the
+kernel on its own (``statectl_spec``). After every event the implementation (the
+device the harness runs: the ``statectl_chart`` fixture's chart and the driver under
+test) must be where the specification is, with the invokes it issues and the
+driver's API call for each, or unhandled for its reason. A failure shrinks to a
+short sequence. The driver is the simulated twin unless a conftest.py overrides
 ``statectl_new_driver`` (a fresh driver per example); see docs/testing.md.
 """
 
@@ -227,23 +233,29 @@ STATECTL_TABLES = {tables}
 #: The events a test can send (commands, completions, faults), in table order.
 EVENTS = {events}
 
+#: Each event with the data it is sent with (``None``: none, or the event's
+#: ``statectl_event_data``): the values its guards are tested with.
+SENT = {sent}
 
-def test_{slug}_follows_the_kernel(statectl_device_factory):
-    """After any sequence of the chart's events, the device did what the kernel decides."""
+
+def test_{slug}_follows_the_specification(statectl_device_factory, statectl_spec):
+    """After any sequence of the chart's events, the device did what the tables decide."""
 
     class {cls}(RuleBasedStateMachine):
         def __init__(self):
             super().__init__()
             self.device = statectl_device_factory()
+            self.spec = statectl_spec()
+            self.spec.start(self.device)
 
-        @rule(event=st.sampled_from(EVENTS))
-        def send(self, event):
-            self.device.step(event)
+        @rule(sent=st.sampled_from(SENT))
+        def send(self, sent):
+            self.spec.check(self.device, *sent)
 
     run_state_machine_as_test(
         {cls},
         settings=settings(
-            max_examples=100,
+            max_examples=200,
             stateful_step_count=30,
             deadline=None,
             suppress_health_check=[HealthCheck.function_scoped_fixture],
@@ -255,13 +267,18 @@ def test_{slug}_follows_the_kernel(statectl_device_factory):
 def hypothesis_text(chart: Chart, source: Path, out_dir: Path, shown: str) -> str:
     """The Hypothesis module of ``chart`` (its tables at ``source``, written into ``out_dir``)."""
     tables = Path(os.path.relpath(source.resolve(), out_dir.resolve())).as_posix()
-    events = "[\n" + "".join(f"    {_lit(e)},\n" for e in sendable_events(chart)) + "]"
+    sendable = sendable_events(chart)
+    events = "[\n" + "".join(f"    {_lit(e)},\n" for e in sendable) + "]"
+    datas = candidate_event_data(chart)
+    pairs = [(e, v) for e in sendable for v in datas.get(e, (None,))]
+    sent = "[\n" + "".join(f"    {_lit(p)},\n" for p in pairs) + "]"
     return _HYPOTHESIS.format(
         device=docstring(chart.name),
         source=docstring(shown),
         out=docstring(out_dir.as_posix()),
         tables=_lit(tables),
         events=events,
+        sent=sent,
         slug=identifier(chart.name, "device", NAME_LIMIT),
         cls=class_name(chart.name, "Machine"),
     )
