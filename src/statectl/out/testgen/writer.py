@@ -233,8 +233,8 @@ STATECTL_TABLES = {tables}
 #: The events a test can send (commands, completions, faults), in table order.
 EVENTS = {events}
 
-#: Each event with the data it is sent with (``None``: none, or the event's
-#: ``statectl_event_data``): the values its guards are tested with.
+#: Each event with the data it is sent with (``None``: the event's
+#: ``statectl_event_data``, else none): the values its guards are tested with.
 SENT = {sent}
 
 
@@ -270,7 +270,8 @@ def hypothesis_text(chart: Chart, source: Path, out_dir: Path, shown: str) -> st
     sendable = sendable_events(chart)
     events = "[\n" + "".join(f"    {_lit(e)},\n" for e in sendable) + "]"
     datas = candidate_event_data(chart)
-    pairs = [(e, v) for e in sendable for v in datas.get(e, (None,))]
+    # an event whose guard reads its data is sent with data (without, the guard fails)
+    pairs = [(e, v) for e in sendable for v in datas.get(e, (None, None))[1:] or (None,)]
     sent = "[\n" + "".join(f"    {_lit(p)},\n" for p in pairs) + "]"
     return _HYPOTHESIS.format(
         device=docstring(chart.name),
