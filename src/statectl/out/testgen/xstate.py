@@ -12,6 +12,10 @@ Rules:
    methods, so a path lists the device API it drives.
 4. What XState has no place for is kept in ``meta``: the row's file:line and
    prose condition, the events a state declares ignored, the invoke numbers.
+5. A row whose targets are its own source or inside it re-enters the source
+   (SCXML exits and enters it again, its entry notifications included) where
+   XState v5 would not: it is marked ``reenter: true``; an internal row
+   ``reenter: false``.
 """
 
 from __future__ import annotations
@@ -25,7 +29,17 @@ from statectl.out.testgen.cases import where
 __all__ = ["xstate_config"]
 
 
-def _transition(t: Transition) -> dict[str, Any]:
+def _within(chart: Chart, state: str, source: str) -> bool:
+    """Whether ``state`` is ``source`` or one of its descendants (rule 5)."""
+    at: str | None = state
+    while at is not None:
+        if at == source:
+            return True
+        at = chart.state(at).parent if chart.has_state(at) else None
+    return False
+
+
+def _transition(chart: Chart, t: Transition) -> dict[str, Any]:
     out: dict[str, Any] = {}
     if t.targets:
         out["target"] = [f"#{x}" for x in t.targets] if len(t.targets) > 1 else f"#{t.targets[0]}"
@@ -36,6 +50,8 @@ def _transition(t: Transition) -> dict[str, Any]:
         out["actions"] = methods
     if t.internal:
         out["reenter"] = False
+    elif t.targets and all(_within(chart, x, t.source) for x in t.targets):
+        out["reenter"] = True  # SCXML leaves and enters the source again
     meta: dict[str, Any] = {"row": where(t)}
     if t.condition:
         meta["condition"] = t.condition
@@ -67,13 +83,13 @@ def _state(chart: Chart, s: State, ignored: dict[str, list[str]]) -> dict[str, A
     on: dict[str, list[dict[str, Any]]] = {}
     for t in chart.transitions_from(s.name):
         if not t.events:
-            node.setdefault("always", []).append(_transition(t))
+            node.setdefault("always", []).append(_transition(chart, t))
             continue
         for e in t.events:
             if e == f"done.state.{s.name}":
-                node.setdefault("onDone", []).append(_transition(t))
+                node.setdefault("onDone", []).append(_transition(chart, t))
             else:
-                on.setdefault(e, []).append(_transition(t))
+                on.setdefault(e, []).append(_transition(chart, t))
     if on:
         node["on"] = on
     meta: dict[str, Any] = {}
