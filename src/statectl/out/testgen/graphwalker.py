@@ -3,8 +3,8 @@
 Rules:
 1. Vertices are the reachable configurations (active atomic states), edges the
    handled events between them, both as the kernel's search found them from the
-   default state with the chart's default data; an edge named ``e__start`` with no
-   source enters the default configuration and is the start element.
+   default state (from every start data it tried); an edge named ``e__start``
+   with no source enters the default configuration and is the start element.
 2. Names are what GraphWalker maps to test methods: ``v_`` + the states,
    ``e_`` + the event, each reduced to an identifier; ``properties`` keep the
    exact states, event and the rows (file:line) an edge takes, so nothing is lost
