@@ -19,6 +19,7 @@ if TYPE_CHECKING:
     from statectl.out.testgen.coverage import Coverage, journal_coverage
     from statectl.out.testgen.generator import Generated, generate
     from statectl.out.testgen.harness import DeviceUnderTest, Recorder
+    from statectl.out.testgen.oracle import Specification
     from statectl.out.testgen.paths import Graph, explore
 
 __all__ = [
@@ -31,6 +32,7 @@ __all__ = [
     "Generated",
     "Graph",
     "Recorder",
+    "Specification",
     "Suite",
     "Table",
     "cases_for",
@@ -55,6 +57,7 @@ _WHERE = {
     "generate": "generator",
     "DeviceUnderTest": "harness",
     "Recorder": "harness",
+    "Specification": "oracle",
     "Graph": "paths",
     "explore": "paths",
 }

@@ -49,15 +49,16 @@ class Context:
     outcome: bool
 
 
-def _contexts(g: Graph, t: Transition) -> list[Context]:
+def _contexts(g: Graph, t: Transition, by_event: dict[str, list[int]]) -> list[Context]:
     """The row's contexts in breadth-first order (rule 1), each with the guard's outcome."""
     m = compiled(g.chart)
     guard = m.guards.get(t.guard or "")
     if guard is None or not t.events:
         return []
     out = []
-    for e in g.edges:
-        if e.event not in t.events or t.source not in e.source.snapshot.active:
+    for k in sorted(k for event in t.events for k in by_event.get(event, ())):
+        e = g.edges[k]
+        if t.source not in e.source.snapshot.active:
             continue
         run = Run(
             set(e.source.snapshot.active),
@@ -180,13 +181,16 @@ def guard_parts(
     notes: list[str] = []
     counts = dict.fromkeys(GUARD_PARTS, 0)
     rows: list[tuple[int, Transition, Guard, list[Context], str, str]] = []
+    by_event: dict[str, list[int]] = {}
+    for k, e in enumerate(g.edges):
+        by_event.setdefault(e.event, []).append(k)
     for i, t in enumerate(g.chart.transitions, 1):
         if not t.guard:
             continue
         info = analyse(t.guard, names)
         if info is None:
             continue
-        ctx = _contexts(g, t)
+        ctx = _contexts(g, t, by_event)
         if ctx:
             head, place = words(i, t)
             rows.append((i, t, info, ctx, head, place))
