@@ -34,11 +34,12 @@ __all__ = ["GUARD_PARTS", "Context", "guard_parts"]
 
 #: The parts in the order they are added, as the module docstring names them.
 GUARD_PARTS = ("guards over previous", "MC/DC", "boundaries")
-#: Bound on the contexts looked at per row (rule 1): the shortest come first.
+#: Bound on the contexts looked at per row (rule 1): the shortest come first, so a
+#: big chart's row is tested in the contexts nearest the start.
 MAX_CONTEXTS = 400
 
-#: makes a case of an edge: (base name, docstring, edge) -> the case's key, or None if
-#: the suite has it already (rule 5)
+#: makes a case of an edge: (base name, docstring, edge) -> whether it was added
+#: (False: the suite has that case already, rule 5)
 AddCase = Callable[[str, str, Edge], bool]
 
 
