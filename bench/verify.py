@@ -42,13 +42,16 @@ events:
 """
 
 
-def make_cell(folder: Path, n: int) -> Path:
-    """Write the station file and a cell of ``n`` stations; return the cell's path."""
+def make_cell(folder: Path, n: int, *, links: bool = True) -> Path:
+    """Write the station file and a cell of ``n`` stations; return the cell's path.
+
+    Without ``links`` the stations do not interact at all (the non-interacting row)."""
     (folder / "station.yaml").write_text(STATION, encoding="utf-8")
     lines = [f"cell: stations-{n}", "devices:"]
     lines += [f"  s{i}: station.yaml" for i in range(n)]
-    lines.append("links:")
-    for i in range(n - 1):
+    if links:
+        lines.append("links:")
+    for i in range(n - 1 if links else 0):
         lines.append(f"  - {{from: s{i}, enters: Faulted, to: s{i + 1}, send: Hold}}")
     lines.append("environment:")
     for i in range(n):

@@ -7,7 +7,8 @@ Rules:
 2. The verdict is ``holds`` only when the search was complete and nothing
    failed; a bounded search that found nothing is ``incomplete``.
 3. Every trace starts in the initial global state and is as short as any trace
-   to its state (breadth-first order).
+   to its state (breadth-first order), unless the report says it is not
+   (``shortest`` false: found by a reduced search, explore/search.py rule 7).
 4. Where verify over-approximates (free choices over data it does not track, kept
    events released beyond what a device keeps), a trace that takes such a way is
    marked "may not be reproducible" with what it assumes, and so is a failing
@@ -206,6 +207,10 @@ class Report:
     properties: tuple[tuple[str, str], ...] = field(default=())  # (property, verdict)
     #: (property, what its verdict relies on beyond the model): rule 4
     relies: tuple[tuple[str, tuple[str, ...]], ...] = ()
+    #: the reductions the search used, one line each (empty: the full search)
+    reductions: tuple[str, ...] = ()
+    #: whether every trace is as short as any (rule 3)
+    shortest: bool = True
 
     @property
     def failures(self) -> tuple[Finding, ...]:
@@ -235,6 +240,8 @@ class Report:
             "seconds": round(self.seconds, 3),
             "states_per_second": round(self.rate),
             "peak_bytes": self.peak_bytes,
+            "reductions": list(self.reductions),
+            "shortest_traces": self.shortest,
             "properties": [
                 {"property": p, "verdict": v, **({"assumes": list(r)} if (r := relies[p]) else {})}
                 for p, v in self.properties
@@ -262,6 +269,7 @@ class Report:
             f"depth {self.depth}, in {self.seconds:.2f} s ({self.rate:,.0f} states/s, "
             f"peak {self.peak_bytes / 2**20:.0f} MiB)",
         ]
+        out.extend(self.reductions)
         if not self.complete:
             out.append(
                 f"incomplete: the search stopped at its bound of {self.states:,} states "
@@ -285,7 +293,9 @@ class Report:
             out.append(f"{head} {f.kind.value} {f.name}: {f.message}{more}")
             if f.trace is not None:
                 maybe = f"; may not be reproducible: assumes {'; '.join(f.assumed)}"
-                out.append(f"  shortest trace ({len(f.trace)} steps{maybe if f.assumed else ''}):")
+                how = "shortest trace" if self.shortest else "trace"
+                short = "" if self.shortest else "; not shortest: partial-order reduction"
+                out.append(f"  {how} ({len(f.trace)} steps{short}{maybe if f.assumed else ''}):")
                 out.extend(f.trace.lines())
         if self.unanticipated:
             out.append(

@@ -8,6 +8,9 @@ Rules:
    loop on locals; a device state with cascading stimuli, unanticipated inputs or
    raising guards goes through :meth:`Walk._rare`, called only for those.
 3. Reaching ``max_states`` stops the walk and marks it incomplete.
+4. With partial-order reduction (:mod:`statectl.cell.explore.ample`), a state the
+   reduction accepts is expanded through its cluster alone
+   (:meth:`Walk.expand_cluster`); the others are expanded in full as before.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from statectl.cell.explore.compose import Composed, Predicate, Stimulus
 from statectl.cell.model import InputKind
 
 if TYPE_CHECKING:
+    from statectl.cell.explore.ample import Ample
     from statectl.cell.explore.search import _Tables
 
 
@@ -44,8 +48,10 @@ class Walk:
         *,
         keep_edges: bool,
         max_states: int | None,
+        ample: Ample | None = None,
     ) -> None:
         self.model = model
+        self.ample = ample
         self.tables = tables
         self.invariants = invariants
         self.keep_edges = keep_edges
@@ -112,6 +118,11 @@ class Walk:
                     progress(Progress(len(states), head, self.depth, now - t0))
                     last_report = now
             g = states[head]
+            if self.ample is not None and self.ample.expand(self, g, head):
+                if not self.complete:
+                    break
+                head += 1
+                continue
             alive = False
             flagged = False
             for d in range(n):
@@ -148,7 +159,11 @@ class Walk:
         """Device ``d`` in local state ``lid`` of ``g``: run its cascading stimuli, count
         its unanticipated inputs and raising guards. Whether a stimulus happened, and
         whether an unanticipated input was met."""
-        alive = self._cascades(g, head, d, lid)
+        return self._cascades(g, head, d, lid), self._observe(g, head, d, lid)
+
+    def _observe(self, g: int, head: int, d: int, lid: int) -> bool:
+        """Count device ``d``'s unanticipated inputs and raising guards in ``g`` (state
+        number ``head``); whether an unanticipated input was met."""
         model = self.model
         flagged = False
         for _i, s in self.tables.unant[d][lid]:
@@ -166,7 +181,47 @@ class Walk:
             key = (d, model.spaces[d].state_of(lid), s.event)
             self.error_count[key] = self.error_count.get(key, 0) + 1
             self.errors.setdefault(key, (head, s, -1, lid, -1))
-        return alive, flagged
+        return flagged
+
+    def expand_cluster(
+        self, g: int, head: int, lids: list[int], members: int, *, observe: bool = True
+    ) -> None:
+        """Expand ``g`` through the stimuli of the devices in the bit set ``members``
+        alone (rule 4); every device's unanticipated inputs and raising guards are
+        still counted (unless ``observe`` is false: they were)."""
+        simple, index = self.tables.simple, self.index
+        flagged = False
+        for d, lid in enumerate(lids):
+            if members >> d & 1:
+                for delta in simple[d][lid]:
+                    h = g ^ delta
+                    self.transitions += 1
+                    if h not in index:
+                        if len(self.states) == self.limit:
+                            self.complete = False
+                            return
+                        self.add(h, head)
+                    if self.keep_edges:
+                        self.src.append(head)
+                        self.dst.append(index[h])
+                if self.tables.complex[d][lid]:
+                    self._cascades(g, head, d, lid)
+                    if not self.complete:
+                        return
+            if observe and (self.tables.unant[d][lid] or self.tables.errors[d][lid]):
+                flagged = self._observe(g, head, d, lid) or flagged
+        if flagged:
+            self.unant_states += 1
+
+    def expand_rest(self, head: int, members: int) -> None:
+        """Expand state number ``head``, once expanded through the cluster ``members``
+        alone, through every other device's stimuli too (the cycle proviso of
+        :mod:`statectl.cell.explore.ample`); what it met there was counted then."""
+        g = self.states[head]
+        model = self.model
+        lids = [(g >> model.shift[d]) & model.mask[d] for d in range(len(model.names))]
+        others = ~members & ((1 << len(lids)) - 1)
+        self.expand_cluster(g, head, lids, others, observe=False)
 
     def _cascades(self, g: int, head: int, d: int, lid: int) -> bool:
         """The stimuli whose links fire (or that wait on ``when``), by the full cascade of

@@ -166,6 +166,11 @@ def _add_verify(sub: Any) -> None:
         help="print each counterexample as a sequence diagram",
     )
     s.add_argument("--progress", action="store_true", help="show progress even when piped")
+    s.add_argument(
+        "--no-por",
+        action="store_true",
+        help="no partial-order reduction: store every reachable global state",
+    )
     s.set_defaults(func=cmd_verify)
 
 

@@ -269,6 +269,7 @@ def cmd_verify(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         traces=args.traces,
         diagrams=args.diagrams,
         progress=True if args.progress else None,
+        por=not args.no_por,
         out=out,
         err=err,
     )

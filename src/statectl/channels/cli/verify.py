@@ -38,6 +38,7 @@ def verify_main(
     traces: str | None = None,
     diagrams: str | None = None,
     progress: bool | None = None,
+    por: bool = True,
     out: TextIO,
     err: TextIO,
 ) -> int:
@@ -46,7 +47,8 @@ def verify_main(
     ``export="promela"`` writes the composed model (to ``output`` or stdout) instead
     of exploring; ``traces`` names a folder for the failing traces and diagrams;
     ``diagrams`` ("mermaid" or "plantuml") prints each failing trace's diagram.
-    ``max_states`` bounds the search (``None``: :data:`DEFAULT_MAX_STATES`; 0: no bound).
+    ``max_states`` bounds the search (``None``: :data:`DEFAULT_MAX_STATES`; 0: no bound);
+    ``por=False`` (``--no-por``) turns partial-order reduction off.
     """
     if not Path(cell).is_file():
         err.write(f"statectl verify: {cell}: no such file\n")
@@ -75,7 +77,7 @@ def verify_main(
         return _export(loaded, output, out, f"{Path(cell).stem}.pml")
     show = err.isatty() if progress is None else progress
     printer = ProgressPrinter(err) if show else None
-    report = explore(loaded, max_states=bound, progress=printer)
+    report = explore(loaded, max_states=bound, progress=printer, por=por)
     if printer is not None:
         printer.done()
     if as_json:
