@@ -1,6 +1,7 @@
 """Benchmark ``statectl verify`` against SPIN on generated cells of N devices.
 
-Usage: python bench/verify.py [--devices 10] [--no-spin] [--max-states N] [--keep DIR]
+Usage: python bench/verify.py [--devices 10] [--independent] [--no-por] [--no-spin]
+                               [--max-states N] [--keep DIR]
 
 Each generated device is a station: Idle -> Busy (Begin, a command) -> Done (Begin
 completion) -> Idle (Reset); a Jam in the monitored Busy state makes it Faulted
@@ -8,6 +9,9 @@ until Reset. Station i entering Faulted sends Hold to station i+1, which takes B
 back to Idle and ignores it elsewhere. With 10 stations the cell has about a million
 reachable global states. The same composed model is exported to Promela and checked
 by SPIN in the same run (breadth-first, safety only), so the times are comparable.
+``--independent`` drops the links: N stations that do not interact at all. Both
+tools use their partial-order reduction (SPIN's default) unless ``--no-por``, which
+turns it off in both (``statectl verify --no-por``, pan built with ``-DNOREDUCE``).
 """
 
 from __future__ import annotations
@@ -83,8 +87,9 @@ def _unfinished(returncode: int, output: str, stored: int) -> str:
     return ""
 
 
-def run_spin(pml: Path, max_states: int) -> dict[str, float | int | str]:
-    """spin -a, gcc and pan (BFS, safety); wall times and pan's state count."""
+def run_spin(pml: Path, max_states: int, *, reduce: bool = True) -> dict[str, float | int | str]:
+    """spin -a, gcc and pan (BFS, safety; its partial-order reduction unless not
+    ``reduce``); wall times and pan's state count."""
     if shutil.which("spin") is None or shutil.which("gcc") is None:
         return {"skipped": "spin or gcc not installed"}
     folder = pml.parent
@@ -98,7 +103,7 @@ def run_spin(pml: Path, max_states: int) -> dict[str, float | int | str]:
             "-O2",
             "-DBFS",
             "-DSAFETY",
-            "-DNOREDUCE",
+            *(() if reduce else ("-DNOREDUCE",)),
             f"-DMEMLIM={memlim}",
             "-o",
             "pan",
@@ -138,11 +143,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--devices", type=int, default=10)
     ap.add_argument("--max-states", type=int, default=None)
     ap.add_argument("--no-spin", action="store_true")
+    ap.add_argument("--independent", action="store_true", help="stations without links")
+    ap.add_argument("--no-por", action="store_true", help="no partial-order reduction")
     ap.add_argument("--keep", type=Path, default=None, help="write the cell and model here")
     args = ap.parse_args(argv)
     folder = args.keep or Path(tempfile.mkdtemp(prefix="statectl-bench-"))
     folder.mkdir(parents=True, exist_ok=True)
-    cell_path = make_cell(folder, args.devices)
+    cell_path = make_cell(folder, args.devices, links=not args.independent)
     cell, diags = load_cell(cell_path)
     if cell is None:
         for d in diags:
@@ -151,7 +158,9 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     model = Composed(cell)
     printer = ProgressPrinter(sys.stderr) if sys.stderr.isatty() else None
-    report = explore(cell, max_states=args.max_states, progress=printer, model=model)
+    report = explore(
+        cell, max_states=args.max_states, progress=printer, model=model, por=not args.no_por
+    )
     if printer is not None:
         printer.done()
     seconds = time.perf_counter() - t0
@@ -162,11 +171,13 @@ def main(argv: list[str] | None = None) -> int:
         f"{report.states / seconds:,.0f} states/s, peak RSS {peak:,.0f} MiB, "
         f"verdict {report.verdict}"
     )
+    for line in report.reductions:
+        print(f"statectl: {line}")
     if args.no_spin:
         return 0
     pml = folder / "cell.pml"
     pml.write_text(export_promela(model), encoding="utf-8")
-    spin = run_spin(pml, report.states)
+    spin = run_spin(pml, report.states, reduce=not args.no_por)
     if "skipped" in spin:
         print(f"spin: skipped ({spin['skipped']})")
         return 0
@@ -177,15 +188,21 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 1
-    print(
-        f"note: SPIN stored {int(spin['stored']):,} states, statectl found "
-        f"{report.states:,} (the models count the same cell; a difference means one "
-        "of them explored another space)"
-    )
+    if args.no_por:
+        print(
+            f"note: SPIN stored {int(spin['stored']):,} states, statectl found "
+            f"{report.states:,} (the models count the same cell; a difference means one "
+            "of them explored another space)"
+        )
+    else:
+        print(
+            f"note: with partial-order reduction SPIN stored {int(spin['stored']):,} states, "
+            f"statectl {report.states:,} (each reduces in its own way; the verdicts must agree)"
+        )
     print(
         f"spin:     {spin['stored']:,} states stored, search (pan) {spin['pan_s']:.1f} s, "
         f"total with spin -a and gcc {spin['total_s']:.1f} s, memory {spin['memory_mb']} MB, "
-        f"errors {spin['errors']}"
+        f"errors {spin['errors']}, partial-order reduction {'off' if args.no_por else 'on'}"
     )
     print(
         f"ratio:    statectl / spin total = {seconds / float(spin['total_s']):.2f}, "

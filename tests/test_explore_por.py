@@ -8,12 +8,111 @@ every counterexample the reduced search gives must replay on the simulated twins
 
 from __future__ import annotations
 
+import io
 import random
 from pathlib import Path
 
 from statectl.cell.explore import Report, explore
+from statectl.cell.explore.ample import reducible
 from statectl.cell.explore.replay import ReplayStep, run_cell
-from statectl.cell.model import Cell, load_cell
+from statectl.cell.model import Cell, load_cell, load_cell_or_raise
+from statectl.channels.cli import main
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+STATION = """\
+device: Station
+states:
+  - {state: Idle, control: default, ignore: [Reset, Jam]}
+  - {state: Busy, control: [event trigger required, monitoring required], ignore: [Begin, Reset]}
+  - {state: Done, control: event trigger required, ignore: [Begin, Jam]}
+  - {state: Faulted, control: event trigger required, ignore: [Begin, Jam]}
+events:
+  - {event: Begin, old: Idle, new: Busy, kind: command, api: Work}
+  - {event: Finish, old: Busy, new: Done, kind: command, api: Work}
+  - {event: Reset, old: Done, new: Idle, kind: command, api: Clear}
+  - {event: Reset, old: Faulted, new: Idle, kind: command, api: Clear}
+  - {event: Jam, old: Busy, new: Faulted, kind: fault, api: Clear}
+"""
+
+
+def stations(
+    folder: Path, n: int, invariant: str = "not (In('s0.Idle') and In('s0.Busy'))"
+) -> Path:
+    """``n`` stations that do not interact (each Idle, Busy, Done or Faulted) and one
+    invariant; the cell's path."""
+    (folder / "station.yaml").write_text(STATION, encoding="utf-8")
+    lines = ["cell: stations", "devices:", *(f"  s{i}: station.yaml" for i in range(n))]
+    lines.append("environment:")
+    for i in range(n):
+        lines += [f"  - {{send: {e}, to: s{i}}}" for e in ("Begin", "Finish", "Reset")]
+        lines.append(f"  - {{fault: Jam, to: s{i}}}")
+    lines += ["invariants:", "  - name: inv", f'    holds: "{invariant}"']
+    path = folder / f"stations-{n}.yaml"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+def test_stations_that_do_not_interact_grow_linearly(tmp_path: Path) -> None:
+    """N stations that share nothing: the reduced search stores a number of states that
+    grows by the same amount per station; the full search stores 4**N."""
+    counts = [explore(load_cell_or_raise(stations(tmp_path, n))).states for n in (4, 6, 8)]
+    assert counts[2] - counts[1] == counts[1] - counts[0] > 0
+    assert explore(load_cell_or_raise(stations(tmp_path, 6)), por=False).states == 4**6
+    assert counts[1] < 4**6 // 20
+
+
+def test_no_por_option(tmp_path: Path) -> None:
+    """``verify --no-por`` stores every state and prints no reduction line; by default
+    the report names the reduction, the states stored and the full search's bound."""
+    path = str(stations(tmp_path, 6))
+    for argv, stored, line in (
+        (["verify", path], None, True),
+        (["verify", path, "--no-por"], "explored 4,096 global states", False),
+    ):
+        out = io.StringIO()
+        assert main(argv, out, io.StringIO()) == 0
+        text = out.getvalue()
+        assert ("partial-order reduction:" in text) is line
+        assert stored is None or stored in text
+        if line:
+            assert "the full search stores at most 4,096 states" in text
+
+
+def test_recovery_cells_are_searched_in_full() -> None:
+    """A cell with recovery properties is searched in full: the reduction does not keep
+    "can always reach"."""
+    cell = load_cell_or_raise(EXAMPLES / "pick-and-place" / "cell.yaml")
+    assert "recovery" in reducible(cell)
+    report = explore(cell)
+    assert report.reductions == () and report.states == explore(cell, por=False).states
+
+
+def test_a_failure_is_searched_again_in_full(tmp_path: Path) -> None:
+    """When the reduced search fails, the report is the full search's: shortest traces,
+    counts over every state, and a line saying so."""
+    cell = load_cell_or_raise(stations(tmp_path, 6, "not (In('s4.Faulted') and In('s5.Faulted'))"))
+    report, full = explore(cell), explore(cell, por=False)
+    assert report.verdict == "fails" and report.shortest
+    assert "searched again in full" in report.reductions[0]
+    assert [(f.name, len(f.trace or ()), f.count) for f in report.failures] == [
+        (f.name, len(f.trace or ()), f.count) for f in full.failures
+    ]
+    assert "shortest trace (4 steps)" in report.to_text()
+
+
+def test_not_shortest_when_the_full_search_stops_first(tmp_path: Path) -> None:
+    """If the full search reaches the bound before the failure the reduced one met, the
+    reduced report stands and says its traces are not shortest."""
+    path = stations(tmp_path, 8, "not (In('s6.Faulted') and In('s7.Faulted'))")
+    report = explore(load_cell_or_raise(path), max_states=300)
+    assert report.verdict == "fails" and not report.shortest
+    text = report.to_text()
+    assert "steps; not shortest: partial-order reduction):" in text
+    assert "shortest trace" not in text
+    doc = report.to_json()
+    assert doc["shortest_traces"] is False and doc["reductions"]
+
 
 STATES = ("A", "B", "C", "D")
 EVENTS = ("Go", "Back", "Poke", "Kick")

@@ -33,7 +33,7 @@ Rules:
 from __future__ import annotations
 
 from array import array
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from typing import TYPE_CHECKING
 
 from statectl.cell.explore.compose import Composed, Stimulus
@@ -276,34 +276,39 @@ class Ample:
 
     # -- per state ---------------------------------------------------------------------
 
-    def clusters(self, lids: list[int], moved: int) -> list[int]:
+    def clusters(self, lids: list[int], moved: int) -> Iterator[int]:
         """Closed clusters smaller than the cell with some stimulus possible (at most
-        :data:`TRIES`): first those of the devices in the bit set ``moved`` (those the
-        step into this state changed: a device that left its cycle goes round it before
-        another one leaves, so the others' states are not multiplied), smallest first."""
+        :data:`TRIES`), each computed only when the one before would not do: first those
+        of the devices in the bit set ``moved`` (those the step into this state changed:
+        a device that left its cycle goes round it before another one leaves, so the
+        others' states are not multiplied), a device alone before a larger cluster."""
         needs, maybe = self.needs, self.maybe
+        seeds = [d for d in range(self.n) if maybe[d][lids[d]]]
+        first = [d for d in seeds if moved >> d & 1] + [d for d in seeds if not moved >> d & 1]
+        tried = 0
+        for d in sorted(first, key=lambda d: bool(needs[d][lids[d]]) + 2 * (not moved >> d & 1)):
+            members = self._closure(d, lids)
+            if members:
+                yield members
+                tried += 1
+                if tried == TRIES:
+                    return
+
+    def _closure(self, d: int, lids: list[int]) -> int:
+        """The cluster of device ``d`` (rule 1) as a bit set; 0 if it is the whole cell."""
+        needs = self.needs
         full = (1 << self.n) - 1
-        order = sorted(range(self.n), key=lambda d: not moved >> d & 1)
-        seeds = [d for d in order if maybe[d][lids[d]]]
-        singles = [1 << d for d in seeds if not needs[d][lids[d]]]
-        if len(singles) >= TRIES:
-            return singles[:TRIES]
-        found: dict[int, None] = dict.fromkeys(singles)
-        for d in seeds:
-            if needs[d][lids[d]]:
-                members = 1 << d
-                todo = [d]
-                while todo and members != full:
-                    e = todo.pop()
-                    more = needs[e][lids[e]] & ~members
-                    members |= more
-                    while more:
-                        low = more & -more
-                        todo.append(low.bit_length() - 1)
-                        more ^= low
-                if members != full:
-                    found[members] = None
-        return sorted(found, key=lambda m: (not m & moved, m.bit_count()))[:TRIES]
+        members = 1 << d
+        todo = [d]
+        while todo:
+            e = todo.pop()
+            more = needs[e][lids[e]] & ~members
+            members |= more
+            while more:
+                low = more & -more
+                todo.append(low.bit_length() - 1)
+                more ^= low
+        return 0 if members == full else members
 
     def successors(self, g: int, lids: list[int], members: int) -> list[int]:
         """The states the ample set of cluster ``members`` leads to from ``g``."""
