@@ -173,7 +173,7 @@ def explore(
             "for shortest traces"
         )
         return replace(full, reductions=(again,), seconds=report.seconds + full.seconds)
-    return replace(report, shortest=False)
+    return report
 
 
 def _search(
@@ -220,6 +220,7 @@ def _search(
         )
         for (d, lid, event, kind), first in walk.unant_first.items()
     )
+    reductions = _reductions(walk, bound)
     return Report(
         cell=cell.name,
         path=cell.path,
@@ -238,7 +239,8 @@ def _search(
         free_guards=tuple(g for sp in model.spaces for g in sp.free_guards),
         properties=tuple(properties),
         relies=_relies(model, properties, findings),
-        reductions=_reductions(walk, bound),
+        reductions=reductions,
+        shortest=not reductions,  # the unanticipated inputs' traces too (JSON)
     )
 
 
