@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING
 
 from statectl.cell.explore.compose import Composed, Stimulus
 from statectl.cell.explore.conditions import foreign_leaf
-from statectl.cell.explore.local import Outcome
+from statectl.cell.explore.local import Reaction
 from statectl.cell.model import Cell, GlobalExpr
 from statectl.kernel.semantics import Unhandled
 
@@ -73,7 +73,7 @@ def _expr_bits(model: Composed, expr: GlobalExpr | None) -> int:
     return 0 if expr is None else _bits(model, expr.refs)
 
 
-def _cond_bits(model: Composed, o: Outcome) -> int:
+def _cond_bits(model: Composed, o: Reaction) -> int:
     """The other devices whose state decides whether outcome ``o`` is possible."""
     refs = (foreign_leaf(leaf) for leaf, _value in o.choices)
     return _bits(model, (r for r in refs if r is not None))
