@@ -15,6 +15,7 @@ from pathlib import Path
 from statectl.cell.explore import Report, explore
 from statectl.cell.explore.ample import reducible
 from statectl.cell.explore.replay import ReplayStep, run_cell
+from statectl.cell.explore.verify import verify_cell
 from statectl.cell.model import Cell, load_cell, load_cell_or_raise
 from statectl.channels.cli import main
 
@@ -77,6 +78,10 @@ def test_no_por_option(tmp_path: Path) -> None:
         assert stored is None or stored in text
         if line:
             assert "the full search stores at most 4,096 states" in text
+    full, _ = verify_cell(path, por=False)
+    reduced, _ = verify_cell(path)
+    assert full is not None and reduced is not None
+    assert full.states == 4**6 > reduced.states and full.verdict == reduced.verdict == "holds"
 
 
 def test_recovery_cells_are_searched_in_full() -> None:

@@ -28,12 +28,14 @@ def verify_cell(
     *,
     max_states: int | None = None,
     progress: Callable[[Progress], None] | None = None,
+    por: bool = True,
 ) -> tuple[Report | None, list[Diagnostic]]:
-    """Load and explore a cell file; ``None`` and the diagnostics when it does not load."""
+    """Load and explore a cell file (``por=False``: without partial-order reduction);
+    ``None`` and the diagnostics when it does not load."""
     cell, diags = load_cell(path)
     if cell is None:
         return None, diags
-    return explore(cell, max_states=max_states, progress=progress), diags
+    return explore(cell, max_states=max_states, progress=progress, por=por), diags
 
 
 #: Longest part of a trace file name taken from a property's name: file systems
