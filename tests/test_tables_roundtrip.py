@@ -102,7 +102,14 @@ event_rows = st.builds(
     api=optional_names,
     invoke=optional_names,
     unasked=st.booleans(),
-).map(lambda r: replace(r, unasked=r.unasked and r.kind is EventKind.COMPLETION))
+    severity=st.none() | st.integers(1, 1000),
+).map(
+    lambda r: replace(
+        r,
+        unasked=r.unasked and r.kind is EventKind.COMPLETION,
+        severity=r.severity if r.kind is EventKind.FAULT else None,
+    )
+)
 device_tables = st.builds(
     DeviceTables,
     device=names,

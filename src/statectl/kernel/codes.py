@@ -127,6 +127,13 @@ ALL: tuple[Code, ...] = (
         "a bad unasked cell (not yes, no, true or false; or on an event that is not a completion)",
         _TABLES,
     ),
+    _c(
+        "T126",
+        _E,
+        "a bad severity cell (not a whole number from 1 to 1000; or on an event that is not "
+        "a fault)",
+        _TABLES,
+    ),
     # -- B2xx: building a chart from tables, and tables from a chart (front.builder.build) --
     _c("B201", _E, "an event row's old or new state is not in the State Definition table", _TABLES),
     _c("B202", _E, "no state is marked default", _TABLES),

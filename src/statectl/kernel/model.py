@@ -326,6 +326,9 @@ class EventDef:
     #: a completion the device may report with no call of its API pending (the
     #: table's ``unasked`` column; statectl.kernel.semantics.calls rule 4)
     unasked: bool = False
+    #: the severity (1-1000) of the OPC UA alarm a fault raises (the table's ``severity``
+    #: column); None: the server's default
+    severity: int | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -37,6 +37,7 @@ from statectl.front.tables.rows import (
     ALIASES,
     COLUMNS,
     CONTROL_WORDS,
+    MAX_SEVERITY,
     REDO_WORDS,
     REQUIRED,
     TYPE_WORDS,
@@ -76,6 +77,7 @@ _DESCRIBED = {
     "ignore": "events this state ignores (or: all others)",
     "defer": "events kept until the state is left",
     "timeout": "DURATION -> EVENT, armed on entry",
+    "severity": "a fault's OPC UA alarm severity, 1 (lowest) to 1000",
 }
 
 
@@ -96,6 +98,9 @@ def _cell(table: str, column: str) -> dict[str, Any]:
         out = {"anyOf": [_words(k.value for k in EventKind), {"type": "null"}]}
     elif table == "recovery" and column == "redo":
         out = {"anyOf": [{"type": "boolean"}, _words(REDO_WORDS), {"type": "null"}]}
+    elif table == "events" and column == "severity":
+        number = {"type": "integer", "minimum": 1, "maximum": MAX_SEVERITY}
+        out = {"anyOf": [number, {"type": "string", "pattern": "^[0-9]+$"}, {"type": "null"}]}
     elif column in ("data", "assign"):  # event data declared, or a recovery payload
         out = {"type": ["object", "string", "null", "array", "number", "boolean"]}
     elif column in _LIST_COLUMNS:

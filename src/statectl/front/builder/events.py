@@ -76,6 +76,7 @@ def _event_defs(rows: Sequence[EventRow], diags: list[Diagnostic]) -> tuple[Even
                 "; ".join(_unique([r.condition for r in group])),
                 first.where,
                 unasked=any(r.unasked for r in group),
+                severity=max((r.severity for r in group if r.severity is not None), default=None),
             )
         )
     return tuple(defs)

@@ -245,6 +245,7 @@ def _rows_of(chart: Chart) -> tuple[DeviceTables, Chart]:
             else (),
             assign=tuple((a.location, a.expr or "") for a in t.actions if isinstance(a, Assign)),
             unasked=t.events[0] in declared and declared[t.events[0]].unasked,
+            severity=declared[t.events[0]].severity if t.events[0] in declared else None,
         )
         for t, spec in zip(chart.transitions, specs, strict=True)
     )

@@ -13,6 +13,7 @@ from statectl.front.tables.literals import parse_payload
 from statectl.front.tables.rows import (
     COLUMNS,
     CONTROL_WORDS,
+    MAX_SEVERITY,
     REDO_WORDS,
     REQUIRED,
     TYPE_NAMES,
@@ -231,6 +232,7 @@ def event_row(row: RawRow, diags: list[Diagnostic]) -> EventRow:
         invoke=_text(row, "invoke", diags),
         where=row.where,
         unasked=_unasked(row, diags),
+        severity=_severity(row, diags),
         **event_data_cells(row, diags),
     )
 
@@ -264,6 +266,37 @@ def _unasked(row: RawRow, diags: list[Diagnostic]) -> bool:
         )
         return False
     return value
+
+
+def _severity(row: RawRow, diags: list[Diagnostic]) -> int | None:
+    """The ``severity`` cell: the OPC UA alarm severity (1-1000) of a fault; empty: none."""
+    text = _text(row, "severity", diags)
+    if not text:
+        return None
+    where = row.cells["severity"][1]
+    if not (text.isascii() and text.isdigit() and 1 <= int(text) <= MAX_SEVERITY):
+        diags.append(
+            diag(
+                "T126",
+                where,
+                f"event 'severity' must be a whole number from 1 to {MAX_SEVERITY} (got {text!r})",
+                "write the alarm's severity as OPC UA counts it: 1 (lowest) to 1000 "
+                "(highest), e.g. severity: 700; leave it empty for the default",
+            )
+        )
+        return None
+    kind = _text(row, "kind", diags).strip().lower() if "kind" in row.cells else ""
+    if kind != EventKind.FAULT.value:
+        diags.append(
+            diag(
+                "T126",
+                where,
+                f"severity on {kind or 'command'} event {_text(row, 'event', diags)!r}",
+                "only a fault raises an alarm: set kind: fault or remove the severity",
+            )
+        )
+        return None
+    return int(text)
 
 
 def _unreadable(row: RawRow, column: str) -> bool:

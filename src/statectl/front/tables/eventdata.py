@@ -215,6 +215,8 @@ def event_columns(events: Sequence[Any], flat: Sequence[str]) -> tuple[str, ...]
         extra.append("assign")
     if any(getattr(e, "unasked", False) for e in events):
         extra.append("unasked")
+    if any(getattr(e, "severity", None) is not None for e in events):
+        extra.append("severity")
     return (*flat, *extra)
 
 
@@ -242,4 +244,6 @@ def event_extra_cells(e: Any, columns: Sequence[str]) -> list[str]:
         out.append(format_assign(e.assign))
     if "unasked" in columns:
         out.append("yes" if e.unasked else "")
+    if "severity" in columns:
+        out.append("" if e.severity is None else str(e.severity))
     return out

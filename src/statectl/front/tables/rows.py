@@ -43,10 +43,13 @@ EVENT_COLUMNS = (
     "data",
     "assign",
     "unasked",
+    "severity",
 )
-#: The event columns every writer emits; ``data``, ``assign`` and ``unasked`` only when a
-#: row uses them.
+#: The event columns every writer emits; ``data``, ``assign``, ``unasked`` and
+#: ``severity`` only when a row uses them.
 FLAT_EVENT_COLUMNS = EVENT_COLUMNS[:8]
+#: The highest alarm severity an event row may give (OPC UA's scale: 1 to 1000).
+MAX_SEVERITY = 1000
 DATA_COLUMNS = ("name", "value")
 RECOVERY_COLUMNS = ("state", "event", "data", "redo")
 #: The recovery columns every writer emits; ``redo`` only when a row uses it.
@@ -161,6 +164,8 @@ class EventRow:
     assign: tuple[tuple[str, str], ...] = ()
     #: a completion the device may report with no call pending (kernel.semantics.calls)
     unasked: bool = False
+    #: the OPC UA alarm severity of a fault (1-1000); None: the default (channels/opcua)
+    severity: int | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -332,6 +332,8 @@ def _event_doc(tables: DeviceTables) -> list[dict[str, Any]]:
             row["assign"] = format_assign(e.assign)
         if e.unasked:
             row["unasked"] = _Yes()
+        if e.severity is not None:
+            row["severity"] = e.severity
         rows.append(row)
     return rows
 
