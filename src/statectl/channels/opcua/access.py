@@ -1,8 +1,11 @@
 """Who may do what on the OPC UA server (rule 4 of :mod:`statectl.channels.opcua.server`).
 
 Rules:
-1. Anonymous clients browse, read and subscribe; the one configured user may also call
-   methods; nobody writes. Passwords are compared in constant time.
+1. Anonymous clients browse, read and subscribe, and may call ``ConditionRefresh``
+   (a request whose every method is ``ConditionRefresh`` or ``ConditionRefresh2``:
+   it only sends the caller's subscription the retained alarms again); the one
+   configured user may also call methods; nobody writes. Passwords are compared in
+   constant time.
 2. Only the security policies the config lists open a session. asyncua picks a
    channel's policy from its factories and, when none matches, keeps the policy the
    connection started with: None, with no permission rules at all. So when the config
@@ -88,9 +91,30 @@ def rules() -> Any:  # a ruleset class built on first use (asyncua is optional)
             _CALLER.set(getattr(user, "name", None) if role is UserRole.User else None)  # rule 3
             if role is UserRole.User:
                 return action_type_id in everyone or action_type_id == call
+            if role is UserRole.Anonymous and action_type_id == call:
+                return _refresh_only(body)
             return role is UserRole.Anonymous and action_type_id in everyone
 
     return Rules()
+
+
+def _refresh_only(body: Any) -> bool:
+    """Rule 1: a Call request whose every method is a ConditionRefresh (read from a copy
+    of the request's bytes: asyncua reads the body itself afterwards)."""
+    ua = ua_module()
+    from asyncua.common.utils import Buffer
+    from asyncua.ua.ua_binary import struct_from_binary
+
+    refresh = {
+        ua.NodeId(ua.ObjectIds.ConditionType_ConditionRefresh),
+        ua.NodeId(ua.ObjectIds.ConditionType_ConditionRefresh2),
+    }
+    try:
+        params = struct_from_binary(ua.CallParameters, Buffer(bytes(body)))
+    except Exception:  # unreadable: asyncua refuses it on its own reading
+        return False
+    methods = params.MethodsToCall or []
+    return bool(methods) and all(m.MethodId in refresh for m in methods)
 
 
 def discovery_only() -> Any:

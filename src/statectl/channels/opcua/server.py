@@ -41,6 +41,10 @@ Rules:
    after each step that changed them; the type comes from the initial value
    (Boolean, Int64, Double, String; anything else JSON text), and a value that
    fits it in no way keeps the last one, marked ``UncertainLastUsableValue``.
+6. A fault a monitored state raises is an OPC UA alarm (``AlarmConditionType``) of
+   the device, raised by the fault's step and cleared when the device leaves the
+   state it entered; clients acknowledge it and refresh the retained ones
+   (:mod:`statectl.channels.opcua.alarms`).
 """
 
 from __future__ import annotations
@@ -62,6 +66,7 @@ from statectl.channels.opcua.access import Users as _Users
 from statectl.channels.opcua.access import discovery_only
 from statectl.channels.opcua.access import rules as _Rules
 from statectl.channels.opcua.access import ua_module as _ua
+from statectl.channels.opcua.alarms import AlarmSpace, alarm_events
 from statectl.channels.opcua.certs import APP_URI, default_directory, ensure_certificate
 from statectl.channels.opcua.methods import Calls
 from statectl.channels.opcua.nodes import (
@@ -79,7 +84,7 @@ from statectl.channels.opcua.packml import PackmlNaming, PackmlSpace, naming, pa
 from statectl.channels.opcua.space import Change, Layout, changes, layout
 from statectl.kernel.errors import StatectlError
 from statectl.run.devices.opcua_config import endpoint_problem
-from statectl.run.runtime import InvokeIssued, MicrostepTaken, Started, StepRecord
+from statectl.run.runtime import InvokeIssued, MicrostepTaken, Started, StepRecord, Taken
 from statectl.run.system import System
 
 __all__ = ["NAMESPACE", "OpcuaServer", "OpcuaSettings"]
@@ -167,9 +172,9 @@ class OpcuaServer:
         }
         self._offs: list[Callable[[], None]] = []
         self._server: Any = None
-        self._updates: deque[
-            tuple[_Device, frozenset[str], list[Change], dict[str, Any] | None]
-        ] = deque()
+        self._updates: deque[tuple[_Device, frozenset[str], list[Change], Any, Any]] = deque()
+        self._alarms: AlarmSpace | None = None  # rule 6 (alarms.py)
+        self._faults = {n: frozenset(alarm_events(s.chart)) for n, s in system.subjects.items()}
         self._kick: Any = None  # an asyncio.Event of the server's loop
         self._loop_thread: int | None = None
         self._packml_space: PackmlSpace | None = None  # when a device declares PackML
@@ -197,19 +202,21 @@ class OpcuaServer:
                         buffer.append(record)
 
             def stepped(
-                _event: str, _data: Any, _outcome: str, device: _Device = device, s: Any = subject
+                event: str, data: Any, outcome: str, device: _Device = device, s: Any = subject
             ) -> None:
                 records = device.pending
                 assert records is not None
                 device.pending = []
                 loop = self._loop
+                fault = None  # a fault that raises an alarm (rule 6): its event and data
+                if event in self._faults[device.name] and outcome == "handled":
+                    fault = (event, data)
+                now = (device, s.configuration, records, dict(s.data), fault)
                 if threading.get_ident() == self._loop_thread:
-                    self._publish(device, s.configuration, records, dict(s.data))
+                    self._publish(*now)
                 elif loop is not None:
                     with contextlib.suppress(RuntimeError):  # the loop closed: stopping
-                        loop.call_soon_threadsafe(
-                            self._publish, device, s.configuration, records, dict(s.data)
-                        )
+                        loop.call_soon_threadsafe(self._publish, *now)
 
             self._offs.append(subject.listen_steps(keep))
             self._offs.append(subject.on_step(stepped))
@@ -333,6 +340,7 @@ class OpcuaServer:
         charts = {n: s.chart for n, s in self.system.subjects.items()}
         names = {n: naming(charts[n], d.layout) for n, d in self._devices.items()}
         packml = await PackmlSpace.create(server, kind, idx) if any(names.values()) else None
+        self._alarms = alarms = await AlarmSpace.create(server, self.system)
         self._packml_space = packml
         for name, device in self._devices.items():
             chart = charts[name]
@@ -361,6 +369,7 @@ class OpcuaServer:
             device.last_invoke = await node.add_variable(
                 idx, "LastInvoke", ua.Variant(-1, ua.VariantType.Int32)
             )
+            await alarms.add_device(idx, name, node, chart)
             pack = names[name]
             made = await self._machines(node, kind, idx, device, methods, chart.initial, pack)
             if packml is not None and pack is not None:
@@ -464,8 +473,9 @@ class OpcuaServer:
         active: frozenset[str],
         records: list[Change],
         data: dict[str, Any] | None = None,
+        fault: tuple[str, Any] | None = None,
     ) -> None:
-        self._updates.append((device, active, records, data))
+        self._updates.append((device, active, records, data, fault))
         self._kick.set()
 
     async def _writer(self) -> None:
@@ -483,6 +493,7 @@ class OpcuaServer:
         active: frozenset[str],
         records: list[Change],
         data: dict[str, Any] | None = None,
+        fault: tuple[str, Any] | None = None,
     ) -> None:
         ua = _ua()
 
@@ -549,6 +560,12 @@ class OpcuaServer:
             to_id = device.state_nodes[to].nodeid if to else ua.NodeId()
             setattr(ev.event, "ToState/Id", ua.Variant(to_id, node_id))
             await ev.trigger(message=f"{device.name}: {name}")
+        if self._alarms is not None:  # rule 6
+            faults = self._faults[device.name]
+            entered = {
+                r.label: r.targets for r in records if isinstance(r, Taken) and r.label in faults
+            }
+            await self._alarms.stepped(device.name, active, entered, fault)
 
 
 def _initial(chart: Any, spec: Any, chart_initial: set[str]) -> str | None:

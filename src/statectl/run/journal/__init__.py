@@ -10,6 +10,7 @@ from statectl.run.journal.device import JournalledDevice
 from statectl.run.journal.device_file import DeviceFile, RecoveryRule, load_device
 from statectl.run.journal.format import Guarantee, JournalError, StepKind, Sync
 from statectl.run.journal.read import (
+    ACKNOWLEDGED,
     REDO,
     REFUSED,
     DeviceRow,
@@ -25,6 +26,7 @@ from statectl.run.journal.store import Journal, Ticket
 from statectl.run.journal.subjects import restore_subject
 
 __all__ = [
+    "ACKNOWLEDGED",
     "REDO",
     "REFUSED",
     "DeviceFile",

@@ -50,6 +50,10 @@ Rules:
    :meth:`JournalledDevice.refused` as an ``event`` step with no inbox row and the
    outcome ``refused: ORIGIN``, with the snapshot it left unchanged; the System calls it
    as the owner, so the row follows the device's steps. Replay passes over it.
+8. An operator's acknowledgement of an alarm (an OPC UA ``Acknowledge``) is journalled
+   the same way by :meth:`JournalledDevice.acknowledged`: an ``event`` step named after
+   the fault, with the comment as its data and the outcome ``acknowledged: ORIGIN``;
+   the snapshot is unchanged and replay passes over it.
 """
 
 from __future__ import annotations
@@ -66,7 +70,7 @@ from statectl.kernel.semantics import Step, step
 from statectl.run.journal.assigned import replay_assigned_data
 from statectl.run.journal.device_file import RecoveryRule
 from statectl.run.journal.format import Guarantee, JournalError, StepKind, encode_data
-from statectl.run.journal.read import REDO, REFUSED, JournalReader, StepRow
+from statectl.run.journal.read import ACKNOWLEDGED, REDO, REFUSED, JournalReader, StepRow
 from statectl.run.journal.store import Journal, Send, Ticket
 from statectl.run.journal.subjects import restore_subject
 from statectl.run.runtime.eventdata import check_posted
@@ -307,6 +311,14 @@ class JournalledDevice:
     def refused(self, event: str, data: Any, origin: str) -> None:
         """Rule 7: journal a command refused at the door; a journal that cannot take the
         row any more fails elsewhere, and the command is refused all the same."""
+        self._aside(event, data, f"{REFUSED}: {origin}")
+
+    def acknowledged(self, fault: str, comment: str, origin: str) -> None:
+        """Rule 8: journal an alarm's acknowledgement, on the owner (after the fault's step)."""
+        self._aside(fault, {"comment": comment} if comment else None, f"{ACKNOWLEDGED}: {origin}")
+
+    def _aside(self, event: str, data: Any, outcome: str) -> None:
+        """A step row that ran nothing (rules 7 and 8), with the snapshot as it is."""
         snapshot = self.subject.snapshot
         if snapshot is None:  # not started: no state to journal it with
             return
@@ -317,7 +329,7 @@ class JournalledDevice:
         with contextlib.suppress(JournalError):
             self.journal.record(
                 self.name, StepKind.EVENT, snapshot, time_=self.subject.clock.now(),
-                event=event, data=data, outcome=f"{REFUSED}: {origin}",
+                event=event, data=data, outcome=outcome,
             )  # fmt: skip
 
     def _record_now(self, kind: StepKind) -> None:

@@ -12,7 +12,8 @@ Rules:
    applied by two steps is refused: it ran twice), except a recovery
    ``redo`` step (:data:`REDO`): it re-issued device calls and changed no state,
    so it is not posted, nor is a ``refused`` step (:data:`REFUSED`, a command the
-   System's door refused). The
+   System's door refused) or an ``acknowledged`` one (:data:`ACKNOWLEDGED`, an
+   operator acknowledged an alarm). The
    snapshot the model reaches must equal the journalled one after every step
    (for a redo: the one before it), and a ``restore`` must find the device where
    the run before it left it; every difference is reported as a
@@ -44,6 +45,7 @@ from statectl.run.runtime.hooks import Listener
 from statectl.run.runtime.subject import Subject
 
 __all__ = [
+    "ACKNOWLEDGED",
     "REDO",
     "REFUSED",
     "DeviceRow",
@@ -62,6 +64,8 @@ __all__ = [
 REDO = "redo"
 #: The outcome of a command the System's door refused (``refused: ORIGIN``): nothing ran.
 REFUSED = "refused"
+#: The outcome of an alarm's acknowledgement (``acknowledged: ORIGIN``): nothing ran.
+ACKNOWLEDGED = "acknowledged"
 
 
 @dataclass(frozen=True, slots=True)
@@ -407,7 +411,7 @@ def replay(
             else:  # the window starts mid-run: take the journal's word for the first state
                 restore_subject(subject, row.snapshot)
             subjects[row.device] = subject
-        refused = row.outcome.partition(":")[0] == REFUSED  # the door refused it: nothing ran
+        refused = row.outcome.partition(":")[0] in (REFUSED, ACKNOWLEDGED)  # nothing ran
         if (row.kind is StepKind.EVENT and not refused) or (
             row.kind is StepKind.RECOVERY and row.outcome != REDO
         ):
