@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import contextlib
 import uuid
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
@@ -44,6 +45,7 @@ from statectl.channels.opcua.access import ua_module as _ua
 from statectl.front.observers import extract
 from statectl.kernel.model import Chart
 from statectl.run.commands import Origin
+from statectl.run.runtime import Taken
 from statectl.run.system import System
 
 __all__ = ["DEFAULT_SEVERITY", "AlarmSpace", "alarm_events"]
@@ -167,11 +169,20 @@ class AlarmSpace:
     # -- after each step (rules 2 and 3) -----------------------------------------------------
 
     async def stepped(
-        self, device: str, active: frozenset[str], entered: Any, fault: tuple[str, Any] | None
+        self,
+        device: str,
+        active: frozenset[str],
+        records: Sequence[object],
+        fault: tuple[str, Any] | None,
     ) -> None:
-        """Raise the alarm of ``fault`` (its event and data) the step took, clear those
-        whose retaining states the device left; ``entered`` maps a fault to its targets."""
-        for alarm in self.by_device.get(device, ()):
+        """Raise the alarm of ``fault`` (its event and data) whose transition the step took
+        (in ``records``), and clear those whose retaining states the device left."""
+        alarms = self.by_device.get(device, ())
+        faults = {a.fault for a in alarms}
+        entered = {
+            r.label: r.targets for r in records if isinstance(r, Taken) and r.label in faults
+        }
+        for alarm in alarms:
             if fault is not None and fault[0] == alarm.fault and alarm.fault in entered:
                 alarm.targets = tuple(entered[alarm.fault])
                 await self._raise(alarm, fault[1])

@@ -30,7 +30,8 @@ Rules:
    and sent through the System's door
    (:mod:`statectl.channels.opcua.methods`). A device whose file declares
    ``profile: packml`` gets the PackML companion's names too
-   (:mod:`statectl.channels.opcua.packml`).
+   (:mod:`statectl.channels.opcua.packml`), and its PackTags
+   (:mod:`statectl.channels.opcua.packtags`).
 4. Security: anonymous sessions may browse, read and subscribe; calling a method
    needs the configured user (a session with wrong credentials is refused). The
    endpoints offer only the configured policies (Basic256Sha256 SignAndEncrypt
@@ -81,10 +82,11 @@ from statectl.channels.opcua.nodes import (
     write_data,
 )
 from statectl.channels.opcua.packml import PackmlNaming, PackmlSpace, naming, packml_call
+from statectl.channels.opcua.packtags import PackTags
 from statectl.channels.opcua.space import Change, Layout, changes, layout
 from statectl.kernel.errors import StatectlError
 from statectl.run.devices.opcua_config import endpoint_problem
-from statectl.run.runtime import InvokeIssued, MicrostepTaken, Started, StepRecord, Taken
+from statectl.run.runtime import InvokeIssued, MicrostepTaken, Started, StepRecord
 from statectl.run.system import System
 
 __all__ = ["NAMESPACE", "OpcuaServer", "OpcuaSettings"]
@@ -153,6 +155,7 @@ class _Device:
     pending: list[Change] | None = None
     #: data item -> its variable, its kind (rule 5) and the variant it shows
     data: dict[str, list[Any]] | None = None
+    packtags: PackTags | None = None  # a PackML device's Status and Admin (packtags.py)
 
 
 class OpcuaServer:
@@ -374,6 +377,8 @@ class OpcuaServer:
             made = await self._machines(node, kind, idx, device, methods, chart.initial, pack)
             if packml is not None and pack is not None:
                 await packml.finish(node, made, pack, functools.partial(self._packml, name))
+                data = dict(self.system.subjects[name].data)
+                device.packtags = await PackTags.create(node, chart, idx, packml.index, data)
 
     def _packml(self, device: str, event: str, holder: Any) -> Callable[..., Any]:
         """A PackML command method of ``holder``: the same call, answered with a status."""
@@ -528,6 +533,8 @@ class OpcuaServer:
             await put(m.available_transitions, moves, node_id)
         if data and device.data:
             await write_data(server, device.data, data, now)
+        if device.packtags is not None:
+            await device.packtags.write(server, active, data, now)
         if records:
             await asyncio.sleep(0)  # let the publisher send the new states before the rest
         for record in records:
@@ -561,11 +568,7 @@ class OpcuaServer:
             setattr(ev.event, "ToState/Id", ua.Variant(to_id, node_id))
             await ev.trigger(message=f"{device.name}: {name}")
         if self._alarms is not None:  # rule 6
-            faults = self._faults[device.name]
-            entered = {
-                r.label: r.targets for r in records if isinstance(r, Taken) and r.label in faults
-            }
-            await self._alarms.stepped(device.name, active, entered, fault)
+            await self._alarms.stepped(device.name, active, records, fault)
 
 
 def _initial(chart: Any, spec: Any, chart_initial: set[str]) -> str | None:
