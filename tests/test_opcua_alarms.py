@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import io
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -78,6 +78,7 @@ class Served:
     url: str
     system: Any
     journal: Path
+    stop: Callable[[], None]  # the owner, the server and the system; once
 
 
 @pytest.fixture
@@ -94,17 +95,20 @@ def served(tmp_path: Path) -> Iterator[Served]:
     settings = OpcuaSettings(endpoint=url, user=USER, password=PASSWORD, security=("None",))
     server = OpcuaServer(system, settings)
     server.start()
-    halt = None
+    halts: list[Callable[[], None]] = []
+
+    def stop() -> None:
+        while halts:
+            halts.pop()()
+
+    halts += [system.close, server.stop]
     try:
         system.start()
         server.refresh()
-        halt = system.start_owner()
-        yield Served(url, system, journal)
+        halts.append(system.start_owner())
+        yield Served(url, system, journal, stop)
     finally:
-        if halt is not None:
-            halt()
-        server.stop()
-        system.close()
+        stop()
 
 
 class Alarms:
@@ -202,6 +206,13 @@ def test_a_fault_raises_an_alarm_acknowledged_refreshed_and_cleared(served: Serv
                     ua.LocalizedText(""),
                 )
             )
+            seen["bad"] = [
+                await _status(condition.call_method("0:Acknowledge", *args))
+                for args in (
+                    (ua.Variant(raised.EventId, ua.VariantType.ByteString),),
+                    (ua.Variant("text", ua.VariantType.String), ua.LocalizedText("")),
+                )
+            ]
             system.post("Motor", "Error completion")
             seen["cleared"] = await heard.next(lambda e: _state(e, "ActiveState") is False)
             seen["after"] = await _refresh(client, sub, heard)
@@ -211,6 +222,7 @@ def test_a_fault_raises_an_alarm_acknowledged_refreshed_and_cleared(served: Serv
         return seen
 
     seen = run(go())
+    served.stop()  # the journal's writer commits what it holds
     raised = seen["raised"]
     assert seen["before"] is False and seen["variable"] is True
     assert seen["refs"] == [seen["condition"]]
@@ -222,6 +234,7 @@ def test_a_fault_raises_an_alarm_acknowledged_refreshed_and_cleared(served: Serv
     assert (seen["acked"].Comment.Text, seen["acked"].ClientUserId) == ("seen it", USER)
     assert seen["again"] == "BadConditionBranchAlreadyAcked"
     assert seen["stale"] == "BadEventIdUnknown"
+    assert seen["bad"] == ["BadArgumentsMissing", "BadInvalidArgument"]
     assert (seen["cleared"].Retain, _state(seen["cleared"], "AckedState")) == (False, True)
     assert seen["after"] == []
     _the_journal_keeps_the_acknowledgement(served)

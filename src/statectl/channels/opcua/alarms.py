@@ -42,6 +42,7 @@ from typing import Any
 
 from statectl.channels.opcua.access import caller
 from statectl.channels.opcua.access import ua_module as _ua
+from statectl.channels.opcua.nodes import browse
 from statectl.front.observers import extract
 from statectl.kernel.model import Chart
 from statectl.run.commands import Origin
@@ -118,7 +119,7 @@ class AlarmSpace:
         server_id = ua.NodeId(ua.ObjectIds.Server)
         for at, fault in enumerate(faults):
             condition = await folder.add_object(
-                idx, fault.replace(":", "_"), objecttype=kind, instantiate_optional=False
+                idx, browse(fault), objecttype=kind, instantiate_optional=False
             )
             await node.add_reference(condition.nodeid, ua.ObjectIds.HasCondition)
             gen = EventGenerator(self.server.iserver.isession)
@@ -177,7 +178,9 @@ class AlarmSpace:
     ) -> None:
         """Raise the alarm of ``fault`` (its event and data) whose transition the step took
         (in ``records``), and clear those whose retaining states the device left."""
-        alarms = self.by_device.get(device, ())
+        alarms = self.by_device.get(device)
+        if not alarms:  # most devices: nothing to do after a step
+            return
         faults = {a.fault for a in alarms}
         entered = {
             r.label: r.targets for r in records if isinstance(r, Taken) and r.label in faults
