@@ -88,3 +88,23 @@ def test_the_dashboard_state_carries_names_as_shown(tmp_path: Path) -> None:
     assert {name: pairs[name] for name in NAMES} == NAMES
     assert all(i["name"].isprintable() and i["method"].isprintable() for i in state["invokes"])
     json.dumps(state)
+
+
+#: Names whose escape differed by where they were printed: ``repr`` doubled a backslash
+#: and switched to double quotes around a quote; the one display escape does neither.
+WIRE_NAMES = [*NAMES, "C:\\motor\n", "it's\u202e", 'say "hi"\x00']
+
+
+def test_the_wire_and_the_commands_policy_escape_as_the_kernel_does() -> None:
+    """A Zenoh name (trust.shown) and a principal in a refusal (run/commands.py) are
+    escaped by kernel/text.py's ``shown``: each keeps only its quotes and its cut."""
+    from statectl.channels.distributed.trust import shown as wire_shown
+    from statectl.kernel.text import shown
+    from statectl.run.commands import Commands, Origin
+
+    for name in WIRE_NAMES:
+        assert wire_shown(name) == f"'{shown(name)}'"
+        refusal = str(Commands().refusal(Origin("opcua", name), "Motor", "Error"))
+        assert f"opcua '{shown(name)}' may not send it" in refusal, refusal
+    long = "\u202e" * 100
+    assert wire_shown(long) == f"'{shown(long[:80])}'... (100 characters)"

@@ -38,6 +38,7 @@ from typing import Any, Final
 import yaml
 
 from statectl.kernel.errors import StatectlError
+from statectl.kernel.text import shown
 
 __all__ = [
     "ANYONE",
@@ -113,8 +114,9 @@ class Grant:
 
 
 def _shown(name: str) -> str:
-    """A principal's name as a message shows it: escaped when it holds a control character."""
-    return name if name.isprintable() else repr(name)
+    """A principal's name as a message shows it: as it is when printable, else escaped by
+    the one display escape (kernel/text.py) and quoted, so the escape is seen as one."""
+    return name if name.isprintable() else f"'{shown(name)}'"
 
 
 #: Rule 3: what each channel allowed before there was a policy.

@@ -93,11 +93,11 @@ def name_problem(name: str) -> str | None:
 
 
 def shown(name: str) -> str:
-    """A name from the wire as it may be printed or journalled: quoted, every character
-    that is not printable escaped (``\\n``, ``\\u202e``), cut after 80 characters."""
+    """A name from the wire as it may be printed or journalled: cut after 80 characters,
+    escaped by the one display escape (kernel/text.py: ``\\n``, ``\\u202e``), quoted."""
     if len(name) <= _SHOWN:
-        return repr(name)
-    return f"{name[:_SHOWN]!r}... ({len(name)} characters)"
+        return f"'{display(name)}'"
+    return f"'{display(name[:_SHOWN])}'... ({len(name)} characters)"
 
 
 def printable(text: str, limit: int = 400) -> str:
