@@ -176,3 +176,53 @@ def test_a_repeated_guard_is_read_for_names_once(
     monkeypatch.setattr(names, "_named", counting)
     _check(_device(tmp_path / "d.yaml", 400, guard='previous == "A"'))
     assert len(reads) == 1
+
+
+def _ring(path: Path, rows: int) -> Path:
+    """bench/check.py's ring: ``rows / 4`` states, each with ``e2`` twice under exclusive
+    guards that cover every case (``mode <= 1`` / ``mode > 1``)."""
+    states = rows // 4
+    lines = ["device: Big", "data:", "  mode: 0", "states:", "  - {state: S0, control: default}"]
+    lines += [f"  - {{state: S{s}, control: event trigger required}}" for s in range(1, states)]
+    lines.append("events:")
+    for i in range(rows):
+        s, k = divmod(i, 4)
+        guard = ", guard: mode <= 1" if k == 2 else ", guard: mode > 1" if k == 3 else ""
+        lines.append(f"  - {{event: e{min(k, 2)}, old: S{s}, new: S{(s + 1 + k) % states}{guard}}}")
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+def test_a_pair_of_guards_repeated_on_every_state_is_compared_once(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """C403 (exclusive) and C419 (covering) prove a pair of guard texts once, however many
+    states repeat it: the proofs of 400 rows are the proofs of 40 (one per state made
+    them grow with the rows)."""
+    import statectl.front.rules.guards as guards
+
+    proofs: list[int] = []
+    real = guards._contradictory
+
+    def counting(conj: object) -> bool:
+        proofs.append(1)
+        return real(conj)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(guards, "_contradictory", counting)
+    counts = []
+    for rows in (40, 400):
+        guards._exclusive.cache_clear()
+        proofs.clear()
+        assert _check(_ring(tmp_path / f"ring{rows}.yaml", rows)) == 0
+        counts.append(len(proofs))
+    assert counts[0] == counts[1] <= 8, counts
+
+
+def test_a_checked_chart_is_not_kept_by_the_process(tmp_path: Path) -> None:
+    """statectl check frees the chart it checked (and its compiled machine) before the
+    collector is on again: no 100,000-row chart stays for it to walk, or in memory."""
+    from statectl.kernel.semantics import machine
+
+    before = dict(machine._COMPILED)
+    assert _check(_ring(tmp_path / "ring.yaml", 40)) == 0
+    assert before == machine._COMPILED

@@ -83,7 +83,9 @@ class StateKind(enum.Enum):
 
     @property
     def is_history(self) -> bool:
-        return self in (StateKind.HISTORY_SHALLOW, StateKind.HISTORY_DEEP)
+        # identity, not ``in (...)``: a tuple test hashes the member, and every step,
+        # build and check asks this of each state it touches
+        return self is StateKind.HISTORY_SHALLOW or self is StateKind.HISTORY_DEEP
 
 
 class Action:

@@ -47,7 +47,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, TypeVar
 
 from statectl.front.builder.common import GUARD_NAMES, _compile, _d, _hint, _literal
 from statectl.front.builder.eventdata import Fields, assign_actions, check_guard, event_fields
@@ -71,6 +71,7 @@ from statectl.kernel.model import (
     Action,
     Chart,
     DataItem,
+    EventDef,
     InvokeNumber,
     Notify,
     State,
@@ -113,9 +114,7 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
     assigns = _check_rows(tables, merged, data_names, fields, diags)
 
     rows = _merge_events(tables.events, diags)
-    events = tuple(
-        dataclasses.replace(e, fields=fields.get(e.name, ())) for e in _event_defs(rows, diags)
-    )
+    events = tuple(_with(e, fields=fields.get(e.name, ())) for e in _event_defs(rows, diags))
     _check_invokes(rows, diags)
     apis, invokes = derive_invokes(
         [EventSpec(r.event, r.kind, r.api or None, r.new, r.invoke or None) for r in rows]
@@ -125,9 +124,7 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
 
     event_names = [e.name for e in events]
     extras = state_extras(merged, kinds, rows, event_names, diags)
-    states = [
-        dataclasses.replace(s, timeout=extras[s.name][0], defer=extras[s.name][1]) for s in states
-    ]
+    states = [_with(s, timeout=extras[s.name][0], defer=extras[s.name][1]) for s in states]
     check_apis(merged, rows, diags)
     ignored = _ignored(kept, merged, rows, event_names, diags)
 
@@ -148,6 +145,18 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
         profile=tables.profile,
     )
     return chart, diags
+
+
+_T = TypeVar("_T", State, EventDef)
+
+
+def _with(value: _T, **changes: object) -> _T:
+    """``value`` with ``changes``; the very value when they change nothing (the usual
+    state has no timeout and no defer, the usual event no data): a replace per row was
+    a tenth of a 100,000-row build."""
+    if all(getattr(value, name) == new for name, new in changes.items()):
+        return value
+    return dataclasses.replace(value, **changes)  # type: ignore[arg-type]  # the fields
 
 
 def _states(

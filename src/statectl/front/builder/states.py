@@ -76,6 +76,9 @@ def _merge_states(rows: Sequence[StateRow], diags: list[Diagnostic]) -> dict[str
                     f"rows at {_rows_text(places)}",
                 )
             )
+        if len(group) == 1:  # the usual state: one row, nothing to merge
+            merged[name] = _one_row(first)
+            continue
         controls: list[ControlKind] = []
         for r in group:
             controls.extend(c for c in r.controls if c not in controls)
@@ -95,6 +98,26 @@ def _merge_states(rows: Sequence[StateRow], diags: list[Diagnostic]) -> dict[str
             defer=tuple(_unique([d for r in group for d in r.defer])),
         )
     return merged
+
+
+def _one_row(r: StateRow) -> _Merged:
+    """A state of one row as :func:`_merge_states` merges a group of one, without the
+    group's walks (each ``next(...)`` over one row is that row's cell)."""
+    return _Merged(
+        name=r.state,
+        component=r.component,
+        api=r.api,
+        controls=tuple(dict.fromkeys(r.controls)),
+        description=r.description,
+        ignore=tuple(_unique(r.ignore)),
+        parent=r.parent,
+        rows=(r.where,),
+        type=r.type,
+        default=r.default,
+        number=r.number,
+        timeout=r.timeout,
+        defer=tuple(_unique(r.defer)),
+    )
 
 
 def _order(

@@ -55,7 +55,7 @@ from statectl.front.tables.bulk import gc_paused
 from statectl.kernel.codes import family
 from statectl.kernel.errors import Diagnostic, Location, Severity, did_you_mean, has_errors
 from statectl.kernel.model import Chart, ControlKind, EventKind, State, StateKind, Transition
-from statectl.kernel.semantics import Machine, entry_set, structural
+from statectl.kernel.semantics import Machine, entry_set, release, structural
 
 __all__ = ["CODES", "check_chart", "check_paths", "guards_exclusive"]
 
@@ -537,4 +537,6 @@ def _check_path(path: str, texts: Mapping[str, str] | None) -> list[Diagnostic]:
     if chart is not None and not errors:
         out.extend(check_chart(chart))
         out.extend(check_recovery(chart, tables.recovery))
+    if chart is not None:
+        release(chart)  # nobody steps this chart: free it now, while the collector is off
     return out

@@ -257,6 +257,13 @@ def guards_exclusive(first: str | None, second: str | None) -> bool:
 
     Sound but incomplete: ``True`` is a proof, ``False`` means "not proven".
     """
+    return _exclusive(first or None, second or None)
+
+
+@functools.lru_cache(maxsize=4096)
+def _exclusive(first: str | None, second: str | None) -> bool:
+    """:func:`guards_exclusive`, once per pair of guard texts: a table repeats a few
+    guards on many rows, and C403 and C419 ask of each state's pair again."""
     left = _normal_form(first) if first else ((),)
     right = _normal_form(second) if second else ((),)
     if left is None or right is None:

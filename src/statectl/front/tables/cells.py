@@ -184,10 +184,15 @@ def _type(row: RawRow, diags: list[Diagnostic]) -> StateKind | None:
     return kind
 
 
+#: Each table's columns as a set: every cell of every row is looked up here.
+_KNOWN = {table: frozenset(columns) for table, columns in COLUMNS.items()}
+
+
 def _check_keys(table: str, row: RawRow, diags: list[Diagnostic]) -> None:
-    for name, (_, where) in row.cells.items():
-        if name not in COLUMNS[table]:
-            diags.append(unknown_column(table, name, where))
+    known = _KNOWN[table]
+    for name in row.cells:
+        if name not in known:
+            diags.append(unknown_column(table, name, row.cells[name][1]))
 
 
 def state_row(row: RawRow, diags: list[Diagnostic]) -> StateRow:

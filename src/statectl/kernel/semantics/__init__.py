@@ -46,7 +46,13 @@ from statectl.kernel.semantics.algorithm import (
     select_eventless_transitions,
     select_transitions,
 )
-from statectl.kernel.semantics.machine import Machine, compiled, name_match, structural
+from statectl.kernel.semantics.machine import (
+    Machine,
+    compiled,
+    name_match,
+    release,
+    structural,
+)
 from statectl.kernel.semantics.records import (
     MAX_GUARD_PATHS,
     MAX_MICROSTEPS,
@@ -99,6 +105,7 @@ __all__ = [
     "microstep",
     "name_match",
     "process_event",
+    "release",
     "remove_conflicting_transitions",
     "select_eventless_transitions",
     "select_transitions",

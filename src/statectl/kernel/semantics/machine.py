@@ -266,6 +266,16 @@ def compiled(chart: Chart) -> Machine:
         return m
 
 
+def release(chart: Chart) -> None:
+    """Drop ``chart``'s shared machine: a host that asked only structural questions of a
+    chart it then discards (``statectl check``) frees both at once, rather than keeping a
+    100,000-row chart for the life of the process (and the collector walking it)."""
+    with _compiling:
+        hit = _COMPILED.get(id(chart))
+        if hit is not None and hit[0] is chart:
+            del _COMPILED[id(chart)]
+
+
 def structural(chart: Chart) -> Machine:
     """A Machine to ask structural questions (entry sets, ancestors) of any built chart.
 
