@@ -423,6 +423,7 @@ def _check_monitors(st: _Structure) -> Iterator[Diagnostic]:
         if ControlKind.MONITORING in s.controls
         for anc in st.ancestors.get(s.name, ())
     }
+    faults = {e for e in chart.event_names if _is_fault(chart, e)}  # once per name, not row
     for t in chart.transitions:
         source = st.by_name.get(t.source)
         if source is None or ControlKind.MONITORING in source.controls:
@@ -430,7 +431,7 @@ def _check_monitors(st: _Structure) -> Iterator[Diagnostic]:
         if t.source in monitored_below:
             continue  # a monitored substate's monitor raises it (a superstate's fault row)
         for e in t.events:
-            if _is_fault(chart, e):
+            if e in faults:
                 yield Diagnostic(
                     "C408",
                     Severity.WARNING,

@@ -186,12 +186,13 @@ def check_triggers(st: _Structure) -> Iterator[Diagnostic]:
     if not marked:
         return
     m = structural(chart)
+    drives = {  # per event name, asked once: whether it is a command or a fault
+        e: (d := chart.event(e)) is None or d.kind in (EventKind.COMMAND, EventKind.FAULT)
+        for e in chart.event_names
+    }
     triggered: set[str] = set()
     for t in chart.transitions:
-        if any(
-            (d := chart.event(e)) is None or d.kind in (EventKind.COMMAND, EventKind.FAULT)
-            for e in t.events
-        ):
+        if any(drives[e] for e in t.events):
             triggered.update(_entered(st, m, t))
     for s in marked:
         if s.name not in triggered:
