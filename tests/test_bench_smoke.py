@@ -6,6 +6,7 @@ and prints a row per scenario for each library asked for.
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -39,6 +40,8 @@ def output() -> str:
         "| paper cycle | statectl demo wiring + journal |",
         "| paper cycle | statectl demo wiring + trace |",
         "| paper cycle | statectl bare post()+run_until_idle() |",
+        "| paper cycle | statectl demo wiring, clock still (no polls; completions dispatched) |",
+        "| paper cycle | statectl cold: built from the file, motor connected, first cycle |",
         "| paper cycle | dict baseline |",
         "| 50 states, 2 levels | statectl dispatch() |",
         "| 50 states, 2 levels | statectl post()+run_until_idle() |",
@@ -68,8 +71,9 @@ def test_quick_run_reports_the_worst_row_beside_the_best(output: str) -> None:
 def test_quick_run_reports_many_devices_on_one_system(output: str) -> None:
     """The System row counts every event it was fed as processed."""
     line = next(x for x in output.splitlines() if "Motors on one System" in x)
-    fed = line.split("(")[1].split()[0]
-    assert int(fed.replace(",", "")) == 100 * 2 * 7  # devices x cycles x events
+    fed = re.search(r"([0-9,]+) events processed", line)
+    assert fed is not None, line
+    assert int(fed[1].replace(",", "")) == 100 * 2 * 8  # devices x cycles x events
 
 
 @pytest.mark.parametrize(
@@ -93,3 +97,10 @@ def test_verify_bench_refuses_an_unfinished_spin_search(
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     assert (module._unfinished(code, output, stored) == "") is finished
+
+
+def test_the_many_devices_line_says_its_threads_and_cpu(output: str) -> None:
+    """Issue 26: the many-devices figure names its threads and gives CPU time per event."""
+    line = next(x for x in output.splitlines() if "Motors on one System" in x)
+    assert "(1 owner thread, 4 posting threads)" in line
+    assert "ns/event of the process's CPU, all threads" in line
