@@ -153,14 +153,20 @@ def _row_cells(
     cells: dict[str, tuple[Cell, Location]] = {}
     scalar = yaml.ScalarNode
     plain = table != "recovery"  # a recovery row's data cell is constructed (_payload)
+    at = _at(file, item)  # a cell on the row's line (or the last cell's) shares its location
     for key, value in item.value:
-        if type(key) is not scalar or key.value in cells or _column(key.value) != key.value:
+        if type(key) is not scalar:
             return _slow_row_cells(file, table, item, diags)
-        if type(value) is scalar and (plain or key.value != "data"):
+        name = key.value
+        if name in cells or (_columns.get(name) or _column(name)) != name:
+            return _slow_row_cells(file, table, item, diags)
+        if type(value) is scalar and (plain or name != "data"):
             cell: Cell = "" if value.tag == NULL_TAG else str(value.value)
         else:
-            cell = _row_cell(table, key.value, value)
-        cells[key.value] = (cell, _at(file, value))
+            cell = _row_cell(table, name, value)
+        if value.start_mark.line + 1 != at.line:
+            at = _at(file, value)
+        cells[name] = (cell, at)
     return cells
 
 
