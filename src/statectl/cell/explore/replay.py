@@ -245,7 +245,8 @@ class _Runner:
         """Why the twin of ``device`` would not report ``event`` now ("" if it would)."""
         d = self.model.position[device]
         space = self.model.spaces[d]
-        lid = space.lookup(self.subjects[device].snapshot or Snapshot(frozenset()))
+        subject = self.subjects[device]
+        lid = space.lookup(subject.snapshot or Snapshot(frozenset()), subject.data)
         if lid is not None and timing_out(space, lid, event):
             return ""
         if space.unasked(event) or self.twins[device].would_report(event):

@@ -15,6 +15,8 @@ Rules:
    verdict all of whose counterexamples do; a deadlock or recovery verdict that
    holds on a model with such ways is marked "over-approximated" (an assumed way
    on may hide a real dead end). Other verdicts that hold are sound as they are.
+5. A reduced search (symmetry) says so: the states it stored, the states the full
+   search stores, and the reductions it used; its verdicts are the full search's.
 """
 
 from __future__ import annotations
@@ -207,10 +209,13 @@ class Report:
     properties: tuple[tuple[str, str], ...] = field(default=())  # (property, verdict)
     #: (property, what its verdict relies on beyond the model): rule 4
     relies: tuple[tuple[str, tuple[str, ...]], ...] = ()
-    #: the reductions the search used, one line each (empty: the full search)
+    #: the reductions the search used, one line each (empty: the full search; rule 5)
     reductions: tuple[str, ...] = ()
     #: whether every trace is as short as any (rule 3)
     shortest: bool = True
+    #: the states the full search stores (symmetry: the stored orbits counted out; with
+    #: an incomplete search, at least this many), when the reduction can tell
+    full_states: int | None = None
 
     @property
     def failures(self) -> tuple[Finding, ...]:
@@ -242,6 +247,7 @@ class Report:
             "peak_bytes": self.peak_bytes,
             "reductions": list(self.reductions),
             "shortest_traces": self.shortest,
+            **({"full_states": self.full_states} if self.full_states is not None else {}),
             "properties": [
                 {"property": p, "verdict": v, **({"assumes": list(r)} if (r := relies[p]) else {})}
                 for p, v in self.properties

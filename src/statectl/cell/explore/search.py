@@ -25,6 +25,11 @@ Rules:
    again in full, so that traces are shortest and counts are over every state; if that
    search stops at the bound before meeting every failure, the reduced report stands
    and says its traces are not shortest.
+8. Unless told ``symmetry=False``, devices the cell cannot tell apart are stored once
+   per orbit (:mod:`statectl.cell.explore.symmetry`); the verdicts are the full
+   search's, traces stay shortest and concrete, per-device findings name one member
+   of a group, and the report gives the full search's state count. A cell with such
+   devices is reduced by symmetry alone: the two reductions are not combined (yet).
 """
 
 from __future__ import annotations
@@ -32,7 +37,7 @@ from __future__ import annotations
 import resource
 import time
 from array import array
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from itertools import pairwise
 from math import prod
@@ -40,6 +45,7 @@ from math import prod
 from statectl.cell.explore.ample import Ample, reducible
 from statectl.cell.explore.compose import Branch, Composed, Predicate, Stimulus
 from statectl.cell.explore.report import Finding, Kind, Report, Trace, TraceStep, Unanticipated
+from statectl.cell.explore.symmetry import Symmetry, find_symmetry
 from statectl.cell.explore.walk import Progress, Walk
 from statectl.cell.model import Cell
 from statectl.kernel.semantics import Unhandled
@@ -116,25 +122,45 @@ class _Tables:
 def trace_to(
     model: Composed,
     parent: array[int],
-    states: list[int],
+    states: Sequence[int],
     i: int,
     last: Stimulus | None = None,
     match: Callable[[object], bool] | None = None,
+    sym: Symmetry | None = None,
 ) -> Trace:
     """The trace from the initial state to state ``i`` (then ``last``, if given)."""
     path: list[int] = []
     while i >= 0:
-        path.append(i)
+        path.append(states[i])
         i = parent[i]
     path.reverse()
+    if sym is not None:
+        path = _concrete(model, sym, path)
     steps: list[TraceStep] = []
-    for a, b in pairwise(path):
-        g, h = states[a], states[b]
+    for g, h in pairwise(path):
         steps.append(_step_between(model, g, lambda br, h=h: br.state == h))
     if last is not None:
-        g = states[path[-1]]
-        steps.append(_step_between(model, g, match or (lambda br: True), last))
-    return Trace(model.names, model.labels(states[path[0]]), tuple(steps))
+        steps.append(_step_between(model, path[-1], match or (lambda br: True), last))
+    return Trace(model.names, model.labels(path[0]), tuple(steps))
+
+
+def _concrete(model: Composed, sym: Symmetry, reps: list[int]) -> list[int]:
+    """A run through the orbits of ``reps`` that ends in ``reps[-1]`` itself (rule 8):
+    each step from the concrete state to one in the next orbit, then every state
+    renamed so the last is the stored one (a renaming of a run is a run)."""
+    run = [reps[0]]
+    for rep in reps[1:]:
+        g = run[-1]
+        run.append(
+            next(
+                h
+                for s in model.enabled(g)
+                for h, _, _ in model.successors(g, s)
+                if sym.canon(h) == rep
+            )
+        )
+    rename = sym.align(run[-1], reps[-1])
+    return [rename(g) for g in run]
 
 
 def _step_between(
@@ -156,15 +182,18 @@ def explore(
     progress: Callable[[Progress], None] | None = None,
     model: Composed | None = None,
     por: bool = True,
+    symmetry: bool = True,
 ) -> Report:
     """Explore the reachable global states of ``cell`` and check its properties (rule 7:
-    through partial-order reduction unless ``por`` is false)."""
+    through partial-order reduction unless ``por`` is false; rule 8: one state per
+    orbit of interchangeable devices unless ``symmetry`` is false)."""
     model = model or Composed(cell)
-    reduce = por and not reducible(cell)
-    report = _search(cell, model, max_states, progress, reduce)
-    if not report.failures or not report.reductions:
+    sym = find_symmetry(model) if symmetry else None
+    reduce = por and sym is None and not reducible(cell)
+    report = _search(cell, model, max_states, progress, reduce, sym)
+    if not reduce or not report.failures or not report.reductions:
         return report
-    full = _search(cell, model, max_states, progress, False)
+    full = _search(cell, model, max_states, progress, False, None)
     met = {(f.kind, f.name) for f in full.failures}
     if full.complete or met >= {(f.kind, f.name) for f in report.failures}:
         again = (
@@ -182,6 +211,7 @@ def _search(
     max_states: int | None,
     progress: Callable[[Progress], None] | None,
     reduce: bool,
+    sym: Symmetry | None,
 ) -> Report:
     """One search of ``cell``, reduced or full, and the report read off it."""
     t0 = time.perf_counter()
@@ -197,6 +227,7 @@ def _search(
         keep_edges=bool(cell.recovery),
         max_states=max_states,
         ample=ample,
+        symmetry=sym,
     )
     walk.run(progress, t0)
     seconds = time.perf_counter() - t0
@@ -206,9 +237,10 @@ def _search(
     _judge_deadlock_and_invariants(cell, walk, findings, properties)
     _judge_deliveries(walk, findings, properties)
     _judge_recovery(cell, walk, findings, properties)
-    unreached, bound = _unreached(walk)
+    unreached, bound = _unreached(walk, sym)
     findings.extend(unreached)
     states, parent = walk.states, walk.parent
+    full = sym.full_states(states) if sym is not None else None  # rule 8
     unants = tuple(
         Unanticipated(
             model.names[d],
@@ -216,7 +248,7 @@ def _search(
             event,
             kind,
             walk.unant_count[(d, lid, event, kind)],
-            trace_to(model, parent, states, first),
+            trace_to(model, parent, states, first, sym=sym),
         )
         for (d, lid, event, kind), first in walk.unant_first.items()
     )
@@ -239,8 +271,9 @@ def _search(
         free_guards=tuple(g for sp in model.spaces for g in sp.free_guards),
         properties=tuple(properties),
         relies=_relies(model, properties, findings),
-        reductions=reductions,
+        reductions=reductions + _symmetry_line(walk, full),
         shortest=not reductions,  # the unanticipated inputs' traces too (JSON)
+        full_states=full,
     )
 
 
@@ -252,6 +285,19 @@ def _reductions(walk: Walk, bound: int) -> tuple[str, ...]:
         f"partial-order reduction: {walk.ample.reduced:,} of {len(walk.states):,} stored "
         f"states expanded through one cluster of devices; the full search stores at most "
         f"{bound:,} states (the product of each device's local states reached)",
+    )
+
+
+def _symmetry_line(walk: Walk, full: int | None) -> tuple[str, ...]:
+    """The report's line on the symmetry reduction (rule 8), if one was used."""
+    sym = walk.symmetry
+    if sym is None or full is None:
+        return ()
+    return (
+        f"symmetry: {len(walk.states):,} states stored, one per orbit of "
+        f"{sym.describe()}; the full search stores {'' if walk.complete else 'at least '}"
+        f"{full:,}; a finding about one device names one device of its group, its count "
+        "is of stored states",
     )
 
 
@@ -276,7 +322,7 @@ def _judge_deadlock_and_invariants(
                 Kind.DEADLOCK,
                 "deadlock",
                 f"no input can change {model.describe(states[first])}",
-                trace_to(model, parent, states, first),
+                trace_to(model, parent, states, first, sym=walk.symmetry),
                 len(deadlocks),
             )
         )
@@ -292,7 +338,7 @@ def _judge_deadlock_and_invariants(
                     Kind.INVARIANT,
                     inv.name,
                     f"{inv.expr.source} is false in {model.describe(states[at])}",
-                    trace_to(model, parent, states, at),
+                    trace_to(model, parent, states, at, sym=walk.symmetry),
                     walk.violations[inv.name],
                 )
             )
@@ -316,12 +362,12 @@ def _judge_deliveries(
                 f"{name}.{event}",
                 f"a link delivers {event!r} to {name} in {label}, which neither handles nor "
                 "ignores it (a missed transition that shows only in interaction)",
-                trace_to(model, parent, states, at, s, _shows(model, key, target)),
+                trace_to(model, parent, states, at, s, _shows(model, key, target), walk.symmetry),
                 walk.unhandled_count[key],
             )
         )
     properties.append(("no guard raises", _verdict(walk, bool(walk.errors))))
-    findings.extend(_guard_errors(model, parent, states, walk.errors, walk.error_count))
+    findings.extend(_guard_errors(walk))
     properties.append(("no link livelock", _verdict(walk, bool(walk.livelocks))))
     for at, s in walk.livelocks.values():
         findings.append(
@@ -330,7 +376,7 @@ def _judge_deliveries(
                 s.label(model.names),
                 f"links keep delivering events after {s.label(model.names)}; "
                 "more than 256 deliveries in one step",
-                trace_to(model, parent, states, at),
+                trace_to(model, parent, states, at, sym=walk.symmetry),
             )
         )
 
@@ -362,15 +408,16 @@ def _judge_recovery(
                     rec.name,
                     f"from {model.describe(states[failed_at])} no sequence of inputs reaches "
                     f"{rec.target.source}",
-                    trace_to(model, parent, states, failed_at),
+                    trace_to(model, parent, states, failed_at, sym=walk.symmetry),
                     count,
                 )
             )
 
 
-def _unreached(walk: Walk) -> tuple[list[Finding], int]:
-    """Each device state no stored global state has active (within the bound, if hit);
-    and the product of the local states reached, a bound on the full search's states."""
+def _unreached(walk: Walk, sym: Symmetry | None = None) -> tuple[list[Finding], int]:
+    """Each device state no stored global state has active (within the bound, if hit),
+    a member of a symmetric group reaching what any member of its group does; and the
+    product of the local states reached, a bound on the full search's states."""
     model = walk.model
     n = len(model.names)
     shifts, masks = model.shift, model.mask
@@ -378,6 +425,8 @@ def _unreached(walk: Walk) -> tuple[list[Finding], int]:
     for g in walk.states:
         for d in range(n):
             reached[d].add((g >> shifts[d]) & masks[d])
+    if sym is not None:
+        reached = [set().union(*(reached[e] for e in sym.reached(d))) for d in range(n)]
     findings: list[Finding] = []
     for d, space in enumerate(model.spaces):
         seen = {s for lid in reached[d] for s in space.active(lid)}
@@ -406,18 +455,14 @@ def _shows(model: Composed, key: tuple[int, str, str], target: int) -> Callable[
     return match
 
 
-def _guard_errors(
-    model: Composed,
-    parent: array[int],
-    states: list[int],
-    errors: dict[tuple[int, str, str], tuple[int, Stimulus, int, int, int]],
-    count: dict[tuple[int, str, str], int],
-) -> list[Finding]:
+def _guard_errors(walk: Walk) -> list[Finding]:
     """Rule 5: each device, state and event whose guard raised, with its shortest trace.
 
     A stimulus refused outright ends the trace in the state it was offered in (no
     branch shows a refused stimulus); a link delivery ends with the step that made it.
     """
+    model, parent, states, sym = walk.model, walk.parent, walk.states, walk.symmetry
+    errors, count = walk.errors, walk.error_count
     out: list[Finding] = []
     for key, (at, s, target, lid, link) in errors.items():
         t, label, event = key
@@ -427,10 +472,10 @@ def _guard_errors(
         if bad is not None and bad.choices:
             why += " when " + " and ".join(f"{p} is {v}" for p, v in bad.choices)
         if target < 0:
-            trace = trace_to(model, parent, states, at)
+            trace = trace_to(model, parent, states, at, sym=sym)
             how = s.kind.value
         else:
-            trace = trace_to(model, parent, states, at, s, _shows(model, key, target))
+            trace = trace_to(model, parent, states, at, s, _shows(model, key, target), sym)
             how = f"from a link, after {s.label(model.names)}"
         out.append(
             Finding(
@@ -481,7 +526,7 @@ def _recovery(
     model: Composed,
     target: Predicate,
     source: Predicate | None,
-    states: list[int],
+    states: Sequence[int],
     src: array[int],
     dst: array[int],
 ) -> tuple[int, int]:

@@ -29,13 +29,16 @@ def verify_cell(
     max_states: int | None = None,
     progress: Callable[[Progress], None] | None = None,
     por: bool = True,
+    symmetry: bool = True,
 ) -> tuple[Report | None, list[Diagnostic]]:
-    """Load and explore a cell file (``por=False``: without partial-order reduction);
-    ``None`` and the diagnostics when it does not load."""
+    """Load and explore a cell file (``por=False``: without partial-order reduction,
+    ``symmetry=False``: without symmetry reduction); ``None`` and the diagnostics when
+    it does not load."""
     cell, diags = load_cell(path)
     if cell is None:
         return None, diags
-    return explore(cell, max_states=max_states, progress=progress, por=por), diags
+    report = explore(cell, max_states=max_states, progress=progress, por=por, symmetry=symmetry)
+    return report, diags
 
 
 #: Longest part of a trace file name taken from a property's name: file systems

@@ -11,6 +11,10 @@ Rules:
 4. With partial-order reduction (:mod:`statectl.cell.explore.ample`), a state the
    reduction accepts is expanded through its cluster alone
    (:meth:`Walk.expand_cluster`); the others are expanded in full as before.
+5. With ``symmetry`` (symmetry reduction, :mod:`statectl.cell.explore.symmetry`) every
+   state is stored as its orbit's representative; what a step meets on the way is
+   noted with the concrete state it reached. A walk takes one reduction or the
+   other, never both (explore/search.py rule 8).
 """
 
 from __future__ import annotations
@@ -22,11 +26,13 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from statectl.cell.explore.compose import Composed, Predicate, Stimulus
+from statectl.cell.explore.pack import seen_store, state_store
 from statectl.cell.model import InputKind
 
 if TYPE_CHECKING:
     from statectl.cell.explore.ample import Ample
     from statectl.cell.explore.search import _Tables
+    from statectl.cell.explore.symmetry import Symmetry
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,15 +55,19 @@ class Walk:
         keep_edges: bool,
         max_states: int | None,
         ample: Ample | None = None,
+        symmetry: Symmetry | None = None,
     ) -> None:
+        assert ample is None or symmetry is None, "one reduction at a time (rule 5)"
         self.model = model
         self.ample = ample
+        self.symmetry = symmetry
+        self.canon = symmetry.canon if symmetry is not None else None
         self.tables = tables
         self.invariants = invariants
         self.keep_edges = keep_edges
         self.limit = max_states if max_states is not None else -1
-        self.index: dict[int, int] = {}
-        self.states: list[int] = []
+        self.states = state_store(model.width)  # compact: explore/pack.py
+        self.index = seen_store(model.width, keep_edges)
         self.parent: array[int] = array("q")
         self.violated: dict[str, int] = {}
         self.violations: dict[str, int] = {}
@@ -93,7 +103,10 @@ class Walk:
         model, tables = self.model, self.tables
         index, states, add = self.index, self.states, self.add
         src, dst, keep_edges = self.src, self.dst, self.keep_edges
+        canon = self.canon
         for g0 in model.initial:
+            if canon is not None:
+                g0 = canon(g0)
             if g0 not in index:
                 add(g0, -1)
         n = len(model.names)
@@ -131,6 +144,8 @@ class Walk:
                     alive = True
                 for delta in simple[d][lid]:
                     h = g ^ delta
+                    if canon is not None:
+                        h = canon(h)
                     transitions += 1
                     if h not in index:
                         if len(states) == limit:
@@ -246,6 +261,8 @@ class Walk:
                         self.unhandled[key] = (head, s, h)
                 if livelock and i not in self.livelocks:
                     self.livelocks[i] = (head, s)
+                if self.canon is not None:
+                    h = self.canon(h)
                 if h == g:
                     continue
                 self.transitions += 1

@@ -157,6 +157,11 @@ def _add_verify(sub: Any) -> None:
         type=int,
         help="bound the search (default 20,000,000; 0: none); the report then says incomplete",
     )
+    s.add_argument(
+        "--no-symmetry",
+        action="store_true",
+        help="store every global state, not one per orbit of interchangeable devices",
+    )
     s.add_argument("--export", choices=("promela",), help="write the composed model instead")
     s.add_argument("-o", "--output", help="where --export writes (default: standard output)")
     s.add_argument("--traces", metavar="DIR", help="write each counterexample (json, mmd, puml)")

@@ -264,6 +264,7 @@ def cmd_verify(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         args.cell,
         as_json=args.json,
         max_states=args.max_states,
+        symmetry=not args.no_symmetry,
         export=args.export,
         output=args.output,
         traces=args.traces,

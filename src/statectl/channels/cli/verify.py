@@ -33,6 +33,7 @@ def verify_main(
     *,
     as_json: bool = False,
     max_states: int | None = None,
+    symmetry: bool = True,
     export: str | None = None,
     output: str | None = None,
     traces: str | None = None,
@@ -48,7 +49,8 @@ def verify_main(
     of exploring; ``traces`` names a folder for the failing traces and diagrams;
     ``diagrams`` ("mermaid" or "plantuml") prints each failing trace's diagram.
     ``max_states`` bounds the search (``None``: :data:`DEFAULT_MAX_STATES`; 0: no bound);
-    ``por=False`` (``--no-por``) turns partial-order reduction off.
+    ``por=False`` (``--no-por``) turns partial-order reduction off, ``symmetry=False``
+    (``--no-symmetry``) the symmetry reduction (every state stored, not one per orbit).
     """
     if not Path(cell).is_file():
         err.write(f"statectl verify: {cell}: no such file\n")
@@ -77,7 +79,7 @@ def verify_main(
         return _export(loaded, output, out, f"{Path(cell).stem}.pml")
     show = err.isatty() if progress is None else progress
     printer = ProgressPrinter(err) if show else None
-    report = explore(loaded, max_states=bound, progress=printer, por=por)
+    report = explore(loaded, max_states=bound, progress=printer, por=por, symmetry=symmetry)
     if printer is not None:
         printer.done()
     if as_json:
