@@ -57,19 +57,24 @@ def stations(
 def test_stations_that_do_not_interact_grow_linearly(tmp_path: Path) -> None:
     """N stations that share nothing: the reduced search stores a number of states that
     grows by the same amount per station; the full search stores 4**N."""
-    counts = [explore(load_cell_or_raise(stations(tmp_path, n))).states for n in (4, 6, 8)]
+    counts = [
+        explore(load_cell_or_raise(stations(tmp_path, n)), symmetry=False).states for n in (4, 6, 8)
+    ]
     assert counts[2] - counts[1] == counts[1] - counts[0] > 0
-    assert explore(load_cell_or_raise(stations(tmp_path, 6)), por=False).states == 4**6
+    assert (
+        explore(load_cell_or_raise(stations(tmp_path, 6)), por=False, symmetry=False).states == 4**6
+    )
     assert counts[1] < 4**6 // 20
 
 
 def test_no_por_option(tmp_path: Path) -> None:
     """``verify --no-por`` stores every state and prints no reduction line; by default
-    the report names the reduction, the states stored and the full search's bound."""
+    the report names the reduction, the states stored and the full search's bound
+    (the stations are interchangeable: symmetry, which would take them, is off)."""
     path = str(stations(tmp_path, 6))
     for argv, stored, line in (
-        (["verify", path], None, True),
-        (["verify", path, "--no-por"], "explored 4,096 global states", False),
+        (["verify", path, "--no-symmetry"], None, True),
+        (["verify", path, "--no-por", "--no-symmetry"], "explored 4,096 global states", False),
     ):
         out = io.StringIO()
         assert main(argv, out, io.StringIO()) == 0
@@ -78,8 +83,8 @@ def test_no_por_option(tmp_path: Path) -> None:
         assert stored is None or stored in text
         if line:
             assert "the full search stores at most 4,096 states" in text
-    full, _ = verify_cell(path, por=False)
-    reduced, _ = verify_cell(path)
+    full, _ = verify_cell(path, por=False, symmetry=False)
+    reduced, _ = verify_cell(path, symmetry=False)
     assert full is not None and reduced is not None
     assert full.states == 4**6 > reduced.states and full.verdict == reduced.verdict == "holds"
 
@@ -90,14 +95,16 @@ def test_recovery_cells_are_searched_in_full() -> None:
     cell = load_cell_or_raise(EXAMPLES / "pick-and-place" / "cell.yaml")
     assert "recovery" in reducible(cell)
     report = explore(cell)
-    assert report.reductions == () and report.states == explore(cell, por=False).states
+    assert (
+        report.reductions == () and report.states == explore(cell, por=False, symmetry=False).states
+    )
 
 
 def test_a_failure_is_searched_again_in_full(tmp_path: Path) -> None:
     """When the reduced search fails, the report is the full search's: shortest traces,
     counts over every state, and a line saying so."""
     cell = load_cell_or_raise(stations(tmp_path, 6, "not (In('s4.Faulted') and In('s5.Faulted'))"))
-    report, full = explore(cell), explore(cell, por=False)
+    report, full = explore(cell, symmetry=False), explore(cell, por=False, symmetry=False)
     assert report.verdict == "fails" and report.shortest
     assert "searched again in full" in report.reductions[0]
     assert [(f.name, len(f.trace or ()), f.count) for f in report.failures] == [
@@ -110,7 +117,7 @@ def test_not_shortest_when_the_full_search_stops_first(tmp_path: Path) -> None:
     """If the full search reaches the bound before the failure the reduced one met, the
     reduced report stands and says its traces are not shortest."""
     path = stations(tmp_path, 8, "not (In('s6.Faulted') and In('s7.Faulted'))")
-    report = explore(load_cell_or_raise(path), max_states=300)
+    report = explore(load_cell_or_raise(path), max_states=300, symmetry=False)
     assert report.verdict == "fails" and not report.shortest
     text = report.to_text()
     assert "steps; not shortest: partial-order reduction):" in text
@@ -289,7 +296,7 @@ def test_random_cells_same_verdicts(tmp_path: Path) -> None:
         folder.mkdir()
         cell, diags = load_cell(random_cell(random.Random(seed), folder))
         assert cell is not None, (seed, [str(d) for d in diags])
-        full = explore(cell, por=False)
+        full = explore(cell, por=False, symmetry=False)
         red = _reduced(cell)
         assert _summary(red) == _summary(full), seed
         assert red.states <= full.states

@@ -139,12 +139,13 @@ def test_an_order_that_shows_keeps_the_devices_apart(tmp_path: Path) -> None:
 
 
 def test_cli_reports_the_reduction_and_no_symmetry_turns_it_off(tmp_path: Path) -> None:
-    """verify prints the states stored, the full search's count and the reduction used;
-    --no-symmetry stores them all, with the same verdict and exit code."""
+    """verify prints the states stored, the full search's count and the reduction used
+    (symmetry alone: the two reductions are not combined); --no-symmetry (with --no-por)
+    stores them all, with the same verdict and exit code."""
     path = str(_line(tmp_path, 3, invariants=ALL_BUSY))
     out, err, out2 = io.StringIO(), io.StringIO(), io.StringIO()
     code = main(["verify", path], out=out, err=err)
-    assert main(["verify", path, "--no-symmetry"], out=out2, err=err) == code == 1
+    assert main(["verify", path, "--no-symmetry", "--no-por"], out=out2, err=err) == code == 1
     text, plain = out.getvalue(), out2.getvalue()
     full = re.search(r"explored ([\d,]+) global states", plain)
     reduced = re.search(
@@ -154,6 +155,7 @@ def test_cli_reports_the_reduction_and_no_symmetry_turns_it_off(tmp_path: Path) 
     assert reduced.group(2) == full.group(1)
     assert int(reduced.group(1).replace(",", "")) < int(full.group(1).replace(",", ""))
     assert "one per orbit of 3 interchangeable devices (s0, s1, s2)" in text
+    assert "partial-order reduction" not in text
     assert "symmetry" not in plain
     assert text.splitlines()[-1] == plain.splitlines()[-1] == "verdict: fails"
     doc = io.StringIO()
@@ -323,8 +325,8 @@ def test_random_cells_reduced_and_full_agree(tmp_path: Path) -> None:
         cell, diags = load_cell(path)
         assert cell is not None, [str(d) for d in diags]
         model = Composed(cell)
-        full = explore(cell, model=model, symmetry=False)
-        reduced = explore(cell, model=model)
+        full = explore(cell, model=model, symmetry=False, por=False)
+        reduced = explore(cell, model=model, por=False)
         assert (reduced.verdict, reduced.properties) == (full.verdict, full.properties), path
         if not reduced.reductions:
             assert reduced.states == full.states

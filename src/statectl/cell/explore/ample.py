@@ -331,6 +331,7 @@ class Ample:
         if not hs:
             return None
         index, model, visible, partial = walk.index, self.model, self.visible, self.members
+        assert isinstance(index, dict), "a walk under the reduction numbers its states"
         back: list[int] = []
         for h in hs:
             j = index.get(h)

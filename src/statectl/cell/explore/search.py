@@ -211,7 +211,7 @@ def _search(
     max_states: int | None,
     progress: Callable[[Progress], None] | None,
     reduce: bool,
-    sym: Symmetry | None,
+    sym: Symmetry | None = None,
 ) -> Report:
     """One search of ``cell``, reduced or full, and the report read off it."""
     t0 = time.perf_counter()

@@ -67,7 +67,8 @@ class Walk:
         self.keep_edges = keep_edges
         self.limit = max_states if max_states is not None else -1
         self.states = state_store(model.width)  # compact: explore/pack.py
-        self.index = seen_store(model.width, keep_edges)
+        # numbered: recovery's edges and the reduction's cycle proviso ask state numbers
+        self.index = seen_store(model.width, keep_edges or ample is not None)
         self.parent: array[int] = array("q")
         self.violated: dict[str, int] = {}
         self.violations: dict[str, int] = {}
