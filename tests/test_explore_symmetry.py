@@ -163,6 +163,30 @@ def test_cli_reports_the_reduction_and_no_symmetry_turns_it_off(tmp_path: Path) 
     assert json.loads(doc.getvalue())["full_states"] == int(full.group(1).replace(",", ""))
 
 
+def test_stations_no_link_touches_get_partial_order_reduction(tmp_path: Path) -> None:
+    """Interchangeable devices that no link touches are left to partial-order reduction,
+    which stores states linear in their number (symmetry would store a polynomial); the
+    verdict is the full search's."""
+    (tmp_path / "station.yaml").write_text(STATION, encoding="utf-8")
+    stored = []
+    for n in (4, 8):
+        text = "cell: free\ndevices:\n" + "".join(f"  s{i}: station.yaml\n" for i in range(n))
+        text += "environment:\n" + "".join(
+            f"  - {{send: Begin, to: s{i}}}\n  - {{send: Reset, to: s{i}}}\n" for i in range(n)
+        )
+        path = tmp_path / f"free{n}.cell.yaml"
+        path.write_text(text, encoding="utf-8")
+        cell = load_cell_or_raise(path)
+        assert find_symmetry(Composed(cell)) is not None  # interchangeable, yet not reduced so
+        report = explore(cell)
+        assert any("partial-order reduction" in line for line in report.reductions), report
+        assert not any(line.startswith("symmetry") for line in report.reductions)
+        full = explore(cell, por=False, symmetry=False)
+        assert report.properties == full.properties and full.states > report.states
+        stored.append(report.states)
+    assert stored[1] < 3 * stored[0]  # 4 -> 8 stations: linear growth, not n^2 or 2^n
+
+
 # -- random cells: the reduced search against the full one -----------------------------------
 
 
