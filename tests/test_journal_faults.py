@@ -658,3 +658,20 @@ def test_a_journal_path_ending_in_a_slash_is_a_directory(tmp_path: Path) -> None
     logs = f"{tmp_path / 'logs'}/"
     code = run(str(MOTOR), journal=logs, events=io.StringIO("Movement\n"), out=out, err=err)
     assert (code, (tmp_path / "logs" / "run.db").is_file()) == (0, True), err.getvalue()
+
+
+def test_a_run_refused_at_start_leaves_no_journal_in_the_folder_given(tmp_path: Path) -> None:
+    """``--journal DIR/`` on a run refused before it starts (a driver that cannot drive
+    its device): the journal made in DIR is removed again, nothing half-written is left."""
+    folder = tmp_path / "journals"
+    err = io.StringIO()
+    code = run(
+        str(GRIPPER),
+        driver="sim-motor",
+        journal=f"{folder}/",
+        events=io.StringIO("Grip\n"),
+        out=io.StringIO(),
+        err=err,
+    )
+    assert code == 1 and "Grip()" in err.getvalue(), err.getvalue()
+    assert not folder.exists() or list(folder.iterdir()) == []

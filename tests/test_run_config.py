@@ -12,7 +12,8 @@ from typing import Any
 
 import pytest
 
-from statectl.channels.cli.run import TOKEN_VARIABLE, run
+from statectl.channels.cli.run import run
+from statectl.channels.cli.run_setup import TOKEN_VARIABLE
 from statectl.kernel.errors import DiagnosticError
 from statectl.run.devices import DashboardConfig, load_driver_config, load_run_config
 from statectl.run.runner import System

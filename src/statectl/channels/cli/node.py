@@ -127,7 +127,7 @@ def dashboard_main(
 ) -> int:
     """``statectl dashboard CELL``: the operator station (docs/distributed.md)."""
     from statectl.cell.model import load_cell
-    from statectl.channels.cli import run as runcli
+    from statectl.channels.cli import run_setup
     from statectl.channels.distributed.dashboard import station
     from statectl.run.devices import DashboardConfig, RunConfig, load_run_config
 
@@ -153,7 +153,7 @@ def dashboard_main(
         table = RunConfig(None, DashboardConfig())
         if config is not None:
             table = load_run_config(config)
-        host, port, token, where = runcli._dashboard_settings(
+        host, port, token, where = run_setup.dashboard_settings(
             host, port, token, config, table.dashboard
         )
         if threading.current_thread() is threading.main_thread():
@@ -221,7 +221,7 @@ def node_main(
     stop: threading.Event | None = None,
 ) -> int:
     """The whole ``statectl node``; returns the exit code (0 ok, 1 problems, 2 usage)."""
-    from statectl.channels.cli import run as runcli
+    from statectl.channels.cli.lifecycle import Ending, say_resumed
     from statectl.channels.distributed import Wire
 
     setup = _node_setup(path, node, journal, resume, fresh, guarantee, port, err)
@@ -229,15 +229,14 @@ def node_main(
         return setup
     promise, cell, devices, mine = setup
     problems = Problems()
-    system: Any = None
-    wire: Any = None
-    server: Any = None
-    failed = ""
+    ending = Ending("node", err)
+    ending.after_close(out.flush)
     halt = stop or threading.Event()
     try:
         system, table, drivers, journal = _node_system(
             cell, devices, path, driver, config, journal, resume, fresh, promise, out
         )
+        ending.system = system
         wire = Wire(
             cell,
             node,
@@ -246,16 +245,18 @@ def node_main(
             journal=Path(journal) if journal is not None else None,
             resume=resume,
         )
+        ending.started(wire.close)
         _listen(system, wire, problems, drivers, quiet, out, err)
         _announce(cell, node, mine, wire, out)
         wire.open(states=dashboard)
         resumed = system.start(resume=resume)
-        _say_resumed(system, resumed, out)
+        say_resumed(system, resumed, out)
         wire.listen()
         if dashboard:
             server, url, shown = _node_dashboard(
                 cell, system, wire, host, port, token, config, table
             )
+            ending.started(server.stop)
             wire.refresh()  # states put before the page listened
             out.write(f"dashboard: {url}\ntoken: {shown}\n")
         out.write(f"node {node}: running\n")
@@ -263,23 +264,13 @@ def node_main(
         _serve(system, halt, events, problems, out, err)
         return verdict(problems, err, "node")
     except (StatectlError, OSError) as exc:
-        failed = str(exc)
-        err.write(f"statectl node: {exc}\n")
-        return PROBLEMS
+        return ending.fail(exc)
     except Exception as exc:  # Zenoh's own errors (a port in use, a bad endpoint)
         if type(exc).__name__ != "ZError":
             raise
-        failed = str(exc)
-        err.write(f"statectl node: Zenoh: {exc}\n")
-        return PROBLEMS
+        return ending.fail(exc, "Zenoh: ")
     finally:
-        if server is not None:
-            server.stop()
-        if wire is not None:
-            wire.close()
-        if system is not None:
-            runcli._close(system, err, failed)
-        out.flush()
+        ending.close()
 
 
 def _node_setup(
@@ -294,7 +285,7 @@ def _node_setup(
 ) -> int | tuple[Any, Any, tuple[Any, ...], Any]:
     """The exit code of a bad start (usage 2, problems 1), or what the node runs: the
     journal's promise, the cell, this node's device setups and their names."""
-    from statectl.channels.cli import run as runcli
+    from statectl.channels.cli import run_setup
     from statectl.run.journal import Guarantee
 
     if (resume or fresh) and journal is None:
@@ -313,7 +304,7 @@ def _node_setup(
         err.write(f"statectl node: --guarantee must be prompt or durable-first ({guarantee!r})\n")
         return USAGE
     try:
-        cell, devices = runcli._load_cell(path, err, journal is not None, node)
+        cell, devices = run_setup.load_cell_setups(path, err, journal is not None, node)
     except DiagnosticError as exc:
         for d in exc.diagnostics:
             err.write(f"{d}\n")
@@ -348,7 +339,7 @@ def _node_system(
     """The node's System over its own devices, their drivers and journal; the run config
     it read and the journal's path (the output rule may complete it). A journal this
     start made is removed again if the System cannot start."""
-    from statectl.channels.cli import run as runcli
+    from statectl.channels.cli import run_setup
     from statectl.channels.cli.outputs import output
     from statectl.channels.cli.run_journal import (
         JOURNAL_NAME,
@@ -364,7 +355,7 @@ def _node_system(
     table = RunConfig(None, DashboardConfig())
     if config is not None:
         table = load_run_config(config)
-    drivers = runcli._drivers(devices, driver, config, table)
+    drivers = run_setup.drivers_for(devices, driver, config, table)
     setups = tuple(replace(d, driver=drivers.get(d.name)) for d in devices)
     store = None
     if journal is not None:
@@ -399,14 +390,14 @@ def _listen(
 ) -> None:
     """Trace each step (unless quiet) and count what the verdict counts: problem steps,
     violations, failures and refused posts."""
-    from statectl.channels.cli import run as runcli
+    from statectl.channels.cli import run_setup
     from statectl.run.runtime import TraceWriter
 
     if system.subjects:
         width = max(len(n) for n in system.subjects)
         if not quiet:
             system.listen_steps(TraceWriter(out, device_width=width).step)
-            runcli._show_notes(drivers, out, width)
+            run_setup.show_notes(drivers, out, width)
     system.listen_steps(problems.step)
     width = max((len(n) for n in system.subjects), default=4)
     system.on_violation.append(problems.violation(out, width))  # rule 5
@@ -427,17 +418,6 @@ def _announce(cell: Any, node: str, mine: Any, wire: Any, out: TextIO) -> None:
     )
 
 
-def _say_resumed(system: Any, resumed: Any, out: TextIO) -> None:
-    """One line per device resumed from the journal: its states, what recovery did."""
-    for name, bound in system.bound.items():
-        if resumed.get(name):
-            taken = ", ".join(bound.recovered) or "none"
-            out.write(
-                f"resumed {name} in {', '.join(sorted(system.subjects[name].configuration))}"
-                f"; recovery: {taken}; {bound.redelivered} accepted event(s) redelivered\n"
-            )
-
-
 def _node_dashboard(
     cell: Any,
     system: Any,
@@ -450,10 +430,10 @@ def _node_dashboard(
 ) -> tuple[Any, str, str]:
     """Serve the cell's dashboard over this node's view: the server, its URL, and the
     token to show (where it came from, when the user gave it)."""
-    from statectl.channels.cli import run as runcli
+    from statectl.channels.cli import run_setup
     from statectl.channels.distributed.dashboard import serve_cell
 
-    host, port, token, where = runcli._dashboard_settings(
+    host, port, token, where = run_setup.dashboard_settings(
         host, port, token, config, table.dashboard
     )
     server, url = serve_cell(
@@ -494,7 +474,7 @@ def _serve(
 def _bad_usage(command: str, port: int | None, connect: Sequence[str], err: TextIO) -> bool:
     """--port out of range, or a --connect that is no Zenoh endpoint: said as run says it."""
     from statectl.cell.nodes import endpoint_problem
-    from statectl.channels.cli.run import MAX_PORT
+    from statectl.channels.cli.run_options import MAX_PORT
 
     if port is not None and not 0 <= port <= MAX_PORT:
         err.write(

@@ -60,19 +60,16 @@ Rules:
 from __future__ import annotations
 
 import contextlib
-import os
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import replace
-from pathlib import Path
 from typing import Any, TextIO
-from urllib.parse import urlparse
 
 from statectl.cell.explore.enforce import Refused
-from statectl.cell.model import Cell, load_cell
-from statectl.channels.cli.commands import input_exists
+from statectl.cell.model import Cell
+from statectl.channels.cli.lifecycle import Ending, say_resumed
 from statectl.channels.cli.outputs import output, wrote
 from statectl.channels.cli.problems import Problems, verdict
 from statectl.channels.cli.run_journal import (
@@ -81,115 +78,45 @@ from statectl.channels.cli.run_journal import (
     open_journal,
     undone_on_failure,
 )
+from statectl.channels.cli.run_options import RunOptions
+from statectl.channels.cli.run_setup import (
+    NO_DRIVER,
+    dashboard_settings,
+    drivers_for,
+    load_cell_setups,
+    load_device_setups,
+    search_beside,
+    show_notes,
+)
 from statectl.channels.cli.settle import unsettled_note
 from statectl.channels.cli.steps import StepLog
 from statectl.front.kinds import is_cell
 from statectl.kernel.errors import (
     DiagnosticError,
     MissingExtra,
-    Severity,
     StatectlError,
     did_you_mean,
 )
 from statectl.kernel.exits import PROBLEMS, USAGE
 from statectl.run.commands import Origin
 from statectl.run.devices import (
-    MIN_TOKEN,
     DashboardConfig,
     DeviceDriver,
     OpcuaConfig,
     RunConfig,
-    SimTwin,
-    TwinNote,
     load_run_config,
-    make_driver,
 )
 from statectl.run.devices.config import ShipConfig
 from statectl.run.journal import (
-    Guarantee,
     Journal,
     JournalError,
-    Sync,
-    load_device,
 )
-from statectl.run.runner.cells import load_setups, relevant_warnings
 from statectl.run.runner.events import parse_event_line
 from statectl.run.runtime import Clock, SimClock, TraceWriter, WallClock
 from statectl.run.system import DeviceSetup, System
 
-
-def _drivers(
-    devices: Sequence[DeviceSetup], driver: str | None, config: str | None, table: RunConfig
-) -> dict[str, DeviceDriver]:
-    """Rule 6: the config file's drivers, else ``driver`` for all, else a twin for each."""
-    names = [d.name for d in devices]
-    if table.drivers is not None:
-        drivers = table.drivers
-        missing = [n for n in names if n not in drivers]
-        if missing:
-            raise StatectlError(f"{config}: no driver for device(s) {missing}")
-        return {d.name: make_driver(*drivers[d.name], chart=d.chart) for d in devices}
-    if driver == NO_DRIVER:
-        return {}  # rule 10: the model alone
-    return {d.name: make_driver(driver or "sim-twin", chart=d.chart) for d in devices}
-
-
-def _search_beside(*files: str | None) -> None:
-    """Rule 11: a driver module may sit beside the model or config file (searched last)."""
-    for f in files:
-        if f is not None:
-            folder = str(Path(f).resolve().parent)
-            if folder not in sys.path:
-                sys.path.append(folder)
-
-
-#: ``--driver none``: no driver at all, the model alone (rule 10).
-NO_DRIVER = "none"
-
-#: The highest TCP port number (``--port``).
-MAX_PORT = 65535
-
-#: The environment variable that may hold the dashboard's token (rule 7).
-TOKEN_VARIABLE = "STATECTL_DASHBOARD_TOKEN"
 #: Event lines typed or piped in come from the operator at the console (run/commands.py).
 STDIN = Origin("stdin", "operator")
-
-
-def _dashboard_settings(
-    host: str | None, port: int | None, token: str | None, config: str | None, dash: DashboardConfig
-) -> tuple[str, int, str | None, str]:
-    """Rule 7: flags, then the environment (token), then the config file, then the defaults.
-
-    Returns host, port, token (None: the dashboard makes one) and where the token came from.
-    """
-    where = "--token"
-    if token is None and os.environ.get(TOKEN_VARIABLE):
-        token, where = os.environ[TOKEN_VARIABLE], TOKEN_VARIABLE
-    if token is None and dash.token is not None:
-        token, where = dash.token, str(config)
-    if token is not None and len(token) < MIN_TOKEN:
-        raise StatectlError(
-            f"the dashboard token from {where} is shorter than {MIN_TOKEN} characters, "
-            "so it could be guessed; make one with "
-            "python -c 'import secrets; print(secrets.token_urlsafe(18))'"
-        )
-    host = host if host is not None else dash.host or "127.0.0.1"
-    port = port if port is not None else dash.port or 0
-    return host, port, token, where
-
-
-def _show_notes(drivers: Mapping[str, DeviceDriver], out: TextIO, width: int) -> None:
-    """Rule 6: a twin's notes (what it did not report, and why) go into the trace."""
-
-    def writer(name: str) -> Callable[[TwinNote], None]:
-        def write(note: TwinNote) -> None:
-            out.write(f"t={note.time:7.2f}  {name:<{width}}  {'twin':<8} {note}\n")
-
-        return write
-
-    for name, d in drivers.items():
-        if isinstance(d, SimTwin):
-            d.on_note = writer(name)
 
 
 def _feed(
@@ -268,32 +195,6 @@ def _unknown_event(system: System, device: str | None, event: str) -> str | None
     return f"{name} has no event {event!r}; {maybe}its events: {', '.join(names)}"
 
 
-def _load_cell(
-    path: str, err: TextIO, journalled: bool, node: str | None = None
-) -> tuple[Cell, tuple[DeviceSetup, ...]]:
-    """The cell and its setups; the warnings printed are those of ``node``'s own devices
-    when one is named (``statectl node``: the others run on other nodes)."""
-    cell, diags = load_cell(path)
-    if cell is None:
-        raise DiagnosticError([d for d in diags if d.severity is not Severity.INFO])
-    only = None
-    if node is not None and cell.nodes is not None:
-        names = {n.name for n in cell.nodes.nodes}
-        only = cell.nodes.node(node).devices if node in names else ()
-    setups, warnings = load_setups(cell, journalled=journalled, only=only)
-    for d in warnings:
-        err.write(f"{d}\n")
-    return cell, setups
-
-
-def _load_device(path: str, err: TextIO, journalled: bool) -> tuple[DeviceSetup, ...]:
-    device = load_device(path)
-    for d in relevant_warnings(device.warnings, journalled):
-        err.write(f"{d}\n")
-    chart = device.chart
-    return (DeviceSetup(chart.name, chart, device.rules, os.path.abspath(path)),)
-
-
 def run(
     path: str,
     *,
@@ -333,171 +234,244 @@ def run(
     ``driver="none"`` runs the model alone and ``as_json`` (``--json``) writes one
     JSON object per event line (rule 10).
     """
-    if as_json and (dashboard or realtime or opcua is not None):
-        err.write(
-            "statectl run: --json steps a batch run; not with --dashboard, --realtime or --opcua\n"
-        )
-        return USAGE
-    if (resume or fresh) and journal is None:
-        err.write(f"statectl run: {'--resume' if resume else '--fresh'} needs --journal DB\n")
-        return USAGE
-    if not input_exists(Path(path)):
-        err.write(f"statectl run: {path}: no such file\n")
-        return USAGE
-    if settle_limit is not None and not settle_limit > 0:
-        err.write(
-            f"statectl run: --settle-limit must be more than 0 seconds (got {settle_limit})\n"
-        )
-        return USAGE
-    if port is not None and not 0 <= port <= MAX_PORT:
-        err.write(f"statectl run: --port must be 0 (any free port) to {MAX_PORT} (got {port})\n")
-        return USAGE
-    if opcua and not (opcua.startswith("opc.tcp://") and urlparse(opcua).hostname):
-        err.write(f"statectl run: --opcua must be an opc.tcp://HOST:PORT URL (got {opcua!r})\n")
-        return USAGE
-    try:
-        mode = Sync(sync.lower())
-    except ValueError:
-        err.write(f"statectl run: --sync must be normal or full (got {sync!r})\n")
-        return USAGE
-    try:
-        promise = Guarantee(guarantee.lower())
-    except ValueError:
-        err.write(
-            f"statectl run: --guarantee must be prompt or durable-first (got {guarantee!r})\n"
-        )
+    opts = RunOptions(
+        driver=driver,
+        config=config,
+        dashboard=dashboard,
+        host=host,
+        port=port,
+        token=token,
+        journal=journal,
+        resume=resume,
+        fresh=fresh,
+        sync=sync,
+        guarantee=guarantee,
+        realtime=realtime,
+        opcua=opcua,
+        settle_limit=settle_limit,
+        as_json=as_json,
+    )
+    problem = opts.usage_problem(path)
+    if problem is not None:
+        err.write(f"statectl run: {problem}\n")
         return USAGE
     cell: Cell | None = None
     try:
         if is_cell(path):
-            cell, devices = _load_cell(path, err, journal is not None)
+            cell, devices = load_cell_setups(path, err, journal is not None)
         else:
-            devices = _load_device(path, err, journal is not None)
+            devices = load_device_setups(path, err, journal is not None)
     except DiagnosticError as exc:
         for d in exc.diagnostics:
             err.write(f"{d}\n")
         return PROBLEMS
-    live = dashboard or realtime or opcua is not None
-    problems = Problems()
-    failed = ""  # what the run reported as its failure, if anything
-    system: System | None = None
-    server: Any = None
-    plant: Any = None  # the OPC UA server (cli/opcua.py)
-    shipping: Any = None  # a ShipThread (journal/ship.py) when the config has 'ship:'
-    try:
-        _search_beside(path, config)  # rule 11
-        table = RunConfig(None, DashboardConfig())
-        if config is not None:
-            table = load_run_config(config)
-        if opcua is None and table.opcua != OpcuaConfig():
-            opcua, live = "", True  # an opcua: section serves it too
-            if as_json:
-                raise StatectlError(f"{config}: its opcua: section makes a live run; not --json")
-        info = err if as_json else out  # rule 10: --json writes nothing else to stdout
-        drivers = _drivers(devices, driver, config, table)
-        walled = [n for n, d in drivers.items() if getattr(d, "realtime", False)]
-        if walled and not live:  # rule 3: a bus on wall time never settles on a SimClock
-            err.write(
-                f"statectl run: the driver of {', '.join(walled)} runs on the bus's wall time; "
-                "a batch run on simulated time would end before it reports: add --realtime\n"
-            )
-            return USAGE
-        host, port, token, token_from = _dashboard_settings(
-            host, port, token, config, table.dashboard
-        )
-        setups = tuple(replace(d, driver=drivers.get(d.name)) for d in devices)
-        clock: Clock = WallClock() if realtime else SimClock()
-        store = None
-        if journal is not None:
-            with output(
-                journal, JOURNAL_NAME, existing=False
-            ) as target:  # cli/outputs.py: the output rule
-                journal = str(target)
-                read = (path, config, *(d.source for d in devices))
-                made = new_journal(journal, resume=resume, fresh=fresh)
-                store = open_journal(
-                    journal, mode, promise, resume=resume, fresh=fresh, out=info, inputs=read
+    return _Run(path, opts, cell, devices, events, out, err).go(stop, ready)
+
+
+class _Run:
+    """One ``statectl run`` whose flags and model were read: set up, feed or serve, end.
+
+    Its state is what the parts share: the options as the config file completed them
+    (an ``opcua:`` section makes a live run; the journal's path as written), what it
+    started (``ending``: stopped however the run leaves) and the problems it counted.
+    """
+
+    def __init__(
+        self,
+        path: str,
+        opts: RunOptions,
+        cell: Cell | None,
+        devices: tuple[DeviceSetup, ...],
+        events: TextIO | None,
+        out: TextIO,
+        err: TextIO,
+    ) -> None:
+        self.path, self.cell, self.devices = path, cell, devices
+        self.events, self.out, self.err = events, out, err
+        self.opts = opts
+        self.info = err if opts.as_json else out  # rule 10: --json writes nothing else
+        self.problems = Problems()
+        self.ending = Ending("run", err)
+        self.server: Any = None  # the dashboard
+        self.plant: Any = None  # the OPC UA server (cli/opcua.py)
+        self.steps: StepLog | None = None
+        self.token_from = ""  # where the dashboard's token came from (rule 7)
+
+    def go(
+        self, stop: threading.Event | None, ready: Callable[[System, str | None], None] | None
+    ) -> int:
+        """Set up, start, then feed a batch or serve a live run; the exit code."""
+        try:
+            search_beside(self.path, self.opts.config)  # rule 11
+            table = self._config()
+            drivers = drivers_for(self.devices, self.opts.driver, self.opts.config, table)
+            walled = [n for n, d in drivers.items() if getattr(d, "realtime", False)]
+            if walled and not self.opts.live:  # rule 3: a bus on wall time never settles
+                self.err.write(
+                    f"statectl run: the driver of {', '.join(walled)} runs on the bus's wall "
+                    "time; a batch run on simulated time would end before it reports: "
+                    "add --realtime\n"
                 )
-        with undone_on_failure(store, journal if store is not None and made else None):
-            system = System(setups, clock, store, cell, commands=table.commands)
+                return USAGE
+            system = self._system(table, drivers)
+            url = self._attach(system, table, drivers)
+            self._start(system, url)
+            if ready is not None:
+                ready(system, url)
+            if not self.opts.live:
+                return self._batch(system)
+            return self._serve(system, drivers, stop)
+        except (BrokenPipeError, MissingExtra):
+            raise  # the reader went away: quietly; an extra missing (a config's section): exit 2
+        except (StatectlError, OSError) as exc:
+            return self.ending.fail(exc)
+        finally:
+            self.ending.close()
+
+    def _config(self) -> RunConfig:
+        """The ``--config`` file's sections; an ``opcua:`` section serves OPC UA (live)."""
+        config = self.opts.config
+        table = RunConfig(None, DashboardConfig()) if config is None else load_run_config(config)
+        if self.opts.opcua is None and table.opcua != OpcuaConfig():
+            self.opts = replace(self.opts, opcua="")
+            if self.opts.as_json:
+                raise StatectlError(f"{config}: its opcua: section makes a live run; not --json")
+        return table
+
+    def _system(self, table: RunConfig, drivers: Mapping[str, DeviceDriver]) -> System:
+        """The System on its clock, journalled as asked, shipping as its config says."""
+        opts = self.opts
+        host, port, token, token_from = dashboard_settings(
+            opts.host, opts.port, opts.token, opts.config, table.dashboard
+        )
+        self.opts = replace(opts, host=host, port=port, token=token)
+        self.token_from = token_from
+        setups = tuple(replace(d, driver=drivers.get(d.name)) for d in self.devices)
+        clock: Clock = WallClock() if opts.realtime else SimClock()
+        store, made = self._journal()
+        opts = self.opts  # the journal's path as written (a directory given: the file in it)
+        with undone_on_failure(store, opts.journal if store is not None and made else None):
+            system = System(setups, clock, store, self.cell, commands=table.commands)
+        self.ending.system = system
         if table.ship is not None:
-            shipping = _start_shipping(table.ship, store, config, err)
-        if settle_limit is not None:
-            system.settle_limit = settle_limit
-        system.hold_time = driver == NO_DRIVER and config is None  # time moves on +S lines only
-        width = max(len(n) for n in system.subjects)
-        if driver is None and config is None:
-            info.write(f"no driver configured: simulated twins for {', '.join(drivers)}\n")
+            self.ending.after_close(_start_shipping(table.ship, store, opts.config, self.err).stop)
+        if opts.settle_limit is not None:
+            system.settle_limit = opts.settle_limit
+        system.hold_time = opts.driver == NO_DRIVER and opts.config is None  # +S lines only
+        if opts.driver is None and opts.config is None:
+            self.info.write(f"no driver configured: simulated twins for {', '.join(drivers)}\n")
         elif not drivers:
-            info.write("no driver (--driver none): the model alone, only the events given\n")
-        steps = None
-        if as_json:
-            steps = StepLog(system, out)
-        else:
-            system.listen_steps(TraceWriter(out, device_width=width).step)
-            _show_notes(drivers, out, width)
-        system.listen_steps(problems.step)
-        system.on_violation.append(problems.violation(out if steps is None else info, width))
-        system.on_failure.append(problems.failure(err))  # system.py rule 7
-        url = None
-        if dashboard:
-            try:
-                from statectl.channels.web import Dashboard, Limits  # optional at run time
-            except ImportError:
-                raise MissingExtra("the dashboard", "aiohttp", "dashboard") from None
-            streams = table.dashboard.streams
-            limits = Limits() if streams is None else Limits(streams=streams)
-            server = Dashboard(
-                system.subjects.values(),
-                post=problems.counting(system.post, err),
-                token=token,
-                limits=limits,
-                origin=Origin("dashboard", "token"),  # its token is checked before it posts
-                token_from=token_from,
+            self.info.write("no driver (--driver none): the model alone, only the events given\n")
+        return system
+
+    def _journal(self) -> tuple[Journal | None, bool]:
+        """The journal opened (rule 2) and whether this run made it; (None, False) without."""
+        opts = self.opts
+        if opts.journal is None:
+            return None, False
+        with output(opts.journal, JOURNAL_NAME, existing=False) as target:  # cli/outputs.py
+            self.opts = opts = replace(opts, journal=str(target))
+            journal = str(target)
+            read = (self.path, opts.config, *(d.source for d in self.devices))
+            made = new_journal(journal, resume=opts.resume, fresh=opts.fresh)
+            mode, promise = opts.modes
+            store = open_journal(
+                journal,
+                mode,
+                promise,
+                resume=opts.resume,
+                fresh=opts.fresh,
+                out=self.info,
+                inputs=read,
             )
-            url = server.start(host, port)
-        if opcua is not None:
+        return store, made
+
+    def _attach(
+        self, system: System, table: RunConfig, drivers: Mapping[str, DeviceDriver]
+    ) -> str | None:
+        """The trace (or --json), the problem counts, the dashboard and OPC UA; the page's URL."""
+        width = max(len(n) for n in system.subjects)
+        if self.opts.as_json:
+            self.steps = StepLog(system, self.out)
+        else:
+            system.listen_steps(TraceWriter(self.out, device_width=width).step)
+            show_notes(drivers, self.out, width)
+        system.listen_steps(self.problems.step)
+        shown = self.out if self.steps is None else self.info
+        system.on_violation.append(self.problems.violation(shown, width))
+        system.on_failure.append(self.problems.failure(self.err))  # system.py rule 7
+        url = self._dashboard(system, table) if self.opts.dashboard else None
+        if self.opts.opcua is not None:
             from statectl.channels.cli.opcua import serve_opcua
 
-            plant = serve_opcua(system, opcua, table.opcua, config, out)
-        resumed = system.start(resume=resume)
-        if plant is not None:
-            plant.refresh()
-        for name, bound in system.bound.items():
-            if resumed.get(name):
-                taken = ", ".join(bound.recovered) or "none"
-                info.write(
-                    f"resumed {name} in {', '.join(sorted(system.subjects[name].configuration))}"
-                    f"; recovery: {taken}; {bound.redelivered} accepted event(s) redelivered\n"
-                )
-        if server is not None:
-            shown = server.token if token is None else f"(from {token_from})"
-            out.write(f"dashboard: {url}\ntoken: {shown}\n")
-        out.flush()
-        if ready is not None:
-            ready(system, url)
-        if not live:
-            if events is None and sys.stdin.isatty():
-                err.write(
-                    "reading event lines '[DEVICE:] EVENT [DATA]' or '+SECONDS' from the "
-                    "terminal; end with Ctrl-D\n"
-                )
-            lines = events if events is not None else sys.stdin
-            if steps is not None:
-                steps.begin()  # what the start did is not a line's
-            early: list[int] = []
-            _feed(system, lines, err, batch=True, problems=problems, steps=steps, early=early)
-            system.quiesce()
-            problems.unsettled = unsettled_note(system, early, system.work_pending())
-            _final_states(system, info, cell is None, journal)
-            return verdict(problems, err)
+            self.plant = serve_opcua(
+                system, self.opts.opcua, table.opcua, self.opts.config, self.out
+            )
+            self.ending.started(self.plant.stop)
+        return url
+
+    def _dashboard(self, system: System, table: RunConfig) -> str:
+        """The live dashboard (rule 7), started; its URL."""
+        try:
+            from statectl.channels.web import Dashboard, Limits  # optional at run time
+        except ImportError:
+            raise MissingExtra("the dashboard", "aiohttp", "dashboard") from None
+        streams = table.dashboard.streams
+        self.server = Dashboard(
+            system.subjects.values(),
+            post=self.problems.counting(system.post, self.err),
+            token=self.opts.token,
+            limits=Limits() if streams is None else Limits(streams=streams),
+            origin=Origin("dashboard", "token"),  # its token is checked before it posts
+            token_from=self.token_from,
+        )
+        self.ending.started(self.server.stop)
+        url: str = self.server.start(self.opts.host, self.opts.port)
+        return url
+
+    def _start(self, system: System, url: str | None) -> None:
+        """Start the devices (resuming them from the journal), and say what is running."""
+        resumed = system.start(resume=self.opts.resume)
+        if self.plant is not None:
+            self.plant.refresh()
+        say_resumed(system, resumed, self.info)
+        if self.server is not None:
+            token = self.opts.token
+            shown = self.server.token if token is None else f"(from {self.token_from})"
+            self.out.write(f"dashboard: {url}\ntoken: {shown}\n")
+        self.out.flush()
+
+    def _batch(self, system: System) -> int:
+        """Rule 3: feed every line, each settled on the simulated clock, then the verdict."""
+        if self.events is None and sys.stdin.isatty():
+            self.err.write(
+                "reading event lines '[DEVICE:] EVENT [DATA]' or '+SECONDS' from the "
+                "terminal; end with Ctrl-D\n"
+            )
+        lines = self.events if self.events is not None else sys.stdin
+        if self.steps is not None:
+            self.steps.begin()  # what the start did is not a line's
+        early: list[int] = []
+        problems = self.problems
+        _feed(system, lines, self.err, batch=True, problems=problems, steps=self.steps, early=early)
+        system.quiesce()
+        problems.unsettled = unsettled_note(system, early, system.work_pending())
+        _final_states(system, self.info, self.cell is None, self.opts.journal)
+        return verdict(problems, self.err)
+
+    def _serve(
+        self, system: System, drivers: Mapping[str, DeviceDriver], stop: threading.Event | None
+    ) -> int:
+        """A live run: serve until stopped, fed by stdin when no page is (rule 5)."""
         halt = stop or threading.Event()
-        if events is None and server is None:
+        events = self.events
+        if events is None and self.server is None:
             events = sys.stdin  # rule 5: without a dashboard, stdin is the operator
         if events is not None:
+            alone = self.server is None and self.plant is None
             feeder = threading.Thread(
                 target=_feed_then_stop,
-                args=(system, events, err, halt, server is None and plant is None, problems),
+                args=(system, events, self.err, halt, alone, self.problems),
                 daemon=True,
             )
             feeder.start()
@@ -505,24 +479,9 @@ def run(
             system.serve(halt)
         if system.journal is not None:
             system.journal.flush()  # a write that failed meanwhile fails the run
-        _final_states(system, out, cell is None, journal)
-        problems.partway = _partway(drivers, err)
-        return verdict(problems, err)
-    except (BrokenPipeError, MissingExtra):
-        raise  # the reader went away: quietly; an extra missing (a config's section): exit 2
-    except (StatectlError, OSError) as exc:
-        failed = str(exc)
-        err.write(f"statectl run: {exc}\n")
-        return PROBLEMS
-    finally:
-        if server is not None:
-            server.stop()
-        if plant is not None:
-            plant.stop()
-        if system is not None:
-            _close(system, err, failed)
-        if shipping is not None:
-            shipping.stop()  # what the journal committed goes too, for a few seconds at most
+        _final_states(system, self.out, self.cell is None, self.opts.journal)
+        self.problems.partway = _partway(drivers, self.err)
+        return verdict(self.problems, self.err)
 
 
 def _final_states(system: System, out: TextIO, one: bool, journal: str | None) -> None:
@@ -582,12 +541,3 @@ def _start_shipping(
     store.after_commit(thread.wake)
     thread.start()
     return thread
-
-
-def _close(system: System, err: TextIO, failed: str) -> None:
-    """Close the run; a journal failure not reported yet is reported (no traceback)."""
-    try:
-        system.close()
-    except JournalError as exc:
-        if str(exc) not in failed:
-            err.write(f"statectl run: {exc}\n")
