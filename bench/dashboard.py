@@ -93,7 +93,8 @@ def hist_percentile(hist: list[int], q: float) -> float:
 
 def serve(args: argparse.Namespace) -> dict[str, Any]:
     from statectl.channels.cli.demo import motor_chart
-    from statectl.channels.web import Dashboard, Limits
+    from statectl.channels.web.app import Limits
+    from statectl.channels.web.server import Dashboard
     from statectl.run.runtime import Subject, WallClock
 
     raise_file_limit()

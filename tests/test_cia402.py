@@ -15,9 +15,10 @@ pytest.importorskip("canopen")
 import can
 
 from statectl.channels.cli.demo import motor_chart
+from statectl.channels.runconfig import load_driver_config
 from statectl.kernel.errors import DiagnosticError, StatectlError
 from statectl.kernel.model import Chart
-from statectl.run.devices import connect, load_driver_config
+from statectl.run.devices import connect
 from statectl.run.devices.cia402 import Cia402Driver, Cia402SimDriver
 from statectl.run.devices.cia402.profile import (
     PowerState,

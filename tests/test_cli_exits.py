@@ -15,10 +15,10 @@ from pathlib import Path
 
 import pytest
 
+from statectl.channels.runconfig import load_run_config
 from statectl.front.builder.build import load_and_build
 from statectl.kernel.errors import StatectlError
 from statectl.run.devices import make_driver
-from statectl.run.devices.config import load_run_config
 from statectl.run.runtime import SimClock, Subject
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from statectl.channels.cli.demo import motor_chart
+from statectl.channels.runconfig import load_run_config
 from statectl.kernel.errors import DiagnosticError, StatectlError
 from statectl.run.commands import (
     ANYONE,
@@ -17,7 +18,6 @@ from statectl.run.commands import (
     Grant,
     Origin,
 )
-from statectl.run.devices import load_run_config
 from statectl.run.journal import REFUSED, Journal, JournalReader, replay
 from statectl.run.runtime import SimClock
 from statectl.run.system import DeviceSetup, System

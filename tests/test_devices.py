@@ -8,6 +8,7 @@ from typing import Any, ClassVar
 
 import pytest
 
+from statectl.channels.runconfig import load_driver_config
 from statectl.front.builder.build import load_chart
 from statectl.front.observers import Notification
 from statectl.kernel.errors import DiagnosticError, StatectlError
@@ -17,7 +18,6 @@ from statectl.run.devices import (
     SimMotor,
     SimStepper,
     connect,
-    load_driver_config,
     make_driver,
     requested_target,
 )

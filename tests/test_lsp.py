@@ -20,9 +20,9 @@ from pygls.uris import from_fs_path
 
 import statectl
 from statectl.cell.model import load_cell
+from statectl.channels.runconfig import load_run_config
 from statectl.front.rules import check_paths
 from statectl.kernel.errors import Diagnostic, DiagnosticError
-from statectl.run.devices.config import load_run_config
 
 ROOT = Path(__file__).resolve().parents[1]
 SRC = Path(statectl.__file__).resolve().parents[1]

@@ -21,9 +21,9 @@ from pymodbus.datastore import (
 )
 from pymodbus.server import ModbusTcpServer
 
+from statectl.channels.runconfig import load_driver_config
 from statectl.front.observers import Notification
 from statectl.kernel.errors import DiagnosticError
-from statectl.run.devices import load_driver_config
 from statectl.run.devices.modbus import ModbusIO
 from statectl.run.runtime import WallClock
 

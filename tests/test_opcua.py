@@ -23,8 +23,8 @@ from typing import Any
 import pytest
 
 from statectl.channels.opcua import layout
+from statectl.channels.runconfig import load_run_config
 from statectl.kernel.errors import DiagnosticError
-from statectl.run.devices import load_run_config
 from statectl.run.journal import load_device
 from support import MOTOR, ROOT
 

@@ -14,8 +14,9 @@ import pytest
 
 from statectl.channels.cli.run import run
 from statectl.channels.cli.run_setup import TOKEN_VARIABLE
+from statectl.channels.runconfig import load_driver_config, load_run_config
+from statectl.channels.web.config import DashboardConfig
 from statectl.kernel.errors import DiagnosticError
-from statectl.run.devices import DashboardConfig, load_driver_config, load_run_config
 from statectl.run.runner import System
 
 MOTOR = Path(__file__).parent.parent / "examples" / "motor" / "motor.yaml"

@@ -25,12 +25,13 @@ import pgserver
 from statectl.channels.cli.journal import journal_export, journal_replay, journal_show
 from statectl.channels.cli.run import run
 from statectl.channels.cli.ship import journal_ship
+from statectl.channels.runconfig import load_run_config
 from statectl.kernel.errors import DiagnosticError
 from statectl.kernel.semantics import Snapshot
-from statectl.run.devices.config import ShipConfig, load_run_config
 from statectl.run.journal import Journal, JournalError, JournalReader, StepKind
 from statectl.run.journal.pg import PgJournalReader, display_url, split_url
 from statectl.run.journal.ship import Shipper, ShipRefused, ShipThread
+from statectl.run.journal.ship_config import ShipConfig
 
 psycopg = pytest.importorskip("psycopg")
 

@@ -11,11 +11,12 @@ import pytest
 
 from statectl.channels.cli.demo import run_demo
 from statectl.channels.cli.run import run
+from statectl.channels.runconfig import load_driver_config
 from statectl.front.builder.build import load_chart
 from statectl.front.observers import Notification
 from statectl.kernel.errors import DiagnosticError, StatectlError
 from statectl.kernel.model import Chart
-from statectl.run.devices import SimMotor, SimTwin, connect, load_driver_config, make_driver
+from statectl.run.devices import SimMotor, SimTwin, connect, make_driver
 from statectl.run.devices.base import Driver
 from statectl.run.runtime import Record, SimClock, Subject
 from statectl.run.runtime.records import MicrostepTaken

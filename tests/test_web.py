@@ -10,7 +10,8 @@ from dataclasses import dataclass
 import pytest
 
 from statectl.channels.cli.demo import motor_chart
-from statectl.channels.web import Dashboard, fallback_svg
+from statectl.channels.web.server import Dashboard
+from statectl.channels.web.svg import fallback_svg
 from statectl.out.render.diagram import from_chart
 from statectl.run.devices import SimMotor
 from statectl.run.runner import DeviceSetup, System

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from statectl.channels.cli.demo import motor_chart
-from statectl.channels.web import Dashboard
+from statectl.channels.web.server import Dashboard
 from statectl.run.devices import SimMotor
 from statectl.run.runner import DeviceSetup, System
 from statectl.run.runtime import SimClock

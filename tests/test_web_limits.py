@@ -20,7 +20,8 @@ from dataclasses import dataclass
 import pytest
 
 from statectl.channels.cli.demo import motor_chart
-from statectl.channels.web import Dashboard, Limits
+from statectl.channels.web.app import Limits
+from statectl.channels.web.server import Dashboard
 from statectl.run.devices import SimMotor
 from statectl.run.runner import DeviceSetup, System
 from statectl.run.runtime import SimClock

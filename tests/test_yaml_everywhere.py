@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from statectl.cell.explore.replay import load_replay
+from statectl.channels.runconfig import load_run_config
 from statectl.kernel.errors import DiagnosticError, StatectlError
-from statectl.run.devices import load_run_config
 from statectl.run.runner import is_cell, parse_event_line
 
 #: A small alias bomb: nine references per level, seven levels (4.7 million leaves).

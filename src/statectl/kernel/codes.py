@@ -317,7 +317,7 @@ ALL: tuple[Code, ...] = (
         "a recovery rule's data does not fit the fields its event declares",
         _check("c413--recovery-data-its-event-would-refuse-error"),
     ),
-    # -- D5xx: driver and run configs (statectl.run.devices.config) ---------------------------
+    # -- D5xx: driver and run configs (statectl.channels.runconfig and its sections' owners) --
     _c("D501", _E, "the driver or run config cannot be read", _DRIVERS),
     _c("D502", _E, "the config is not valid YAML (or an alias or too deep)", _DRIVERS),
     _c("D503", _E, "no 'devices' mapping", _DRIVERS),

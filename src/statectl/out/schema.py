@@ -6,7 +6,9 @@ Rules:
    device file's top keys (:mod:`statectl.front.tables.yaml_io`), the cell's keys
    (:mod:`statectl.cell.values`, :mod:`statectl.cell.reader`,
    :mod:`statectl.cell.nodes`, :mod:`statectl.cell.security`) and the run config's
-   (:mod:`statectl.run.devices.config`, :mod:`statectl.run.commands`). The copies shipped in
+   (:mod:`statectl.channels.runconfig` and each section's owner: run/devices/config.py,
+   channels/web/config.py, channels/opcua/config.py, run/journal/ship_config.py,
+   run/commands.py). The copies shipped in
    ``statectl/data/schema/`` are checked equal to these by the suite.
 2. A schema accepts every file the loader accepts as to its shape (a column
    may be a scalar or, for the list columns, a list of scalars) and refuses
@@ -33,6 +35,9 @@ from statectl.cell.reader import (
 )
 from statectl.cell.security import SECURITY_KEYS, TLS_KEYS
 from statectl.cell.values import TOP_KEYS as CELL_KEYS
+from statectl.channels.opcua.config import MIN_PASSWORD, OPCUA_KEYS, POLICIES
+from statectl.channels.runconfig import RUN_CONFIG_KEYS
+from statectl.channels.web.config import DASHBOARD_KEYS, MAX_STREAMS, MIN_TOKEN
 from statectl.front.tables.rows import (
     ALIASES,
     COLUMNS,
@@ -48,12 +53,8 @@ from statectl.run.commands import CHANNELS, GRANT_KEYS
 from statectl.run.devices.config import (
     DEVICE_KEYS as DRIVER_KEYS,
 )
-from statectl.run.devices.config import (
-    DRIVERS,
-    RUN_CONFIG_KEYS,
-)
-from statectl.run.devices.opcua_config import MIN_PASSWORD, OPCUA_KEYS, POLICIES
-from statectl.run.devices.sections import DASHBOARD_KEYS, MAX_STREAMS, MIN_TOKEN, SHIP_KEYS
+from statectl.run.devices.config import DRIVERS
+from statectl.run.journal.ship_config import SHIP_KEYS
 
 __all__ = ["KINDS", "schema", "schema_text"]
 

@@ -21,10 +21,11 @@ from collections.abc import Iterable
 from importlib.resources import as_file, files
 from typing import TextIO
 
+from statectl.channels.runconfig import load_driver_config
 from statectl.front.builder.build import load_chart
 from statectl.kernel.errors import StatectlError
 from statectl.kernel.model import Chart
-from statectl.run.devices import Driver, connect, load_driver_config, make_driver
+from statectl.run.devices import Driver, connect, make_driver
 from statectl.run.runtime import Clock, Listener, SimClock, Subject, TraceWriter, WallClock
 
 __all__ = ["FAULT", "motor_chart", "run_demo"]

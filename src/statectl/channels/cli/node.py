@@ -129,7 +129,8 @@ def dashboard_main(
     from statectl.cell.model import load_cell
     from statectl.channels.cli import run_setup
     from statectl.channels.distributed.dashboard import station
-    from statectl.run.devices import DashboardConfig, RunConfig, load_run_config
+    from statectl.channels.runconfig import RunConfig, load_run_config
+    from statectl.channels.web.config import DashboardConfig
 
     if not Path(path).exists():
         err.write(f"statectl dashboard: {path}: no such file\n")
@@ -348,7 +349,8 @@ def _node_system(
         undone_on_failure,
     )
     from statectl.channels.distributed import NodeSystem
-    from statectl.run.devices import DashboardConfig, RunConfig, load_run_config
+    from statectl.channels.runconfig import RunConfig, load_run_config
+    from statectl.channels.web.config import DashboardConfig
     from statectl.run.journal import Sync
     from statectl.run.runtime import WallClock
 

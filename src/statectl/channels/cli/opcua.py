@@ -18,9 +18,8 @@ import os
 from pathlib import Path
 from typing import Any, TextIO
 
+from statectl.channels.opcua.config import MIN_PASSWORD, OpcuaConfig
 from statectl.kernel.errors import StatectlError, require
-from statectl.run.devices import OpcuaConfig
-from statectl.run.devices.opcua_config import MIN_PASSWORD
 from statectl.run.system import System
 
 __all__ = ["DEFAULT_ENDPOINT", "PASSWORD_VARIABLE", "USER_VARIABLE", "serve_opcua"]

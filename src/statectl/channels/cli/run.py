@@ -90,6 +90,9 @@ from statectl.channels.cli.run_setup import (
 )
 from statectl.channels.cli.settle import unsettled_note
 from statectl.channels.cli.steps import StepLog
+from statectl.channels.opcua.config import OpcuaConfig
+from statectl.channels.runconfig import RunConfig, load_run_config
+from statectl.channels.web.config import DashboardConfig
 from statectl.front.kinds import is_cell
 from statectl.kernel.errors import (
     DiagnosticError,
@@ -99,18 +102,12 @@ from statectl.kernel.errors import (
 )
 from statectl.kernel.exits import PROBLEMS, USAGE
 from statectl.run.commands import Origin
-from statectl.run.devices import (
-    DashboardConfig,
-    DeviceDriver,
-    OpcuaConfig,
-    RunConfig,
-    load_run_config,
-)
-from statectl.run.devices.config import ShipConfig
+from statectl.run.devices import DeviceDriver
 from statectl.run.journal import (
     Journal,
     JournalError,
 )
+from statectl.run.journal.ship_config import ShipConfig
 from statectl.run.runner.events import parse_event_line
 from statectl.run.runtime import Clock, SimClock, TraceWriter, WallClock
 from statectl.run.system import DeviceSetup, System
@@ -413,7 +410,8 @@ class _Run:
     def _dashboard(self, system: System, table: RunConfig) -> str:
         """The live dashboard (rule 7), started; its URL."""
         try:
-            from statectl.channels.web import Dashboard, Limits  # optional at run time
+            from statectl.channels.web.app import Limits  # optional at run time
+            from statectl.channels.web.server import Dashboard
         except ImportError:
             raise MissingExtra("the dashboard", "aiohttp", "dashboard") from None
         streams = table.dashboard.streams

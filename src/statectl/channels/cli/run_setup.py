@@ -12,16 +12,10 @@ from pathlib import Path
 from typing import TextIO
 
 from statectl.cell.model import Cell, load_cell
+from statectl.channels.runconfig import RunConfig
+from statectl.channels.web.config import MIN_TOKEN, DashboardConfig
 from statectl.kernel.errors import DiagnosticError, Severity, StatectlError
-from statectl.run.devices import (
-    MIN_TOKEN,
-    DashboardConfig,
-    DeviceDriver,
-    RunConfig,
-    SimTwin,
-    TwinNote,
-    make_driver,
-)
+from statectl.run.devices import DeviceDriver, SimTwin, TwinNote, make_driver
 from statectl.run.journal import load_device
 from statectl.run.runner.cells import load_setups, relevant_warnings
 from statectl.run.system import DeviceSetup

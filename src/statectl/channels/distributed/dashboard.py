@@ -85,7 +85,8 @@ def serve_cell(
 ) -> tuple[Any, str]:
     """Start the dashboard of the whole cell (rule 1); the started Dashboard and its URL."""
     try:
-        from statectl.channels.web import Dashboard, Limits
+        from statectl.channels.web.app import Limits
+        from statectl.channels.web.server import Dashboard
     except ImportError:
         raise MissingExtra("the dashboard", "aiohttp", "dashboard") from None
     mirrors = {

@@ -24,11 +24,12 @@ from statectl.cell.reader import RECOVERY_FIELDS as GOAL_FIELDS
 from statectl.cell.values import TOP_KEYS as CELL_KEYS
 from statectl.channels.lsp.documents import Document, FileKind, Project
 from statectl.channels.lsp.index import Kind, device_key
+from statectl.channels.runconfig import RUN_CONFIG_KEYS
 from statectl.front.tables.rows import COLUMNS, CONTROL_WORDS, TYPE_NAMES, normalize_column
 from statectl.front.tables.yaml_io import TOP_KEYS as DEVICE_KEYS
 from statectl.kernel.model import EventKind
 from statectl.run.devices.config import DEVICE_KEYS as DRIVER_KEYS
-from statectl.run.devices.config import DRIVERS, RUN_CONFIG_KEYS
+from statectl.run.devices.config import DRIVERS
 
 __all__ = ["Candidate", "complete"]
 

@@ -11,7 +11,7 @@ Rules:
    reports (:func:`statectl.front.rules.check_paths`), a cell what ``statectl
    verify`` reports before it explores (:func:`statectl.cell.model.load_cell`), a
    run config what ``statectl run --config`` reports
-   (:func:`statectl.run.devices.config.load_run_config`). Only those placed in
+   (:func:`statectl.channels.runconfig.load_run_config`). Only those placed in
    the file itself are kept (a CSV pair's other file has its own).
 3. :class:`Project` holds the editor's open texts, read before the disk
    wherever a file is read (a CSV pair's other half, a cell's device files when
@@ -35,11 +35,11 @@ from statectl.channels.lsp.index import (
     device_key,
     device_symbols,
 )
+from statectl.channels.runconfig import RUN_CONFIG_KEYS
 from statectl.front.tables import safeyaml
 from statectl.front.tables.csv_io import csv_paths
 from statectl.front.tables.inputs import read_input_text
 from statectl.kernel.errors import Diagnostic, DiagnosticError, Location
-from statectl.run.devices.config import RUN_CONFIG_KEYS
 
 __all__ = ["Document", "FileKind", "Project", "diagnose", "kind_of"]
 
@@ -117,7 +117,7 @@ def diagnose(doc: Document, texts: dict[str, str]) -> list[Diagnostic]:
 
         found = load_cell(doc.path, doc.text)[1]
     else:
-        from statectl.run.devices.config import load_run_config
+        from statectl.channels.runconfig import load_run_config
 
         try:
             load_run_config(doc.path, doc.text)

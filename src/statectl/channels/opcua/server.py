@@ -69,6 +69,7 @@ from statectl.channels.opcua.access import rules as _Rules
 from statectl.channels.opcua.access import ua_module as _ua
 from statectl.channels.opcua.alarms import AlarmSpace, alarm_events
 from statectl.channels.opcua.certs import APP_URI, default_directory, ensure_certificate
+from statectl.channels.opcua.config import endpoint_problem
 from statectl.channels.opcua.methods import Calls
 from statectl.channels.opcua.nodes import (
     browse,
@@ -85,7 +86,6 @@ from statectl.channels.opcua.packml import PackmlNaming, PackmlSpace, naming, pa
 from statectl.channels.opcua.packtags import PackTags
 from statectl.channels.opcua.space import Change, Layout, changes, layout
 from statectl.kernel.errors import StatectlError
-from statectl.run.devices.opcua_config import endpoint_problem
 from statectl.run.runtime import InvokeIssued, MicrostepTaken, Started, StepRecord
 from statectl.run.system import System
 

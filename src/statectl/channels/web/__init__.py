@@ -1,7 +1,7 @@
-"""The live dashboard (aiohttp + Server-Sent Events on its own loop); see docs/dashboard.md."""
+"""The live dashboard (aiohttp + Server-Sent Events on its own loop); see docs/dashboard.md.
 
-from statectl.channels.web.app import Limits
-from statectl.channels.web.server import LOG_SIZE, Dashboard, PostFn
-from statectl.channels.web.svg import fallback_svg
-
-__all__ = ["LOG_SIZE", "Dashboard", "Limits", "PostFn", "fallback_svg"]
+:mod:`~statectl.channels.web.server` is the :class:`Dashboard` (aiohttp, the ``dashboard``
+extra), :mod:`~statectl.channels.web.app` its routes and :class:`Limits`,
+:mod:`~statectl.channels.web.config` the run config's ``dashboard:`` section. Nothing is
+imported here, so reading a run config needs no aiohttp.
+"""

@@ -3,13 +3,7 @@
 from statectl.run.devices.base import Driver, connect, requested_target
 from statectl.run.devices.config import (
     DRIVERS,
-    MIN_TOKEN,
-    DashboardConfig,
     DriverConfig,
-    OpcuaConfig,
-    RunConfig,
-    load_driver_config,
-    load_run_config,
     make_driver,
     resolve_driver,
 )
@@ -21,22 +15,16 @@ from statectl.run.runtime.records import ApiCall
 
 __all__ = [
     "DRIVERS",
-    "MIN_TOKEN",
     "ApiCall",
-    "DashboardConfig",
     "DeviceDriver",
     "Driver",
     "DriverConfig",
-    "OpcuaConfig",
     "Report",
-    "RunConfig",
     "SimMotor",
     "SimStepper",
     "SimTwin",
     "TwinNote",
     "connect",
-    "load_driver_config",
-    "load_run_config",
     "make_driver",
     "requested_target",
     "resolve_driver",

@@ -9,8 +9,8 @@ Rules:
        devices:
          Motor: {driver: sim-motor, options: {speed: 10}}
 
-   :func:`load_driver_config` reports every problem at once as diagnostics
-   D501-D510 with the file and line, raising one
+   :func:`statectl.channels.runconfig.load_driver_config` reports every problem at
+   once as D5xx diagnostics with the file and line, raising one
    :class:`~statectl.kernel.errors.DiagnosticError` if any is an error.
 3. Options are checked against the driver's constructor when the file loads,
    so a misspelt option is a diagnostic, not a ``TypeError`` at start-up; a
@@ -20,26 +20,10 @@ Rules:
 4. A driver whose constructor takes ``chart`` is given the device's chart by
    :func:`make_driver` (a twin derives itself from the tables); ``chart`` is
    never an option a config file sets.
-5. The same file may carry the live dashboard's settings, so a token need not
-   be typed on a command line (where ``ps`` shows it)::
-
-       dashboard: {host: 127.0.0.1, port: 8765, token: <16 or more characters>, streams: 1000}
-
-   :func:`load_run_config` reads both sections; a file with only ``dashboard``
-   leaves the drivers to ``--driver`` or the twins. Problems there are D510.
-6. An ``opcua:`` section configures ``statectl run --opcua`` (parsed by
-   :mod:`statectl.run.devices.opcua_config`; problems there are D520).
-7. A ``ship:`` section ships the run's journal to PostgreSQL as it is
-   committed (docs/journal.md, "Shipping to PostgreSQL")::
-
-       ship: {to: postgresql://statectl@db.plant/cell, source: cell-a, interval: 0.5}
-
-   ``to`` is required; ``source`` (default ``host:path``), ``interval`` (seconds
-   between looks when nothing wakes the shipper), ``retry`` (seconds between
-   attempts while the server is down) and ``batch`` (rows per transaction) are
-   optional. Problems there are D530; a password in ``to`` is never echoed.
-8. A ``commands:`` section says who may command which device (parsed by
-   :mod:`statectl.run.commands`, which the System asks; problems there are D540).
+5. The same file carries the other sections of a run config (dashboard, OPC UA,
+   shipping, who may command): each is parsed by the package that uses it, and
+   :mod:`statectl.channels.runconfig` reads the whole file. This module parses the
+   ``devices:`` section (:func:`parse_devices`).
 """
 
 from __future__ import annotations
@@ -48,52 +32,28 @@ import importlib
 import importlib.util
 import inspect
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Protocol
 
 import yaml
 
-from statectl.front.tables import safeyaml
-from statectl.front.tables.inputs import read_input_text
-from statectl.kernel.errors import (
-    Diagnostic,
-    DiagnosticError,
-    Location,
-    Severity,
-    StatectlError,
-    did_you_mean,
-)
+from statectl.kernel.errors import StatectlError, did_you_mean
 from statectl.kernel.model import Chart
-from statectl.run.commands import Commands, parse_commands
 from statectl.run.devices.cia402 import Cia402Driver, Cia402SimDriver
 from statectl.run.devices.cia402.options import cia402_option_problems
 from statectl.run.devices.modbus import ModbusIO, modbus_option_problems
 from statectl.run.devices.motor import SimMotor, motor_option_problems
-from statectl.run.devices.opcua_config import OpcuaConfig, parse_opcua
 from statectl.run.devices.protocol import DeviceDriver
-from statectl.run.devices.sections import (
-    MIN_TOKEN,
-    DashboardConfig,
-    ShipConfig,
-    parse_dashboard,
-    parse_ship,
-)
 from statectl.run.devices.stepper import SimStepper, stepper_option_problems
 from statectl.run.devices.twin import SimTwin, twin_option_problems
 
 __all__ = [
+    "DEVICE_KEYS",
     "DRIVERS",
-    "MIN_TOKEN",
     "OPTION_CHECKS",
-    "DashboardConfig",
     "DriverConfig",
-    "OpcuaConfig",
-    "RunConfig",
-    "ShipConfig",
-    "load_driver_config",
-    "load_run_config",
+    "SectionError",
     "make_driver",
+    "parse_devices",
     "resolve_driver",
 ]
 
@@ -142,24 +102,8 @@ SUPPLIED = ("chart",)
 #: device -> (driver name, options)
 DriverConfig = dict[str, tuple[str, dict[str, Any]]]
 
-#: The sections of a run config, and the keys of a device entry (the JSON Schema,
-#: out/schema.py, reads them; the dashboard's and ship's are in sections.py).
-RUN_CONFIG_KEYS = ("devices", "dashboard", "opcua", "ship", "commands")
+#: The keys of a device entry (the JSON Schema, out/schema.py, reads them).
 DEVICE_KEYS = ("driver", "options")
-
-
-@dataclass(frozen=True, slots=True)
-class RunConfig:
-    """A run's configuration file: drivers per device (None: no ``devices`` section)."""
-
-    drivers: DriverConfig | None
-    dashboard: DashboardConfig
-    #: the ``opcua:`` section (devices/opcua_config.py)
-    opcua: OpcuaConfig = field(default_factory=OpcuaConfig)
-    #: the ``ship:`` section: the run's journal shipped to PostgreSQL
-    ship: ShipConfig | None = None
-    #: the ``commands:`` section: who may command which device (run/commands.py)
-    commands: Commands = field(default_factory=Commands)
 
 
 def _available() -> str:
@@ -286,122 +230,17 @@ def _option_problem(factory: Callable[..., Any], options: Mapping[str, Any]) -> 
     return None
 
 
-def load_driver_config(path: str | Path) -> DriverConfig:
-    """Read a driver config file; every problem becomes a D5xx diagnostic."""
-    config = load_run_config(path)
-    if config.drivers is None:
-        diag = Diagnostic(
-            "D503",
-            Severity.ERROR,
-            Location(str(path), 1),
-            "no 'devices' mapping",
-            "add 'devices:' with one entry per device",
-        )
-        raise DiagnosticError([diag])
-    return config.drivers
-
-
-def load_run_config(path: str | Path, text: str | None = None) -> RunConfig:
-    """Read a run's config file (drivers, dashboard); every problem becomes a D5xx diagnostic.
-
-    ``text`` is the file's content when the caller holds it (an editor's buffer).
-    """
-    file = str(path)
-    diags: list[Diagnostic] = []
-
-    def error(code: str, line: int | None, message: str, hint: str = "") -> None:
-        diags.append(Diagnostic(code, Severity.ERROR, Location(file, line), message, hint))
-
-    try:
-        text = read_input_text(path) if text is None else text
-    except (OSError, UnicodeDecodeError) as exc:
-        error("D501", None, f"cannot read driver config ({exc})", "check the path")
-        raise DiagnosticError(diags) from None
-    try:  # no aliases, bounded depth: a config file may come from elsewhere too
-        root = safeyaml.compose(text)
-    except safeyaml.YamlRefused as exc:
-        error("D502", exc.line, f"not valid YAML here ({exc.message})", exc.hint)
-        raise DiagnosticError(diags) from None
-
-    def line_of(node: yaml.Node) -> int:
-        return int(node.start_mark.line) + 1
-
-    def value(node: yaml.Node) -> Any:
-        return safeyaml.construct(node)
-
-    found = _sections(root, value, line_of, error)
-    devices_node, dashboard_node = found.get("devices"), found.get("dashboard")
-    opcua_node, ship_node, commands_node = (
-        found.get("opcua"),
-        found.get("ship"),
-        found.get("commands"),
-    )
-    result = _drivers(devices_node, value, line_of, error)
-    dashboard = DashboardConfig()
-    if dashboard_node is not None:
-        dashboard = parse_dashboard(dashboard_node, value, line_of, error)
-    opcua = OpcuaConfig() if opcua_node is None else parse_opcua(opcua_node, value, line_of, error)
-    ship = None if ship_node is None else parse_ship(ship_node, value, line_of, error)
-    commands = (
-        Commands()
-        if commands_node is None
-        else parse_commands(commands_node, value, line_of, error, file)
-    )
-    if diags:
-        raise DiagnosticError(diags)
-    return RunConfig(result if devices_node is not None else None, dashboard, opcua, ship, commands)
-
-
-class _Error(Protocol):
+class SectionError(Protocol):
     """How the sections report a problem: a code, a line, what is wrong, what to do."""
 
     def __call__(self, code: str, line: int | None, message: str, hint: str = "") -> None: ...
 
 
-def _sections(
-    root: yaml.Node | None,
-    value: Callable[[yaml.Node], Any],
-    line_of: Callable[[yaml.Node], int],
-    error: _Error,
-) -> dict[str, yaml.Node]:
-    """The file's sections by key (D503 if none or not a mapping, D507 for others)."""
-    found: dict[str, yaml.Node] = {}
-    if not isinstance(root, yaml.MappingNode):
-        error(
-            "D503",
-            line_of(root) if root is not None else 1,
-            "a driver config must be a mapping with a 'devices' key",
-            "write 'devices: {Motor: {driver: sim-motor}}'",
-        )
-    else:
-        for key, val in root.value:
-            if value(key) in RUN_CONFIG_KEYS:
-                found[value(key)] = val
-            else:
-                error(
-                    "D507",
-                    line_of(key),
-                    f"unknown key {value(key)!r}",
-                    "a run config has 'devices', 'dashboard', 'opcua', 'ship' and 'commands'",
-                )
-        if not found:
-            error(
-                "D503",
-                line_of(root),
-                "no 'devices' mapping",
-                "add 'devices:' with one entry per device",
-            )
-        elif "devices" in found and not isinstance(found["devices"], yaml.MappingNode):
-            error("D503", line_of(found["devices"]), "'devices' must map device names to entries")
-            del found["devices"]
-    return found
-
-
-def _drivers(
+def parse_devices(
     devices_node: yaml.Node | None,
     value: Callable[[yaml.Node], Any],
     line_of: Callable[[yaml.Node], int],
-    error: _Error,
+    error: SectionError,
 ) -> DriverConfig:
     """The ``devices:`` section: each entry whose driver and options pass every check."""
     result: DriverConfig = {}
@@ -419,7 +258,7 @@ def _device(
     entry: yaml.Node,
     value: Callable[[yaml.Node], Any],
     line_of: Callable[[yaml.Node], int],
-    error: _Error,
+    error: SectionError,
 ) -> tuple[str, dict[str, Any]] | None:
     """One device's (driver, options), or None once its first problem is reported."""
     here = line_of(key)
@@ -474,7 +313,7 @@ def _driver_fits(
     fields: dict[str, tuple[yaml.Node, yaml.Node]],
     options: dict[str, Any],
     line_of: Callable[[yaml.Node], int],
-    error: _Error,
+    error: SectionError,
 ) -> bool:
     """Whether the named driver exists, takes these options with sane values (D505,
     D508, D509, D511) and has its library installed (D512): so start-up cannot fail."""

@@ -1,7 +1,7 @@
 """The one check of a URL's syntax, for every URL a run config names.
 
-The ``ship: to`` PostgreSQL URL (devices/config.py, journal/pg.py) and the ``opcua:
-endpoint`` (devices/opcua_config.py) are checked when the file loads, so a URL that
+The ``ship: to`` PostgreSQL URL (journal/ship_config.py, journal/pg.py) and the ``opcua:
+endpoint`` (channels/opcua/config.py) are checked when the file loads, so a URL that
 cannot be parsed is a line of the file, never a traceback when the run starts.
 """
 
