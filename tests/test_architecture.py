@@ -233,6 +233,7 @@ NESTED = {
     "front.rules.names": "names",
     "channels.cli.demo": "demo",
     "out.scxml.tables_io": "scxml_io",
+    "run.door": "system",  # the System's one front door, split out of run/system.py
 }
 
 

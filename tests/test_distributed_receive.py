@@ -21,6 +21,7 @@ import pytest
 from statectl.cell.model import load_cell
 from statectl.channels.distributed import NodeSystem, Wire
 from statectl.kernel.errors import StatectlError
+from statectl.run.door import Submitted
 from statectl.run.runner.cells import cell_setups
 from statectl.run.runtime import SimClock
 
@@ -297,15 +298,15 @@ def test_a_stream_on_two_threads_never_lets_a_later_number_overtake(tmp_path: Pa
     system.subjects["pong"].on_step(lambda event, data, outcome: order.append(data))
     paused = threading.Event()
     go_on = threading.Event()
-    run_now = system.run_now
+    submit = system.submit
 
-    def slow_first(device: str, event: str, data: Any) -> bool:
-        if data == 1:  # event 1 has passed its order check: hold it before its step
+    def slow_first(device: str, event: str, data: Any, **how: Any) -> Submitted:
+        if data == 1:  # event 1 has passed its order check: hold it before the door
             paused.set()
             go_on.wait(10)
-        return run_now(device, event, data)
+        return submit(device, event, data, **how)
 
-    system.run_now = slow_first  # type: ignore[method-assign]
+    system.submit = slow_first  # type: ignore[method-assign]
     on_link = wire._receiver("a", "pong")
     first = threading.Thread(target=on_link, args=(_Sample(b'["ep1",1,"Hit",1]'),))
     first.start()

@@ -210,17 +210,23 @@ async def _collect(stream: object, seen: list[tuple[str, str]], n: int) -> None:
                 return
 
 
-def test_send_refuses_a_journalled_system(motor: Chart, tmp_path: object) -> None:
-    """A journalled System accepts through its journal: send() says to use post()."""
+def test_send_runs_on_a_journalled_system_too(motor: Chart, tmp_path: object) -> None:
+    """send() on a journalled System accepts through the journal and resolves once the
+    device ran the event (it used to refuse: use post() and wait for the ticket)."""
     from pathlib import Path
 
-    from statectl.run.journal import Journal
+    from statectl.run.journal import Journal, JournalReader
 
-    system = System((DeviceSetup("M0", motor),), SimClock(), Journal(Path(str(tmp_path)) / "j.db"))
+    path = Path(str(tmp_path)) / "j.db"
+    system = System((DeviceSetup("M0", motor),), SimClock(), Journal(path))
     system.start()
-    with pytest.raises(StatectlError, match="with one, post\\(\\) and wait for the ticket"):
-        asyncio.run(system.send("M0", "Movement"))
+    assert asyncio.run(system.send("M0", "Movement")) == "handled"
+    assert system.subjects["M0"].configuration == {"Moving"}
     system.close()
+    with JournalReader(path) as reader:
+        assert [r.event for r in reader.pending("M0")] == []  # accepted and processed
+        last = reader.last_step("M0")
+        assert last is not None and last.event == "Movement" and last.inbox is not None
 
 
 def test_a_driver_given_where_the_rules_go_is_refused(motor: Chart) -> None:

@@ -2,9 +2,12 @@
 
 Rules:
 1. An :class:`Origin` says where a command comes from: its channel (:data:`CHANNELS`:
-   ``stdin``, ``dashboard``, ``opcua``, ``zenoh``, ``link``) and, where the channel
-   authenticates, its principal (the OPC UA session's user, the dashboard token's
-   holder, the Zenoh peer, the link's name). ``None`` is an anonymous principal.
+   ``stdin``, ``dashboard``, ``opcua``, ``zenoh``, ``link``, ``driver``) and, where the
+   channel authenticates, its principal (the OPC UA session's user, the dashboard
+   token's holder, the Zenoh peer, a link's source device in one process or its
+   sending node over Zenoh, the device whose driver reports). ``None`` is an anonymous
+   principal. ``link`` and ``driver`` are the run's own (:data:`INTERNAL`): a full
+   queue never refuses them.
 2. A policy is a list of grants. A grant names one channel and who on it: ``CHANNEL``
    anyone (anonymous included), ``CHANNEL/*`` any authenticated principal,
    ``CHANNEL/NAME`` that principal; the devices it may command (all by default) and the
@@ -12,7 +15,7 @@ Rules:
    channel covers its principal, device and event.
 3. The defaults are what each channel allowed before the policy existed
    (:data:`DEFAULT_GRANTS`): anyone on ``stdin``, ``dashboard`` (it checks its token
-   before it posts), ``zenoh`` and ``link``; on ``opcua`` an authenticated user only. A
+   before it posts), ``zenoh``, ``link`` and ``driver``; on ``opcua`` an authenticated user only. A
    run config's ``commands:`` section replaces the grants of the channels it names;
    a channel it does not name keeps its default.
 4. :meth:`Commands.check` raises :class:`CommandRefused` (a ``StatectlError``) saying who
@@ -46,6 +49,7 @@ __all__ = [
     "CHANNELS",
     "DEFAULT_GRANTS",
     "GRANT_KEYS",
+    "INTERNAL",
     "CommandRefused",
     "Commands",
     "Grant",
@@ -54,7 +58,9 @@ __all__ = [
 ]
 
 #: The channels a command can come through (rule 1).
-CHANNELS: Final = ("stdin", "dashboard", "opcua", "zenoh", "link")
+CHANNELS: Final = ("stdin", "dashboard", "opcua", "zenoh", "link", "driver")
+#: The channels that are the run itself: a cell's links and drivers' completions (rule 1).
+INTERNAL: Final = frozenset({"link", "driver"})
 #: A grant's principal: anyone on the channel, anonymous included (``from: CHANNEL``); no
 #: principal is named so (an empty name is refused).
 ANYONE: Final = ""
@@ -113,6 +119,10 @@ class Grant:
         return f"{self.channel}{who} may send {send} to {to} ({self.where})"
 
 
+def _everything(g: Grant) -> bool:
+    return g.principal == ANYONE and g.devices is None and g.events is None
+
+
 def _shown(name: str) -> str:
     """A principal's name as a message shows it: as it is when printable, else escaped by
     the one display escape (kernel/text.py) and quoted, so the escape is seen as one."""
@@ -126,13 +136,14 @@ DEFAULT_GRANTS: Final = (
     Grant("opcua", AUTHENTICATED),
     Grant("zenoh"),
     Grant("link"),
+    Grant("driver"),
 )
 
 
 class Commands:
     """The commands policy (rules 2-4): the grants by channel, the defaults where none."""
 
-    __slots__ = ("_by_channel", "configured")
+    __slots__ = ("_by_channel", "_open", "configured")
 
     def __init__(self, grants: Iterable[Grant] = ()) -> None:
         given = tuple(grants)
@@ -143,6 +154,12 @@ class Commands:
         for g in (*given, *(d for d in DEFAULT_GRANTS if d.channel not in named)):
             by_channel[g.channel].append(g)
         self._by_channel = {c: tuple(gs) for c, gs in by_channel.items()}
+        self._open = frozenset(c for c, gs in by_channel.items() if any(map(_everything, gs)))
+
+    def open_to_all(self, channel: str) -> bool:
+        """Whether anyone on ``channel`` may send anything anywhere: the door need not ask
+        (a cell's links and drivers' completions by default, on the hot path)."""
+        return channel in self._open
 
     def grants(self, channel: str) -> tuple[Grant, ...]:
         """The grants in force for ``channel``."""

@@ -28,39 +28,35 @@ Rules:
    Each device's queue is first in, first out.
 4. :meth:`System.post` never blocks (but for a cell's command with a ``when``,
    which waits for the owner to run what came before it, rule 6). With
-   ``max_queue`` a device whose queue holds that many events refuses more with
-   :class:`QueueFull`, which tells a producer it outruns the device instead of
-   letting memory grow.
-5. asyncio: :meth:`System.send` posts and resolves once the device has
-   processed the event (its outcome: ``handled`` or the
-   :class:`~statectl.kernel.semantics.Unhandled` reason); :meth:`System.records` is an
-   async iterator of every device's records. Both hand results to the event
-   loop with ``call_soon_threadsafe``: the owner never waits for a coroutine.
-6. A cell's rules hold at run time as verify assumed them (explore/enforce.py):
-   an environment command whose every ``when`` is false is refused by
-   :meth:`System.post` (:class:`~statectl.cell.explore.enforce.Refused`), judged as verify
-   takes a command: once everything posted or accepted before it has run and its
-   links have settled (the poster runs them as the owner if the owner has not yet);
-   invariants
-   are checked once a stimulus's cascade has settled (every link event it caused
-   delivered, as verify takes a stimulus and its links as one move), each
-   violation goes to the ``on_violation`` callbacks and sends the invariant's
-   declared events (through the journal when there is one); link events carry
-   their data; a device guard's ``In('other.State')`` reads the other device's
-   state.
-7. A row that fails while the owner drains (a guard or an assignment that raises,
-   e.g. a linked event sent without the data its guard reads) refuses that event
-   only: the device records it (``EventRejected``, guard error), the message goes
-   to the ``on_failure`` callbacks (``statectl run`` prints it and exits 1), and
-   the other devices and the device's later events go on. In the live owner loop
-   (:meth:`System.serve`) an observer that raises a ``StatectlError`` (a driver
-   refusing an event's data, ``Movement {amount: abc}``) fails the same way: the
-   message goes to ``on_failure`` and the loop goes on; before, one bad event sent
-   from the dashboard or typed into a ``--realtime`` run ended the whole run.
-8. The door, :meth:`System.admit` (post and send): an event with an ``origin``
-   (:mod:`statectl.run.commands`) enters if :attr:`System.commands` allows it, else
-   ``CommandRefused``, journalled as a ``refused`` step that changes nothing. An event
-   without one is the host's own (a driver, the Python API): one test.
+   ``max_queue`` a device whose queue holds that many events refuses more from
+   outside with :class:`QueueFull`: a producer learns it outruns the device.
+5. asyncio: ``await system.submit(...)`` (or :meth:`System.send`) resolves once the
+   device ran the event; :meth:`System.records` is an async iterator of every
+   device's records. Both hand results to the loop with ``call_soon_threadsafe``.
+6. A cell's rules hold at run time as verify assumed them (explore/enforce.py): an
+   environment command whose every ``when`` is false is refused
+   (:class:`~statectl.cell.explore.enforce.Refused`), judged as verify takes a command:
+   once everything posted or accepted before it has run and its links have settled
+   (the poster runs them as the owner if the owner has not yet); invariants are
+   checked once a stimulus's cascade has settled (every link event it caused
+   delivered), each violation goes to the ``on_violation`` callbacks and sends the
+   invariant's declared events (through the journal when there is one); link events
+   carry their data; a device guard's ``In('other.State')`` reads the other device.
+7. A row that fails while the owner drains (a guard or an assignment that raises, a
+   driver refusing an event's data) refuses that event only: the message goes to the
+   ``on_failure`` callbacks (``statectl run`` prints it and exits 1), and the other
+   devices and the device's later events go on.
+8. One front door, :meth:`System.submit` (DESIGN.md): every event from stdin, the
+   Python API, the dashboard, OPC UA, Zenoh, a cell link or a driver's completion
+   enters there (:meth:`post` and :meth:`send` are submit without a handle, and
+   awaited). Its ``origin`` (:mod:`statectl.run.commands`) enters if
+   :attr:`System.commands` allows it, else ``CommandRefused``, journalled as a
+   ``refused`` step that changes nothing (a refused link or driver event is dropped
+   with one log line). Without an origin it is the host's own (the Python API).
+   Whether the submitting thread runs the step at once is decided there alone
+   (:meth:`_run_here`): when the System is live and nobody owns the devices, it does
+   (no hop to the owner's thread); else the owner is woken. Timers and monitors are
+   the owner's own work, queued on the device at their point of its queue.
 """
 
 from __future__ import annotations
@@ -77,11 +73,12 @@ from statectl.cell.explore.conditions import bind_cross_guards
 from statectl.cell.explore.enforce import CellRules, Violation
 from statectl.cell.explore.replay import CellLinks
 from statectl.cell.model import Cell
-from statectl.kernel.errors import StatectlError, did_you_mean
+from statectl.kernel.errors import StatectlError
 from statectl.kernel.model import Chart
 from statectl.kernel.semantics.eventview import GuardError
-from statectl.run.commands import Commands, Origin
+from statectl.run.commands import Commands
 from statectl.run.devices import DeviceDriver, connect
+from statectl.run.door import Door, QueueFull, Submitted
 from statectl.run.journal import (
     Guarantee,
     Journal,
@@ -89,20 +86,15 @@ from statectl.run.journal import (
     JournalledDevice,
     JournalReader,
     RecoveryRule,
-    Ticket,
 )
 from statectl.run.runtime import Clock, Record, SimClock, StepRecord, Subject, WallClock
 from statectl.run.runtime.eventdata import AssignError
 
-__all__ = ["SETTLE_LIMIT", "DeviceSetup", "QueueFull", "System"]
+__all__ = ["SETTLE_LIMIT", "DeviceSetup", "QueueFull", "Submitted", "System"]
 
 #: Simulated seconds a batch run lets pass at most for one event to settle.
 SETTLE_LIMIT = 60.0
 _TICK = 0.02
-
-
-class QueueFull(StatectlError):
-    """A device's queue holds ``max_queue`` events: the producer outruns it (rule 4)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -127,7 +119,7 @@ class DeviceSetup:
 
 
 @dataclass(slots=True)
-class System:
+class System(Door):
     """Devices on one clock with one owner; optionally journalled, a cell, bounded (rules 1-4)."""
 
     setups: Sequence[DeviceSetup]
@@ -177,8 +169,8 @@ class System:
             s = Subject(d.chart, clock=self.clock, name=d.name)
             s.on_queued(ready)
             self.subjects[d.name] = s
-            if d.driver is not None:
-                connect(s, d.driver)
+            if d.driver is not None:  # its completions come through the door (rule 8)
+                connect(s, d.driver, report=self._reporter(d.name))
             if self.journal is not None:
                 self.bound[d.name] = JournalledDevice(s, self.journal, source=d.source)
         if self.cell is not None and self.journal is not None:
@@ -207,8 +199,10 @@ class System:
         if not self._live:
             self.links.fired.clear()  # entering the initial states fires nothing
             return
+        links = self.links.cell.links
         for send in self.links.sends(data):
-            self.subjects[send.target].post(send.event, send.data)
+            if self._link_admitted(links[send.link].source, send.target, send.event, send.data):
+                self.subjects[send.target].post(send.event, send.data)
         self._unchecked = self.rules is not None  # rule 6: once the cascade settles
 
     def _link_sends(self) -> list[tuple[JournalledDevice, str]]:
@@ -218,7 +212,11 @@ class System:
             self.links.fired.clear()  # entering the initial states fires nothing
             return []
         self._unchecked = self.rules is not None  # rule 6: once the cascade settles
-        return [(self.bound[k.target], k.event) for k in self.links.due()]
+        return [
+            (self.bound[k.target], k.event)
+            for k in self.links.due()
+            if self._link_admitted(k.source, k.target, k.event, None)
+        ]
 
     def _settled_check(self) -> bool:
         """Rule 6 at the end of a cascade: report the invariants it broke and send their
@@ -251,13 +249,7 @@ class System:
         """On the writer after a commit (rule 2): drain now if nobody owns the devices."""
         if not self._live:
             return
-        if self.owner.acquire(blocking=False):
-            try:
-                self._drain_past_failures()
-            finally:
-                self.owner.release()
-        else:
-            self.wake.set()
+        self._run_here()
 
     def listen(self, callback: Callable[[Any], None]) -> None:
         """Every device's typed records, one call each (``Subject.listen``)."""
@@ -310,59 +302,6 @@ class System:
         self.drain()  # recovery transitions, redelivered events: the links they fire are sent
         self.wake.set()  # events delivered before the start are drained by the owner
         return resumed
-
-    def device(self, name: str | None) -> str:
-        if name is None:
-            if len(self.subjects) == 1:
-                return next(iter(self.subjects))
-            raise StatectlError(f"name the device: {', '.join(self.subjects)}")
-        if name not in self.subjects:
-            maybe = did_you_mean(name, list(self.subjects))
-            raise StatectlError(f"no device {name!r}; {maybe}devices: {', '.join(self.subjects)}")
-        return name
-
-    def admit(
-        self, device: str | None, event: str, data: Any = None, origin: Origin | None = None
-    ) -> str:
-        """The door (rules 4, 8): the device, once ``origin`` may send ``event`` and it has room."""
-        name = self.device(device)
-        if origin is not None and not self.commands.allows(origin, name, event):
-            if (bound := self.bound.get(name)) is not None:
-                with self.owner:  # between the device's steps: the row keeps their order
-                    bound.refused(event, data, str(origin))
-            raise self.commands.refusal(origin, name, event)
-        limit = self.max_queue
-        if limit is not None and self.subjects[name].queued >= limit:
-            raise QueueFull(
-                f"{name}: {limit} events are queued already (max_queue); the producer "
-                "outruns the device: slow down, or retry once it has caught up"
-            )
-        return name
-
-    def post(
-        self, device: str | None, event: str, data: Any = None, *, origin: Origin | None = None
-    ) -> Ticket | None:
-        """Accept an event from outside (any thread); with a journal the ticket says when.
-
-        Never blocks; a full device raises :class:`QueueFull` (rule 4); ``origin``: rule 8.
-        """
-        name = self.admit(device, event, data, origin)
-        if self.rules is not None and self.rules.guarded(name, event):
-            with self.owner:  # the global state once what came before has settled (rule 6)
-                if not self._draining:  # (a post from a step: the drain running is the owner)
-                    self._drain_past_failures(commit=True)  # what came before: run, links too
-                self.rules.admit(name, event)  # Refused when every 'when' is false
-        bound = self.bound.get(name)
-        if bound is not None:
-            ticket = bound.post(event, data)
-            if bound.journal.guarantee is Guarantee.PROMPT:
-                self.wake.set()  # the device has it now; durable-first: the writer wakes
-            return ticket
-        self.subjects[name].post(event, data)
-        wake = self.wake
-        if not wake.is_set():  # set already: the owner clears it before it drains
-            wake.set()
-        return None
 
     def drain(self) -> int:
         """Be the owner once: process every device's queue until all are empty."""
@@ -512,26 +451,6 @@ class System:
 
     # -- asyncio (rule 5) ---------------------------------------------------------------------
 
-    async def send(
-        self, device: str | None, event: str, data: Any = None, *, origin: Origin | None = None
-    ) -> str:
-        """Post ``event`` and wait until its device has processed it; returns the outcome,
-        ``"handled"`` or the :class:`~statectl.kernel.semantics.Unhandled` reason. Something
-        must own the devices meanwhile (:meth:`serve` on a thread, :meth:`start_owner`). A
-        journalled System accepts through its journal: use :meth:`post` and the ticket."""
-        if self.journal is not None:
-            why = "send() runs on a System without a journal; with one, post() and wait"
-            raise StatectlError(f"{why} for the ticket")
-        name = self.admit(device, event, data, origin)
-        subject = self.subjects[name]
-        loop = asyncio.get_running_loop()
-        done: asyncio.Future[str] = loop.create_future()
-        subject.post(
-            event, data, then=lambda outcome: loop.call_soon_threadsafe(_resolve, done, outcome)
-        )
-        self.wake.set()
-        return await done
-
     async def records(self, maxsize: int = 10_000) -> AsyncIterator[Record]:
         """Every device's records as they happen, until the consumer stops iterating: the
         owner hands each step over as one :class:`StepRecord`, whose typed records are built
@@ -593,8 +512,3 @@ class System:
                     s.close()
                 if isinstance(self.clock, WallClock):
                     self.clock.stop()
-
-
-def _resolve(future: asyncio.Future[str], result: str) -> None:
-    if not future.done():  # the awaiting task may have been cancelled
-        future.set_result(result)

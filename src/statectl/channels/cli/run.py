@@ -158,7 +158,7 @@ def _feed(
                 err.write(f"line {number}: {unknown}\n")
             if batch and early is not None and system.work_pending():
                 early.append(number)
-            ticket = system.post(device, event, data, origin=STDIN)
+            ticket = system.submit(device, event, data, origin=STDIN).ticket  # the one door
             if batch:
                 if ticket is not None:
                     ticket.wait()

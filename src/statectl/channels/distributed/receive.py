@@ -9,7 +9,10 @@ the stream's or one a hello announced, its number in range
 (statectl.channels.distributed.streams rule 4). Anything else is refused: one line
 in the node's log, a note in its journal, nothing applied, the stream's position
 kept. Which node may put on the stream's key at all is Zenoh's access control
-(trust rule 2), when the cell authenticates its nodes.
+(trust rule 2), when the cell authenticates its nodes. An event the stream accepts
+enters at the System's one door (``System.submit``, origin ``link`` and the sending
+node), which runs it on this thread while nobody owns the devices; a refusal of the
+commands policy is one log line and a ``refused`` step, nothing applied.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from statectl.channels.distributed.resume import INBOUND_KEY
 from statectl.channels.distributed.streams import MAX_NUMBER, Verdict
 from statectl.channels.distributed.trust import data_problem, payload_problem, printable, shown
 from statectl.kernel.errors import StatectlError
-from statectl.run.journal.format import Guarantee
+from statectl.run.commands import Origin
 
 if TYPE_CHECKING:
     from statectl.channels.distributed.wire import Wire
@@ -66,13 +69,12 @@ def stream_receiver(
     lock = inbound.lock
     offer = inbound.offer
     system = wire.system
-    subject = system.subjects[device]
     bound = system.bound.get(device)
     note = f"{INBOUND_KEY}{node}/{device}"
     ack = wire._ack
     wake = wire._wake
-    run_devices = wire._run_devices
-    run_now = system.run_now
+    submit = system.submit  # the System's one door (statectl.run.system rule 8)
+    origin = Origin("link", node)  # the commands policy's link grants
     key = wire.keys.link(node, device)
 
     def refused(reason: str, event: str) -> None:  # a refused step too, if the device knows it
@@ -104,7 +106,6 @@ def stream_receiver(
             if problem is not None:
                 refused(f"event {shown(event)} with {problem}", event)
                 return
-        run = True
         with lock:
             verdict, last = offer(node, device, e, n)
             if verdict is Verdict.DUPLICATE or verdict is Verdict.GAP:
@@ -114,20 +115,18 @@ def stream_receiver(
             if verdict is Verdict.APPLY:
                 try:  # under the lock: the stream's next event waits until this one ran
                     if bound is not None:  # acknowledged once committed (_committed)
-                        ticket = bound.post(event, msg.d, note=(note, f"{e} {n}"))
-                        wire._acks.append((ticket.seq, node, device, e, n))
-                        run = bound.journal.guarantee is Guarantee.PROMPT
-                    elif run_now(device, event, msg.d):  # nobody owned the devices: ran here
-                        run = False
-                    else:  # the owner's thread runs it
-                        subject.post(event, msg.d)
-                except StatectlError as exc:
+                        ticket = submit(
+                            device, event, msg.d, origin=origin, note=(note, f"{e} {n}")
+                        )
+                        assert ticket.ticket is not None
+                        wire._acks.append((ticket.ticket.seq, node, device, e, n))
+                    else:  # run here by the door if nobody owns the devices, else queued
+                        submit(device, event, msg.d, origin=origin)
+                except StatectlError as exc:  # a refusal too: dropped, one line (journalled)
                     wire._say(f"link event {shown(event)} from {node} to {device}: {exc}")
         if verdict is Verdict.REFUSED:  # out of the stream's lock: its journal row takes the owner
             refused(f"{shown(event)} numbered {n} in epoch {shown(e)}: {why(e, n)}", event)
             return
-        if run:
-            run_devices()  # before waking the wire's thread: the device first
         if bound is None:
             ack(node, device, e, n, False)
             if not wake.is_set():

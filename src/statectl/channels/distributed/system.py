@@ -25,11 +25,12 @@ Rules:
    the first device (in the cell's ``devices:`` order) it reads, after every step
    of its devices and whenever a mirrored state changes, and its ``on_violation``
    events go to their devices, here or over the wire.
-7. A link event that arrives while nobody owns the devices runs at once on the
-   thread that received it (:meth:`NodeSystem.run_now`), which owns them
-   meanwhile: no hand-over to the owner's thread, whose wake-up after a pause
-   costs tens of microseconds. While another thread owns them, it is queued
-   and that owner runs it, in order.
+7. A link event from another node enters at the System's one door like any other
+   (``System.submit``, origin ``link`` and the sending node: statectl.run.system
+   rule 8), which runs it at once on the thread that received it while nobody owns
+   the devices (no hand-over to the owner's thread, whose wake-up after a pause
+   costs tens of microseconds), else queues it for the owner, in order. A link
+   between two devices of this node passes the same policy check.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ from statectl.cell.model import Cell, Link
 from statectl.cell.nodes import LinkDelivery, PeerDown
 from statectl.cell.options import cross_refs
 from statectl.kernel.errors import StatectlError
-from statectl.kernel.semantics import Snapshot
+from statectl.kernel.semantics import Outcome, Snapshot
 from statectl.run.journal import JournalledDevice, Ticket
 from statectl.run.runtime import Subject
 from statectl.run.system import System
@@ -144,11 +145,20 @@ class RemoteDevice(JournalledDevice):
         self.subject = cast(Subject, _Post(name, wire))
         self._wire = wire
 
-    def _deliver(self, seq: int, event: str, data: Any) -> None:
+    def _deliver(
+        self, seq: int, event: str, data: Any, then: Callable[[Outcome], object] | None = None
+    ) -> None:
         with self._lock:
             self._wire.send(self.name, event, data)
 
-    def post(self, event: str, data: Any = None, *, note: tuple[str, str] | None = None) -> Ticket:
+    def post(
+        self,
+        event: str,
+        data: Any = None,
+        *,
+        note: tuple[str, str] | None = None,
+        then: Callable[[Outcome], object] | None = None,
+    ) -> Ticket:
         raise StatectlError(f"{self.name} runs on another node")
 
 
@@ -251,27 +261,6 @@ class NodeSystem(System):
         if sends:
             self.wake.set()
 
-    def run_now(self, device: str, event: str, data: Any) -> bool:
-        """Rule 7: process ``event`` on ``device`` on this thread if nobody owns the devices.
-
-        False, doing nothing, when another thread owns them: the caller queues the
-        event for that owner instead. Otherwise this thread is the owner meanwhile:
-        the device first runs what was queued for it (``Subject.dispatch``), then
-        whatever the step queued for devices here runs too, as in a drain.
-        """
-        if not self._live or not self.owner.acquire(blocking=False):
-            return False
-        try:
-            try:
-                self.subjects[device].dispatch(event, data)
-            except StatectlError as exc:  # statectl.run.system rule 7: that event only (a guard,
-                self._failed(exc)  # an assignment, a driver refusing the event's data)
-            if self._ready:
-                self._drain_past_failures()
-        finally:
-            self.owner.release()
-        return True
-
     def _dropping(self, link: Link) -> bool:
         """A ``drop`` link (its route says so) whose peer is down now."""
         return self._routes[id(link)][1] and self._wire.down(link)
@@ -287,7 +276,8 @@ class NodeSystem(System):
             link = links[send.link]
             target = routes[id(link)][0]
             if target is not None:
-                target.post(send.event, send.data)
+                if self._link_admitted(link.source, send.target, send.event, send.data):
+                    target.post(send.event, send.data)
             elif self._dropping(link):
                 dropped = self._policy[id(link)].dropped
                 if dropped is not None:
@@ -308,7 +298,8 @@ class NodeSystem(System):
         for link in self.links.due():
             bound = self.bound.get(link.target)
             if bound is not None:
-                out.append((bound, link.event))
+                if self._link_admitted(link.source, link.target, link.event, None):
+                    out.append((bound, link.event))
             elif self._dropping(link):
                 dropped = self._policy[id(link)].dropped
                 if dropped is not None:

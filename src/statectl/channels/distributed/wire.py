@@ -364,18 +364,6 @@ class Wire:
         with self._due:
             self._ack_due[node, device] = (e, n, again)
 
-    def _run_devices(self) -> None:
-        """Run the event now on this thread if nobody owns the devices (one thread hop less);
-        else wake the owner."""
-        system = self.system
-        if system.owner.acquire(blocking=False):
-            try:
-                system._drain()
-            finally:
-                system.owner.release()
-        else:
-            system.wake.set()
-
     def _on_ack(self, sample: Any) -> None:
         _, device = Keys.last(sample.key_expr)
         stream = self.outbound.get(device)

@@ -22,19 +22,16 @@ Rules (rule 3 of :mod:`statectl.channels.opcua.server` in detail):
    the System's commands policy decides at its door (:mod:`statectl.run.commands`)
    whatever asyncua's own rules let through. A refusal is ``BadUserAccessDenied``; the
    System journals it and nothing moves.
-4. Then the call posts the event and answers once the device's step on it ran: through
-   the journal when there is one; else the loop's thread runs the step itself when no
-   other thread owns the devices (as the journal's writer does, system.py rule 2).
+4. Then the call submits the event at the System's one door and answers once the
+   device's step on it ran, with or without a journal; whether the loop's thread runs
+   the step itself is the door's to decide (system.py rule 8), not this module's.
 """
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
 import functools
 import json
 import math
-import threading
 from collections.abc import Awaitable, Callable
 from typing import Any
 
@@ -232,69 +229,12 @@ class Calls:
         return self.checked(holder, functools.partial(read_fields, fields=fields), run)
 
     async def outcome(self, device: str, event: str, data: Any, origin: Origin) -> str:
-        """Rule 4: post ``event`` and wait for the device's step: ``handled`` or why not.
-        A refusal of the commands policy is raised (rule 3), any other said."""
+        """Rule 4: submit ``event`` at the System's door and wait for the device's step:
+        ``handled`` or why not. A refusal of the commands policy is raised (rule 3), any
+        other said."""
         try:
-            if self.system.journal is None:
-                return await _send(self.system, device, event, data, origin)
-            return await self._journalled(device, event, data, origin)
+            return await self.system.submit(device, event, data, origin=origin)
         except CommandRefused:
             raise
         except StatectlError as exc:
             return str(exc)
-
-    async def _journalled(self, device: str, event: str, data: Any, origin: Origin) -> str:
-        """Post through the journal and wait for the device's step on ``event``."""
-        loop = asyncio.get_running_loop()
-        done: asyncio.Future[str] = loop.create_future()
-        subject = self.system.subjects[self.system.device(device)]
-        off: Callable[[], None] | None = None
-
-        def heard(name: str, _data: Any, outcome: str) -> None:
-            if name == event and off is not None:
-                off()
-                with contextlib.suppress(RuntimeError):  # the loop closed: stopping
-                    loop.call_soon_threadsafe(_settle, done, outcome)
-
-        off = subject.on_step(heard)
-        try:
-            self.system.post(device, event, data, origin=origin)
-        except StatectlError:
-            off()
-            raise
-        return await done
-
-
-async def _send(system: System, device: str, event: str, data: Any, origin: Origin) -> str:
-    """:meth:`System.send`, but the loop's thread is the owner for a moment if nobody is.
-
-    As the journal's writer does (system.py rule 2): the step runs here, with no hop to
-    the owner's thread and back. It never waits for the owner lock: when another thread
-    owns the devices, that thread is woken and runs the event.
-    """
-    subject = system.subjects[system.admit(device, event, data, origin)]
-    loop = asyncio.get_running_loop()
-    done: asyncio.Future[str] = loop.create_future()
-    here = threading.get_ident()
-
-    def then(outcome: str) -> None:
-        if threading.get_ident() == here:
-            _settle(done, outcome)
-        else:
-            with contextlib.suppress(RuntimeError):  # the loop closed: stopping
-                loop.call_soon_threadsafe(_settle, done, outcome)
-
-    subject.post(event, data, then=then)
-    if subject.started and system.owner.acquire(blocking=False):
-        try:
-            system.drain()
-        finally:
-            system.owner.release()
-    else:
-        system.wake.set()
-    return await done
-
-
-def _settle(future: asyncio.Future[str], outcome: str) -> None:
-    if not future.done():
-        future.set_result(outcome)

@@ -253,14 +253,16 @@ def connect(
     *,
     invokes: Iterable[int] | None = None,
     period: float = DEFAULT_PERIOD,
+    report: Report | None = None,
 ) -> tuple[Monitor, ...]:
     """Bind ``driver`` to ``subject``, attach it for ``invokes`` and give it its monitors.
 
-    Raises :class:`StatectlError` before binding anything when the driver lacks an
-    observer method those invokes need (rule 6).
+    The driver reports its completions to ``report`` (a System's door), else to the
+    Subject's queue. Raises :class:`StatectlError` before binding anything when the
+    driver lacks an observer method those invokes need (rule 6).
     """
     check_serves(subject, driver, invokes)
-    driver.bind(subject.post, subject.clock)
+    driver.bind(subject.post if report is None else report, subject.clock)
     subject.attach(driver, invokes)
     return attach_monitors(subject, driver, period=period)
 

@@ -66,7 +66,7 @@ from typing import Any
 
 from statectl.kernel.errors import StatectlError
 from statectl.kernel.model import Notify
-from statectl.kernel.semantics import Step, step
+from statectl.kernel.semantics import Outcome, Step, step
 from statectl.run.journal.assigned import replay_assigned_data
 from statectl.run.journal.device_file import RecoveryRule
 from statectl.run.journal.format import Guarantee, JournalError, StepKind, encode_data
@@ -112,10 +112,18 @@ class JournalledDevice:
 
     # -- in ------------------------------------------------------------------------------
 
-    def post(self, event: str, data: Any = None, *, note: tuple[str, str] | None = None) -> Ticket:
+    def post(
+        self,
+        event: str,
+        data: Any = None,
+        *,
+        note: tuple[str, str] | None = None,
+        then: Callable[[Outcome], object] | None = None,
+    ) -> Ticket:
         """Accept ``event`` (rule 1); the ticket turns durable once its inbox row is committed.
 
-        ``note``: a ``meta`` row committed with the inbox row (``Journal.accept``).
+        ``note``: a ``meta`` row committed with the inbox row (``Journal.accept``);
+        ``then(outcome)``: on the owner once the device ran it (``Subject.post``).
         """
         if not isinstance(event, str):
             raise StatectlError(f"an event name must be a str (got {event!r})")
@@ -123,20 +131,22 @@ class JournalledDevice:
         journal = self.journal
         if journal.guarantee is Guarantee.DURABLE_FIRST:
             return journal.accept(
-                self.name, event, data, lambda seq: self._deliver(seq, event, data), note=note
+                self.name, event, data, lambda seq: self._deliver(seq, event, data, then), note=note
             )
         with self._lock:  # seq order is this device's queue order: resume relies on it
             ticket = journal.accept(self.name, event, data, hold=True, note=note)
             self._expect.append((ticket.seq, event, data))
-            self.subject.post(event, data)
+            self.subject.post(event, data, then=then)
         if self.wake is not None:
             self.wake()
         return ticket
 
-    def _deliver(self, seq: int, event: str, data: Any) -> None:
+    def _deliver(
+        self, seq: int, event: str, data: Any, then: Callable[[Outcome], object] | None = None
+    ) -> None:
         with self._lock:
             self._expect.append((seq, event, data))
-            self.subject.post(event, data)
+            self.subject.post(event, data, then=then)
         if self.wake is not None:
             self.wake()
 

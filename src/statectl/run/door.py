@@ -1,0 +1,298 @@
+"""The System's one front door (DESIGN.md, "One door") and the :class:`Submitted` it hands back.
+
+Rules:
+1. :class:`Door` is the part of :class:`~statectl.run.system.System` every event enters
+   by (system.py rule 8): :meth:`Door.submit`, and :meth:`Door.post` / :meth:`Door.send`
+   over it, checks the origin against the commands policy (:meth:`Door.admit`), the
+   queue bound and a cell's ``when``, hands the event to the journal or the device,
+   and decides, in :meth:`Door._run_here` alone, whether the calling thread runs the
+   step now. A cell's link events and drivers' completions pass the same check
+   (:meth:`Door._link_admitted`, :meth:`Door._reporter`).
+2. :meth:`Door.submit` returns a :class:`Submitted` for an event it
+   let in: the device, the event, the journal's :class:`~statectl.run.journal.Ticket` when
+   the System has a journal (None without one), and, once the device's step on that
+   event has run, its :class:`~statectl.kernel.semantics.Outcome` (``HANDLED`` or why
+   nothing happened). A refused event gets no handle: the door raises.
+3. It is resolved on the owner, right after that step and before the device's next
+   event, by the Subject's ``then`` hook: the owner never waits for anyone.
+4. Like a ``concurrent.futures.Future``: :meth:`Submitted.done`,
+   :meth:`Submitted.result` (blocks, with a timeout) and
+   :meth:`Submitted.add_done_callback`; and awaitable from asyncio (``await handle``),
+   which hands the outcome to the awaiting loop with ``call_soon_threadsafe`` (no hop
+   when the step ran on the loop's own thread).
+5. Cheap when nobody waits: one lock; a waiter's event is made only when someone blocks.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import threading
+from collections import deque
+from collections.abc import Callable, Generator
+from typing import Any
+
+from statectl.cell.explore.enforce import CellRules
+from statectl.kernel.errors import StatectlError, did_you_mean
+from statectl.kernel.semantics import Outcome
+from statectl.run.commands import INTERNAL, CommandRefused, Commands, Origin
+from statectl.run.journal import Guarantee, Journal, JournalledDevice, Ticket
+from statectl.run.runtime import Subject
+
+__all__ = ["Door", "QueueFull", "Submitted"]
+
+_LOG = logging.getLogger("statectl.run.system")
+
+
+class QueueFull(StatectlError):
+    """A device's queue holds ``max_queue`` events: the producer outruns it (system rule 4)."""
+
+
+class Submitted:
+    """An event the door let in; resolves with the outcome of its device's step (rules 2-5)."""
+
+    __slots__ = ("_callbacks", "_lock", "_outcome", "_waiter", "device", "event", "ticket")
+
+    def __init__(self, device: str, event: str) -> None:
+        self.device = device
+        self.event = event
+        #: the journal's ticket (when the inbox row is durable); None without a journal
+        self.ticket: Ticket | None = None
+        self._outcome: Outcome | None = None
+        self._waiter: threading.Event | None = None
+        self._callbacks: list[Callable[[Submitted], object]] = []
+        self._lock = threading.Lock()
+
+    def __repr__(self) -> str:
+        state = "pending" if self._outcome is None else self._outcome.value
+        return f"<Submitted {self.device}: {self.event} {state}>"
+
+    def resolve(self, outcome: Outcome) -> None:
+        """Rule 3, on the owner right after the step: the outcome; later calls do nothing."""
+        with self._lock:
+            if self._outcome is not None:
+                return
+            self._outcome = outcome
+            waiter, callbacks, self._callbacks = self._waiter, self._callbacks, []
+        if waiter is not None:
+            waiter.set()
+        for fn in callbacks:
+            fn(self)
+
+    def done(self) -> bool:
+        """Whether the device's step on the event has run."""
+        return self._outcome is not None
+
+    def result(self, timeout: float | None = None) -> Outcome:
+        """The step's outcome, waiting at most ``timeout`` seconds (None: as long as it takes).
+
+        Someone must own the devices meanwhile (``System.serve``, ``start_owner``), unless
+        the door ran the step on the submitting thread."""
+        with self._lock:
+            outcome = self._outcome
+            if outcome is None and self._waiter is None:
+                self._waiter = threading.Event()
+            waiter = self._waiter
+        if outcome is not None:
+            return outcome
+        assert waiter is not None
+        if not waiter.wait(timeout):
+            raise TimeoutError(
+                f"{self.device}: {self.event} did not run within {timeout} s; is anything "
+                "owning the devices (System.serve, start_owner)?"
+            )
+        assert self._outcome is not None
+        return self._outcome
+
+    def add_done_callback(self, fn: Callable[[Submitted], object]) -> None:
+        """Call ``fn(self)`` once resolved: on the owner, or now if it is already."""
+        with self._lock:
+            if self._outcome is None:
+                self._callbacks.append(fn)
+                return
+        fn(self)
+
+    def __await__(self) -> Generator[Any, None, Outcome]:
+        """Rule 4: ``await handle`` in a coroutine returns the outcome."""
+        if self._outcome is not None:
+            return self._outcome
+        loop = asyncio.get_running_loop()
+        future: asyncio.Future[Outcome] = loop.create_future()
+        here = threading.get_ident()
+
+        def hand_over(done: Submitted) -> None:
+            assert done._outcome is not None
+            if threading.get_ident() == here:
+                _settle(future, done._outcome)
+                return
+            with contextlib.suppress(RuntimeError):  # the loop closed: stopping
+                loop.call_soon_threadsafe(_settle, future, done._outcome)
+
+        self.add_done_callback(hand_over)
+        return (yield from future.__await__())
+
+
+def _settle(future: asyncio.Future[Outcome], outcome: Outcome) -> None:
+    if not future.done():  # the awaiting task may have been cancelled
+        future.set_result(outcome)
+
+
+class Door:
+    """The System's one front door (rule 1); :class:`~statectl.run.system.System` is one."""
+
+    __slots__ = ()
+    # what the door reads of its System (statectl.run.system.System's fields)
+    subjects: dict[str, Subject]
+    bound: dict[str, JournalledDevice]
+    journal: Journal | None
+    commands: Commands
+    rules: CellRules | None
+    max_queue: int | None
+    owner: threading.RLock
+    wake: threading.Event
+    _live: bool
+    _draining: bool
+    _ready: deque[Subject]
+
+    def _drain_past_failures(self, *, commit: bool = False) -> None:
+        raise NotImplementedError  # the System's (system.py rule 7)
+
+    def device(self, name: str | None) -> str:
+        if name is None:
+            if len(self.subjects) == 1:
+                return next(iter(self.subjects))
+            raise StatectlError(f"name the device: {', '.join(self.subjects)}")
+        if name not in self.subjects:
+            maybe = did_you_mean(name, list(self.subjects))
+            raise StatectlError(f"no device {name!r}; {maybe}devices: {', '.join(self.subjects)}")
+        return name
+
+    def admit(
+        self, device: str | None, event: str, data: Any = None, origin: Origin | None = None
+    ) -> str:
+        """The door (rules 4, 8): the device, once ``origin`` may send ``event`` and it has room."""
+        name = self.device(device)
+        if origin is not None and not self.commands.allows(origin, name, event):
+            if (bound := self.bound.get(name)) is not None:
+                with self.owner:  # between the device's steps: the row keeps their order
+                    bound.refused(event, data, str(origin))
+            raise self.commands.refusal(origin, name, event)
+        limit = self.max_queue
+        inside = origin is not None and origin.channel in INTERNAL
+        if limit is not None and not inside and self.subjects[name].queued >= limit:
+            raise QueueFull(
+                f"{name}: {limit} events are queued already (max_queue); the producer "
+                "outruns the device: slow down, or retry once it has caught up"
+            )
+        return name
+
+    def submit(
+        self,
+        device: str | None,
+        event: str,
+        data: Any = None,
+        *,
+        origin: Origin | None,
+        note: tuple[str, str] | None = None,
+    ) -> Submitted:
+        """The one front door (rule 8): ``event`` for ``device`` from ``origin``; the handle
+        resolves with the outcome of the device's step on it (run/door.py).
+
+        Raises ``CommandRefused`` (journalled), :class:`QueueFull` or another
+        ``StatectlError`` when the event does not get in. ``note``: a journal ``meta`` row
+        committed with its inbox row (a Zenoh stream's position).
+        """
+        name = self.admit(device, event, data, origin)
+        handle = Submitted(name, event)
+        ticket = handle.ticket = self._let_in(name, event, data, handle.resolve, note)
+        if ticket is None or self.journal is None or self.journal.guarantee is Guarantee.PROMPT:
+            self._run_here()  # durable-first: the writer runs it once committed (rule 2)
+        return handle
+
+    def post(
+        self, device: str | None, event: str, data: Any = None, *, origin: Origin | None = None
+    ) -> Ticket | None:
+        """:meth:`submit` without a handle, never running the step here: it never blocks
+        (rule 4); with a journal the ticket says when the event is durable."""
+        return self._let_in(self.admit(device, event, data, origin), event, data, None, None)
+
+    def _let_in(
+        self,
+        name: str,
+        event: str,
+        data: Any,
+        then: Callable[[Outcome], object] | None,
+        note: tuple[str, str] | None,
+    ) -> Ticket | None:
+        """Past the policy: a cell's ``when`` (rule 6), then the journal or the device."""
+        if self.rules is not None and self.rules.guarded(name, event):
+            with self.owner:  # the global state once what came before has settled (rule 6)
+                if not self._draining:  # (a post from a step: the drain running is the owner)
+                    self._drain_past_failures(commit=True)  # what came before: run, links too
+                self.rules.admit(name, event)  # Refused when every 'when' is false
+        bound = self.bound.get(name)
+        if bound is not None:
+            ticket = bound.post(event, data, note=note, then=then)
+            if bound.journal.guarantee is Guarantee.PROMPT:
+                self.wake.set()  # the device has it now; durable-first: the writer wakes
+            return ticket
+        self.subjects[name].post(event, data, then=then)
+        wake = self.wake
+        if not wake.is_set():  # set already: the owner clears it before it drains
+            wake.set()
+        return None
+
+    def _run_here(self) -> bool:
+        """Rule 8, the one place that decides it: the calling thread runs the devices' steps
+        now when the System is live and nobody owns them (it owns them meanwhile, rule 7
+        for failures); the owner running a step goes on with its drain; else it is woken."""
+        if self._live and self.owner.acquire(blocking=False):
+            try:
+                if not self._draining:
+                    self._drain_past_failures()
+                    return True
+            finally:
+                self.owner.release()
+        self.wake.set()
+        return False
+
+    def _reporter(self, device: str) -> Callable[..., None]:
+        """A driver's completions through the door (rule 8), queued as before: not run here
+        (the driver may be on the owner mid-step) and never into the journal's inbox (the
+        journal has the step); refused by the policy: dropped, one log line."""
+        origin = Origin("driver", device)
+        subject = self.subjects[device]
+        if self.commands.open_to_all("driver"):  # the default: nothing to ask per completion
+            return subject.post
+
+        def report(event: str, data: Any = None) -> None:
+            try:
+                self.admit(device, event, data, origin)
+            except CommandRefused as exc:
+                _LOG.warning("driver completion dropped: %s", exc)
+                return
+            subject.post(event, data)
+
+        return report
+
+    def _link_admitted(self, source: str, target: str, event: str, data: Any) -> bool:
+        """Rule 8 for a cell's link event (on the owner): whether the policy lets it in; a
+        refused one is journalled as refused, dropped, and said in one log line."""
+        if self.commands.open_to_all("link"):  # the default: no check to pay per link event
+            return True
+        try:
+            self.admit(target, event, data, Origin("link", source))
+        except CommandRefused as exc:
+            _LOG.warning("link event dropped: %s", exc)
+            return False
+        return True
+
+    async def send(
+        self, device: str | None, event: str, data: Any = None, *, origin: Origin | None = None
+    ) -> str:
+        """``await`` :meth:`submit`: the outcome once its device processed the event,
+        ``"handled"`` or the :class:`~statectl.kernel.semantics.Unhandled` reason; with or
+        without a journal. Something owns the devices meanwhile (:meth:`serve`,
+        :meth:`start_owner`) unless the door runs the step on the loop's thread."""
+        return await self.submit(device, event, data, origin=origin)
