@@ -52,7 +52,16 @@ class QueueFull(StatectlError):
 class Submitted:
     """An event the door let in; resolves with the outcome of its device's step (rules 2-5)."""
 
-    __slots__ = ("_callbacks", "_lock", "_outcome", "_waiter", "device", "event", "ticket")
+    __slots__ = (
+        "_callbacks",
+        "_error",
+        "_lock",
+        "_outcome",
+        "_waiter",
+        "device",
+        "event",
+        "ticket",
+    )
 
     def __init__(self, device: str, event: str) -> None:
         self.device = device
@@ -60,6 +69,7 @@ class Submitted:
         #: the journal's ticket (when the inbox row is durable); None without a journal
         self.ticket: Ticket | None = None
         self._outcome: Outcome | None = None
+        self._error: StatectlError | None = None  # no outcome will come (fail)
         self._waiter: threading.Event | None = None
         self._callbacks: list[Callable[[Submitted], object]] = []
         self._lock = threading.Lock()
@@ -70,10 +80,17 @@ class Submitted:
 
     def resolve(self, outcome: Outcome) -> None:
         """Rule 3, on the owner right after the step: the outcome; later calls do nothing."""
+        self._settle(outcome, None)
+
+    def fail(self, error: StatectlError) -> None:
+        """No outcome will come here (the device runs on another node): result() raises."""
+        self._settle(Outcome.UNKNOWN_EVENT, error)  # an outcome marks it done; never read
+
+    def _settle(self, outcome: Outcome, error: StatectlError | None) -> None:
         with self._lock:
             if self._outcome is not None:
                 return
-            self._outcome = outcome
+            self._outcome, self._error = outcome, error
             waiter, callbacks, self._callbacks = self._waiter, self._callbacks, []
         if waiter is not None:
             waiter.set()
@@ -81,7 +98,7 @@ class Submitted:
             fn(self)
 
     def done(self) -> bool:
-        """Whether the device's step on the event has run."""
+        """Whether the device's step on the event has run (or :meth:`fail` said none will)."""
         return self._outcome is not None
 
     def result(self, timeout: float | None = None) -> Outcome:
@@ -94,14 +111,15 @@ class Submitted:
             if outcome is None and self._waiter is None:
                 self._waiter = threading.Event()
             waiter = self._waiter
-        if outcome is not None:
-            return outcome
-        assert waiter is not None
-        if not waiter.wait(timeout):
-            raise TimeoutError(
-                f"{self.device}: {self.event} did not run within {timeout} s; is anything "
-                "owning the devices (System.serve, start_owner)?"
-            )
+        if outcome is None:
+            assert waiter is not None
+            if not waiter.wait(timeout):
+                raise TimeoutError(
+                    f"{self.device}: {self.event} did not run within {timeout} s; is anything "
+                    "owning the devices (System.serve, start_owner)?"
+                )
+        if self._error is not None:
+            raise self._error
         assert self._outcome is not None
         return self._outcome
 
@@ -116,26 +134,30 @@ class Submitted:
     def __await__(self) -> Generator[Any, None, Outcome]:
         """Rule 4: ``await handle`` in a coroutine returns the outcome."""
         if self._outcome is not None:
-            return self._outcome
+            return self.result()
         loop = asyncio.get_running_loop()
         future: asyncio.Future[Outcome] = loop.create_future()
         here = threading.get_ident()
 
         def hand_over(done: Submitted) -> None:
-            assert done._outcome is not None
             if threading.get_ident() == here:
-                _settle(future, done._outcome)
+                _hand(future, done)
                 return
             with contextlib.suppress(RuntimeError):  # the loop closed: stopping
-                loop.call_soon_threadsafe(_settle, future, done._outcome)
+                loop.call_soon_threadsafe(_hand, future, done)
 
         self.add_done_callback(hand_over)
         return (yield from future.__await__())
 
 
-def _settle(future: asyncio.Future[Outcome], outcome: Outcome) -> None:
-    if not future.done():  # the awaiting task may have been cancelled
-        future.set_result(outcome)
+def _hand(future: asyncio.Future[Outcome], done: Submitted) -> None:
+    if future.done():  # the awaiting task may have been cancelled
+        return
+    if done._error is not None:
+        future.set_exception(done._error)
+    else:
+        assert done._outcome is not None
+        future.set_result(done._outcome)
 
 
 class Door:

@@ -48,6 +48,7 @@ from statectl.cell.nodes import LinkDelivery, PeerDown
 from statectl.cell.options import cross_refs
 from statectl.kernel.errors import StatectlError
 from statectl.kernel.semantics import Outcome, Snapshot
+from statectl.run.door import Submitted
 from statectl.run.journal import JournalledDevice, Ticket
 from statectl.run.runtime import Subject
 from statectl.run.system import System
@@ -317,3 +318,13 @@ class NodeSystem(System):
             self._wire.forward(device, event, data)
             return None
         return System.post(self, device, event, data, **how)  # how: the origin (run/commands.py)
+
+    def submit(self, device: str | None, event: str, data: Any = None, **how: Any) -> Submitted:
+        """Rule 5 at the one door: an event for a device on another node is forwarded there,
+        once; its handle fails (that node's door judges and runs it, and tells nobody here)."""
+        if device in self._remote:
+            self._wire.forward(device, event, data)
+            handle = Submitted(device, event)
+            handle.fail(StatectlError(f"{device} runs on another node; {event} was forwarded"))
+            return handle
+        return System.submit(self, device, event, data, **how)  # how: origin, note
