@@ -63,6 +63,7 @@ _LAZY = {
     "System": "statectl.run.system",
     "DeviceSetup": "statectl.run.system",
     "QueueFull": "statectl.run.system",
+    "Submitted": "statectl.run.door",
     **dict.fromkeys(
         (
             "EventIgnored",
@@ -134,6 +135,7 @@ __all__ = [
     "StatectlError",
     "StepRecord",
     "Subject",
+    "Submitted",
     "System",
     "Taken",
     "Transition",

@@ -227,9 +227,11 @@ class Door:
         """
         name = self.admit(device, event, data, origin)
         handle = Submitted(name, event)
-        ticket = handle.ticket = self._let_in(name, event, data, handle.resolve, note)
-        if ticket is None or self.journal is None or self.journal.guarantee is Guarantee.PROMPT:
-            self._run_here()  # durable-first: the writer runs it once committed (rule 2)
+        journal = self.journal
+        here = journal is None or journal.guarantee is Guarantee.PROMPT  # else: the writer's
+        handle.ticket = self._let_in(name, event, data, handle.resolve, note, wake=not here)
+        if here:
+            self._run_here()  # it runs now, or wakes the owner
         return handle
 
     def post(
@@ -237,7 +239,9 @@ class Door:
     ) -> Ticket | None:
         """:meth:`submit` without a handle, never running the step here: it never blocks
         (rule 4); with a journal the ticket says when the event is durable."""
-        return self._let_in(self.admit(device, event, data, origin), event, data, None, None)
+        return self._let_in(
+            self.admit(device, event, data, origin), event, data, None, None, wake=True
+        )
 
     def _let_in(
         self,
@@ -246,8 +250,11 @@ class Door:
         data: Any,
         then: Callable[[Outcome], object] | None,
         note: tuple[str, str] | None,
+        *,
+        wake: bool,
     ) -> Ticket | None:
-        """Past the policy: a cell's ``when`` (rule 6), then the journal or the device."""
+        """Past the policy: a cell's ``when`` (rule 6), then the journal or the device; then
+        ``wake`` the owner (submit does not when it is about to run the step itself)."""
         if self.rules is not None and self.rules.guarded(name, event):
             with self.owner:  # the global state once what came before has settled (rule 6)
                 if not self._draining:  # (a post from a step: the drain running is the owner)
@@ -256,13 +263,12 @@ class Door:
         bound = self.bound.get(name)
         if bound is not None:
             ticket = bound.post(event, data, note=note, then=then)
-            if bound.journal.guarantee is Guarantee.PROMPT:
+            if wake and bound.journal.guarantee is Guarantee.PROMPT:
                 self.wake.set()  # the device has it now; durable-first: the writer wakes
             return ticket
         self.subjects[name].post(event, data, then=then)
-        wake = self.wake
-        if not wake.is_set():  # set already: the owner clears it before it drains
-            wake.set()
+        if wake and not self.wake.is_set():  # set already: the owner clears it before it drains
+            self.wake.set()
         return None
 
     def _run_here(self) -> bool:

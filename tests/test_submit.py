@@ -1,0 +1,419 @@
+"""System.submit, the one front door (run/door.py, system.py rule 8).
+
+Every channel hands its events to ``submit`` (or ``post``, submit without a handle):
+the handle resolves with the outcome of the device's step, with and without a journal,
+from any thread and from asyncio; the door alone decides whether the submitting
+thread runs the step; a refused command, whatever its channel, changes nothing and is
+journalled as refused.
+"""
+
+from __future__ import annotations
+
+import ast
+import asyncio
+import io
+import logging
+import threading
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import statectl
+from statectl.cell.model import load_cell
+from statectl.channels.cli.demo import motor_chart
+from statectl.kernel.errors import StatectlError
+from statectl.kernel.semantics import Outcome
+from statectl.run.commands import ANYONE, CommandRefused, Commands, Grant, Origin
+from statectl.run.devices import make_driver
+from statectl.run.door import Submitted
+from statectl.run.journal import REFUSED, Journal, JournalReader
+from statectl.run.runner.cells import cell_setups
+from statectl.run.runtime import SimClock
+from statectl.run.system import DeviceSetup, System
+
+SRC = Path(statectl.__file__).parent
+
+
+def _motor(journal: Journal | None = None, **kw: Any) -> System:
+    system = System((DeviceSetup("Motor", motor_chart()),), SimClock(), journal, **kw)
+    system.start()
+    return system
+
+
+def _journal(tmp_path: Path, guarantee: str) -> Journal:
+    return Journal(tmp_path / "j.db", guarantee=guarantee)
+
+
+def _rows(path: Path, device: str = "Motor") -> list[tuple[str | None, str]]:
+    with JournalReader(path) as reader:
+        return [(r.event, r.outcome) for r in reader.steps() if r.device == device]
+
+
+# -- the handle --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("guarantee", [None, "prompt", "durable-first"])
+def test_the_handle_resolves_with_the_steps_outcome(tmp_path: Path, guarantee: str | None) -> None:
+    """Without an owner thread the door runs each step on the caller's thread: the handle
+    is done when submit returns, with the kernel's Outcome; with a journal it carries the
+    ticket, durable once committed (durable-first: before the step ran)."""
+    journal = None if guarantee is None else _journal(tmp_path, guarantee)
+    system = _motor(journal)
+    try:
+        outcomes = []
+        for event in ("Initialization", "Movement", "Movement"):
+            handle = system.submit("Motor", event, origin=None)
+            assert isinstance(handle, Submitted)
+            assert (handle.ticket is None) == (journal is None)
+            if handle.ticket is not None:
+                assert handle.ticket.wait(10)
+            outcomes.append(handle.result(10))
+        assert outcomes == [Outcome.DECLARED_IGNORED, Outcome.HANDLED, Outcome.DECLARED_IGNORED]
+        assert system.subjects["Motor"].configuration == {"Moving"}
+    finally:
+        system.close()
+    if journal is not None:
+        assert _rows(tmp_path / "j.db")[-3:] == [
+            ("Initialization", "declared ignored"),
+            ("Movement", "handled"),
+            ("Movement", "declared ignored"),
+        ]
+
+
+@pytest.mark.parametrize("guarantee", [None, "prompt", "durable-first"])
+def test_a_handle_from_another_thread_resolves_once_the_owner_ran_it(
+    tmp_path: Path, guarantee: str | None
+) -> None:
+    """While another thread owns the devices the door does not run the step here: it is
+    queued, the owner is woken, and the handle resolves once the owner ran it."""
+    journal = None if guarantee is None else _journal(tmp_path, guarantee)
+    system = _motor(journal)
+    ran_on: list[threading.Thread] = []
+    system.subjects["Motor"].on_step(lambda e, d, o: ran_on.append(threading.current_thread()))
+    handles: list[Submitted] = []
+    with system.owner:  # this thread owns the devices: a submitter must leave the step to it
+        poster = threading.Thread(
+            target=lambda: handles.append(system.submit("Motor", "Movement", origin=None))
+        )
+        poster.start()
+        poster.join(10)
+        assert len(handles) == 1 and not handles[0].done()
+    halt = system.start_owner(paced=False)
+    try:
+        assert handles[0].result(10) is Outcome.HANDLED
+    finally:
+        halt()
+        system.close()
+    assert ran_on and ran_on[-1] is not poster
+
+
+@pytest.mark.parametrize("guarantee", [None, "prompt", "durable-first"])
+def test_await_submit_and_send_give_the_outcome(tmp_path: Path, guarantee: str | None) -> None:
+    """From asyncio, ``await system.submit(...)`` and ``await system.send(...)`` return the
+    outcome, with or without a journal (send used to refuse a journalled System)."""
+    journal = None if guarantee is None else _journal(tmp_path, guarantee)
+    system = _motor(journal)
+    halt = system.start_owner(paced=False)
+
+    async def main() -> list[str]:
+        return [
+            await system.submit("Motor", "Movement", origin=None),
+            await system.send("Motor", "Movement"),
+            await system.submit("Motor", "Bogus", origin=None),
+        ]
+
+    try:
+        outcomes = asyncio.run(asyncio.wait_for(main(), 10))
+    finally:
+        halt()
+        system.close()
+    assert outcomes == [Outcome.HANDLED, Outcome.DECLARED_IGNORED, Outcome.UNKNOWN_EVENT]
+
+
+def test_a_handle_waited_for_with_nobody_owning_the_devices_times_out() -> None:
+    """result(timeout) says what is missing instead of hanging: the System is not started,
+    so the door may not run the step, and nothing owns the devices."""
+    system = System((DeviceSetup("Motor", motor_chart()),), SimClock())
+    handle = system.submit("Motor", "Movement", origin=None)
+    with pytest.raises(TimeoutError, match="owning the devices"):
+        handle.result(0)
+    system.start()  # runs what was queued before the start
+    assert handle.result(0) is Outcome.HANDLED
+    system.close()
+
+
+def test_a_submit_from_a_step_is_left_to_the_drain_that_runs_it() -> None:
+    """An observer that submits during a step (the owner mid-drain) must not start a second
+    drain on the same thread: its event runs after the step, in the same drain."""
+    system = _motor()
+    handles: list[Submitted] = []
+
+    class Completes:
+        def update(self, notification: object) -> None:
+            handles.append(system.submit("Motor", "Movement completion", origin=None))
+
+    system.subjects["Motor"].attach(Completes())
+    try:
+        assert system.submit("Motor", "Movement", origin=None).result(0) is Outcome.HANDLED
+        assert handles[0].result(0) is Outcome.HANDLED
+        assert system.subjects["Motor"].configuration == {"Blocked"}
+    finally:
+        system.close()
+
+
+def test_an_event_for_another_nodes_device_fails_its_handle() -> None:
+    """A handle that will never hear an outcome says so when asked, never hangs."""
+    handle = Submitted("arm", "Movement")
+    handle.fail(StatectlError("arm runs on another node; Movement was forwarded"))
+    assert handle.done()
+    with pytest.raises(StatectlError, match="another node"):
+        handle.result(0)
+
+    async def wait() -> object:
+        return await handle
+
+    with pytest.raises(StatectlError, match="another node"):
+        asyncio.run(wait())
+
+
+# -- refusals through each channel ---------------------------------------------------------
+
+
+def test_a_refused_submit_changes_nothing_and_is_journalled(tmp_path: Path) -> None:
+    """The door raises CommandRefused before any handle exists; the device stays and the
+    journal has a refused step with the origin."""
+    journal = _journal(tmp_path, "prompt")
+    system = _motor(journal, commands=Commands((Grant("stdin", "nobody"),)))
+    try:
+        with pytest.raises(CommandRefused):
+            system.submit("Motor", "Movement", origin=Origin("stdin", "operator"))
+        system.quiesce()
+        assert system.subjects["Motor"].configuration == {"Blocked"}
+    finally:
+        system.close()
+    assert _rows(tmp_path / "j.db")[-1] == ("Movement", f"{REFUSED}: stdin operator")
+
+
+def test_opcua_methods_refuse_at_the_door_with_bad_user_access_denied(tmp_path: Path) -> None:
+    """An OPC UA call goes through submit: allowed, it answers once the step ran (journal or
+    not); refused by the policy, BadUserAccessDenied, journalled, and the Motor stays."""
+    pytest.importorskip("asyncua")
+    from asyncua import ua
+
+    from statectl.channels.opcua.access import _CALLER
+    from statectl.channels.opcua.methods import Calls
+
+    journal = _journal(tmp_path, "prompt")
+    grants = (Grant("opcua", "operator", None, frozenset({"Initialization"})),)
+    system = _motor(journal, commands=Commands(grants))
+    calls = Calls(system)
+    holder = object()
+
+    async def call(user: str, event: str) -> Any:
+        _CALLER.set(user)
+        return await calls.event("Motor", event, holder)(holder)
+
+    try:
+        refused = asyncio.run(call("operator", "Movement"))
+        allowed = asyncio.run(call("operator", "Initialization"))
+    finally:
+        system.close()
+    assert refused.StatusCode.value == ua.StatusCodes.BadUserAccessDenied
+    assert [v.Value for v in allowed] == [False, "declared ignored"]  # ran: guard false
+    assert _rows(tmp_path / "j.db")[-2:] == [
+        ("Movement", f"{REFUSED}: opcua operator"),
+        ("Initialization", "declared ignored"),
+    ]
+
+
+PING = """device: Ping
+states:
+  - {component: Ping, api: Go(), state: Idle, control: default, description: waits}
+  - {component: Ping, api: Go(), state: Busy, control: event trigger required,
+     description: toggles}
+events:
+  - {event: Go, condition: go, old: Idle, new: Busy, kind: command, api: Go}
+  - {event: Go, condition: go, old: Busy, new: Idle, kind: command, api: Go}
+"""
+PONG = PING.replace("Ping", "Pong").replace("Go", "Hit").replace("Idle", "Up")
+PONG = PONG.replace("Busy", "Down")
+CELL = """cell: Door
+devices: {ping: ping.yaml, pong: pong.yaml}
+links:
+  - {from: ping, raises: Go, to: pong, send: Hit}
+"""
+
+
+def _cell(tmp_path: Path, grants: tuple[Grant, ...], journalled: bool) -> System:
+    (tmp_path / "ping.yaml").write_text(PING)
+    (tmp_path / "pong.yaml").write_text(PONG)
+    (tmp_path / "cell.yaml").write_text(CELL)
+    cell, diags = load_cell(tmp_path / "cell.yaml")
+    assert cell is not None, diags
+    journal = _journal(tmp_path, "prompt") if journalled else None
+    setups = cell_setups(cell, journalled=journalled)
+    system = System(setups, SimClock(), journal, cell, commands=Commands(grants))
+    system.start()
+    return system
+
+
+@pytest.mark.parametrize("journalled", [False, True])
+@pytest.mark.parametrize(
+    ("grants", "moves"),
+    [
+        ((), True),  # the default: every link event enters
+        ((Grant("link", "ping"),), True),  # the link's principal is its source device
+        ((Grant("link", "ping2"),), False),
+        ((Grant("link", ANYONE, None, frozenset({"Go"})),), False),
+    ],
+)  # fmt: skip
+def test_a_cell_link_event_passes_the_door(
+    tmp_path: Path,
+    caplog: pytest.LogCaptureFixture,
+    journalled: bool,
+    grants: tuple[Grant, ...],
+    moves: bool,
+) -> None:
+    """A link's event is checked as origin ``link``/its source; refused, it is dropped with
+    one log line and (journalled) a refused step of its target, and the target stays."""
+    system = _cell(tmp_path, grants, journalled)
+    try:
+        with caplog.at_level(logging.WARNING, logger="statectl.run.system"):
+            system.post("ping", "Go")
+            system.quiesce()
+        assert system.subjects["ping"].configuration == {"Busy"}
+        assert system.subjects["pong"].configuration == ({"Down"} if moves else {"Up"})
+    finally:
+        system.close()
+    dropped = [r for r in caplog.records if "link event dropped" in r.getMessage()]
+    assert len(dropped) == (0 if moves else 1)
+    if journalled and not moves:
+        assert _rows(tmp_path / "j.db", "pong")[-1] == ("Hit", f"{REFUSED}: link ping")
+
+
+def test_a_drivers_completion_passes_the_door(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A driver reports through the door as origin ``driver``/its device: a completion the
+    policy refuses is dropped, one log line, journalled; the Motor stays Moving."""
+    chart = motor_chart()
+    driver = make_driver("sim-motor", {}, chart=chart)
+    grants = (Grant("driver", ANYONE, None, frozenset({"Initialization completion"})),)
+    journal = _journal(tmp_path, "prompt")
+    system = System(
+        (DeviceSetup("Motor", chart, driver=driver),), SimClock(), journal,
+        commands=Commands(grants),
+    )  # fmt: skip
+    system.start()
+    try:
+        with caplog.at_level(logging.WARNING, logger="statectl.run.system"):
+            system.post("Motor", "Movement", {"amount": 10})
+            system.quiesce()
+        assert system.subjects["Motor"].configuration == {"Moving"}
+    finally:
+        system.close()
+    assert sum("driver completion dropped" in r.getMessage() for r in caplog.records) == 1
+    assert _rows(tmp_path / "j.db")[-1] == ("Movement completion", f"{REFUSED}: driver Motor")
+
+
+def test_a_link_stream_event_the_policy_refuses_is_dropped(tmp_path: Path) -> None:
+    """Over Zenoh a link event enters the receiving node's door as ``link``/the sending
+    node: refused, it is one log line and nothing moves."""
+    pytest.importorskip("zenoh")
+    from statectl.channels.distributed import NodeSystem, Wire
+
+    cell_text = """cell: Stream
+devices: {ping: ping.yaml, pong: pong.yaml}
+nodes:
+  a: {devices: [ping], listen: [tcp/127.0.0.1:1]}
+  b: {devices: [pong], listen: [tcp/127.0.0.1:2]}
+links:
+  - {from: ping, raises: Go, to: pong, send: Hit}
+"""
+    (tmp_path / "ping.yaml").write_text(PING)
+    (tmp_path / "pong.yaml").write_text(PONG)
+    (tmp_path / "cell.yaml").write_text(cell_text)
+    cell, diags = load_cell(tmp_path / "cell.yaml")
+    assert cell is not None, diags
+    results = {}
+    for name, grants in (("allowed", (Grant("link", "a"),)), ("refused", (Grant("link", "c"),))):
+        setups = tuple(s for s in cell_setups(cell, journalled=False) if s.name == "pong")
+        system = NodeSystem(setups, SimClock(), None, cell, commands=Commands(grants))
+        out = io.StringIO()
+        wire = Wire(cell, "b", system, out=out)
+        system.start()
+        wire.inbound.announce("a", "pong", "ep1")
+        wire._receiver("a", "pong")(_Sample(b'["ep1",1,"Hit",null]'))
+        results[name] = (sorted(system.subjects["pong"].configuration), out.getvalue())
+        system.close()
+    assert results["allowed"] == (["Down"], "")
+    state, log = results["refused"]
+    assert state == ["Up"]
+    assert log.count("\n") == 1 and "link event 'Hit' from a to pong" in log and "refused" in log
+
+
+class _Sample:
+    """What a Zenoh subscriber callback reads of a sample: its payload."""
+
+    def __init__(self, data: bytes) -> None:
+        self.payload = self
+        self._data = data
+
+    def to_bytes(self) -> bytes:
+        return self._data
+
+
+# -- nothing goes around the door ----------------------------------------------------------
+
+#: Calls that hand an event to a device, step one, drain or take the owner lock: the
+#: door's business (run/door.py), never a channel's.
+_DOOR_CALLS = {"post", "dispatch", "deliver", "run_until_idle", "_drain", "drain", "acquire"}
+#: Where a channel may call ``post``: the System (its post is the door), a cell view that
+#: forwards over Zenoh to another node's door, a Zenoh key helper (a key, not an event).
+_POST_RECEIVERS = {"system", "self.system", "view", "self.keys"}
+#: Modules that may, and why.
+_MAY_GO_AROUND = {
+    "channels/cli/demo.py": "the demo runs one bare Subject, no System (README's first run)",
+    "channels/distributed/system.py": "NodeSystem is a System: its link sends, checked "
+    "by Door._link_admitted first",
+}
+
+
+def _calls_around_the_door(path: Path) -> list[str]:
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        func = node.func if isinstance(node, ast.Call) else None
+        if isinstance(func, ast.Attribute) and func.attr in _DOOR_CALLS:
+            receiver = ast.unparse(func.value)
+            if func.attr != "post" or receiver not in _POST_RECEIVERS:
+                found.append(f"line {node.lineno}: {receiver}.{func.attr}(...)")
+    return found
+
+
+@pytest.mark.parametrize(
+    "path", sorted((SRC / "channels").rglob("*.py")), ids=lambda p: str(p.relative_to(SRC))
+)
+def test_no_channel_goes_around_the_door(path: Path) -> None:
+    """A channel hands events to the System only (submit or post): it never posts to a
+    Subject, steps one, drains the System or takes its owner lock itself."""
+    rel = str(path.relative_to(SRC))
+    if rel in _MAY_GO_AROUND:
+        return
+    assert _calls_around_the_door(path) == [], f"{rel} goes around System.submit"
+
+
+def test_only_the_door_decides_who_runs_a_step() -> None:
+    """``owner.acquire(blocking=False)`` (run the step here if nobody owns the devices) is
+    written once in the whole package: in Door._run_here."""
+    found = {
+        str(p.relative_to(SRC)): p.read_text(encoding="utf-8").count("acquire(blocking=False)")
+        for p in SRC.rglob("*.py")
+    }
+    assert {k: n for k, n in found.items() if n} == {"run/door.py": 1}
+
+
+def test_the_exceptions_still_need_their_exception() -> None:
+    """Each module allowed around the door still does it (else remove it from the list)."""
+    for rel in _MAY_GO_AROUND:
+        assert _calls_around_the_door(SRC / rel), rel
