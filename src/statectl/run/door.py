@@ -52,16 +52,8 @@ class QueueFull(StatectlError):
 class Submitted:
     """An event the door let in; resolves with the outcome of its device's step (rules 2-5)."""
 
-    __slots__ = (
-        "_callbacks",
-        "_error",
-        "_lock",
-        "_outcome",
-        "_waiter",
-        "device",
-        "event",
-        "ticket",
-    )
+    __slots__ = ("_callbacks", "_error", "_outcome", "_waiter", "device", "event", "ticket")
+    _making = threading.Lock()  # a waiter's event is made once, whoever asks first
 
     def __init__(self, device: str, event: str) -> None:
         self.device = device
@@ -72,7 +64,6 @@ class Submitted:
         self._error: StatectlError | None = None  # no outcome will come (fail)
         self._waiter: threading.Event | None = None
         self._callbacks: list[Callable[[Submitted], object]] = []
-        self._lock = threading.Lock()
 
     def __repr__(self) -> str:
         state = "pending" if self._outcome is None else self._outcome.value
@@ -87,14 +78,25 @@ class Submitted:
         self._settle(Outcome.UNKNOWN_EVENT, error)  # an outcome marks it done; never read
 
     def _settle(self, outcome: Outcome, error: StatectlError | None) -> None:
-        with self._lock:
-            if self._outcome is not None:
-                return
-            self._outcome, self._error = outcome, error
-            waiter, callbacks, self._callbacks = self._waiter, self._callbacks, []
+        """Rule 5 without a lock: the outcome is set before the waiter and the callbacks are
+        read, and they are set before the outcome is read (each list pop is atomic), so
+        whichever side comes second sees the other; each callback is popped once."""
+        if self._outcome is not None:
+            return
+        self._error = error
+        self._outcome = outcome
+        waiter = self._waiter
         if waiter is not None:
             waiter.set()
-        for fn in callbacks:
+        self._call_back()
+
+    def _call_back(self) -> None:
+        callbacks = self._callbacks
+        while callbacks:
+            try:
+                fn = callbacks.pop(0)
+            except IndexError:  # the other side took the last one
+                return
             fn(self)
 
     def done(self) -> bool:
@@ -106,14 +108,12 @@ class Submitted:
 
         Someone must own the devices meanwhile (``System.serve``, ``start_owner``), unless
         the door ran the step on the submitting thread."""
-        with self._lock:
-            outcome = self._outcome
-            if outcome is None and self._waiter is None:
-                self._waiter = threading.Event()
-            waiter = self._waiter
-        if outcome is None:
-            assert waiter is not None
-            if not waiter.wait(timeout):
+        if self._outcome is None:
+            with self._making:
+                waiter = self._waiter
+                if waiter is None:
+                    waiter = self._waiter = threading.Event()
+            if self._outcome is None and not waiter.wait(timeout):
                 raise TimeoutError(
                     f"{self.device}: {self.event} did not run within {timeout} s; is anything "
                     "owning the devices (System.serve, start_owner)?"
@@ -125,11 +125,9 @@ class Submitted:
 
     def add_done_callback(self, fn: Callable[[Submitted], object]) -> None:
         """Call ``fn(self)`` once resolved: on the owner, or now if it is already."""
-        with self._lock:
-            if self._outcome is None:
-                self._callbacks.append(fn)
-                return
-        fn(self)
+        self._callbacks.append(fn)
+        if self._outcome is not None:
+            self._call_back()
 
     def __await__(self) -> Generator[Any, None, Outcome]:
         """Rule 4: ``await handle`` in a coroutine returns the outcome."""
@@ -194,7 +192,7 @@ class Door:
         self, device: str | None, event: str, data: Any = None, origin: Origin | None = None
     ) -> str:
         """The door (rules 4, 8): the device, once ``origin`` may send ``event`` and it has room."""
-        name = self.device(device)
+        name = device if device in self.subjects else self.device(device)
         if origin is not None and not self.commands.allows(origin, name, event):
             if (bound := self.bound.get(name)) is not None:
                 with self.owner:  # between the device's steps: the row keeps their order
