@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     from statectl.api import check, load
     from statectl.front.observers import Notification, Observer
     from statectl.run.devices import DeviceDriver, connect, make_driver
+    from statectl.run.door import QueueFull, Submitted
     from statectl.run.runtime import (
         EventIgnored,
         EventReceived,
@@ -47,7 +48,7 @@ if TYPE_CHECKING:
         Taken,
         WallClock,
     )
-    from statectl.run.system import DeviceSetup, QueueFull, System
+    from statectl.run.system import DeviceSetup, System
 
 __version__ = "0.1.0"
 
@@ -62,7 +63,7 @@ _LAZY = {
     "Observer": "statectl.front.observers",
     "System": "statectl.run.system",
     "DeviceSetup": "statectl.run.system",
-    "QueueFull": "statectl.run.system",
+    "QueueFull": "statectl.run.door",
     "Submitted": "statectl.run.door",
     **dict.fromkeys(
         (

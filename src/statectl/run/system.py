@@ -78,7 +78,7 @@ from statectl.kernel.model import Chart
 from statectl.kernel.semantics.eventview import GuardError
 from statectl.run.commands import Commands
 from statectl.run.devices import DeviceDriver, connect
-from statectl.run.door import Door, QueueFull, Submitted
+from statectl.run.door import Door
 from statectl.run.journal import (
     Guarantee,
     Journal,
@@ -90,7 +90,7 @@ from statectl.run.journal import (
 from statectl.run.runtime import Clock, Record, SimClock, StepRecord, Subject, WallClock
 from statectl.run.runtime.eventdata import AssignError
 
-__all__ = ["SETTLE_LIMIT", "DeviceSetup", "QueueFull", "Submitted", "System"]
+__all__ = ["SETTLE_LIMIT", "DeviceSetup", "System"]
 
 #: Simulated seconds a batch run lets pass at most for one event to settle.
 SETTLE_LIMIT = 60.0
