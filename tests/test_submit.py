@@ -162,6 +162,23 @@ def test_a_submit_from_a_step_is_left_to_the_drain_that_runs_it() -> None:
         system.close()
 
 
+def test_a_callback_that_raises_does_not_stop_the_owner(caplog: pytest.LogCaptureFixture) -> None:
+    """A done-callback runs on the owner; one that raises is logged, and the device's next
+    event still runs and resolves its own handle."""
+    system = _motor()
+    try:
+        with system.owner:  # hold the devices so the callback is added before the step
+            first = system.submit("Motor", "Movement", origin=None)
+            first.add_done_callback(lambda h: 1 / 0)
+        with caplog.at_level(logging.ERROR, logger="statectl.run.system"):
+            system.drain()
+            second = system.submit("Motor", "Movement completion", origin=None)
+        assert (first.result(0), second.result(0)) == (Outcome.HANDLED, Outcome.HANDLED)
+        assert any("callback" in r.getMessage() for r in caplog.records)
+    finally:
+        system.close()
+
+
 def test_an_event_for_another_nodes_device_fails_its_handle() -> None:
     """A handle that will never hear an outcome says so when asked, never hangs."""
     handle = Submitted("arm", "Movement")

@@ -20,7 +20,9 @@ Rules:
    :meth:`Submitted.add_done_callback`; and awaitable from asyncio (``await handle``),
    which hands the outcome to the awaiting loop with ``call_soon_threadsafe`` (no hop
    when the step ran on the loop's own thread).
-5. Cheap when nobody waits: one lock; a waiter's event is made only when someone blocks.
+5. Cheap when nobody waits: no lock of its own (the GIL orders its few writes); a waiter's
+   event is made only when someone blocks. A callback that raises is logged: the owner
+   that resolved the handle goes on with the devices.
 """
 
 from __future__ import annotations
@@ -97,7 +99,10 @@ class Submitted:
                 fn = callbacks.pop(0)
             except IndexError:  # the other side took the last one
                 return
-            fn(self)
+            try:  # on the owner: a callback's error must not stop the devices
+                fn(self)
+            except Exception:
+                _LOG.exception("a Submitted callback for %s: %s raised", self.device, self.event)
 
     def done(self) -> bool:
         """Whether the device's step on the event has run (or :meth:`fail` said none will)."""
