@@ -180,8 +180,16 @@ class Door:
     _draining: bool
     _ready: deque[Subject]
 
+    _unchecked: bool
+
     def _drain_past_failures(self, *, commit: bool = False) -> None:
         raise NotImplementedError  # the System's (system.py rule 7)
+
+    def _failed(self, exc: StatectlError) -> None:
+        raise NotImplementedError  # the System's (system.py rule 7)
+
+    def _as_owner(self, step: Callable[[], object]) -> None:
+        raise NotImplementedError  # the System's (system.py rule 1)
 
     def device(self, name: str | None) -> str:
         if name is None:
@@ -231,6 +239,12 @@ class Door:
         name = self.admit(device, event, data, origin)
         handle = Submitted(name, event)
         journal = self.journal
+        if journal is None and (self.rules is None or not self.rules.guarded(name, event)):
+            subject = self.subjects[name]  # no inbox row to write, no 'when' to judge first
+            if self._run_here(lambda: self._step_here(subject, event, data, handle)):
+                return handle
+            self._let_in(name, event, data, handle.resolve, None, wake=True)
+            return handle
         here = journal is None or journal.guarantee is Guarantee.PROMPT  # else: the writer's
         handle.ticket = self._let_in(name, event, data, handle.resolve, note, wake=not here)
         if here:
@@ -274,19 +288,35 @@ class Door:
             self.wake.set()
         return None
 
-    def _run_here(self) -> bool:
-        """Rule 8, the one place that decides it: the calling thread runs the devices' steps
-        now when the System is live and nobody owns them (it owns them meanwhile, rule 7
-        for failures); the owner running a step goes on with its drain; else it is woken."""
+    def _run_here(self, step: Callable[[], object] | None = None) -> bool:
+        """Rule 8, the one place that decides it: the calling thread runs ``step`` and the
+        devices' queued work now when the System is live and nobody owns the devices (it
+        owns them meanwhile, rule 7 for failures); the owner running a step goes on with
+        its drain. Else it does nothing (without ``step``: it wakes the owner)."""
         if self._live and self.owner.acquire(blocking=False):
             try:
                 if not self._draining:
-                    self._drain_past_failures()
+                    if step is not None:
+                        self._as_owner(step)  # a submit from within it waits for the drain
+                    if step is None or self._ready or self._unchecked:
+                        self._drain_past_failures()  # what the step queued (links), or all
                     return True
             finally:
                 self.owner.release()
-        self.wake.set()
+        if step is None:
+            self.wake.set()
         return False
+
+    def _step_here(self, subject: Subject, event: str, data: Any, handle: Submitted) -> None:
+        """As the owner: the device runs ``event`` now, after what it had queued (the
+        Subject's ``dispatch``, no queue in between). A failure in the step is rule 7's;
+        one before it (the event's data refused) is the submitter's, as a post's is."""
+        try:
+            subject.dispatch(event, data, then=handle.resolve)
+        except StatectlError as exc:
+            if not handle.done():
+                raise
+            self._failed(exc)
 
     def _reporter(self, device: str) -> Callable[..., None]:
         """A driver's completions through the door (rule 8), queued as before: not run here

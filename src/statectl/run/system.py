@@ -330,6 +330,15 @@ class System(Door):
         finally:
             self._draining = was
 
+    def _as_owner(self, step: Callable[[], object]) -> None:
+        """As the owner, run ``step`` as a drain would: what it posts or submits is queued
+        for the drain after it (rule 6: a post from a step does not drain again)."""
+        was, self._draining = self._draining, True
+        try:
+            step()
+        finally:
+            self._draining = was
+
     def advance(self, seconds: float) -> None:
         """On a SimClock: let ``seconds`` pass as the owner, draining after every timer."""
         clock = self.clock

@@ -406,24 +406,30 @@ class Subject:
         finally:
             then(heard[0] if heard else Outcome.HANDLED)
 
-    def dispatch(self, event: str, data: Any = None) -> int:
+    def dispatch(
+        self, event: str, data: Any = None, *, then: Callable[[Outcome], object] | None = None
+    ) -> int:
         """Process ``event`` now, on the calling thread as the owner, after anything queued.
 
         The synchronous form of :meth:`post` then :meth:`run_until_idle`: the same
         path, records, observer calls and errors; returns how many events ran.
+        ``then(outcome)``: as for :meth:`post`, right after the event ran.
         """
         if data is not None and self._declared is not None:
             check_event_data(self._declared, self._engine.name, event, data)
         if self._fast and not self._busy and type(event) is str:  # _fast: nothing queued
             self._busy = True
             try:
-                self._engine.perform(event, data)
+                if then is None:
+                    self._engine.perform(event, data)
+                else:
+                    self._process_then(event, data, then)
             finally:
                 self._busy = False
             if self._inbox:  # posted meanwhile (an observer's completion)
                 return 1 + self.run_until_idle()
             return 1
-        self.post(event, data)
+        self.post(event, data, then=then)
         return self.run_until_idle()
 
     def deliver(self, event: str, data: Any = None) -> None:
