@@ -179,7 +179,6 @@ class Door:
     _live: bool
     _draining: bool
     _ready: deque[Subject]
-
     _unchecked: bool
 
     def _drain_past_failures(self, *, commit: bool = False) -> None:
@@ -192,6 +191,7 @@ class Door:
         raise NotImplementedError  # the System's (system.py rule 1)
 
     def device(self, name: str | None) -> str:
+        """The device ``name`` names (None: the only one), or what to write instead."""
         if name is None:
             if len(self.subjects) == 1:
                 return next(iter(self.subjects))
