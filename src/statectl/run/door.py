@@ -6,7 +6,8 @@ Rules:
    over it, checks the origin against the commands policy (:meth:`Door.admit`), the
    queue bound and a cell's ``when``, hands the event to the journal or the device,
    and decides, in :meth:`Door._run_here` alone, whether the calling thread runs the
-   step now. A cell's link events and drivers' completions pass the same check
+   step now (also for a channel's own work on a device's owner, :meth:`Door.call_soon`).
+   A cell's link events and drivers' completions pass the same check
    (:meth:`Door._link_admitted`, :meth:`Door._reporter`).
 2. :meth:`Door.submit` returns a :class:`Submitted` for an event it
    let in: the device, the event, the journal's :class:`~statectl.run.journal.Ticket` when
@@ -287,6 +288,13 @@ class Door:
         if wake and not self.wake.is_set():  # set already: the owner clears it before it drains
             self.wake.set()
         return None
+
+    def call_soon(self, device: str, fn: Callable[[], object]) -> None:
+        """Run ``fn`` on ``device``'s owner, in order with its events (a channel's journal
+        note after the steps before it: an OPC UA acknowledgement); as for :meth:`submit`,
+        the door decides whether the calling thread runs it now."""
+        self.subjects[self.device(device)].call_soon(fn)
+        self._run_here()
 
     def _run_here(self, step: Callable[[], object] | None = None) -> bool:
         """Rule 8, the one place that decides it: the calling thread runs ``step`` and the

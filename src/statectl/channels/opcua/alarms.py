@@ -263,16 +263,10 @@ class AlarmSpace:
         bound = self.system.bound.get(alarm.device)
         if bound is None:
             return
-        subject = self.system.subjects[alarm.device]
-        subject.call_soon(lambda: bound.acknowledged(alarm.fault, comment, str(origin)))
-        system = self.system
-        if subject.started and system.owner.acquire(blocking=False):
-            try:
-                system.drain()
-            finally:
-                system.owner.release()
-        else:
-            system.wake.set()
+        # on the owner, in order with the device's steps; whether here: the door's to say
+        self.system.call_soon(
+            alarm.device, lambda: bound.acknowledged(alarm.fault, comment, str(origin))
+        )
 
     async def condition_refresh(self, parent: Any, *args: Any) -> Any:
         """Rule 5: the retained conditions again, between RefreshStart and RefreshEnd."""
