@@ -15,7 +15,7 @@ node ``b`` (device ``pong``). Measured, all in the same run:
 ``--breakdown`` also stamps each hop of the paced link events (CLOCK_MONOTONIC on
 both sides) and prints the median of each hop: post -> the wire's ``send`` ->
 Zenoh ``put`` (entry, return) -> node b's link callback -> the device's step on
-that thread (``run_now``) -> the observer call. The stamps wrap the calls, so
+that thread (``System.submit``, the door) -> the observer call. The stamps wrap the calls, so
 they add a little to the link's figures; leave it off for the targets.
 
 Targets (issue 16): link p50 <= 1.5x bare Zenoh, p99 <= 2 ms, >= 20,000 link
@@ -146,11 +146,11 @@ def stamp_b(system: NodeSystem, wire: Wire) -> Stamps:
     stamps = Stamps()
     receiver = wire._receiver  # each stream's link callback, made in listen()
 
-    def stamped(node: str, device: str) -> Any:
-        return stamps.wrap("on_link", receiver(node, device))
+    def stamped(node: str, device: str, *rest: Any) -> Any:
+        return stamps.wrap("on_link", receiver(node, device, *rest))
 
     wire._receiver = stamped  # type: ignore[method-assign]
-    system.run_now = stamps.wrap("run_now", system.run_now)  # type: ignore[method-assign]
+    system.submit = stamps.wrap("submit", system.submit)  # type: ignore[method-assign]
     return stamps
 
 
@@ -230,7 +230,7 @@ def hop_medians(sent: list[int], a: Stamps, b: dict[str, list[int]], hits: list[
     at = {k: v[-n:] for k, v in a.at.items()}  # the warm-up's stamps come first
     path = [("post", sent), ("send", at["send"]), ("put", at["put"])]
     path += [("put-return", at["put-return"]), ("on_link", b["on_link"][-n:])]
-    path += [("run_now", b["run_now"][-n:]), ("observer", hits)]
+    path += [("submit", b["submit"][-n:]), ("observer", hits)]
     lines = []
     for (x, xs), (y, ys) in itertools.pairwise(path):
         gaps = [(t - s) / 1000 for s, t in zip(xs, ys, strict=True)]
