@@ -226,3 +226,30 @@ def test_a_checked_chart_is_not_kept_by_the_process(tmp_path: Path) -> None:
     before = dict(machine._COMPILED)
     assert _check(_ring(tmp_path / "ring.yaml", 40)) == 0
     assert before == machine._COMPILED
+
+
+class _CountingRows(tuple):  # type: ignore[type-arg]  # a chart's transitions, walks counted
+    walks = 0
+
+    def __iter__(self):  # type: ignore[no-untyped-def]
+        type(self).walks += 1
+        return super().__iter__()
+
+
+def test_a_charts_event_names_walk_its_transitions_once(tmp_path: Path) -> None:
+    """Five rules ask a chart's event names; the transitions are walked for the first only."""
+    import dataclasses
+
+    from statectl.front.builder.build import build
+    from statectl.front.tables import load
+
+    tables, _ = load(_device(tmp_path / "d.yaml", 40))
+    assert tables is not None
+    built, _ = build(tables)
+    assert built is not None
+    chart = dataclasses.replace(built, transitions=_CountingRows(built.transitions))
+    first = chart.event_names
+    walked = _CountingRows.walks
+    assert first == ("E0", "E1") and walked >= 1
+    assert all(chart.event_names == first for _ in range(5))
+    assert _CountingRows.walks == walked
