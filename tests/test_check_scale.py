@@ -226,3 +226,61 @@ def test_a_checked_chart_is_not_kept_by_the_process(tmp_path: Path) -> None:
     before = dict(machine._COMPILED)
     assert _check(_ring(tmp_path / "ring.yaml", 40)) == 0
     assert before == machine._COMPILED
+
+
+class _CountingRows(tuple):  # type: ignore[type-arg]  # a chart's transitions, walks counted
+    walks = 0
+
+    def __iter__(self):  # type: ignore[no-untyped-def]
+        type(self).walks += 1
+        return super().__iter__()
+
+
+def test_a_charts_event_names_walk_its_transitions_once(tmp_path: Path) -> None:
+    """Five rules ask a chart's event names; the transitions are walked for the first only."""
+    import dataclasses
+
+    from statectl.front.builder.build import build
+    from statectl.front.tables import load
+
+    tables, _ = load(_device(tmp_path / "d.yaml", 40))
+    assert tables is not None
+    built, _ = build(tables)
+    assert built is not None
+    chart = dataclasses.replace(built, transitions=_CountingRows(built.transitions))
+    first = chart.event_names
+    walked = _CountingRows.walks
+    assert first == ("E0", "E1") and walked >= 1
+    assert all(chart.event_names == first for _ in range(5))
+    assert _CountingRows.walks == walked
+
+
+@pytest.mark.parametrize(
+    "cells",
+    [
+        {"event": " go ", "old": "A", "new": "B"},
+        {"event": "go", "old": "A", "new": "B", "kind": " Fault ", "guard": "x > 1", "api": "m"},
+        {"event": "go", "old": "A", "new": "B", "kind": "", "condition": "c", "invoke": "i"},
+        {"event": "go", "old": "A", "new": "B", "kind": "sometimes"},  # T107: the slow way
+        {"event": "a,b", "old": "A", "new": "B"},  # T111
+        {"event": "go", "old": "", "new": "B"},  # T104
+        {"event": "go", "old": "A", "new": "B", "colour": "red"},  # T103
+        {"event": "go", "old": "A", "new": ("B",)},  # T108
+    ],
+)
+def test_the_short_way_for_a_plain_event_row_reads_as_the_long_way(
+    monkeypatch: pytest.MonkeyPatch, cells: dict[str, object]
+) -> None:
+    """A row of plain text cells skips the cell-by-cell checks: same row, same diagnostics."""
+    from statectl.front.tables import cells as checked
+    from statectl.front.tables.rows import RawRow
+    from statectl.kernel.errors import Location
+
+    at = Location("d.yaml", 3)
+    row = RawRow(at, {k: (v, at) for k, v in cells.items()})  # type: ignore[misc]
+    short: list[object] = []
+    got = checked.event_row(row, short)  # type: ignore[arg-type]
+    monkeypatch.setattr(checked, "_plain_event_row", lambda _row: None)
+    long: list[object] = []
+    assert checked.event_row(row, long) == got  # type: ignore[arg-type]
+    assert short == long

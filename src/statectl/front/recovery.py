@@ -87,16 +87,23 @@ def redo_sources(chart: Chart, state: str) -> tuple[Transition, ...]:
 
 
 def waits_for_device(chart: Chart, state: str) -> bool:
-    """Whether ``state`` is left only by ``completion`` events: only its device takes it out."""
-    leaving = _leaving(chart, state)
-    kinds = set()
-    for t in leaving:
-        if not t.events:
-            return False  # an eventless transition leaves by itself
-        for e in t.events:
-            d = chart.event(e)
-            kinds.add(d.kind if d is not None else None)
-    return bool(leaving) and kinds == {EventKind.COMPLETION}
+    """Whether ``state`` is left only by ``completion`` events: only its device takes it out.
+
+    The first row that is not a completion answers no: J608 asks this of every state,
+    and the usual state's first row is a command."""
+    left = False
+    current: str | None = state
+    while current is not None:  # its own transitions, then its ancestors' (_leaving)
+        for t in chart.transitions_from(current):
+            if not t.events:
+                return False  # an eventless transition leaves by itself
+            for e in t.events:
+                d = chart.event(e)
+                if d is None or d.kind is not EventKind.COMPLETION:
+                    return False
+            left = True
+        current = chart.state(current).parent
+    return left
 
 
 def _data_fits(chart: Chart, r: RecoveryRow) -> list[Diagnostic]:

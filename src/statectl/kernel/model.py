@@ -382,11 +382,11 @@ class Chart:
     script: tuple[Action, ...] = ()  # SCXML top-level ``<script>``, run once at start
     profile: str = ""  # the standard profile the device file declares (docs/profiles.md)
     #: lookups by name, built on first use: a cache, not part of the value
-    _index: dict[str, dict[Any, Any]] = field(
+    _index: dict[str, Any] = field(
         default_factory=dict, init=False, repr=False, compare=False, hash=False
     )
 
-    def _lookup(self) -> dict[str, dict[Any, Any]]:
+    def _lookup(self) -> dict[str, Any]:
         """State, event, children and transitions by name, built once (linear lookups)."""
         index = self._index
         if not index:
@@ -417,7 +417,8 @@ class Chart:
         return name in self._lookup()["states"]
 
     def event(self, name: str) -> EventDef | None:
-        return self._lookup()["events"].get(name)
+        events: dict[str, EventDef] = self._lookup()["events"]
+        return events.get(name)
 
     def children(self, name: str | None) -> Iterator[State]:
         return iter(self._lookup()["children"].get(name, ()))
@@ -438,9 +439,16 @@ class Chart:
 
     @property
     def event_names(self) -> tuple[str, ...]:
-        """Every event the chart knows: declared, then used by transitions, in order."""
-        seen: dict[str, None] = {e.name: None for e in self.events}
-        for t in self.transitions:
-            for e in t.events:
-                seen.setdefault(e, None)
-        return tuple(seen)
+        """Every event the chart knows: declared, then used by transitions, in order.
+
+        Worked out once per chart (kept with the lookups): a check asks it in five rules,
+        and each answer walked every transition."""
+        index = self._lookup()
+        names: tuple[str, ...] | None = index.get("event_names")
+        if names is None:
+            seen: dict[str, None] = {e.name: None for e in self.events}
+            for t in self.transitions:
+                for e in t.events:
+                    seen.setdefault(e, None)
+            names = index["event_names"] = tuple(seen)
+        return names

@@ -211,9 +211,10 @@ def _check_leaving(
     events: Sequence[EventRow], kinds: dict[str, StateKind], diags: list[Diagnostic]
 ) -> None:
     """B216: a final is its parent's end and a history only points back, so no row leaves one."""
-    for r in events:
-        left = kinds.get(r.old)
-        if left is not None and (left.is_history or left is StateKind.FINAL):
+    ends = {name: k for name, k in kinds.items() if k.is_history or k is StateKind.FINAL}
+    for r in events:  # a kind asked per state, not per row
+        left = ends.get(r.old)
+        if left is not None:
             diags.append(
                 _d(
                     "B216",
@@ -241,8 +242,7 @@ def _check_rows(
     known = set(data_names) | GUARD_NAMES
     assigns: dict[tuple[str, ...], tuple[Action, ...]] = {}  # a row's assignments (eventdata)
     for r in tables.events:
-        for column in ("old", "new"):
-            target = getattr(r, column)
+        for column, target in (("old", r.old), ("new", r.new)):
             if target not in merged:
                 diags.append(
                     _d(

@@ -26,7 +26,11 @@ __all__ = ["check_deferred", "check_timeouts", "check_triggers"]
 
 def _entered(st: _Structure, m: Machine, t: Transition) -> tuple[str, ...]:
     """What taking ``t`` enters, by the kernel (:func:`~statectl.kernel.semantics.entry_set`):
-    targets, their ancestors, default children and every region of a parallel state."""
+    targets, their ancestors, default children and every region of a parallel state.
+    One C401 already asked is answered from the check's cache first (its states are known)."""
+    got = st.entry_sets.get(id(t))
+    if got is not None:
+        return got
     if not t.targets or not all(x in st.by_name for x in (t.source, *t.targets)):
         return ()
     return st.entered(m, t)
@@ -192,8 +196,10 @@ def check_triggers(st: _Structure) -> Iterator[Diagnostic]:
     }
     triggered: set[str] = set()
     for t in chart.transitions:
-        if any(drives[e] for e in t.events):
-            triggered.update(_entered(st, m, t))
+        for e in t.events:
+            if drives[e]:
+                triggered.update(_entered(st, m, t))
+                break
     for s in marked:
         if s.name not in triggered:
             yield Diagnostic(

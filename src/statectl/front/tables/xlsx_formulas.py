@@ -13,8 +13,6 @@ import io
 import zipfile
 from collections.abc import Iterable
 
-import openpyxl  # type: ignore[import-untyped, unused-ignore]
-
 from statectl.front.tables.rows import diag
 from statectl.kernel.errors import Diagnostic, Location
 
@@ -53,6 +51,8 @@ def uncached_formulas(content: bytes, file: str, values: object) -> list[Diagnos
     """
     if not _has_formulas(content):
         return []
+    import openpyxl  # type: ignore[import-untyped, unused-ignore]  # on first use only
+
     out: list[Diagnostic] = []
     try:
         formulas = openpyxl.load_workbook(io.BytesIO(content), read_only=True, data_only=False)

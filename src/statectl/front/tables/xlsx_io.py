@@ -22,13 +22,6 @@ import zipfile
 from collections.abc import Iterable
 from typing import Any
 
-# openpyxl ships no type information; types-openpyxl is not a dev dependency (yet).
-import openpyxl  # type: ignore[import-untyped, unused-ignore]
-from openpyxl.styles import Font  # type: ignore[import-untyped, unused-ignore]
-from openpyxl.worksheet.worksheet import (  # type: ignore[import-untyped, unused-ignore]
-    Worksheet,
-)
-
 from statectl.front.tables.cells import check_header
 from statectl.front.tables.eventdata import event_cells, event_columns
 from statectl.front.tables.literals import format_literal, parse_literal
@@ -61,6 +54,16 @@ SHEETS = {
     "recovery": "Recovery",
     "device": "Device",
 }
+
+
+def _openpyxl() -> Any:
+    """openpyxl, imported on first use: a tenth of a second every command paid at start,
+    though only a workbook needs it."""
+    import openpyxl  # type: ignore[import-untyped, unused-ignore]  # no type information
+    import openpyxl.styles  # type: ignore[import-untyped, unused-ignore]
+    import openpyxl.worksheet.worksheet  # type: ignore[import-untyped, unused-ignore]
+
+    return openpyxl
 
 
 def _cell(value: Any) -> Cell:
@@ -139,7 +142,7 @@ def read_xlsx(content: bytes, file: str, stem: str) -> tuple[DeviceTables | None
             )
         ]
     try:
-        wb = openpyxl.load_workbook(io.BytesIO(content), read_only=True, data_only=True)
+        wb = _openpyxl().load_workbook(io.BytesIO(content), read_only=True, data_only=True)
     except Exception as exc:  # openpyxl raises many kinds for a damaged workbook
         return None, [diag("T101", source, f"not a readable XLSX workbook: {exc}")]
     try:
@@ -198,11 +201,11 @@ def read_xlsx(content: bytes, file: str, stem: str) -> tuple[DeviceTables | None
     return result, diags
 
 
-def _fill(ws: Worksheet, header: tuple[str, ...], rows: Iterable[list[str]]) -> None:
+def _fill(ws: Any, header: tuple[str, ...], rows: Iterable[list[str]]) -> None:
     for col, text in enumerate(header, start=1):
         cell = ws.cell(row=1, column=col, value=text)
         cell.data_type = "s"
-        cell.font = Font(bold=True)
+        cell.font = _openpyxl().styles.Font(bold=True)
     for number, row in enumerate(rows, start=2):
         for col, text in enumerate(row, start=1):
             if text:
@@ -214,9 +217,10 @@ def _fill(ws: Worksheet, header: tuple[str, ...], rows: Iterable[list[str]]) -> 
 def dump_xlsx(tables: DeviceTables) -> bytes:
     """The tables as workbook bytes (States, Events, Data and Recovery if any, Device)."""
     columns = state_columns(tables)
+    openpyxl = _openpyxl()
     wb = openpyxl.Workbook()
     states = wb.active
-    assert isinstance(states, Worksheet)
+    assert isinstance(states, openpyxl.worksheet.worksheet.Worksheet)
     states.title = SHEETS["states"]
     _fill(
         states,

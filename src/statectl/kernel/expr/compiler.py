@@ -377,7 +377,7 @@ def check_names(
     expression: Expression, known: Iterable[str], where: Location, *, what: str = "guard"
 ) -> list[Diagnostic]:
     """Report names the expression reads that the chart does not define."""
-    known_set = set(known)
+    known_set = known if isinstance(known, set | frozenset) else set(known)  # not copied per row
     return [
         Diagnostic(
             "X303",
