@@ -284,3 +284,20 @@ def test_the_short_way_for_a_plain_event_row_reads_as_the_long_way(
     long: list[object] = []
     assert checked.event_row(row, long) == got  # type: ignore[arg-type]
     assert short == long
+
+
+def test_check_does_not_load_the_explorer(tmp_path: Path) -> None:
+    """A device file's check pays for what it uses: the cell explorer is imported by a
+    cell's commands only (it was pulled in by every command through the run's problem
+    count, a third of check's start-up)."""
+    import subprocess
+    import sys
+
+    path = _device(tmp_path / "d.yaml", 4)
+    probe = (
+        "import sys\nfrom statectl.channels.cli import main\n"
+        f"code = main(['check', {str(path)!r}])\n"
+        "print(code, sorted(m for m in sys.modules if m.startswith('statectl.cell.explore')))"
+    )
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert done.stdout.split("\n")[-2] == "0 []", done.stdout + done.stderr

@@ -9,13 +9,15 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
-from statectl.cell.explore.enforce import Refused, Violation
 from statectl.kernel.errors import UnhandledEventError
 from statectl.kernel.exits import OK, PROBLEMS
 from statectl.kernel.semantics import Unhandled
 from statectl.run.runtime.records import EventIgnored, EventRejected, StepRecord
+
+if TYPE_CHECKING:  # the explorer is imported by a cell's run only, not by every command
+    from statectl.cell.explore.enforce import Violation
 
 __all__ = ["Problems", "verdict"]
 
@@ -87,6 +89,8 @@ class Problems:
 
     def counting(self, post: Callable[..., Any], err: TextIO) -> Callable[..., Any]:
         """``post`` for the dashboard: a refused command is reported and counted (rule 10)."""
+
+        from statectl.cell.explore.enforce import Refused  # a cell's run has it loaded already
 
         def post_counted(device: str | None, event: str, data: Any = None, **how: Any) -> Any:
             try:
