@@ -279,7 +279,9 @@ class DeviceUnderTest:
         self._seen = seen
         return waited
 
-    def fault(self, detail: str = "fault injected by statectl testgen", within: float = FAULT_BOUND) -> None:
+    def fault(
+        self, detail: str = "fault injected by statectl testgen", within: float = FAULT_BOUND
+    ) -> None:
         """Have the device report a fault, then let time run until its monitor raised an
         event or ``within`` seconds passed; :meth:`expect` checks what followed."""
         self.sent.append("(device fault)")
@@ -431,9 +433,7 @@ class DeviceUnderTest:
             elif call.method != expected[i].method:
                 problems.append(f"API call {i + 1}: expected {expected[i].method}(), made {call}")
             elif self._data_known and call.data != expected[i].data:
-                problems.append(
-                    f"API call {call}: wrong argument, the tables give {expected[i]}"
-                )
+                problems.append(f"API call {call}: wrong argument, the tables give {expected[i]}")
         problems += [f"{c.method}(): no API call made" for c in expected[len(made) :]]
         return problems
 
