@@ -49,7 +49,8 @@ def cmd_testgen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         printer.done()
     out.write(
         f"wrote {made.path}: {made.tests} tests ({len(made.suite.cases)} cases, "
-        f"{len(made.suite.tables)} unhandled-event tables), {made.steps} events sent\n"
+        f"{len(made.suite.tables)} unhandled-event tables), {made.steps} events sent"
+        + (f"; {made.probes} more through the implementation\n" if made.probes else "\n")
     )
     for note in made.suite.notes:
         out.write(f"note: {note}\n")

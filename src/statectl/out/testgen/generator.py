@@ -35,6 +35,9 @@ class Generated:
     suite: Suite
     tests: int  # test functions plus the rows of the parametrised tables
     steps: int  # events sent by all tests together
+    #: tests through the implementation (faults, monitors, completions, recovery): the same
+    #: for every criterion, so not in ``tests`` nor ``steps``
+    probes: int = 0
 
 
 def module_name(device: str, criterion: str) -> str:
@@ -103,12 +106,11 @@ def generate(
     text = module_text(suite, chart.name, source, out, str(file), probes=tuple(probes))
     write_atomic(path, text)
     big = is_big(suite)
-    tests = tests_in(suite, big) + len(probes)
+    tests = tests_in(suite, big)
     steps = count_steps(suite.cases) + sum(
         len(t.given) + t.count if big else (len(t.given) + 1) * t.count for t in suite.tables
     )
-    steps += sum(len(p.given) + 1 for p in probes)
-    return Generated(path, suite, tests, steps)
+    return Generated(path, suite, tests, steps, len(probes))
 
 
 def _recovery_rows(source: Path) -> tuple[RecoveryRow, ...]:

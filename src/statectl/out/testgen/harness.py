@@ -23,7 +23,7 @@ Rules:
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from typing import Any
+from typing import Any, NoReturn
 
 from statectl.front.observers import Observer
 from statectl.front.tables import RecoveryRow
@@ -73,7 +73,7 @@ def _merge(a: Observed, b: Observed) -> Observed:
     )
 
 
-def _skip(why: Unsupported) -> None:
+def _skip(why: Unsupported) -> NoReturn:
     import pytest  # only ever under pytest: the plugin's fixtures make these devices
 
     pytest.skip(f"the implementation under test cannot do this: {why}")
@@ -247,7 +247,10 @@ class DeviceUnderTest:
     def advance(self, seconds: float) -> int:
         """Let time run (the driver's completions and monitors run); what happens meanwhile
         counts with the last event's outcome. Returns the events the device took."""
-        seen = self.impl.advance(seconds)
+        try:
+            seen = self.impl.advance(seconds)
+        except Unsupported as why:
+            _skip(why)
         self._seen = _merge(self._seen, seen)
         return len(seen.events)
 
@@ -256,7 +259,10 @@ class DeviceUnderTest:
         (a timeout's transition: what the device did without being sent anything)."""
         self.sent.append(f"(wait {seconds:g} s)")
         self._data_known = False
-        self._seen = self.impl.advance(seconds)
+        try:
+            self._seen = self.impl.advance(seconds)
+        except Unsupported as why:
+            _skip(why)
         return len(self._seen.events)
 
     def stall(self) -> None:
@@ -274,7 +280,10 @@ class DeviceUnderTest:
         waited = 0.0
         while waited < within - 1e-9 and not done(seen):
             tick = min(TICK, within - waited)
-            seen = _merge(seen, self.impl.advance(tick))
+            try:
+                seen = _merge(seen, self.impl.advance(tick))
+            except Unsupported as why:
+                _skip(why)
             waited += tick
         self._seen = seen
         return waited

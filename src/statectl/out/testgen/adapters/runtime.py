@@ -184,8 +184,21 @@ class RuntimeImpl:
         self.tap.calls.clear()
 
     def _fresh(self) -> Observer:
+        """A new driver like the test's: ``new_driver``'s, else the twin or the driver's
+        class made again with no arguments (a SimMotor)."""
         made = self.new_driver(self.chart) if self.new_driver is not None else None
-        return made if made is not None else SimTwin(self.chart)
+        if made is not None:
+            return made  # type: ignore[no-any-return]
+        if isinstance(self.driver, SimTwin):
+            return type(self.driver)(self.chart)
+        try:
+            again: Observer = type(self.driver)()
+        except TypeError:
+            raise Unsupported(
+                f"restarting needs a new {type(self.driver).__name__}: override "
+                "statectl_new_driver to make one"
+            ) from None
+        return again
 
     def _system_on(self, db: Path) -> System:
         driver = Tap(self._fresh())
