@@ -17,9 +17,9 @@ The device starts before the first command and answers with its own ``done``.
 
 from __future__ import annotations
 
+from statectl.kernel.model import StateKind
 from statectl.out.codegen.cpp_names import identifiers
 from statectl.out.codegen.flat import FlatChart
-from statectl.kernel.model import StateKind
 from statectl.out.escape.cpp import string as string_literal
 
 __all__ = ["harness_source"]
@@ -120,5 +120,5 @@ def harness_source(flat: FlatChart) -> str:
         .replace("@CLS@", cls)
         .replace("@METHODS@", "\n".join(lines))
         .replace("@ATTACH@", attach or "  static_cast<void>(api);")
-        .replace("@LEAVES@", ", ".join(string_literal(n) for n in leaves) or "\"\"")
+        .replace("@LEAVES@", ", ".join(string_literal(n) for n in leaves) or '""')
     )

@@ -206,7 +206,9 @@ def _recovery_probes(
         node = entering.target
         given = tuple(p.event for p in g.path(node))
         if r.redo:
-            what = f"{r.state} is redone ({', '.join(n.method + '()' for n in notifies(entering.step))})"
+            redone = ", ".join(f"{n.method}()" for n in notifies(entering.step))
+            what = f"{r.state} is redone ({redone})"
+            raised: tuple[str, ...]
             states, invokes, raised = (
                 leaves(g.chart, node.snapshot),
                 tuple((n.invoke, n.method) for n in notifies(entering.step)),

@@ -61,7 +61,7 @@ class CppImpl:
 
     def _answer(self) -> list[str]:
         assert self.proc.stdout is not None
-        lines = []
+        lines: list[str] = []
         while True:
             line = self.proc.stdout.readline()
             if not line:

@@ -41,10 +41,11 @@ class OpcuaImpl:
 
     def __init__(self, url: str, chart: Chart) -> None:
         try:
-            from asyncua import ua
+            from asyncua import ua as ua_module
             from asyncua.sync import Client
         except ImportError:
             raise StatectlError("opcua: needs asyncua (pip install 'statectl[opcua]')") from None
+        ua: Any = ua_module  # asyncua's names are generated: typed loosely
         self.ua = ua
         self.chart = chart
         self.order = {s.name: i for i, s in enumerate(chart.states)}
