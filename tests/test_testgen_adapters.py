@@ -75,32 +75,61 @@ def test_the_suite_passes_on_a_hand_written_class(tmp_path: Path) -> None:
 
 @pytest.mark.skipif(GXX is None, reason="no g++ on this machine")
 def test_the_suite_passes_on_the_generated_cpp(tmp_path: Path) -> None:
-    """The harness codegen --harness writes, compiled, passes; what needs a device behind
-    the API (faults, monitors, completions, restart) is skipped saying why."""
+    """The harness codegen --harness writes, compiled, passes: its twin reports the
+    completions and faults, its monitors poll; restart (no journal in C++) is skipped."""
     _, out, tests = _motor(tmp_path)
-    program = _harness(tmp_path)
+    program = _harness(tmp_path, MOTOR)
     result = run_pytest(out, "--statectl-impl", f"cpp:{program}", "-rs")
     assert result.returncode == 0, result.stdout[-3000:]
-    assert counts(result) == {"passed": tests - len(PROBES), "skipped": len(PROBES)}
-    assert "the C++ harness has no device to report a fault" in result.stdout
+    assert counts(result) == {"passed": tests - 2, "skipped": 2}
+    assert "the C++ harness keeps no journal to resume from" in result.stdout
 
 
-def _harness(tmp_path: Path) -> Path:
+def _harness(tmp_path: Path, tables: Path, work: str | None = None) -> Path:
+    """The harness of ``tables`` compiled; ``work``: its twin's seconds per call instead."""
     from statectl.channels.cli import main
 
     cpp = tmp_path / "cpp"
-    assert main(["codegen", str(MOTOR), "--out", str(cpp), "--harness"]) == 0
-    program = cpp / "motor_harness"
+    assert main(["codegen", str(tables), "--out", str(cpp), "--harness"]) == 0
+    source = cpp / f"{tables.stem}_harness.cpp"
+    if work is not None:
+        text = source.read_text(encoding="utf-8")
+        assert "kWork = 1.0;" in text
+        source.write_text(text.replace("kWork = 1.0;", f"kWork = {work};"), encoding="utf-8")
+    program = cpp / f"{tables.stem}_harness"
     flags = ["-std=c++17", "-Wall", "-Wextra", "-Wpedantic", "-Werror", "-fno-exceptions"]
     cmd = [GXX or "g++", *flags, "-fno-rtti", "-DSTATECTL_TRACE=1", "-I", str(cpp)]
     done = subprocess.run(
-        [*cmd, str(cpp / "motor_harness.cpp"), "-o", str(program)],
+        [*cmd, str(cpp / f"{tables.stem}_harness.cpp"), "-o", str(program)],
         capture_output=True,
         text=True,
         check=False,
     )
     assert done.returncode == 0, done.stderr
     return program
+
+
+@pytest.mark.skipif(GXX is None, reason="no g++ on this machine")
+def test_the_clamps_timeouts_run_on_the_cpp_harness(tmp_path: Path) -> None:
+    """A chart with a timeout and a deferred event: the harness ticks the device's timers."""
+    clamp = ROOT / "examples" / "clamp" / "clamp.yaml"
+    made = generate(clamp, "rows", tmp_path / "gen")
+    program = _harness(tmp_path, clamp)
+    result = run_pytest(tmp_path / "gen", "--statectl-impl", f"cpp:{program}")
+    assert result.returncode == 0, result.stdout[-3000:]
+    assert counts(result).get("passed") == made.tests + made.probes - counts(result).get(
+        "skipped", 0
+    )
+
+
+@pytest.mark.skipif(GXX is None, reason="no g++ on this machine")
+def test_a_cpp_twin_that_never_completes_fails(tmp_path: Path) -> None:
+    """The C++ harness built with the twin's work made endless: the completion test fails."""
+    _, out, _ = _motor(tmp_path)
+    program = _harness(tmp_path, MOTOR, work="1e9")
+    result = run_pytest(out, "--statectl-impl", f"cpp:{program}", "-k", "completion_01")
+    assert counts(result).get("failed") == 1, result.stdout[-3000:]
+    assert "expected the device to report Movement completion within 5 s" in result.stdout
 
 
 OPCUA_CONFTEST = '''

@@ -6,9 +6,10 @@ One process per test; each command's answer ends with ``done``.
 
 What the C++ shows: the states, the invokes issued, each API call (the generated API's
 methods take no arguments: a call's data is the event's, as the application passes it
-along) and why an event changed nothing. What it cannot do: time (the generated device
-has no device behind its API, so completions and faults come only when sent), fault
-injection, monitors, restart; the tests that need them are skipped saying so.
+along) and why an event changed nothing. Behind the API the harness has a small twin
+on a simulated clock: ``advance`` lets its completions come, its monitors poll and
+the device's timeouts fire; ``inject_fault`` gives the twin a fault. What it cannot
+do is restart (the C++ keeps no journal): the recovery tests are skipped, saying so.
 """
 
 from __future__ import annotations
@@ -78,16 +79,25 @@ class CppImpl:
         return tuple(sorted(found, key=lambda s: self.order.get(s, len(self.order))))
 
     def send(self, event: str, data: Any = None) -> Observed:
+        return self._observed(self._ask(f"send {event}"), event, data)
+
+    def _observed(self, answer: list[str], sent: str | None, data: Any) -> Observed:
         invokes: list[tuple[int, str]] = []
         calls: list[Call] = []
         unhandled: list[tuple[str, str]] = []
-        for line in self._ask(f"send {event}"):
+        events: list[str] = []
+        for line in answer:
             kind, _, rest = line.partition(" ")
-            if kind == "invoke":
+            if kind == "event":
+                if rest == sent and sent is not None:
+                    sent = None  # the event sent: not one the device took by itself
+                else:
+                    events.append(rest)
+            elif kind == "invoke":
                 n, _, method = rest.partition(" ")
                 invokes.append((int(n), method))
             elif kind == "api":
-                calls.append(Call(rest, data))
+                calls.append(Call(rest, data if not events else None))
             elif kind == "ignored":
                 name, _, reason = rest.rpartition(" (")
                 unhandled.append((name, reason.rstrip(")")))
@@ -97,23 +107,28 @@ class CppImpl:
             unhandled=unhandled[0][1] if unhandled else None,
             invokes=tuple(invokes),
             calls=tuple(calls),
+            events=tuple(events),
             unhandled_all=tuple(unhandled),
         )
 
     def advance(self, seconds: float) -> Observed:
-        raise Unsupported("the C++ harness has no device behind its API: nothing runs in time")
+        return self._observed(self._ask(f"advance {seconds!r}"), None, None)
 
     def inject_fault(self, detail: str) -> None:
-        raise Unsupported("the C++ harness has no device to report a fault")
+        self._ask(f"fault {detail}")
 
     def monitoring(self) -> Mapping[str, int]:
-        raise Unsupported("monitors are the application's in C++ (the device's entry/exit hooks)")
+        found = {}
+        for line in self._ask("monitors"):
+            state, _, polls = line.removeprefix("monitor ").rpartition(" ")
+            found[state] = int(polls)
+        return found
 
     def restart(self) -> Observed:
         raise Unsupported("the C++ harness keeps no journal to resume from")
 
     def stall(self) -> None:
-        raise Unsupported("the C++ harness has no device to silence")
+        self._ask("stall")
 
     def close(self) -> None:
         if self.proc.stdin is not None:
