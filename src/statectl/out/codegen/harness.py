@@ -249,7 +249,8 @@ int main() {
       stalled = true;
     } else if (std::strcmp(line, "monitors") == 0) {
       for (int m = 0; m < kMonitorCount; ++m) {
-        if (monitors[m].active) std::printf("monitor %s %d\n", kMonitors[m].state, monitors[m].polls);
+        const Monitor& on = monitors[m];
+        if (on.active) std::printf("monitor %s %d\n", kMonitors[m].state, on.polls);
       }
     } else if (std::strcmp(line, "states") == 0) {
       for (std::size_t s = 0; s < @NS@::kStateCount; ++s) {
