@@ -35,7 +35,7 @@ from statectl.out.testgen.adapters.runtime import Recorder, RuntimeImpl
 from statectl.out.testgen.coverage import Tally
 from statectl.run.runtime import ApiLogging, SimClock, Subject
 
-__all__ = ["COMPLETION_BOUND", "FAULT_BOUND", "DeviceUnderTest", "Recorder", "api_function"]
+__all__ = ["COMPLETION_BOUND", "FAULT_BOUND", "DeviceUnderTest", "api_function"]
 
 #: Seconds a device may take to report a completion when its state has no timeout.
 COMPLETION_BOUND = 5.0
