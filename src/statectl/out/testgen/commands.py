@@ -85,7 +85,8 @@ def _cell_testgen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         return OK
     made = generate_cell(args.file, args.criterion, args.out)
     for d in made.devices:
-        out.write(f"wrote {d.path}: {d.tests} tests, {d.steps} events sent\n")
+        more = f"; {d.probes} more through the implementation" if d.probes else ""
+        out.write(f"wrote {d.path}: {d.tests} tests, {d.steps} events sent{more}\n")
     out.write(f"wrote {made.links}: {len(made.cases)} link tests\n")
     for note in made.notes:
         out.write(f"note: {note}\n")

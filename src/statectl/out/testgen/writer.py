@@ -41,7 +41,8 @@ Regenerate: statectl testgen {source} --criterion {criterion} --out {out}
 {counts}
 The tests run on the simulated twin derived from the tables. To run them against
 another driver (a real device, a vendor's simulator), override the ``statectl_driver``
-fixture in a conftest.py; see docs/testing.md.{notes}
+fixture in a conftest.py; against another implementation (the generated C++, a device
+over OPC UA, a class of your own), give pytest --statectl-impl; see docs/testing.md.{notes}
 """
 
 from __future__ import annotations
