@@ -634,7 +634,7 @@ def test_coverage_of_a_test_run(tmp_path: Path, criterion: str, summary: str, ne
     """pytest --statectl-coverage writes what the tests exercised; coverage reads it (the
     criterion's own tests: the probes through the implementation take every row)."""
     generate(MOTOR, criterion, tmp_path)
-    probes = "not (fault or monitor or completion or recovery)"
+    probes = "not (test_fault or test_monitor or test_completion_ or test_recovery)"
     result = run_pytest(tmp_path, "--statectl-coverage", str(tmp_path / "cov.json"), "-k", probes)
     assert result.returncode == 0, result.stdout[-3000:]
     code, out, err = cli("coverage", str(tmp_path / "cov.json"), str(MOTOR))

@@ -11,11 +11,15 @@ Rules:
    temporary file), that run is closed as a crash would end it, and a System resumes
    from the journal with the tables' Recovery rows on another fresh driver; the
    resumed Subject is the device from then on.
+4. A driver whose device runs in wall time (``realtime``: a CiA 402 or Modbus bus)
+   gets the time too: ``advance`` waits that long on the wall clock, then moves the
+   simulated one (its reports, queued meanwhile, are taken then).
 """
 
 from __future__ import annotations
 
 import tempfile
+import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -134,6 +138,8 @@ class RuntimeImpl:
     def advance(self, seconds: float) -> Observed:
         self._mark()
         self.history.append(("advance", seconds))
+        if getattr(self.driver, "realtime", False):
+            time.sleep(seconds)  # rule 4: a bus in wall time needs the time to pass
         if self._system is not None:
             self._system.advance(seconds)
         else:
