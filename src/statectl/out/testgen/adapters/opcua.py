@@ -8,8 +8,10 @@ reached through ``HasSubStateMachine``).
 
 Rules:
 1. ``send`` calls the event's method (its data as the ``Data`` JSON input, or one typed
-   input per declared field); an event that is no method (a completion, a fault: the
-   device's own reports) cannot be sent, and its test is skipped saying so.
+   input per declared field). A completion is no method: the device reports it, so
+   ``send`` lets time run (at most :data:`WAIT` s) until the device took it; a fault,
+   or a completion the device does not report then, cannot be sent, and the test is
+   skipped saying so.
 2. ``advance`` is a bounded wall wait: the device runs on its own clock. The events it
    took meanwhile are read from the state change (the chart's transition from the
    states before to the states after).
@@ -28,12 +30,16 @@ from typing import Any
 from urllib.parse import unquote, urlparse
 
 from statectl.kernel.errors import StatectlError
-from statectl.kernel.model import Chart, StateKind
+from statectl.kernel.model import Chart, EventKind, StateKind
 from statectl.out.testgen.adapters import Observed, Unsupported
 
 __all__ = ["OpcuaImpl"]
 
 NAMESPACE = "urn:statectl"
+#: Seconds ``send`` waits for the device to report a completion it was asked to take.
+WAIT = 5.0
+#: The steps it waits in.
+STEP = 0.05
 
 
 class OpcuaImpl:
@@ -114,6 +120,8 @@ class OpcuaImpl:
 
     def send(self, event: str, data: Any = None) -> Observed:
         method = self.methods.get(event)
+        if method is None and self._kind(event) is EventKind.COMPLETION:
+            return self._await(event)
         if method is None:
             raise Unsupported(
                 f"{event} is no method of the OPC UA device: only its command events can be "
@@ -127,6 +135,25 @@ class OpcuaImpl:
         return Observed(
             unhandled=None if handled else (reason or "unhandled"),
             unhandled_all=() if handled else ((event, reason or "unhandled"),),
+        )
+
+    def _kind(self, event: str) -> EventKind | None:
+        return next((e.kind for e in self.chart.events if e.name == event), None)
+
+    def _await(self, event: str) -> Observed:
+        """Rule 1: let the device report ``event`` itself, within :data:`WAIT` seconds."""
+        waited, seen = 0.0, Observed()
+        while waited < WAIT:
+            seen = self.advance(STEP)
+            waited += STEP
+            if not seen.events:
+                continue
+            if seen.events[0] == event:
+                return Observed()
+            break
+        raise Unsupported(
+            f"{event} is no method of the OPC UA device: it is the device's to report, "
+            f"and it did not within {WAIT:g} s (it took {list(seen.events) or 'nothing'})"
         )
 
     def advance(self, seconds: float) -> Observed:
