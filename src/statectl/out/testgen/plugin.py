@@ -354,8 +354,10 @@ def statectl_device_factory(
     statectl_event_data: Mapping[str, Any],
     statectl_api: Mapping[str, str | None] | None,
     request: pytest.FixtureRequest,
+    statectl_impl: Callable[[Chart], Implementation | None],
 ) -> Callable[[], DeviceUnderTest]:
-    """Makes a new started device with a fresh driver each call (a Hypothesis example each)."""
+    """Makes a new started device with a fresh driver each call (a Hypothesis example each),
+    on the implementation ``--statectl-impl`` chooses."""
     chart = statectl_chart
     if chart is None:
         pytest.fail(
@@ -365,6 +367,9 @@ def statectl_device_factory(
         )
 
     def make() -> DeviceUnderTest:
+        impl = statectl_impl(chart)
+        if impl is not None:
+            request.addfinalizer(impl.close)
         return DeviceUnderTest(
             chart,
             statectl_new_driver(chart),
@@ -372,6 +377,7 @@ def statectl_device_factory(
             api=statectl_api,
             tally=_tally(request.config, chart),
             where=request.node.nodeid,
+            impl=impl,
         )
 
     return make
