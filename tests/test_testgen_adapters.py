@@ -383,3 +383,20 @@ def test_a_class_without_inject_fault_skips_the_fault_test() -> None:
 def test_load_class_names_what_is_missing() -> None:
     with pytest.raises(StatectlError, match="module 'json' has no 'Nothing'"):
         load_class("json:Nothing")
+
+
+def test_the_hypothesis_module_runs_on_another_implementation(tmp_path: Path) -> None:
+    """--statectl-impl chooses the Hypothesis module's devices too: the hand-written class
+    passes; with a stray API call it fails, naming the call."""
+    from statectl.out.testgen.generator import generate_hypothesis
+
+    generate_hypothesis(MOTOR, tmp_path)
+    shutil.copy(HAND, tmp_path / "hand_motor.py")
+    result = run_pytest(tmp_path, "--statectl-impl", "python:hand_motor:HandMotor")
+    assert counts(result) == {"passed": 1}, result.stdout[-3000:]
+    (tmp_path / "wrong_motor.py").write_text(
+        "from hand_motor import HandMotor\n" + textwrap.dedent(CLASSES[0][1]), encoding="utf-8"
+    )
+    result = run_pytest(tmp_path, "--statectl-impl", "python:wrong_motor:Wrong")
+    assert counts(result) == {"failed": 1}, result.stdout[-3000:]
+    assert "stray API call Error()" in result.stdout
