@@ -144,6 +144,12 @@ def _add_device_commands(sub: Any) -> None:
     s.add_argument("--target", default="cpp", help="code generation target (cpp)")
     s.add_argument("--out", required=True, help="output directory")
     s.add_argument("--progress", action="store_true", help="show progress even when piped")
+    s.add_argument(
+        "--harness",
+        action="store_true",
+        help="also write DEVICE_harness.cpp, the program testgen's suites drive "
+        "(pytest --statectl-impl cpp:PROGRAM)",
+    )
     s.set_defaults(func=cmd_codegen)
 
 

@@ -15,7 +15,14 @@ from statectl.out.codegen.cpp import generate
 
 
 def run_codegen(
-    path: str, out_dir: str, target: str, out: TextIO, err: TextIO, progress: bool | None = None
+    path: str,
+    out_dir: str,
+    target: str,
+    out: TextIO,
+    err: TextIO,
+    progress: bool | None = None,
+    *,
+    harness: bool = False,
 ) -> int:
     """``statectl codegen FILE --target cpp --out DIR``: 0 written, 1 diagnostics, 2 usage."""
     if target != "cpp":
@@ -41,7 +48,7 @@ def run_codegen(
     show = err.isatty() if progress is None else progress  # as verify --progress
     printer = CountProgress("codegen", "configurations stepped", err) if show else None
     with output(out_dir, directory=True) as folder:  # cli/outputs.py: the one output rule
-        written, gen_diags = generate(chart, str(folder), printer)
+        written, gen_diags = generate(chart, str(folder), printer, harness=harness)
     if printer is not None:
         printer.done()
     for d in (*diags, *gen_diags):

@@ -254,7 +254,7 @@ def cmd_codegen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     from statectl.channels.cli.codegen import run_codegen
 
     progress = True if args.progress else None
-    return run_codegen(args.file, args.out, args.target, out, err, progress)
+    return run_codegen(args.file, args.out, args.target, out, err, progress, harness=args.harness)
 
 
 def cmd_verify(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:

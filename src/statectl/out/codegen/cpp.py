@@ -39,6 +39,7 @@ from statectl.out.codegen.cpp_names import identifiers
 from statectl.out.codegen.cpp_rows import DENSE_CELLS
 from statectl.out.codegen.flat import FlatChart
 from statectl.out.codegen.flatten import flatten
+from statectl.out.codegen.harness import harness_source
 
 __all__ = ["RUNTIME_HEADERS", "generate", "render"]
 
@@ -151,16 +152,23 @@ def generate(
     chart: Chart,
     out_dir: str | os.PathLike[str],
     progress: Callable[[int, int], None] | None = None,
+    *,
+    harness: bool = False,
 ) -> tuple[list[Path], list[Diagnostic]]:
     """Write the device header, the runtime and a CMake target to ``out_dir``.
 
     Returns the written paths and every diagnostic; with an error nothing is written.
-    ``progress``: see :func:`~statectl.out.codegen.flatten.flatten`.
+    ``progress``: see :func:`~statectl.out.codegen.flatten.flatten`. ``harness``: also
+    ``<device>_harness.cpp``, the program testgen's suites drive
+    (:mod:`statectl.out.codegen.harness`).
     """
     flat, diags = flatten(chart, progress)
     if flat is None or has_errors(diags):
         return [], diags
     texts = {**render(flat), **runtime_files()}
+    if harness:
+        base = identifiers([chart.name], lower=True)[chart.name]
+        texts[f"{base}_harness.cpp"] = harness_source(flat)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         where = Location(str(out))

@@ -13,12 +13,13 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from statectl.out.testgen.adapters.runtime import Recorder
     from statectl.out.testgen.cases import CRITERIA, Case, Expect, Suite, Table, cases_for
     from statectl.out.testgen.cellgen import generate_cell
     from statectl.out.testgen.cellharness import CellUnderTest
     from statectl.out.testgen.coverage import Coverage, journal_coverage
     from statectl.out.testgen.generator import Generated, generate
-    from statectl.out.testgen.harness import DeviceUnderTest, Recorder
+    from statectl.out.testgen.harness import DeviceUnderTest
     from statectl.out.testgen.oracle import Specification
     from statectl.out.testgen.paths import Graph, explore
 
@@ -56,7 +57,7 @@ _WHERE = {
     "Generated": "generator",
     "generate": "generator",
     "DeviceUnderTest": "harness",
-    "Recorder": "harness",
+    "Recorder": "adapters.runtime",
     "Specification": "oracle",
     "Graph": "paths",
     "explore": "paths",

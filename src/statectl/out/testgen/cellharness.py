@@ -28,7 +28,8 @@ from statectl.kernel.errors import StatectlError
 from statectl.kernel.model import ControlKind, EventKind, StateKind
 from statectl.kernel.semantics import Snapshot, Unhandled
 from statectl.kernel.semantics import step as kernel_step
-from statectl.out.testgen.harness import Recorder, api_function
+from statectl.out.testgen.adapters.runtime import Recorder
+from statectl.out.testgen.harness import api_function
 from statectl.run.devices import SimTwin
 from statectl.run.runtime import (
     EventIgnored,

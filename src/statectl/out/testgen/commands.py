@@ -49,7 +49,8 @@ def cmd_testgen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         printer.done()
     out.write(
         f"wrote {made.path}: {made.tests} tests ({len(made.suite.cases)} cases, "
-        f"{len(made.suite.tables)} unhandled-event tables), {made.steps} events sent\n"
+        f"{len(made.suite.tables)} unhandled-event tables), {made.steps} events sent"
+        + (f"; {made.probes} more through the implementation\n" if made.probes else "\n")
     )
     for note in made.suite.notes:
         out.write(f"note: {note}\n")
@@ -84,7 +85,8 @@ def _cell_testgen(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         return OK
     made = generate_cell(args.file, args.criterion, args.out)
     for d in made.devices:
-        out.write(f"wrote {d.path}: {d.tests} tests, {d.steps} events sent\n")
+        more = f"; {d.probes} more through the implementation" if d.probes else ""
+        out.write(f"wrote {d.path}: {d.tests} tests, {d.steps} events sent{more}\n")
     out.write(f"wrote {made.links}: {len(made.cases)} link tests\n")
     for note in made.notes:
         out.write(f"note: {note}\n")

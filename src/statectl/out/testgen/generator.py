@@ -3,17 +3,19 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from statectl.front.builder.build import load_chart
-from statectl.front.tables import write_files
+from statectl.front.tables import RecoveryRow, write_files
+from statectl.front.tables import load as load_tables
 from statectl.kernel.errors import DiagnosticError, StatectlError
 from statectl.out.escape.python import NAME_LIMIT, identifier
 from statectl.out.testgen.cases import CRITERIA, Suite, cases_for, count_steps
 from statectl.out.testgen.compact import is_big
 from statectl.out.testgen.graphwalker import graphwalker_model
 from statectl.out.testgen.paths import MAX_NODES, explore
+from statectl.out.testgen.probes import probes_for
 from statectl.out.testgen.writer import hypothesis_text, module_text, tests_in
 from statectl.out.testgen.xstate import xstate_config
 
@@ -33,6 +35,9 @@ class Generated:
     suite: Suite
     tests: int  # test functions plus the rows of the parametrised tables
     steps: int  # events sent by all tests together
+    #: tests through the implementation (faults, monitors, completions, recovery): the same
+    #: for every criterion, so not in ``tests`` nor ``steps``
+    probes: int = 0
 
 
 def module_name(device: str, criterion: str) -> str:
@@ -92,13 +97,37 @@ def generate(
         raise StatectlError(f"unknown criterion {criterion!r}; choose one of {', '.join(CRITERIA)}")
     source = Path(file)
     chart = load_chart(source)
-    suite = cases_for(explore(chart, max_nodes=max_nodes, progress=progress), criterion)
+    graph = explore(chart, max_nodes=max_nodes, progress=progress)
+    suite = cases_for(graph, criterion)
+    probes, notes = probes_for(graph, _recovery_rows(source), _unused(suite))
+    suite = replace(suite, notes=(*suite.notes, *notes))
     out = Path(out_dir)
     path = out / module_name(chart.name, criterion)
-    write_atomic(path, module_text(suite, chart.name, source, out, str(file)))
+    text = module_text(suite, chart.name, source, out, str(file), probes=tuple(probes))
+    write_atomic(path, text)
     big = is_big(suite)
     tests = tests_in(suite, big)
     steps = count_steps(suite.cases) + sum(
         len(t.given) + t.count if big else (len(t.given) + 1) * t.count for t in suite.tables
     )
-    return Generated(path, suite, tests, steps)
+    return Generated(path, suite, tests, steps, len(probes))
+
+
+def _recovery_rows(source: Path) -> tuple[RecoveryRow, ...]:
+    """The device file's Recovery rows (its chart loaded already, so the file loads)."""
+    tables, _ = load_tables(source)
+    return tuple(tables.recovery) if tables is not None else ()
+
+
+def _unused(suite: Suite) -> Callable[[str], str]:
+    """Names for the probes that no case of ``suite`` has taken."""
+    used = {c.name for c in suite.cases} | {t.name for t in suite.tables}
+
+    def name(base: str) -> str:
+        found, n = base[:90], 2
+        while found in used:
+            found, n = f"{base[:86]}_{n}", n + 1
+        used.add(found)
+        return found
+
+    return name

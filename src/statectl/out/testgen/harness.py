@@ -1,59 +1,49 @@
-"""The device under test: a Subject on a SimClock wired to a driver, with a recorder.
+"""The device under test: an implementation of the tables, checked event by event.
 
 Rules:
-1. The Subject runs the chart (the kernel decides); the driver is whatever the
-   test was given, the tables' simulated twin by default. Time stands still
-   unless the test calls :meth:`DeviceUnderTest.advance`, so nothing the driver
-   schedules on the clock (its completions, its monitors' polls) happens behind
-   the test's back.
-2. :meth:`DeviceUnderTest.send` processes one event and keeps the records it
-   produced; :meth:`DeviceUnderTest.expect` compares them with the tables: the
-   states reached, the invoke numbers issued and their observer methods, the
-   device API the driver called for each (``api``: observer method -> API
-   function; by default the driver's own ``methods`` table, else the method's
-   name as the twin calls it), or why the event changed nothing and that the
-   driver was not called.
-3. Every failure says what was sent, what was expected and what happened.
+1. The implementation is whatever the test was given (:mod:`.adapters`): statectl's
+   runtime with the test's driver by default (the tables' simulated twin unless told
+   otherwise; time stands still until :meth:`DeviceUnderTest.advance`), the generated
+   C++, a device over OPC UA or a hand-written class.
+2. :meth:`DeviceUnderTest.send` processes one event and keeps what the implementation
+   showed; :meth:`DeviceUnderTest.expect` compares it with the tables: the states
+   reached, the invoke numbers issued and their observer methods, the device API calls
+   made (the observer methods the tables notify, with the event's data as arguments,
+   in order: a stray call or a wrong argument fails naming it), on the runtime also the
+   driver's own API function for each (``api``: observer method -> function; by
+   default the driver's ``methods`` table), or why the event changed nothing.
+3. Faults, monitors and completions go through the implementation: :meth:`fault` has
+   the device report a fault that its monitor must raise, :meth:`assert_monitored`
+   checks a monitor polls, :meth:`complete` lets time run until the device reports a
+   completion (within a bound), :meth:`restart` stops and resumes the device.
+4. Every failure says what was sent, what was expected and what happened. A test
+   needing what the implementation cannot do (restart a C++ harness) is skipped, saying so.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
-from typing import Any
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import Any, NoReturn
 
 from statectl.front.observers import Observer
+from statectl.front.tables import RecoveryRow
 from statectl.kernel.model import Chart, Notify, StateKind
 from statectl.kernel.semantics import Outcome, Unhandled
 from statectl.kernel.semantics import step as kernel_step
+from statectl.out.testgen.adapters import Call, Implementation, Observed, Unsupported
+from statectl.out.testgen.adapters.runtime import Recorder, RuntimeImpl
 from statectl.out.testgen.coverage import Tally
-from statectl.run.devices import SimTwin, connect
-from statectl.run.devices.base import Driver
-from statectl.run.runtime import (
-    ApiLogging,
-    EventIgnored,
-    EventRejected,
-    InvokeIssued,
-    ObserverCalled,
-    Record,
-    SimClock,
-    Subject,
-)
+from statectl.run.runtime import ApiLogging, SimClock, Subject
 
-__all__ = ["DeviceUnderTest", "Recorder", "api_function"]
+__all__ = ["COMPLETION_BOUND", "FAULT_BOUND", "DeviceUnderTest", "api_function"]
 
-
-class Recorder:
-    """Keeps every record the Subject emits, and marks where the last event began."""
-
-    def __init__(self) -> None:
-        self.records: list[Record] = []
-        self.mark = 0
-
-    def __call__(self, record: Record) -> None:
-        self.records.append(record)
-
-    def since_mark(self) -> list[Record]:
-        return self.records[self.mark :]
+#: Seconds a device may take to report a completion when its state has no timeout.
+COMPLETION_BOUND = 5.0
+#: Seconds a monitor may take to raise a fault the device reported (five polls of the
+#: runtime's default period; shorter than the twin's 1 s work, so its completion comes after).
+FAULT_BOUND = 0.5
+#: The step time runs in while a test waits for a completion, a fault or a poll.
+TICK = 0.05
 
 
 def api_function(call: str) -> str:
@@ -68,8 +58,30 @@ def _default_api(driver: Observer) -> dict[str, str] | None:
     return None
 
 
+def _merge(a: Observed, b: Observed) -> Observed:
+    """What two stretches showed together (an event, then time run on)."""
+
+    def both(x: tuple[Any, ...] | None, y: tuple[Any, ...] | None) -> tuple[Any, ...] | None:
+        return None if x is None or y is None else (*x, *y)
+
+    return Observed(
+        a.unhandled if a.unhandled is not None else b.unhandled,
+        both(a.invokes, b.invokes),
+        both(a.calls, b.calls),
+        (*a.events, *b.events),
+        (*a.unhandled_all, *b.unhandled_all),
+        both(a.driver_calls, b.driver_calls),
+    )
+
+
+def _skip(why: Unsupported) -> NoReturn:
+    import pytest  # only ever under pytest: the plugin's fixtures make these devices
+
+    pytest.skip(f"the implementation under test cannot do this: {why}")
+
+
 class DeviceUnderTest:
-    """A started device whose every event is checked against what its tables say."""
+    """A started implementation whose every event is checked against what its tables say."""
 
     def __init__(
         self,
@@ -82,26 +94,62 @@ class DeviceUnderTest:
         strict: bool = False,
         tally: Tally | None = None,
         where: str = "",
+        impl: Implementation | None = None,
+        new_driver: Callable[[Chart], Any] | None = None,
+        recovery: tuple[RecoveryRow, ...] = (),
+        completion_bound: float = COMPLETION_BOUND,
     ) -> None:
         self.chart = chart
         self.strict = strict
-        self.clock = SimClock()
-        self.subject = Subject(chart, clock=self.clock, data=data)
-        self.driver: Observer = driver if driver is not None else SimTwin(chart)
+        self.completion_bound = completion_bound
+        self.runtime: RuntimeImpl | None = None
+        if impl is None:
+            self.runtime = RuntimeImpl(
+                chart, driver, data=data, new_driver=new_driver, recovery=recovery
+            )
+            impl = self.runtime
+        self.impl: Implementation = impl
         self.event_data = dict(event_data or {})
-        given = _default_api(self.driver) if api is None else dict(api)
-        self.api: Mapping[str, str | None] | None = given
-        self.recorder = Recorder()
-        self.subject.listen(self.recorder)
-        if hasattr(self.driver, "bind") and hasattr(self.driver, "poll_fault"):
-            connect(self.subject, self.driver)  # type: ignore[arg-type]  # a DeviceDriver
+        if self.runtime is not None:
+            given = _default_api(self.runtime.driver) if api is None else dict(api)
         else:
-            self.subject.attach(self.driver)  # a plain observer: no monitors to poll it
+            given = dict(api) if api is not None else None
+        self.api: Mapping[str, str | None] | None = given
         self.sent: list[str] = []
-        self.dropped: list[str] = []  # what the driver reported after stall()
-        self.subject.start()
-        if tally is not None:
-            self._count(tally, where)
+        self._seen = Observed(invokes=(), calls=(), driver_calls=())
+        self._data: Any = None  # the data of the last event sent: the API calls' arguments
+        self._data_known = False
+        if self.runtime is not None:
+            self.runtime.start()
+            if tally is not None:
+                self._count(tally, where)
+
+    # -- the runtime's parts (tests written for the runtime reach them) ----------------------
+
+    @property
+    def subject(self) -> Subject:
+        return self._runtime().subject
+
+    @property
+    def recorder(self) -> Recorder:
+        return self._runtime().recorder
+
+    @property
+    def clock(self) -> SimClock:
+        return self._runtime().clock
+
+    @property
+    def driver(self) -> Observer:
+        return self._runtime().driver
+
+    @property
+    def dropped(self) -> list[str]:
+        return self._runtime().dropped
+
+    def _runtime(self) -> RuntimeImpl:
+        if self.runtime is None:
+            raise AttributeError(f"{type(self.impl).__name__} is not statectl's runtime")
+        return self.runtime
 
     def _count(self, tally: Tally, where: str) -> None:
         """Tell ``tally`` every step the device takes (the plugin's --statectl-coverage)."""
@@ -127,12 +175,7 @@ class DeviceUnderTest:
     @property
     def states(self) -> tuple[str, ...]:
         """The active atomic states in document order: the state reached."""
-        m = self.subject.machine
-        return tuple(
-            s
-            for s in sorted(self.subject.configuration, key=m.order.__getitem__)
-            if m.kind[s] in (StateKind.ATOMIC, StateKind.FINAL)
-        )
+        return tuple(self.impl.states())
 
     def send(self, event: str, data: Any = None) -> None:
         """Process ``event`` (with ``data``, else ``event_data[event]``) to completion.
@@ -141,17 +184,16 @@ class DeviceUnderTest:
         nor declare it ignored (the kernel's ``no transition``) fails at once.
         """
         __tracebackhide__ = True
-        self.recorder.mark = len(self.recorder.records)
         before = self.states
         self.sent.append(event)
-        self.subject.dispatch(event, data if data is not None else self.event_data.get(event))
+        value = data if data is not None else self.event_data.get(event)
+        self._data, self._data_known = value, True
+        try:
+            self._seen = self.impl.send(event, value)
+        except Unsupported as why:
+            _skip(why)
         if self.strict:
-            missed = [
-                r.event
-                for r in self.recorder.since_mark()
-                if isinstance(r, EventIgnored | EventRejected)
-                and r.reason is Unhandled.NO_TRANSITION
-            ]
+            missed = [e for e, r in self._seen.unhandled_all if r == Unhandled.NO_TRANSITION.value]
             if missed:
                 raise AssertionError(
                     f"{self._path()}: {', '.join(missed)} in {list(before)} is a pair the tables "
@@ -173,7 +215,8 @@ class DeviceUnderTest:
                     f"{self._path()}: {e!r} was not handled in the path to the case "
                     f"({reason}); the device is in {list(self.states)}"
                 )
-            problems = self._check_calls(self._issued())
+            issued = self._issued()
+            problems = self._check_calls(issued) if issued is not None else []
             if problems:
                 raise AssertionError(f"{self._path()}: " + "; ".join(problems))
 
@@ -185,6 +228,8 @@ class DeviceUnderTest:
         the driver's API calls are checked), or the reason nothing happened.
         """
         __tracebackhide__ = True
+        if self.runtime is None:
+            _skip(Unsupported("step() follows the runtime's snapshot; use send and expect"))
         before = self.subject.snapshot
         value = data if data is not None else self.event_data.get(event)
         if before is None or event not in self.subject.machine.event_names:
@@ -204,24 +249,118 @@ class DeviceUnderTest:
         )
 
     def advance(self, seconds: float) -> int:
-        """Move the simulated clock on (the driver's completions and monitors run)."""
-        return self.subject.advance(seconds)
+        """Let time run (the driver's completions and monitors run); what happens meanwhile
+        counts with the last event's outcome. Returns the events the device took."""
+        try:
+            seen = self.impl.advance(seconds)
+        except Unsupported as why:
+            _skip(why)
+        self._seen = _merge(self._seen, seen)
+        return len(seen.events)
 
     def wait(self, seconds: float) -> int:
-        """Move the clock on, and check what happened meanwhile with :meth:`expect`
+        """Let time run, and check what happened meanwhile with :meth:`expect`
         (a timeout's transition: what the device did without being sent anything)."""
-        self.recorder.mark = len(self.recorder.records)
         self.sent.append(f"(wait {seconds:g} s)")
-        return self.subject.advance(seconds)
+        self._data_known = False
+        try:
+            self._seen = self.impl.advance(seconds)
+        except Unsupported as why:
+            _skip(why)
+        return len(self._seen.events)
 
     def stall(self) -> None:
         """From now on the driver's own reports (its completions) are dropped, as from a
         device that went silent: a state's timeout can then run out in a test."""
-        if isinstance(self.driver, Driver) and self.driver._clock is not None:
-            Driver.bind(self.driver, self._drop, self.driver._clock)
+        try:
+            self.impl.stall()
+        except Unsupported as why:
+            _skip(why)
 
-    def _drop(self, event: str, data: Any = None) -> None:
-        self.dropped.append(event)
+    def _run_until(self, within: float, done: Callable[[Observed], bool]) -> float:
+        """Let time run a tick at a time until ``done`` or ``within`` seconds passed."""
+        self._data_known = False
+        seen = Observed(invokes=(), calls=(), driver_calls=())
+        waited = 0.0
+        while waited < within - 1e-9 and not done(seen):
+            tick = min(TICK, within - waited)
+            try:
+                seen = _merge(seen, self.impl.advance(tick))
+            except Unsupported as why:
+                _skip(why)
+            waited += tick
+        self._seen = seen
+        return waited
+
+    def fault(
+        self, detail: str = "fault injected by statectl testgen", within: float = FAULT_BOUND
+    ) -> None:
+        """Have the device report a fault, then let time run until its monitor raised an
+        event or ``within`` seconds passed; :meth:`expect` checks what followed."""
+        self.sent.append("(device fault)")
+        try:
+            self.impl.inject_fault(detail)
+        except Unsupported as why:
+            _skip(why)
+        self._run_until(within, lambda seen: bool(seen.events))
+
+    def complete(self, event: str, within: float | None = None) -> None:
+        """Let time run until the device reports ``event`` (a completion): within ``within``
+        seconds (the state's timeout), else the suite's completion bound."""
+        __tracebackhide__ = True
+        bound = self.completion_bound if within is None else within
+        self.sent.append(f"(until {event})")
+        waited = self._run_until(bound, lambda seen: bool(seen.events))
+        got = self._seen.events
+        if not got or got[0] != event:
+            found = f"it reported {list(got)} first" if got else "it reported nothing"
+            raise AssertionError(
+                f"{self._path()}: expected the device to report {event} within {bound:g} s; "
+                f"{found} (waited {waited:g} s); the device is in {list(self.states)}"
+            )
+
+    def assert_monitored(self, state: str, polls: int = 2, within: float = FAULT_BOUND) -> None:
+        """A monitor runs in ``state`` and polls ``polls`` times, raising nothing while the
+        device reports no fault."""
+        __tracebackhide__ = True
+        try:
+            before = self.impl.monitoring()
+        except Unsupported as why:
+            _skip(why)
+        if state not in before:
+            raise AssertionError(
+                f"{self._path()}: {state} requires monitoring, but no monitor runs there "
+                f"(monitored: {sorted(before) or 'none'})"
+            )
+        start = before[state]
+
+        def polled(seen: Observed) -> bool:
+            return bool(seen.events) or self.impl.monitoring().get(state, 0) - start >= polls
+
+        self.sent.append(f"(monitor {state})")
+        self._run_until(within, polled)
+        if self._seen.events:
+            raise AssertionError(
+                f"{self._path()}: with no fault reported, the device raised "
+                f"{list(self._seen.events)} in {state}; its fault check reports a fault it does "
+                "not have"
+            )
+        done = self.impl.monitoring().get(state, 0) - start
+        if done < polls:
+            raise AssertionError(
+                f"{self._path()}: the monitor of {state} polled {done} time(s) in {within:g} s, "
+                f"expected {polls}"
+            )
+
+    def restart(self) -> None:
+        """Stop the device as a power loss would and resume it from what it persisted;
+        :meth:`expect` checks what resuming did (the Recovery table's row)."""
+        self.sent.append("(restart)")
+        self._data_known = False
+        try:
+            self._seen = self.impl.restart()
+        except Unsupported as why:
+            _skip(why)
 
     # -- checking ------------------------------------------------------------------------------
 
@@ -238,30 +377,30 @@ class DeviceUnderTest:
         """The last event made the driver call ``name``: an API function or observer method."""
         __tracebackhide__ = True
         called = self._called()
-        if not any(name in (m, api_function(api)) for m, api in called):
-            shown = [api for _, api in called] or "nothing"
+        calls = [c.method for c in self._seen.calls or ()]
+        if not any(name in (m, api_function(api)) for m, api in called) and name not in calls:
+            shown = [api for _, api in called] or [str(c) for c in self._seen.calls or ()]
             raise AssertionError(
-                f"{self._path()}: expected the driver to call {name}(), it called {shown}"
+                f"{self._path()}: expected the driver to call {name}(), it called "
+                f"{shown or 'nothing'}"
             )
 
     def _path(self) -> str:
         return "after " + (" -> ".join(self.sent) if self.sent else "the start")
 
     def _unhandled(self) -> str | None:
-        for r in self.recorder.since_mark():
-            if isinstance(r, EventIgnored | EventRejected):
-                return r.reason.value
+        return self._seen.unhandled
+
+    def _issued(self) -> list[tuple[int, str]] | None:
+        invokes = self._seen.invokes
+        if invokes is not None:
+            return list(invokes)
+        if self._seen.calls is not None:
+            return [(-1, c.method) for c in self._seen.calls]
         return None
 
-    def _issued(self) -> list[tuple[int, str]]:
-        return [
-            (r.invoke, r.method) for r in self.recorder.since_mark() if isinstance(r, InvokeIssued)
-        ]
-
     def _called(self) -> list[tuple[str, str]]:
-        return [
-            (r.method, r.api) for r in self.recorder.since_mark() if isinstance(r, ObserverCalled)
-        ]
+        return list(self._seen.driver_calls or ())
 
     def expect(
         self,
@@ -269,32 +408,56 @@ class DeviceUnderTest:
         states: Sequence[str],
         invokes: Iterable[Sequence[Any]] = (),
         unhandled: str | None = None,
+        raised: Sequence[str] | None = None,
     ) -> None:
-        """Compare the last event's outcome with the tables' (rule 2)."""
+        """Compare the last event's outcome with the tables' (rule 2); ``raised``: the
+        events the device took by itself (a fault its monitor raised, a completion)."""
         __tracebackhide__ = True
+        seen = self._seen
         problems: list[str] = []
         if tuple(states) != self.states:
             problems.append(f"state: expected {list(states)}, device is in {list(self.states)}")
-        reason = self._unhandled()
-        if reason != unhandled:
+        reason = seen.unhandled
+        if reason != unhandled and not (reason == "unhandled" and unhandled is not None):
             want = f"unhandled ({unhandled})" if unhandled else "handled"
             got = f"unhandled ({reason})" if reason else "handled"
             problems.append(f"outcome: expected {want}, it was {got}")
+        if raised is not None and list(seen.events) != list(raised):
+            problems.append(f"raised: expected {list(raised)}, the device took {list(seen.events)}")
         wanted = [(int(n), str(m)) for n, m in invokes]
-        issued = self._issued()
-        if issued != wanted:
-            problems.append(f"invokes: expected {wanted}, issued {issued}")
+        if seen.invokes is not None and list(seen.invokes) != wanted:
+            problems.append(f"invokes: expected {wanted}, issued {list(seen.invokes)}")
+        problems += self._check_api(wanted)
         problems += self._check_calls(wanted)
         if problems:
             raise AssertionError(f"{self._path()}: " + "; ".join(problems))
 
+    def _check_api(self, wanted: list[tuple[int, str]]) -> list[str]:
+        """Rule 2: the API calls made are the tables' notifications, in order, with the
+        event's data as their arguments; a stray or a wrong one is named."""
+        made = self._seen.calls
+        if made is None:
+            return []
+        problems = []
+        expected = [Call(m, self._data) for _, m in wanted]
+        for i, call in enumerate(made):
+            if i >= len(expected):
+                problems.append(f"stray API call {call}: the tables make no such call here")
+            elif call.method != expected[i].method:
+                problems.append(f"API call {i + 1}: expected {expected[i].method}(), made {call}")
+            elif self._data_known and call.data != expected[i].data:
+                problems.append(f"API call {call}: wrong argument, the tables give {expected[i]}")
+        problems += [f"{c.method}(): no API call made" for c in expected[len(made) :]]
+        return problems
+
     def _check_calls(self, wanted: list[tuple[int, str]]) -> list[str]:
+        """The runtime's driver called its own API function for each notification."""
         called = self._called()
         if not wanted:
             if called:
                 return [f"the driver was called though nothing was notified: {called}"]
             return []
-        if not isinstance(self.driver, ApiLogging):
+        if self.runtime is None or not isinstance(self.runtime.driver, ApiLogging):
             return []  # a plain observer: the Subject notes update(#n), nothing to compare
         problems = []
         for _, method in wanted:

@@ -26,6 +26,11 @@ these fixtures available to every test suite; generated modules use nothing else
   (:class:`~statectl.out.testgen.oracle.Specification`): the Hypothesis module's
   oracle. It reads the file itself, so a ``statectl_chart`` override (the chart the
   implementation runs) does not change it.
+- ``--statectl-impl SPEC`` / ``statectl_impl``: the implementation under test
+  (:mod:`statectl.out.testgen.adapters`): ``runtime`` (default), ``cpp:PROGRAM``,
+  ``opcua:URL`` or ``python:MODULE:CLASS``; ``statectl_completion_bound`` the seconds a
+  completion may take where its state has no timeout; ``statectl_recovery`` the
+  Recovery rows of the tables (what the runtime resumes with).
 - ``statectl_cell``: a started :class:`~statectl.out.testgen.cellharness.CellUnderTest`,
   the devices of the module's ``STATECTL_CELL`` on one System with the cell's links
   (``send(device, event)``, ``given``, ``expect``, ``advance``, ``assert_state``,
@@ -45,13 +50,16 @@ import pytest
 
 from statectl.cell.model import Cell, load_cell
 from statectl.front.builder.build import load_chart
+from statectl.front.tables import RecoveryRow
+from statectl.front.tables import load as load_tables
 from statectl.front.tables.csv_io import input_exists
-from statectl.kernel.errors import DiagnosticError, Severity
+from statectl.kernel.errors import DiagnosticError, Severity, StatectlError
 from statectl.kernel.model import Chart
+from statectl.out.testgen.adapters import Implementation, parse_spec
 from statectl.out.testgen.cellharness import CellUnderTest
 from statectl.out.testgen.coverage import Tally
 from statectl.out.testgen.generator import write_atomic
-from statectl.out.testgen.harness import DeviceUnderTest
+from statectl.out.testgen.harness import COMPLETION_BOUND, DeviceUnderTest
 from statectl.out.testgen.oracle import Specification
 from statectl.run.runtime import Record
 
@@ -68,12 +76,15 @@ __all__ = [
     "statectl_cell_model",
     "statectl_cell_new_drivers",
     "statectl_chart",
+    "statectl_completion_bound",
     "statectl_device",
     "statectl_device_factory",
     "statectl_driver",
     "statectl_event_data",
+    "statectl_impl",
     "statectl_new_driver",
     "statectl_recorder",
+    "statectl_recovery",
     "statectl_spec",
 ]
 
@@ -89,6 +100,14 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         default=None,
         help="write which rows, states and transitions the statectl devices of this run "
         "exercised, as JSON for `statectl coverage PATH FILE`",
+    )
+    parser.getgroup("statectl").addoption(
+        "--statectl-impl",
+        metavar="SPEC",
+        default="runtime",
+        help="the implementation the generated tests check: runtime (statectl's, with the "
+        "driver of the fixtures; default), cpp:PROGRAM (a harness statectl codegen "
+        "--harness wrote), opcua:opc.tcp://HOST:PORT, python:MODULE:CLASS",
     )
 
 
@@ -238,12 +257,64 @@ def statectl_api() -> Mapping[str, str | None] | None:
 
 
 @pytest.fixture
+def statectl_impl(request: pytest.FixtureRequest) -> Callable[[Chart], Implementation | None]:
+    """Makes the implementation under test for a chart; ``None`` is statectl's runtime
+    with the fixtures' driver. Chosen by ``--statectl-impl`` (override it to choose in code)."""
+    spec = request.config.getoption("statectl_impl", "runtime") or "runtime"
+    try:
+        kind, rest = parse_spec(spec)
+    except StatectlError as exc:
+        pytest.fail(str(exc), pytrace=False)
+    return lambda chart: _make_impl(kind, rest, chart)
+
+
+def _make_impl(kind: str, rest: str, chart: Chart) -> Implementation | None:
+    """The adapter of one ``--statectl-impl`` spec (imported only when chosen)."""
+    try:
+        if kind == "python":
+            from statectl.out.testgen.adapters.python import PythonImpl, load_class
+
+            return PythonImpl(load_class(rest))
+        if kind == "cpp":
+            from statectl.out.testgen.adapters.cpp import CppImpl
+
+            return CppImpl(rest, chart)
+        if kind == "opcua":
+            from statectl.out.testgen.adapters.opcua import OpcuaImpl
+
+            return OpcuaImpl(rest, chart)
+    except StatectlError as exc:
+        pytest.fail(f"--statectl-impl {kind}:{rest}: {exc}", pytrace=False)
+    return None
+
+
+@pytest.fixture
+def statectl_completion_bound() -> float:
+    """Seconds a device may take to report a completion where its state has no timeout."""
+    return COMPLETION_BOUND
+
+
+@pytest.fixture(scope="module")
+def statectl_recovery(request: pytest.FixtureRequest) -> tuple[RecoveryRow, ...]:
+    """The Recovery rows of the module's ``STATECTL_TABLES`` (none without it)."""
+    tables = _module_path(request, "STATECTL_TABLES", "the device file's path")
+    if tables is None:
+        return ()
+    loaded, _ = load_tables(_beside(request, tables, "STATECTL_TABLES"))
+    return tuple(loaded.recovery) if loaded is not None else ()
+
+
+@pytest.fixture
 def statectl_device(
     request: pytest.FixtureRequest,
     statectl_chart: Chart | None,
     statectl_driver: Any,
     statectl_event_data: Mapping[str, Any],
     statectl_api: Mapping[str, str | None] | None,
+    statectl_impl: Callable[[Chart], Implementation | None],
+    statectl_new_driver: Callable[[Chart], Any],
+    statectl_recovery: tuple[RecoveryRow, ...],
+    statectl_completion_bound: float,
 ) -> DeviceUnderTest | DeviceMaker:
     """A started device on a simulated clock, wired to the driver under test.
 
@@ -254,7 +325,10 @@ def statectl_device(
         return DeviceMaker(request, statectl_event_data, statectl_api)
     marker = request.node.get_closest_marker("statectl_data")
     data = dict(marker.kwargs) if marker is not None else None
-    return DeviceUnderTest(
+    impl = statectl_impl(statectl_chart)
+    if impl is not None:
+        request.addfinalizer(impl.close)
+    device = DeviceUnderTest(
         statectl_chart,
         statectl_driver,
         data=data,
@@ -263,7 +337,14 @@ def statectl_device(
         strict=request.node.get_closest_marker("statectl_strict") is not None,
         tally=_tally(request.config, statectl_chart),
         where=request.node.nodeid,
+        impl=impl,
+        new_driver=statectl_new_driver,
+        recovery=statectl_recovery,
+        completion_bound=statectl_completion_bound,
     )
+    if device.runtime is not None:
+        request.addfinalizer(device.runtime.close)
+    return device
 
 
 @pytest.fixture
@@ -273,8 +354,10 @@ def statectl_device_factory(
     statectl_event_data: Mapping[str, Any],
     statectl_api: Mapping[str, str | None] | None,
     request: pytest.FixtureRequest,
+    statectl_impl: Callable[[Chart], Implementation | None],
 ) -> Callable[[], DeviceUnderTest]:
-    """Makes a new started device with a fresh driver each call (a Hypothesis example each)."""
+    """Makes a new started device with a fresh driver each call (a Hypothesis example each),
+    on the implementation ``--statectl-impl`` chooses."""
     chart = statectl_chart
     if chart is None:
         pytest.fail(
@@ -284,6 +367,9 @@ def statectl_device_factory(
         )
 
     def make() -> DeviceUnderTest:
+        impl = statectl_impl(chart)
+        if impl is not None:
+            request.addfinalizer(impl.close)
         return DeviceUnderTest(
             chart,
             statectl_new_driver(chart),
@@ -291,6 +377,7 @@ def statectl_device_factory(
             api=statectl_api,
             tally=_tally(request.config, chart),
             where=request.node.nodeid,
+            impl=impl,
         )
 
     return make

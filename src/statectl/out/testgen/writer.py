@@ -29,6 +29,7 @@ from statectl.out.testgen.compact import (
     tree_given,
 )
 from statectl.out.testgen.paths import candidate_event_data, sendable_events
+from statectl.out.testgen.probes import Probe
 from statectl.out.testgen.timing import timing_body
 
 __all__ = ["hypothesis_text", "module_text"]
@@ -40,7 +41,8 @@ Regenerate: statectl testgen {source} --criterion {criterion} --out {out}
 {counts}
 The tests run on the simulated twin derived from the tables. To run them against
 another driver (a real device, a vendor's simulator), override the ``statectl_driver``
-fixture in a conftest.py; see docs/testing.md.{notes}
+fixture in a conftest.py; against another implementation (the generated C++, a device
+over OPC UA, a class of your own), give pytest --statectl-impl; see docs/testing.md.{notes}
 """
 
 from __future__ import annotations
@@ -141,6 +143,23 @@ def _case(c: Case, given: Given = _spelled) -> str:
     return out + _expect(c.expect) + "\n\n"
 
 
+def _probe(p: Probe, given: Given = _spelled) -> str:
+    """A test through the implementation (:mod:`~statectl.out.testgen.probes`)."""
+    out = _marker(p.data) + f"def {p.name}(statectl_device):\n" + _doc(p.doc)
+    out += "    d = statectl_device\n" + given(list(p.given)) + f"    {p.action}\n"
+    if p.raised is None:
+        return out + "\n\n"
+    args = [
+        f"states={_lit(list(p.states))}",
+        f"invokes={_lit([list(i) for i in p.invokes])}",
+        f"raised={_lit(list(p.raised))}",
+    ]
+    line = f"    d.expect({', '.join(args)})\n"
+    if len(line) > 101:
+        line = "    d.expect(\n" + "".join(f"        {a},\n" for a in args) + "    )\n"
+    return out + line + "\n\n"
+
+
 def _table(t: Table) -> str:
     rows = "".join(f"        ({_lit(e)}, {_lit(r)}),\n" for e, r in t.all_rows())
     out = f'@pytest.mark.parametrize(\n    ("event", "reason"),\n    [\n{rows}    ],\n)\n'
@@ -160,14 +179,18 @@ def module_text(
     shown: str,
     *,
     loop_rows: int = LOOP_ROWS,
+    probes: tuple[Probe, ...] = (),
 ) -> str:
-    """The module's text; ``shown`` is the tables path as the user gave it.
+    """The module's text; ``shown`` is the tables path as the user gave it; ``probes``
+    (faults, monitors, completions, recovery) follow the cases.
 
     A big suite (:mod:`~statectl.out.testgen.compact` rule 1) is written compactly."""
     tables = Path(os.path.relpath(source.resolve(), out_dir.resolve())).as_posix()
     big = is_big(suite, loop_rows)
-    n = tests_in(suite, big)
+    n = tests_in(suite, big) + len(probes)
     counts = f"{len(suite.cases)} cases and {len(suite.tables)} tables of unhandled events."
+    if probes:
+        counts += f"\n{len(probes)} tests through the implementation (faults, completions, ...)."
     counts += f" {n} tests in all."
     if suite.parts:
         each = ", ".join(f"{part} {k}" for part, k in suite.parts)
@@ -188,12 +211,13 @@ def module_text(
         out=docstring(out_dir.as_posix()),
     )
     if not big:
-        body = "".join(_case(c) for c in suite.cases) + "".join(_table(t) for t in suite.tables)
+        body = "".join(_case(c) for c in suite.cases) + "".join(_probe(p) for p in probes)
+        body += "".join(_table(t) for t in suite.tables)
         return text + "\n\n" + body.rstrip("\n") + "\n"
     tree = PathTree()
     given = tree_given(tree, _lit)
     events = module_events(suite)
-    parts = [_case(c, given) for c in suite.cases]
+    parts = [_case(c, given) for c in suite.cases] + [_probe(p, given) for p in probes]
     for t in suite.tables:
         head = _marker(t.data) + f"def {t.name}(statectl_device):\n" + _doc(t.doc)
         parts.append(loop_table(t, events, _lit, given(_items(t.given, t.given_data)), head))

@@ -1,0 +1,196 @@
+"""A device served over OPC UA as the implementation under test (``opcua:URL``).
+
+The address space ``statectl run --opcua`` serves (docs/opcua.md), or any server that
+follows it: the device object ``Objects/<device>`` (namespace ``urn:statectl``) with a
+method per command event (outputs ``Handled``, ``Reason``) and ``StateMachine`` whose
+``CurrentState`` names the active state (a composite state's sub-state machines are
+reached through ``HasSubStateMachine``).
+
+Rules:
+1. ``send`` calls the event's method (its data as the ``Data`` JSON input, or one typed
+   input per declared field). A completion is no method: the device reports it, so
+   ``send`` lets time run (at most :data:`WAIT` s) until the device took it; a fault,
+   or a completion the device does not report then, cannot be sent, and the test is
+   skipped saying so.
+2. ``advance`` is a bounded wall wait: the device runs on its own clock. The events it
+   took meanwhile are read from the state change (the chart's transition from the
+   states before to the states after).
+3. Invoke numbers and API calls are the server's business, not shown; fault injection,
+   monitors and restart are not reachable over OPC UA.
+4. ``opc.tcp://USER:PASSWORD@HOST:PORT`` gives the session's user; security policy None
+   (a test server on the loopback); a server that refuses is a clear error.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Mapping
+from typing import Any
+from urllib.parse import unquote, urlparse
+
+from statectl.kernel.errors import StatectlError
+from statectl.kernel.model import Chart, EventKind, StateKind
+from statectl.out.testgen.adapters import Observed, Unsupported
+
+__all__ = ["OpcuaImpl"]
+
+NAMESPACE = "urn:statectl"
+#: Seconds ``send`` waits for the device to report a completion it was asked to take.
+WAIT = 5.0
+#: The steps it waits in.
+STEP = 0.05
+
+
+class OpcuaImpl:
+    """The :class:`~statectl.out.testgen.adapters.Implementation` of a device over OPC UA."""
+
+    def __init__(self, url: str, chart: Chart) -> None:
+        try:
+            from asyncua import ua as ua_module
+            from asyncua.sync import Client
+        except ImportError:
+            raise StatectlError("opcua: needs asyncua (pip install 'statectl[opcua]')") from None
+        ua: Any = ua_module  # asyncua's names are generated: typed loosely
+        self.ua = ua
+        self.chart = chart
+        self.order = {s.name: i for i, s in enumerate(chart.states)}
+        self.leaves = {
+            s.name for s in chart.states if s.kind in (StateKind.ATOMIC, StateKind.FINAL)
+        }
+        parts = urlparse(url)
+        plain = url if parts.username is None else url.replace(parts.netloc, parts.hostname or "")
+        if parts.port is not None and parts.username is not None:
+            plain = plain.replace(parts.hostname or "", f"{parts.hostname}:{parts.port}", 1)
+        self.client = Client(plain, timeout=10)
+        if parts.username is not None:
+            self.client.set_user(unquote(parts.username))
+            self.client.set_password(unquote(parts.password or ""))
+        try:
+            self.client.connect()
+        except Exception as exc:  # asyncua raises many kinds: each is "cannot connect"
+            raise StatectlError(f"cannot connect to {plain}: {exc}") from None
+        try:
+            self.ns = self.client.get_namespace_index(NAMESPACE)
+            self.device = self.client.nodes.objects.get_child([f"{self.ns}:{chart.name}"])
+            self.methods = {
+                m.read_browse_name().Name: m
+                for m in self.device.get_children(refs=ua.ObjectIds.HasComponent)
+                if m.read_node_class() == ua.NodeClass.Method
+            }
+            self.machine = self.device.get_child([f"{self.ns}:StateMachine"])
+        except Exception as exc:
+            self.client.disconnect()
+            raise StatectlError(
+                f"{plain}: no device {chart.name!r} in namespace {NAMESPACE} ({exc})"
+            ) from None
+
+    def _machine_states(self, machine: Any) -> list[str]:
+        ua = self.ua
+        shown = machine.get_child("0:CurrentState").read_value().Text or ""
+        if not shown:
+            return []
+        found = [shown]
+        try:
+            node = machine.get_child([f"{self.ns}:{shown}"])
+            subs = node.get_referenced_nodes(ua.ObjectIds.HasSubStateMachine)
+        except Exception:  # a server without sub-state machines there: the state is a leaf
+            subs = []
+        for sub in subs:
+            found += self._machine_states(sub)
+        return found
+
+    def states(self) -> tuple[str, ...]:
+        found = [s for s in self._machine_states(self.machine) if s in self.leaves]
+        return tuple(sorted(set(found), key=self.order.__getitem__))
+
+    def _inputs(self, method: Any, data: Any) -> list[Any]:
+        ua = self.ua
+        try:
+            args = method.get_child("0:InputArguments").read_value()
+        except Exception:
+            args = []
+        if not args:
+            return []
+        if len(args) == 1 and args[0].Name == "Data":
+            text = "" if data is None else json.dumps(data)
+            return [ua.Variant(text, ua.VariantType.String)]
+        given = data if isinstance(data, dict) else {}
+        return [given.get(a.Name) for a in args]
+
+    def send(self, event: str, data: Any = None) -> Observed:
+        method = self.methods.get(event)
+        if method is None and self._kind(event) is EventKind.COMPLETION:
+            return self._await(event)
+        if method is None:
+            raise Unsupported(
+                f"{event} is no method of the OPC UA device: only its command events can be "
+                "sent; the device reports its completions and faults itself"
+            )
+        try:
+            out = self.device.call_method(method, *self._inputs(method, data))
+        except Exception as exc:
+            raise AssertionError(f"{event}: the server refused the call ({exc})") from None
+        handled, reason = (out[0], out[1]) if isinstance(out, list) else (bool(out), "")
+        return Observed(
+            unhandled=None if handled else (reason or "unhandled"),
+            unhandled_all=() if handled else ((event, reason or "unhandled"),),
+        )
+
+    def _kind(self, event: str) -> EventKind | None:
+        return next((e.kind for e in self.chart.events if e.name == event), None)
+
+    def _await(self, event: str) -> Observed:
+        """Rule 1: let the device report ``event`` itself, within :data:`WAIT` seconds."""
+        waited, seen = 0.0, Observed()
+        while waited < WAIT:
+            seen = self.advance(STEP)
+            waited += STEP
+            if not seen.events:
+                continue
+            if seen.events[0] == event:
+                return Observed()
+            break
+        raise Unsupported(
+            f"{event} is no method of the OPC UA device: it is the device's to report, "
+            f"and it did not within {WAIT:g} s (it took {list(seen.events) or 'nothing'})"
+        )
+
+    def advance(self, seconds: float) -> Observed:
+        before = self.states()
+        time.sleep(seconds)
+        after = self.states()
+        if after == before:
+            return Observed()
+        return Observed(events=self._events(before, after))
+
+    def _events(self, before: tuple[str, ...], after: tuple[str, ...]) -> tuple[str, ...]:
+        """The events of the chart's transitions from ``before`` into ``after`` (rule 2)."""
+        ancestors: set[str] = set()
+        for s in after:
+            cur: str | None = s
+            while cur is not None:
+                ancestors.add(cur)
+                parent = self.chart.state(cur).parent if cur in self.order else None
+                cur = parent
+        found = [
+            t.events[0]
+            for t in self.chart.transitions
+            if t.events and t.source in before and all(x in ancestors for x in t.targets)
+        ]
+        return tuple(found[:1]) if found else ("(a state change)",)
+
+    def inject_fault(self, detail: str) -> None:
+        raise Unsupported("a fault cannot be injected over OPC UA: the device reports its own")
+
+    def monitoring(self) -> Mapping[str, int]:
+        raise Unsupported("the OPC UA address space does not show monitors")
+
+    def restart(self) -> Observed:
+        raise Unsupported("the OPC UA server cannot be restarted from a client")
+
+    def stall(self) -> None:
+        raise Unsupported("the OPC UA device cannot be silenced from a client")
+
+    def close(self) -> None:
+        self.client.disconnect()
