@@ -28,7 +28,7 @@ from statectl.run.runtime.eventdata import AssignError, assignments_of
 __all__ = ["Specification"]
 
 
-class Implementation(Protocol):
+class HarnessDevice(Protocol):
     """What the oracle needs of a device under test (the harness's public methods)."""
 
     event_data: Mapping[str, Any]
@@ -55,12 +55,12 @@ class Specification:
         """The active atomic states the specification is in, in document order."""
         return leaves(self.chart, self.snapshot)
 
-    def start(self, device: Implementation) -> None:
+    def start(self, device: HarnessDevice) -> None:
         """The device starts where the specification does."""
         __tracebackhide__ = True
         device.assert_state(*self.states)
 
-    def check(self, device: Implementation, event: str, data: Any = None) -> None:
+    def check(self, device: HarnessDevice, event: str, data: Any = None) -> None:
         """Send ``event`` to the device and compare it with the specification (rule 2)."""
         __tracebackhide__ = True
         value = data if data is not None else device.event_data.get(event)
