@@ -43,6 +43,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from statectl.front.builder.build import load_chart  # noqa: E402  # src/ first on the path
+from statectl.front.tables import RecoveryRow  # noqa: E402
+from statectl.front.tables import load as load_tables  # noqa: E402
 from statectl.kernel.model import Chart, ControlKind, EventKind, StateKind  # noqa: E402
 from statectl.kernel.semantics import compiled, initial, step  # noqa: E402
 from statectl.out.testgen import DeviceUnderTest, generate  # noqa: E402
@@ -289,14 +291,20 @@ def _calls(func: Any) -> Iterator[tuple[dict[str, Any], dict[str, Any]]]:
         yield data, dict(zip(names, values, strict=True))
 
 
-def run_module(path: Path, spec: Chart, mutant: Mutant | None) -> tuple[int, int]:
-    """(tests failed, tests run) of the generated module at ``path`` on ``mutant``."""
+def run_module(
+    path: Path, spec: Chart, mutant: Mutant | None, recovery: tuple[RecoveryRow, ...] = ()
+) -> tuple[int, int]:
+    """(tests failed, tests run) of the generated module at ``path`` on ``mutant``;
+    ``recovery``: the file's Recovery rows, which its recovery tests restart with."""
     module = _load(path)
     chart = spec if mutant is None else mutant.chart
-    new_driver = (lambda c: None) if mutant is None or mutant.driver is None else mutant.driver
+    maker = None if mutant is None else mutant.driver  # None: the harness's own twin
 
     def device(data: dict[str, Any] | None = None) -> DeviceUnderTest:
-        return DeviceUnderTest(chart, new_driver(chart), data=data or None)
+        driver = maker(chart) if maker is not None else None
+        return DeviceUnderTest(
+            chart, driver, data=data or None, new_driver=maker, recovery=recovery
+        )
 
     failed = run = 0
     for name, func in vars(module).items():
@@ -335,12 +343,14 @@ def score(
 ) -> list[dict[str, Any]]:
     """One row per mutant: kind, name, equivalent, and killed per criterion."""
     spec = load_chart(file)
+    loaded, _ = load_tables(file)
+    recovery = tuple(loaded.recovery) if loaded is not None else ()
     mutants = [m for m in table_mutants(spec) + driver_mutants(spec) if m.kind in kinds]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         made = modules(file, Path(tmp), criteria)
         for c, path in made.items():
-            failed, _ = run_module(path, spec, None)
+            failed, _ = run_module(path, spec, None, recovery)
             if failed:
                 raise SystemExit(f"{file.name}: the {c} module fails on the right tables")
         for m in mutants:
@@ -350,7 +360,7 @@ def score(
                 "equivalent": equivalent(spec, m),
             }
             for c, path in made.items():
-                row[c] = run_module(path, spec, m)[0] > 0
+                row[c] = run_module(path, spec, m, recovery)[0] > 0
             rows.append(row)
     return rows
 
