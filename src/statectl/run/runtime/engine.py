@@ -458,21 +458,7 @@ class Engine:
         record = StepRecord(
             self.name, self._now, event, data, program.step, made, tail, None, program.records
         )
-        if self._handing:  # a step listener's own step: after the one being given now
-            self._hand(record)
-            return
-        self._handing = True  # as _hand gives it, without a call more per step
-        try:
-            for callback in self.hooks.recorders:
-                callback(record)
-            if self._later:
-                self._hand_later()
-        except BaseException:
-            if self._later:
-                self._later.clear()
-            raise
-        finally:
-            self._handing = False
+        self._hand(record)  # a step listener's own step goes after the one being given now
 
     # -- delivering records (rule 4) -------------------------------------------------------
 
