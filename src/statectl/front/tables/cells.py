@@ -282,21 +282,13 @@ def event_row(row: RawRow, diags: list[Diagnostic]) -> EventRow:
 
 def _unasked(row: RawRow, diags: list[Diagnostic]) -> bool:
     """The ``unasked`` cell: yes when the device may report this completion by itself."""
-    text = _text(row, "unasked", diags).lower()
-    if not text:
-        return False
-    value = REDO_WORDS.get(text)
-    if value is None:
-        diags.append(
-            diag(
-                "T125",
-                row.cells["unasked"][1],
-                f"event 'unasked' must be yes or no (got {text!r})",
-                "write unasked: yes on a completion the device may report with no call "
-                "pending; leave it empty for no",
-            )
-        )
-        return False
+    value = _yes_no(
+        row,
+        ("event", "unasked", "T125"),
+        "write unasked: yes on a completion the device may report with no call "
+        "pending; leave it empty for no",
+        diags,
+    )
     kind = _text(row, "kind", diags).strip().lower() if "kind" in row.cells else ""
     if value and kind != EventKind.COMPLETION.value:
         diags.append(
@@ -349,19 +341,24 @@ def _unreadable(row: RawRow, column: str) -> bool:
 
 
 def _redo(row: RawRow, diags: list[Diagnostic]) -> bool:
-    text = _text(row, "redo", diags).lower()
+    return _yes_no(
+        row,
+        ("recovery", "redo", "T114"),
+        "write redo: yes to redo the entering step's device calls; leave it empty for no",
+        diags,
+    )
+
+
+def _yes_no(row: RawRow, where: tuple[str, str, str], fix: str, diags: list[Diagnostic]) -> bool:
+    """A yes/no cell (``where``: its row's noun, column, code); empty or bad: no."""
+    noun, column, code = where
+    text = _text(row, column, diags).lower()
     if not text:
         return False
     value = REDO_WORDS.get(text)
     if value is None:
-        diags.append(
-            diag(
-                "T114",
-                row.cells["redo"][1],
-                f"recovery 'redo' must be yes or no (got {text!r})",
-                "write redo: yes to redo the entering step's device calls; leave it empty for no",
-            )
-        )
+        message = f"{noun} {column!r} must be yes or no (got {text!r})"
+        diags.append(diag(code, row.cells[column][1], message, fix))
         return False
     return value
 
