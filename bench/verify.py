@@ -10,8 +10,10 @@ back to Idle and ignores it elsewhere. With 10 stations the cell has about a mil
 reachable global states. The same composed model is exported to Promela and checked
 by SPIN in the same run (breadth-first, safety only), so the times are comparable.
 ``--independent`` drops the links: N stations that do not interact at all. Both
-tools use their partial-order reduction (SPIN's default) unless ``--no-por``, which
-turns it off in both (``statectl verify --no-por``, pan built with ``-DNOREDUCE``).
+tools use their reductions (SPIN's partial-order reduction is its default) unless
+``--no-por``, which turns them off in both (``statectl verify --no-por --no-symmetry``:
+identical stations without links would otherwise be reduced by symmetry; pan built
+with ``-DNOREDUCE``): the full searches, the worst row.
 """
 
 from __future__ import annotations
@@ -158,8 +160,9 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     model = Composed(cell)
     printer = ProgressPrinter(sys.stderr) if sys.stderr.isatty() else None
+    reduce = not args.no_por  # --no-por: the full search (no symmetry either), as pan's NOREDUCE
     report = explore(
-        cell, max_states=args.max_states, progress=printer, model=model, por=not args.no_por
+        cell, max_states=args.max_states, progress=printer, model=model, por=reduce, symmetry=reduce
     )
     if printer is not None:
         printer.done()
