@@ -200,3 +200,46 @@ def test_available_states_and_transitions_follow_the_current_state(tmp_path: Pat
         )
     finally:
         plant.close()
+
+
+def test_a_step_the_writer_cannot_show_is_logged_and_later_steps_are_still_shown(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The writer task outlives an update that fails: the failure is one logged error
+    naming the device, and the next step's state still reaches the clients (before, the
+    task ended and every later CurrentState stayed stale, silently)."""
+    plant = Plant(tmp_path, (), False)
+    server: Any = plant.server
+    write, failed = server._write, []
+
+    async def first_fails(*update: Any) -> None:
+        if not failed:
+            failed.append(update[0].name)
+            raise RuntimeError("broken update")
+        await write(*update)
+
+    server._write = first_fails
+    try:
+        with caplog.at_level(logging.ERROR, logger="statectl.opcua"):
+            plant.server.refresh()  # the update that fails: the initial state
+            assert plant.calls(("Movement", ())) == [[True, ""]]
+
+            async def current() -> str:
+                async with Client(plant.url, timeout=10) as client:
+                    machine = await client.nodes.objects.get_child(
+                        ["2:Motor", "2:StateMachine", "0:CurrentState"]
+                    )
+                    shown = None
+                    for _ in range(500):
+                        shown = (await machine.read_value()).Text
+                        if shown == "Moving":
+                            break
+                        await asyncio.sleep(0.01)
+                    return str(shown)
+
+            assert run(current()) == "Moving"
+    finally:
+        plant.close()
+    assert failed == ["Motor"]
+    errors = [r.getMessage() for r in caplog.records if r.name == "statectl.opcua"]
+    assert errors == ["cannot show a step of Motor; later ones still"]

@@ -4,7 +4,8 @@ Rules:
 1. The server runs on its own asyncio loop on its own thread. It never makes a
    device wait: the owner only appends to a list while a step runs, and after the
    step hands the list over with one ``call_soon_threadsafe``; the loop writes
-   the variables and fires the events. A step comes as one step record
+   the variables and fires the events (an update it cannot write is logged on
+   ``statectl.opcua``; the later ones are still written). A step comes as one step record
    (``listen_steps``): only its transitions and notifications become records.
 2. Address space (namespace ``urn:statectl``): ``Objects/<device>`` per device,
    holding its machines (:mod:`statectl.channels.opcua.space`), each an instance of
@@ -92,6 +93,7 @@ from statectl.run.system import System
 __all__ = ["NAMESPACE", "OpcuaServer", "OpcuaSettings"]
 
 NAMESPACE = "urn:statectl"
+_LOG = logging.getLogger("statectl.opcua")
 #: A DateTime's null (OPC 10000-6: 1601-01-01, encoded 0): ``TransitionTime`` before any.
 _NEVER = datetime(1601, 1, 1, tzinfo=UTC)
 _START_TIMEOUT = 30.0
@@ -490,7 +492,11 @@ class OpcuaServer:
             await kick.wait()
             kick.clear()
             while updates:
-                await self._write(*updates.popleft())
+                update = updates.popleft()
+                try:
+                    await self._write(*update)
+                except Exception:  # one bad update must not stop every later one
+                    _LOG.exception("cannot show a step of %s; later ones still", update[0].name)
 
     async def _write(
         self,
