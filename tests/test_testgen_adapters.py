@@ -215,7 +215,8 @@ DRIVERS = [
         "the fault check always reports",
         "class Broken(SimTwin):\n    def poll_fault(self):\n        return 'stuck'\n",
         "test_monitor_01_moving",
-        "with no fault reported, the device raised ['Error'] in Moving",
+        "the device took Error (a fault its monitor raised though none was reported) and is "
+        "in ['Returning']",
     ),
     (
         "the completion is never reported",

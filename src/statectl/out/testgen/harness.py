@@ -27,13 +27,13 @@ from typing import Any, NoReturn
 
 from statectl.front.observers import Observer
 from statectl.front.tables import RecoveryRow
-from statectl.kernel.model import Chart, Notify, StateKind
+from statectl.kernel.model import Chart, EventKind, Notify, StateKind
 from statectl.kernel.semantics import Outcome, Unhandled
 from statectl.kernel.semantics import step as kernel_step
-from statectl.out.testgen.adapters import Call, Implementation, Observed, Unsupported
+from statectl.out.testgen.adapters import ApiMade, Call, Implementation, Observed, Unsupported
 from statectl.out.testgen.adapters.runtime import Recorder, RuntimeImpl
 from statectl.out.testgen.coverage import Tally
-from statectl.run.runtime import ApiLogging, SimClock, Subject
+from statectl.run.runtime import SimClock, Subject
 
 __all__ = ["COMPLETION_BOUND", "FAULT_BOUND", "DeviceUnderTest", "api_function"]
 
@@ -71,6 +71,7 @@ def _merge(a: Observed, b: Observed) -> Observed:
         (*a.events, *b.events),
         (*a.unhandled_all, *b.unhandled_all),
         both(a.driver_calls, b.driver_calls),
+        both(a.served, b.served),
     )
 
 
@@ -115,8 +116,10 @@ class DeviceUnderTest:
         else:
             given = dict(api) if api is not None else None
         self.api: Mapping[str, str | None] | None = given
+        #: the API names are the driver's own declared table (no ``statectl_api`` given)
+        self._own_api = self.runtime is not None and api is None and given is not None
         self.sent: list[str] = []
-        self._seen = Observed(invokes=(), calls=(), driver_calls=())
+        self._seen = Observed(invokes=(), calls=(), driver_calls=(), served=())
         self._data: Any = None  # the data of the last event sent: the API calls' arguments
         self._data_known = False
         if self.runtime is not None:
@@ -280,7 +283,7 @@ class DeviceUnderTest:
     def _run_until(self, within: float, done: Callable[[Observed], bool]) -> float:
         """Let time run a tick at a time until ``done`` or ``within`` seconds passed."""
         self._data_known = False
-        seen = Observed(invokes=(), calls=(), driver_calls=())
+        seen = Observed(invokes=(), calls=(), driver_calls=(), served=())
         waited = 0.0
         while waited < within - 1e-9 and not done(seen):
             tick = min(TICK, within - waited)
@@ -297,7 +300,7 @@ class DeviceUnderTest:
     ) -> None:
         """Have the device report a fault, then let time run until its monitor raised an
         event or ``within`` seconds passed; :meth:`expect` checks what followed."""
-        self.sent.append("(device fault)")
+        self.sent.append(f"(device fault in {'/'.join(self.states)})")
         try:
             self.impl.inject_fault(detail)
         except Unsupported as why:
@@ -338,19 +341,33 @@ class DeviceUnderTest:
             return bool(seen.events) or self.impl.monitoring().get(state, 0) - start >= polls
 
         self.sent.append(f"(monitor {state})")
-        self._run_until(within, polled)
+        waited = self._run_until(within, polled)
         if self._seen.events:
             raise AssertionError(
-                f"{self._path()}: with no fault reported, the device raised "
-                f"{list(self._seen.events)} in {state}; its fault check reports a fault it does "
-                "not have"
+                f"{self._path()}: expected the monitor of {state} to poll {polls} time(s) and "
+                f"raise nothing, as the device reported no fault; within {waited:g} s the "
+                f"device took {self._kinds(self._seen.events)} and is in {list(self.states)}"
             )
         done = self.impl.monitoring().get(state, 0) - start
         if done < polls:
             raise AssertionError(
-                f"{self._path()}: the monitor of {state} polled {done} time(s) in {within:g} s, "
-                f"expected {polls}"
+                f"{self._path()}: expected the monitor of {state} to poll {polls} time(s) "
+                f"within {within:g} s; it polled {done} time(s)"
             )
+
+    def _kinds(self, events: Sequence[str]) -> str:
+        """``Leak (a fault its monitor raised though none was reported), ...``: each event the
+        device took by itself, said as what it is."""
+        said = {
+            EventKind.FAULT: "a fault its monitor raised though none was reported",
+            EventKind.COMPLETION: "a completion the device reported",
+        }
+        parts = []
+        for e in events:
+            d = self.chart.event(e)
+            what = said.get(d.kind, f"a {d.kind.value} event") if d is not None else "an event"
+            parts.append(f"{e} ({what})")
+        return ", ".join(parts)
 
     def restart(self) -> None:
         """Stop the device as a power loss would and resume it from what it persisted;
@@ -451,23 +468,70 @@ class DeviceUnderTest:
         return problems
 
     def _check_calls(self, wanted: list[tuple[int, str]]) -> list[str]:
-        """The runtime's driver called its own API function for each notification."""
-        called = self._called()
-        if not wanted:
-            if called:
-                return [f"the driver was called though nothing was notified: {called}"]
-            return []
-        if self.runtime is None or not isinstance(self.runtime.driver, ApiLogging):
-            return []  # a plain observer: the Subject notes update(#n), nothing to compare
-        problems = []
-        for _, method in wanted:
-            calls = [api for m, api in called if m == method]
-            if not calls:
-                problems.append(f"{method}(): the driver made no API call")
+        """Rule 2 on statectl's runtime: the calls the driver really made (its API log),
+        per notification, against the tables: one call of the method's API function, with
+        the event's data as its argument where the function is the tables' own name; a
+        stray call, one made twice, or a wrong argument is named."""
+        served = self._seen.served
+        if served is None or self.runtime is None:
+            return self._check_notified(wanted)
+        problems: list[str] = []
+        for s in served:
+            if s.method is not None:
+                problems += self._check_served(s.method, s.data, s.calls)
                 continue
-            expected = self.api.get(method, method) if self.api is not None else method
-            if expected is not None and expected not in [api_function(c) for c in calls]:
-                problems.append(
-                    f"{method}(): expected the API call {expected}(), the driver called {calls}"
-                )
+            problems += [
+                f"stray API call {c}: the driver made it by itself; the tables make no such call"
+                for c in s.calls
+                if self._stray(c.function)
+            ]
         return problems
+
+    def _function(self, method: str) -> str | None:
+        """The API function the tables' ``method`` calls (``statectl_api``, else the driver's
+        declared ``methods``, else the method's own name); None: not checked."""
+        return self.api.get(method, method) if self.api is not None else method
+
+    def _stray(self, function: str) -> bool:
+        """Whether a call the tables did not ask for is an error. A driver with its own API
+        table may make calls outside it (SimMotor's ``stop()`` before a new target); a call
+        to a function of that table, or any call where the API is the tables' own, is not."""
+        if self._own_api and self.api is not None:
+            return function in self.api.values()
+        return True
+
+    def _check_served(self, method: str, data: Any, calls: Sequence[ApiMade]) -> list[str]:
+        expected = self._function(method)
+        if expected is None:
+            return []
+        if not calls:
+            return [f"{method}(): the driver made no API call"]
+        hits = [c for c in calls if c.function == expected]
+        if not hits:
+            made = [str(c) for c in calls]
+            return [f"{method}(): expected the API call {expected}(), the driver called {made}"]
+        problems = [
+            f"stray API call {c} serving {method}(): the tables make one {expected}() call"
+            for c in hits[1:]
+        ]
+        problems += [
+            f"stray API call {c} serving {method}(): the tables make no such call here"
+            for c in calls
+            if c.function != expected and self._stray(c.function)
+        ]
+        if expected == method:  # the tables' own name: its argument is the event's data
+            allowed: list[tuple[Any, ...]] = [()] if data is None else [(), (data,)]
+            given = Call(method, data)
+            problems += [
+                f"API call {c}: wrong argument, the tables give {given}"
+                for c in hits
+                if c.args not in allowed
+            ]
+        return problems
+
+    def _check_notified(self, wanted: list[tuple[int, str]]) -> list[str]:
+        """A driver that logs no API calls: nothing called unless notified."""
+        called = self._called()
+        if not wanted and called:
+            return [f"the driver was called though nothing was notified: {called}"]
+        return []

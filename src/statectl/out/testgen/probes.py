@@ -20,8 +20,12 @@ Rules:
    state (and no other row's), then ``d.restart()``, and ``expect`` the row's effect:
    its event's transition (``raised=[event]``), or for a redo the same states with the
    entering step's notifications issued again.
-5. A probe with no path (no such edge in the explored graph, a path that needs event
-   data) is not written; the module's docstring notes it.
+5. A path's events are sent with the data the explorer found for them (a completion
+   whose guard reads the pressure it carries, a command with declared data), so a
+   state reached only through such an event is probed too. A probe with no path (no
+   such edge in the explored graph) is not written; the module's docstring notes it.
+6. Every failure says what was expected and what happened, naming the state, the
+   event and the call (:class:`~statectl.out.testgen.harness.DeviceUnderTest`).
 """
 
 from __future__ import annotations
@@ -41,7 +45,7 @@ from statectl.out.escape.python import identifier, string
 from statectl.out.testgen.paths import Edge, Graph, Node, leaves, notifies
 from statectl.out.testgen.timing import describe_state
 
-__all__ = ["Probe", "probes_for"]
+__all__ = ["Probe", "path_items", "probes_for"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,12 +60,13 @@ class Probe:
     states: tuple[str, ...] = ()
     invokes: tuple[tuple[int, str], ...] = ()
     raised: tuple[str, ...] | None = None  # None: no expect line (assert_monitored checks)
+    given_data: tuple[Any, ...] = ()  # per event of ``given``, the data it is sent with
 
 
-def _plain(g: Graph, node: Node) -> tuple[Edge, ...] | None:
-    """The path to ``node`` when every event on it is sent without data, else None."""
-    path = g.path(node)
-    return None if any(e.data is not None for e in path) else path
+def path_items(edges: Sequence[Edge]) -> tuple[tuple[str, ...], tuple[Any, ...]]:
+    """The events of ``edges`` and, per event, the data it is sent with (None: none):
+    what a test sends to follow that path (rule 5)."""
+    return tuple(e.event for e in edges), tuple(e.data for e in edges)
 
 
 def _nodes(g: Graph) -> list[Node]:
@@ -85,7 +90,6 @@ def _fault_probes(g: Graph, name: Callable[[str], str]) -> tuple[list[Probe], li
                 and e.data is None
                 and spec.state in e.source.snapshot.active
                 and e.step.unhandled is None
-                and _plain(g, e.source) is not None
             ),
             None,
         )
@@ -93,7 +97,7 @@ def _fault_probes(g: Graph, name: Callable[[str], str]) -> tuple[list[Probe], li
         if found is None:
             notes.append(f"{where}: no path reaches it with {fault} handled; no fault test")
             continue
-        given = tuple(p.event for p in g.path(found.source))
+        given, sent = path_items(g.path(found.source))
         data = tuple(g.overrides(found.source).items())
         slug = identifier(spec.state)
         probes.append(
@@ -107,6 +111,7 @@ def _fault_probes(g: Graph, name: Callable[[str], str]) -> tuple[list[Probe], li
                 leaves(g.chart, found.step.target),
                 tuple((n.invoke, n.method) for n in notifies(found.step)),
                 (fault,),
+                sent,
             )
         )
         probes.append(
@@ -117,6 +122,7 @@ def _fault_probes(g: Graph, name: Callable[[str], str]) -> tuple[list[Probe], li
                 data,
                 given,
                 f"d.assert_monitored({_q(spec.state)})",
+                given_data=sent,
             )
         )
     return probes, notes
@@ -138,9 +144,9 @@ def _completion_probes(g: Graph, name: Callable[[str], str]) -> list[Probe]:
     seen: set[tuple[str, str]] = set()
     probes: list[Probe] = []
     for e in g.edges:
-        if e.data is not None or e.step.unhandled is not None:
+        if e.step.unhandled is not None:
             continue
-        if kinds.get(e.event) is EventKind.COMPLETION or _plain(g, e.source) is None:
+        if kinds.get(e.event) is EventKind.COMPLETION:
             continue
         for n in notifies(e.step):
             key = (n.method, e.event)
@@ -160,6 +166,7 @@ def _completion_probes(g: Graph, name: Callable[[str], str]) -> list[Probe]:
                 continue
             seen.add(key)
             within = _within(g, e.target)
+            given, sent = path_items((*g.path(e.source), e))
             bound = f"{within:g} s (its state's timeout)" if within else "the suite's bound"
             arg = f", within={within!r}" if within else ""
             probes.append(
@@ -169,11 +176,12 @@ def _completion_probes(g: Graph, name: Callable[[str], str]) -> list[Probe]:
                     f"{n.method}() called by {e.event}: the device reports {follow.event} "
                     f"within {bound}, and its transition follows.",
                     tuple(g.overrides(e.source).items()),
-                    (*(p.event for p in g.path(e.source)), e.event),
+                    given,
                     f"d.complete({_q(follow.event)}{arg})",
                     leaves(g.chart, follow.step.target),
                     tuple((x.invoke, x.method) for x in notifies(follow.step)),
                     (follow.event,),
+                    sent,
                 )
             )  # fmt: skip
     return probes
@@ -196,7 +204,6 @@ def _recovery_probes(
                 and r.state in e.target.snapshot.active
                 and r.state not in e.source.snapshot.active
                 and len(ruled & e.target.snapshot.active) == 1
-                and _plain(g, e.target) is not None
             ),
             None,
         )
@@ -204,7 +211,7 @@ def _recovery_probes(
             notes.append(f"{where}: no path enters {r.state} alone; its rule is not tested")
             continue
         node = entering.target
-        given = tuple(p.event for p in g.path(node))
+        given, sent = path_items(g.path(node))
         if r.redo:
             redone = ", ".join(f"{n.method}()" for n in notifies(entering.step))
             what = f"{r.state} is redone ({redone})"
@@ -230,6 +237,7 @@ def _recovery_probes(
                 states,
                 invokes,
                 raised,
+                sent,
             )
         )
     return probes, notes

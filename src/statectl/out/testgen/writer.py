@@ -146,7 +146,8 @@ def _case(c: Case, given: Given = _spelled) -> str:
 def _probe(p: Probe, given: Given = _spelled) -> str:
     """A test through the implementation (:mod:`~statectl.out.testgen.probes`)."""
     out = _marker(p.data) + f"def {p.name}(statectl_device):\n" + _doc(p.doc)
-    out += "    d = statectl_device\n" + given(list(p.given)) + f"    {p.action}\n"
+    out += "    d = statectl_device\n" + given(_items(p.given, p.given_data))
+    out += f"    {p.action}\n"
     if p.raised is None:
         return out + "\n\n"
     args = [

@@ -7,7 +7,9 @@ Rules:
 1. ``send(event, data)`` processes one event to completion and returns what the
    implementation showed (:class:`Observed`): why nothing happened, the invoke numbers
    issued (when it shows them), the device API calls it made (observer method and
-   arguments, when it shows them) and the events it took by itself meanwhile.
+   arguments, when it shows them), the driver's own API calls per notification it
+   served (``served``: statectl's runtime reads them from the driver's API log) and the
+   events it took by itself meanwhile.
 2. ``states()`` is the active atomic states in document order.
 3. ``advance(seconds)`` lets time run (a simulated clock, or a bounded wall wait for a
    real device); what the implementation did meanwhile is the returned ``Observed``.
@@ -32,7 +34,16 @@ from typing import Any, Protocol, runtime_checkable
 
 from statectl.kernel.errors import StatectlError
 
-__all__ = ["KINDS", "Call", "Implementation", "Observed", "Unsupported", "parse_spec"]
+__all__ = [
+    "KINDS",
+    "ApiMade",
+    "Call",
+    "Implementation",
+    "Observed",
+    "Served",
+    "Unsupported",
+    "parse_spec",
+]
 
 #: The adapter kinds a ``--statectl-impl`` spec may name.
 KINDS = ("runtime", "cpp", "opcua", "python")
@@ -54,6 +65,28 @@ class Call:
 
 
 @dataclass(frozen=True, slots=True)
+class ApiMade:
+    """One call a driver really made to its device: ``SimMotor.move_to(5.0)``."""
+
+    owner: str
+    function: str
+    args: tuple[Any, ...] = ()
+
+    def __str__(self) -> str:
+        return f"{self.owner}.{self.function}({', '.join(map(repr, self.args))})"
+
+
+@dataclass(frozen=True, slots=True)
+class Served:
+    """The API calls a driver made serving one notification (``method`` and its event's
+    ``data``), or by itself between notifications (``method`` None)."""
+
+    method: str | None
+    data: Any
+    calls: tuple[ApiMade, ...]
+
+
+@dataclass(frozen=True, slots=True)
 class Observed:
     """What an implementation showed for one event or one stretch of time (rule 1)."""
 
@@ -70,6 +103,8 @@ class Observed:
     unhandled_all: tuple[tuple[str, str], ...] = ()
     #: the runtime's driver-level calls, (observer method, ``Owner.fn(args)``)
     driver_calls: tuple[tuple[str, str], ...] | None = None
+    #: the driver's own API calls, per notification served (its API log); ``None``: not shown
+    served: tuple[Served, ...] | None = None
 
 
 @runtime_checkable

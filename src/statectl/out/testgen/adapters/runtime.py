@@ -3,8 +3,10 @@
 Rules:
 1. The Subject runs the chart; the driver is the test's, the tables' simulated twin by
    default. It is attached through a :class:`Tap` that notes every notification the
-   driver gets (the API call: observer method and the event's data) and counts each
-   monitor's polls. Time stands still until :meth:`RuntimeImpl.advance`.
+   driver gets (observer method and the event's data) and, from the driver's API log,
+   the calls the driver really made serving it and those it made by itself in between
+   (``Observed.served``: what the harness compares with the tables). Time stands
+   still until :meth:`RuntimeImpl.advance`.
 2. What an event did is read from the Subject's records since it was sent.
 3. :meth:`RuntimeImpl.restart` is a journal and a kill: what the test did so far
    (events, waits, faults) runs again on a fresh driver into a journal (SQLite, a
@@ -27,7 +29,7 @@ from typing import Any
 from statectl.front.observers import Notification, Observer
 from statectl.front.tables import RecoveryRow
 from statectl.kernel.model import Chart, StateKind
-from statectl.out.testgen.adapters import Call, Observed, Unsupported
+from statectl.out.testgen.adapters import ApiMade, Call, Observed, Served, Unsupported
 from statectl.run.devices import SimTwin, connect
 from statectl.run.devices.base import Driver
 from statectl.run.journal import Journal
@@ -41,6 +43,7 @@ from statectl.run.runtime import (
     SimClock,
     Subject,
 )
+from statectl.run.runtime.hooks import ApiLogging, api_calls_since, api_count
 from statectl.run.runtime.monitors import Monitor
 from statectl.run.system import DeviceSetup, System
 
@@ -62,15 +65,37 @@ class Recorder:
 
 
 class Tap:
-    """Stands between the Subject and the driver and notes each notification (rule 1)."""
+    """Stands between the Subject and the driver and notes each notification and the API
+    calls the driver made for it (rule 1)."""
 
     def __init__(self, driver: Observer) -> None:
         self.driver = driver
         self.calls: list[Call] = []
+        self.logs = isinstance(driver, ApiLogging)  # else: no API log to read
+        self.served: list[Served] = []
+        self._count = api_count(driver) if self.logs else 0
 
     def update(self, notification: Notification) -> None:
         self.calls.append(Call(notification.method, notification.data))
+        self.catch_up()
         self.driver.update(notification)
+        if self.logs:
+            self.served.append(Served(notification.method, notification.data, self._new()))
+
+    def catch_up(self) -> None:
+        """Note the calls the driver made by itself since the last look (a timer's, a thread's)."""
+        if self.logs and api_count(self.driver) != self._count:
+            self.served.append(Served(None, None, self._new()))
+
+    def clear(self) -> None:
+        self.catch_up()
+        self.calls.clear()
+        self.served.clear()
+
+    def _new(self) -> tuple[ApiMade, ...]:
+        made = api_calls_since(self.driver, self._count)
+        self._count = api_count(self.driver)
+        return tuple(ApiMade(c.device, c.function, tuple(c.args)) for c in made)
 
     def __getattr__(self, name: str) -> Any:  # bind, poll_fault, serves, api_log, ...
         return getattr(self.driver, name)
@@ -191,7 +216,7 @@ class RuntimeImpl:
 
     def _mark(self) -> None:
         self.recorder.mark = len(self.recorder.records)
-        self.tap.calls.clear()
+        self.tap.clear()
 
     def _fresh(self) -> Observer:
         """A new driver like the test's: ``new_driver``'s, else the twin or the driver's
@@ -244,6 +269,7 @@ class RuntimeImpl:
     def observed(self, sent: str | None = None) -> Observed:
         """What the records since the mark show (rule 2)."""
         since = self.recorder.since_mark()
+        self.tap.catch_up()
         unhandled_all = tuple(
             (r.event, r.reason.value) for r in since if isinstance(r, EventIgnored | EventRejected)
         )
@@ -262,4 +288,5 @@ class RuntimeImpl:
             events=tuple(events),
             unhandled_all=unhandled_all,
             driver_calls=tuple((r.method, r.api) for r in since if isinstance(r, ObserverCalled)),
+            served=tuple(self.tap.served) if self.tap.logs else None,
         )
