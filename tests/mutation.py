@@ -45,6 +45,7 @@ sys.path.insert(0, str(ROOT / "src"))
 from statectl.front.builder.build import load_chart  # noqa: E402  # src/ first on the path
 from statectl.front.tables import RecoveryRow  # noqa: E402
 from statectl.front.tables import load as load_tables  # noqa: E402
+from statectl.kernel.errors import StatectlError  # noqa: E402
 from statectl.kernel.model import Chart, ControlKind, EventKind, StateKind  # noqa: E402
 from statectl.kernel.semantics import compiled, initial, step  # noqa: E402
 from statectl.out.testgen import DeviceUnderTest, generate  # noqa: E402
@@ -392,7 +393,11 @@ def main(argv: list[str] | None = None) -> int:
     criteria = tuple(c for c in args.criteria.split(",") if c)
     if args.no_hypothesis:
         criteria = tuple(c for c in criteria if c != "hypothesis")
-    results = {f.name: score(f, criteria) for f in args.files}
+    try:
+        results = {f.name: score(f, criteria) for f in args.files}
+    except StatectlError as exc:  # a cell file, a broken device file: say so, no traceback
+        print(f"mutation.py: {exc}; give device files, a cell's one by one", file=sys.stderr)
+        return 2
     print(table(results, criteria))
     if args.survivors:
         for f, rows in results.items():

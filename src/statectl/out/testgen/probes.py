@@ -138,11 +138,12 @@ def _within(g: Graph, node: Node) -> float | None:
     return min(due) if due else None
 
 
-def _completion_probes(g: Graph, name: Callable[[str], str]) -> list[Probe]:
+def _completion_probes(g: Graph, name: Callable[[str], str]) -> tuple[list[Probe], list[str]]:
     calls = DeviceCalls(g.chart)
     kinds = {e.name: e.kind for e in g.chart.events}
     seen: set[tuple[str, str]] = set()
     probes: list[Probe] = []
+    unsure: dict[tuple[str, str], str] = {}  # calls whose completion needs the device's data
     for e in g.edges:
         if e.step.unhandled is not None:
             continue
@@ -163,6 +164,12 @@ def _completion_probes(g: Graph, name: Callable[[str], str]) -> list[Probe]:
                 None,
             )  # fmt: skip
             if follow is None:
+                if any(x.source == e.target and x.event in completions for x in g.edges):
+                    unsure[key] = (
+                        f"{n.method}() called by {e.event}: {' or '.join(completions)} is taken "
+                        "only with the data the device reports (its guards read it); no "
+                        "completion test"
+                    )
                 continue
             seen.add(key)
             within = _within(g, e.target)
@@ -184,7 +191,7 @@ def _completion_probes(g: Graph, name: Callable[[str], str]) -> list[Probe]:
                     sent,
                 )
             )  # fmt: skip
-    return probes
+    return probes, [text for key, text in unsure.items() if key not in seen]
 
 
 def _recovery_probes(
@@ -257,5 +264,6 @@ def probes_for(
 ) -> tuple[list[Probe], list[str]]:
     """Every probe of ``g`` (rules 1-4) and notes on those not made (rule 5)."""
     faults, notes = _fault_probes(g, used)
+    completions, unsure = _completion_probes(g, used)
     recovery, more = _recovery_probes(g, rows, used)
-    return [*faults, *_completion_probes(g, used), *recovery], [*notes, *more]
+    return [*faults, *completions, *recovery], [*notes, *unsure, *more]
