@@ -15,8 +15,10 @@ Rules:
 2. ``advance`` is a bounded wall wait: the device runs on its own clock. The events it
    took meanwhile are read from the state change (the chart's transition from the
    states before to the states after).
-3. Invoke numbers and API calls are the server's business, not shown; fault injection,
-   monitors and restart are not reachable over OPC UA.
+3. Invoke numbers and API calls are the server's business, not shown. The address
+   space has no method that injects a fault, shows a monitor, silences the device or
+   restarts it (a fault event is no method; the driver is behind the server), so those
+   tests are skipped, each saying why and where to run them instead.
 4. ``opc.tcp://USER:PASSWORD@HOST:PORT`` gives the session's user; security policy None
    (a test server on the loopback); a server that refuses is a clear error.
 """
@@ -181,16 +183,32 @@ class OpcuaImpl:
         return tuple(found[:1]) if found else ("(a state change)",)
 
     def inject_fault(self, detail: str) -> None:
-        raise Unsupported("a fault cannot be injected over OPC UA: the device reports its own")
+        raise Unsupported(
+            "a fault cannot be injected over OPC UA: the address space statectl serves "
+            "(docs/opcua.md) has a method per command event only; a fault event is none, and "
+            "no method reaches the driver behind the server. The device's monitors raise its "
+            "faults from what the device reports (each shows as the alarm Alarms/<fault>); "
+            "run the fault tests on the runtime with the device's driver (statectl_driver)"
+        )
 
     def monitoring(self) -> Mapping[str, int]:
-        raise Unsupported("the OPC UA address space does not show monitors")
+        raise Unsupported(
+            "the OPC UA address space shows no monitors: whether one runs in a state and how "
+            "often it polled stay in the server (an alarm shows only a fault once raised); "
+            "run the monitor tests on the runtime with the device's driver (statectl_driver)"
+        )
 
     def restart(self) -> Observed:
-        raise Unsupported("the OPC UA server cannot be restarted from a client")
+        raise Unsupported(
+            "a client cannot stop and resume the OPC UA server's device: restart the server "
+            "with its journal (statectl run --journal FILE --resume) and check it by hand"
+        )
 
     def stall(self) -> None:
-        raise Unsupported("the OPC UA device cannot be silenced from a client")
+        raise Unsupported(
+            "a client cannot silence the OPC UA device's own reports (its completions), so a "
+            "state's timeout cannot be made to run out from a test"
+        )
 
     def close(self) -> None:
         self.client.disconnect()
