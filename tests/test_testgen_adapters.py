@@ -201,6 +201,20 @@ def test_the_suite_passes_on_the_opcua_server(tmp_path: Path) -> None:
     assert "a fault cannot be injected over OPC UA" in result.stdout
 
 
+def test_the_fault_test_runs_on_a_served_device_whose_driver_is_at_hand(tmp_path: Path) -> None:
+    """Served in the test's process, the driver behind the server takes the fault; the
+    monitor raising it is read over OPC UA. Monitors stay unseen: that test is skipped."""
+    pytest.importorskip("asyncua")
+    _, out, _ = _motor(tmp_path)
+    behind = "super().__init__(url, chart, behind=system.setups[0].driver)"
+    conftest = OPCUA_CONFTEST.replace("super().__init__(url, chart)", behind)
+    assert conftest != OPCUA_CONFTEST
+    (out / "conftest.py").write_text(conftest, encoding="utf-8")
+    result = run_pytest(out, "-rs", "-k", "fault_01 or monitor_01")
+    assert counts(result) == {"passed": 1, "skipped": 1}, result.stdout[-3000:]
+    assert "the OPC UA address space shows no monitors" in result.stdout
+
+
 # -- each kind of test catches its mutant -----------------------------------------------------
 
 #: (what is wrong, conftest body, the test that must fail, what its message says)

@@ -19,7 +19,12 @@ Rules:
    space has no method that injects a fault, shows a monitor, silences the device or
    restarts it (a fault event is no method; the driver is behind the server), so those
    tests are skipped, each saying why and where to run them instead.
-4. ``opc.tcp://USER:PASSWORD@HOST:PORT`` gives the session's user; security policy None
+4. A test that serves the device in its own process may give the driver behind the
+   server (``behind``, a twin or a real driver with ``inject_fault``): the fault is
+   then injected into it and silencing goes to it, and what follows is read over OPC
+   UA as always (the fault's transition in ``CurrentState``), so the fault and timeout
+   tests run.
+5. ``opc.tcp://USER:PASSWORD@HOST:PORT`` gives the session's user; security policy None
    (a test server on the loopback); a server that refuses is a clear error.
 """
 
@@ -34,6 +39,7 @@ from urllib.parse import unquote, urlparse
 from statectl.kernel.errors import StatectlError
 from statectl.kernel.model import Chart, EventKind, StateKind
 from statectl.out.testgen.adapters import Observed, Unsupported
+from statectl.run.devices.base import Driver
 
 __all__ = ["OpcuaImpl"]
 
@@ -44,10 +50,14 @@ WAIT = 5.0
 STEP = 0.05
 
 
+def _silent(event: str, data: Any = None) -> None:
+    """Where a silenced driver's reports go: nowhere."""
+
+
 class OpcuaImpl:
     """The :class:`~statectl.out.testgen.adapters.Implementation` of a device over OPC UA."""
 
-    def __init__(self, url: str, chart: Chart) -> None:
+    def __init__(self, url: str, chart: Chart, behind: Any = None) -> None:
         try:
             from asyncua import ua as ua_module
             from asyncua.sync import Client
@@ -56,6 +66,7 @@ class OpcuaImpl:
         ua: Any = ua_module  # asyncua's names are generated: typed loosely
         self.ua = ua
         self.chart = chart
+        self.behind = behind  # rule 4: the served device's driver, when in this process
         self.order = {s.name: i for i, s in enumerate(chart.states)}
         self.leaves = {
             s.name for s in chart.states if s.kind in (StateKind.ATOMIC, StateKind.FINAL)
@@ -183,6 +194,10 @@ class OpcuaImpl:
         return tuple(found[:1]) if found else ("(a state change)",)
 
     def inject_fault(self, detail: str) -> None:
+        inject = getattr(self.behind, "inject_fault", None)
+        if callable(inject):  # rule 4: the driver behind the server reports it
+            inject(detail)
+            return
         raise Unsupported(
             "a fault cannot be injected over OPC UA: the address space statectl serves "
             "(docs/opcua.md) has a method per command event only; a fault event is none, and "
@@ -205,6 +220,9 @@ class OpcuaImpl:
         )
 
     def stall(self) -> None:
+        if isinstance(self.behind, Driver) and self.behind._clock is not None:
+            Driver.bind(self.behind, _silent, self.behind._clock)  # rule 4
+            return
         raise Unsupported(
             "a client cannot silence the OPC UA device's own reports (its completions), so a "
             "state's timeout cannot be made to run out from a test"
