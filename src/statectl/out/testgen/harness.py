@@ -9,9 +9,12 @@ Rules:
    showed; :meth:`DeviceUnderTest.expect` compares it with the tables: the states
    reached, the invoke numbers issued and their observer methods, the device API calls
    made (the observer methods the tables notify, with the event's data as arguments,
-   in order: a stray call or a wrong argument fails naming it), on the runtime also the
-   driver's own API function for each (``api``: observer method -> function; by
-   default the driver's ``methods`` table), or why the event changed nothing.
+   in order: a stray call or a wrong argument fails naming it), or why the event changed
+   nothing. On the runtime the calls are the ones the driver really made (its API log,
+   per notification served): one call each of the method's function (``api``: observer
+   method -> function; by default the driver's ``methods`` table, else the method's
+   name), with the event's data or nothing as argument where that is the method's own
+   name; a second call, another method's function or a call made by itself fails.
 3. Faults, monitors and completions go through the implementation: :meth:`fault` has
    the device report a fault that its monitor must raise, :meth:`assert_monitored`
    checks a monitor polls, :meth:`complete` lets time run until the device reports a
@@ -493,9 +496,9 @@ class DeviceUnderTest:
         return self.api.get(method, method) if self.api is not None else method
 
     def _stray(self, function: str) -> bool:
-        """Whether a call the tables did not ask for is an error. A driver with its own API
-        table may make calls outside it (SimMotor's ``stop()`` before a new target); a call
-        to a function of that table, or any call where the API is the tables' own, is not."""
+        """Whether a call the tables did not ask for is an error: always, but that a driver
+        with its own API table may call outside it (SimMotor's ``stop()`` before a new
+        target); a call there to another method's function of the table is still one."""
         if self._own_api and self.api is not None:
             return function in self.api.values()
         return True
