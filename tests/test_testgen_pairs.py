@@ -229,3 +229,15 @@ def test_a_fault_that_is_not_raised_names_the_state() -> None:
     said = str(failed.value)
     assert "(device fault in Moving)" in said
     assert "raised: expected ['Error'], the device took []" in said
+
+
+def test_a_completion_not_reported_names_the_call_it_answers() -> None:
+    """The completion test says which completion, within what, and for which call."""
+    chart = load_chart(PRESS)
+    d = DeviceUnderTest(chart, mutation.NeverCompletes(chart))
+    d.given(["Press", {"pressure": 2.5}])
+    with pytest.raises(AssertionError) as failed:
+        d.complete("Stroke completion")
+    said = str(failed.value)
+    assert "expected the device to report Stroke completion within 5 s; it reported nothing" in said
+    assert said.endswith("the device is in ['Pressing']; the call it answers: Stroke()")

@@ -315,14 +315,16 @@ class DeviceUnderTest:
         seconds (the state's timeout), else the suite's completion bound."""
         __tracebackhide__ = True
         bound = self.completion_bound if within is None else within
+        called = [f"{m}()" for _, m in self._seen.invokes or ()]  # the calls it answers
         self.sent.append(f"(until {event})")
         waited = self._run_until(bound, lambda seen: bool(seen.events))
         got = self._seen.events
         if not got or got[0] != event:
             found = f"it reported {list(got)} first" if got else "it reported nothing"
+            answers = f"; the call it answers: {', '.join(called)}" if called else ""
             raise AssertionError(
                 f"{self._path()}: expected the device to report {event} within {bound:g} s; "
-                f"{found} (waited {waited:g} s); the device is in {list(self.states)}"
+                f"{found} (waited {waited:g} s); the device is in {list(self.states)}{answers}"
             )
 
     def assert_monitored(self, state: str, polls: int = 2, within: float = FAULT_BOUND) -> None:
