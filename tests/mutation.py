@@ -14,7 +14,8 @@ module fails.
   +-1), a row's target changed, a row dropped, a fault turned into a command, a
   state's ``monitoring required`` dropped.
 - Buggy drivers for the right tables (the SimTwin changed): never completes,
-  completes late, an extra API call, a wrong argument.
+  completes late, an extra API call, a wrong argument (the last two in the twin's
+  own API log, which the runtime adapter reads per notification).
 
 A mutant of a device file is *equivalent* when the kernel cannot tell it from the
 right file: the two charts stepped side by side over every event, with the data
