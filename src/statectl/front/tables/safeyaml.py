@@ -16,23 +16,35 @@ Rules:
 4. :func:`construct` turns a node into a plain value with the safe constructor;
    any failure (an unknown tag, a number with too many digits, a date that does
    not exist) is a :class:`YamlRefused` carrying a line, never another exception.
+5. ``compose(text, flat=...)`` reads each mapping of scalars in the list under a top
+   key ``flat`` accepts as a :class:`FlatRow` (its texts and lines, straight from the
+   events) instead of nodes: the state and event tables of a 100,000-row file made
+   ~800,000 nodes that were read once. A row holding anything but scalars (a nested
+   value, an alias) is composed as nodes from where it stops being flat, so every
+   refusal above is raised at the same event, with the same line.
 """
 
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import yaml
 
 __all__ = [
     "MAX_DEPTH",
+    "FlatRow",
     "YamlRefused",
     "compose",
     "construct",
     "load_value",
     "top_keys",
 ]
+
+#: The tag of a scalar that resolves to null (``~``, ``null``, an empty value).
+NULL_TAG = "tag:yaml.org,2002:null"
 
 #: Deepest nesting of sequences and mappings a file or a cell may have (T116).
 MAX_DEPTH = 64
@@ -71,27 +83,33 @@ def _line(mark: Any) -> int | None:
 
 
 def compose(
-    text: str, loader: type[yaml.SafeLoader] | None = None, max_depth: int = MAX_DEPTH
+    text: str,
+    loader: type[yaml.SafeLoader] | None = None,
+    max_depth: int = MAX_DEPTH,
+    flat: Callable[[str], bool] | None = None,
 ) -> yaml.Node | None:
     """The node tree of a one-document YAML text (``None`` when it is empty).
 
     Raises :class:`YamlRefused`: T101 malformed, T115 an alias, T116 too deep. A
     malformed text is read again by the pure-Python parser, so the line and message
-    do not depend on whether libyaml is installed.
+    do not depend on whether libyaml is installed. ``flat`` names the top keys
+    whose list's rows may be read as :class:`FlatRow` (rule 5).
     """
     try:
-        return _compose_with(loader or _Loader, text, max_depth)
+        return _compose_with(loader or _Loader, text, max_depth, flat)
     except YamlRefused as refused:
         if refused.code != "T101" or loader is not None or _Loader is _PyLoader:
             raise
-    return _compose_with(_PyLoader, text, max_depth)
+    return _compose_with(_PyLoader, text, max_depth, flat)
 
 
-def _compose_with(loader: type[yaml.SafeLoader], text: str, max_depth: int) -> yaml.Node | None:
+def _compose_with(
+    loader: type[yaml.SafeLoader], text: str, max_depth: int, flat: Callable[[str], bool] | None
+) -> yaml.Node | None:
     parser: Any = None
     try:
         parser = loader(text)  # the pure-Python reader refuses control characters here
-        return _compose(parser, max_depth)
+        return _compose(parser, max_depth, flat)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         problem = exc.problem or exc.context or "malformed YAML"
@@ -104,13 +122,49 @@ def _compose_with(loader: type[yaml.SafeLoader], text: str, max_depth: int) -> y
             parser.dispose()
 
 
-def _compose(parser: Any, max_depth: int) -> yaml.Node | None:
-    """Rule 1 over the parser's events, one pass, no recursion.
+@dataclass(frozen=True, slots=True)
+class FlatRow:
+    """A mapping of scalars read from the parser's events without nodes (rule 5).
 
-    The loop dispatches on the event's exact type (the parsers make no
-    subclasses) and resolves a plain scalar's tag once per distinct text: with
-    no path resolvers (the safe loaders have none) the tag depends on the text
-    alone. A 10,000-state file is ~200,000 events, so each test here counts.
+    ``line`` is the mapping's 1-based line; each entry is (key text, key line, value
+    text or ``None`` when the value resolves to null, value line), in file order.
+    """
+
+    line: int
+    entries: tuple[tuple[str, int, str | None, int], ...]
+
+
+def _tagger(parser: Any) -> Callable[[Any], str]:
+    """A scalar event -> its tag, as the safe composer resolves it.
+
+    A plain scalar's tag is resolved once per distinct text: with no path resolvers
+    (the safe loaders have none) it depends on the text alone.
+    """
+    resolve, scalar_node = parser.resolve, yaml.ScalarNode
+    cacheable = not getattr(parser, "yaml_path_resolvers", None)
+    plain_tags: dict[str, str] = {}  # plain scalar text -> its resolved tag
+
+    def tag_of(event: Any) -> str:
+        tag: str | None = event.tag
+        if tag is not None and tag != "!":
+            return tag
+        value, implicit = event.value, event.implicit
+        if cacheable and implicit[0]:
+            tag = plain_tags.get(value)
+            if tag is None:
+                tag = plain_tags[value] = resolve(scalar_node, value, implicit)
+            return tag
+        resolved: str = resolve(scalar_node, value, implicit)
+        return resolved
+
+    return tag_of
+
+
+def _compose(parser: Any, max_depth: int, flat: Callable[[str], bool] | None) -> yaml.Node | None:
+    """Rule 1 over the parser's events, one pass, no recursion (rule 5 for ``flat``).
+
+    The loop dispatches on the event's exact type (the parsers make no subclasses).
+    A 10,000-state file is ~200,000 events, so each test here counts.
     """
     get = parser.get_event
     get()  # StreamStart
@@ -120,42 +174,38 @@ def _compose(parser: Any, max_depth: int) -> yaml.Node | None:
     scalar_event, alias_event = yaml.ScalarEvent, yaml.AliasEvent
     seq_start, map_start = yaml.SequenceStartEvent, yaml.MappingStartEvent
     seq_end, map_end = yaml.SequenceEndEvent, yaml.MappingEndEvent
-    scalar_node, seq_node, map_node = yaml.ScalarNode, yaml.SequenceNode, yaml.MappingNode
-    resolve = parser.resolve
-    cacheable = not getattr(parser, "yaml_path_resolvers", None)
-    plain_tags: dict[str, str] = {}  # plain scalar text -> its resolved tag
+    scalar_node = yaml.ScalarNode
+    tag_of = _tagger(parser)
     root: yaml.Node | None = None
-    stack: list[tuple[yaml.SequenceNode | yaml.MappingNode, list[yaml.Node]]] = []
-    items: list[yaml.Node] | None = None  # the open collection's items
+    # each open collection: its node, its items, whether its mappings may be FlatRows
+    stack: list[tuple[yaml.CollectionNode, list[Any], bool]] = []
+    items: list[Any] | None = None  # the open collection's items
+    pending: Any = None  # an event read ahead by _flat_row, handled next
     while True:
-        event: Any = get()
+        event: Any = pending or get()
+        pending = None
         kind = type(event)
-        node: yaml.Node
+        node: Any  # a yaml.Node, or a FlatRow in a list
         if kind is scalar_event:
-            tag = event.tag
-            if tag is None or tag == "!":
-                value = event.value
-                implicit = event.implicit
-                if cacheable and implicit[0]:
-                    tag = plain_tags.get(value)
-                    if tag is None:
-                        tag = plain_tags[value] = resolve(scalar_node, value, implicit)
-                else:
-                    tag = resolve(scalar_node, value, implicit)
-            node = scalar_node(tag, event.value, event.start_mark, event.end_mark, event.style)
+            node = scalar_node(
+                tag_of(event), event.value, event.start_mark, event.end_mark, event.style
+            )
         elif kind is map_start or kind is seq_start:
             if len(stack) >= max_depth:
                 raise _too_deep(event, max_depth)
-            made = map_node if kind is map_start else seq_node
-            tag = event.tag
-            if tag is None or tag == "!":
-                tag = resolve(made, None, event.implicit)
-            opened = made(tag, [], event.start_mark, event.end_mark, flow_style=event.flow_style)
-            items = []
-            stack.append((opened, items))
+            if kind is map_start and stack and stack[-1][2]:
+                read = _flat_row(get, event, tag_of)
+                if isinstance(read, FlatRow):
+                    items.append(read)  # type: ignore[union-attr]  # a list is open
+                    continue
+                pending = read[1]  # the row holds more than scalars: compose it as nodes
+            opened, items = _opened(parser, event, kind is map_start)
+            stack.append((opened, items, flat is not None and _flat_list(stack, event, flat)))
+            if pending is not None:
+                items.extend(_scalar_nodes(read[0], tag_of))
             continue
         elif kind is map_end or kind is seq_end:
-            closed, values = stack.pop()
+            closed, values, _ = stack.pop()
             closed.end_mark = event.end_mark
             if kind is map_end:
                 closed.value = list(zip(values[::2], values[1::2], strict=True))
@@ -172,9 +222,62 @@ def _compose(parser: Any, max_depth: int) -> yaml.Node | None:
         if items is not None:
             items.append(node)
         else:
-            root = node
+            root = node  # a FlatRow is never the root: only a list's item is one
     _one_document(parser)
     return root
+
+
+def _opened(parser: Any, event: Any, mapping: bool) -> tuple[yaml.CollectionNode, list[Any]]:
+    """A new collection node for a start event (its items come later), and its item list."""
+    made = yaml.MappingNode if mapping else yaml.SequenceNode
+    tag = event.tag
+    if tag is None or tag == "!":
+        tag = parser.resolve(made, None, event.implicit)
+    return made(tag, [], event.start_mark, event.end_mark, flow_style=event.flow_style), []
+
+
+def _flat_list(stack: list[Any], event: Any, flat: Callable[[str], bool]) -> bool:
+    """Rule 5: ``event`` opens a list that is the value of a top key ``flat`` names."""
+    if len(stack) != 1 or type(event) is not yaml.SequenceStartEvent:
+        return False
+    top, items, _ = stack[0]
+    return (
+        type(top) is yaml.MappingNode
+        and len(items) % 2 == 1
+        and type(items[-1]) is yaml.ScalarNode
+        and flat(items[-1].value)
+    )
+
+
+def _flat_row(get: Callable[[], Any], start: Any, tag_of: Callable[[Any], str]) -> Any:
+    """Rule 5: the mapping ``start`` opens, read to its end as a :class:`FlatRow`; or,
+    at the first event that is not a scalar, the scalar events read so far and that
+    event, so the caller composes the row as nodes from there."""
+    scalar_event: Any = yaml.ScalarEvent  # Any: the events' stubs are not what the loop reads
+    null = NULL_TAG
+    read: list[Any] = []
+    entries: list[tuple[str, int, str | None, int]] = []
+    key: Any
+    while True:
+        key = get()
+        if type(key) is not scalar_event:
+            break
+        value: Any = get()
+        read += key, value
+        if type(value) is not scalar_event:
+            return read[:-1], value
+        text: str | None = value.value
+        if tag_of(value) == null:
+            text = None
+        entries.append((key.value, key.start_mark.line + 1, text, value.start_mark.line + 1))
+    if type(key) is not yaml.MappingEndEvent:
+        return read, key
+    return FlatRow(start.start_mark.line + 1, tuple(entries))
+
+
+def _scalar_nodes(events: list[Any], tag_of: Callable[[Any], str]) -> list[yaml.Node]:
+    """The nodes of scalar events, as the composer makes them."""
+    return [yaml.ScalarNode(tag_of(e), e.value, e.start_mark, e.end_mark, e.style) for e in events]
 
 
 # The refusals _compose raises, kept out of its loop so the loop reads as rule 1.

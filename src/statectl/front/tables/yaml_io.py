@@ -39,7 +39,7 @@ from statectl.front.tables.rows import (
     diag,
     normalize_column,
 )
-from statectl.front.tables.safeyaml import YamlRefused, compose, construct
+from statectl.front.tables.safeyaml import FlatRow, YamlRefused, compose, construct
 from statectl.front.tables.schema import make_tables
 from statectl.kernel.errors import Diagnostic, Location
 
@@ -56,7 +56,10 @@ _columns: dict[str, str] = {}
 
 
 def _at(file: str, node: yaml.Node) -> Location:
-    line = node.start_mark.line + 1
+    return _at_line(file, node.start_mark.line + 1)
+
+
+def _at_line(file: str, line: int) -> Location:
     last = _last_at[0]
     if last.line == line and last.file == file:
         return last
@@ -131,6 +134,10 @@ def _table(
         return None
     rows: list[RawRow] = []
     for item in node.value:
+        if type(item) is FlatRow:
+            where = _at_line(file, item.line)
+            rows.append(RawRow(where, _flat_cells(file, where, item, diags)))
+            continue
         if not isinstance(item, yaml.MappingNode):
             diags.append(
                 diag(
@@ -167,6 +174,36 @@ def _row_cells(
         if value.start_mark.line + 1 != at.line:
             at = _at(file, value)
         cells[name] = (cell, at)
+    return cells
+
+
+def _flat_cells(
+    file: str, where: Location, row: FlatRow, diags: list[Diagnostic]
+) -> dict[str, tuple[Cell, Location]]:
+    """A :class:`FlatRow`'s cells, as :func:`_row_cells` reads the same row's nodes."""
+    cells: dict[str, tuple[Cell, Location]] = {}
+    at = where  # a cell on the row's line (or the last cell's) shares its location
+    for name, _, text, line in row.entries:
+        if name in cells or (_columns.get(name) or _column(name)) != name:
+            return _slow_flat_cells(file, row, diags)
+        if line != at.line:
+            at = _at_line(file, line)
+        cells[name] = ("" if text is None else text, at)
+    return cells
+
+
+def _slow_flat_cells(
+    file: str, row: FlatRow, diags: list[Diagnostic]
+) -> dict[str, tuple[Cell, Location]]:
+    """Any :class:`FlatRow`: keys normalized, duplicates reported, as :func:`_pairs` does."""
+    cells: dict[str, tuple[Cell, Location]] = {}
+    for key, key_line, text, line in row.entries:
+        name = _column(key)
+        if name in cells:
+            at = _at_line(file, key_line)
+            diags.append(diag("T101", at, f"key {key!r} appears twice in one mapping"))
+            continue
+        cells[name] = ("" if text is None else text, _at_line(file, line))
     return cells
 
 
@@ -227,12 +264,18 @@ def _data(
     return entries
 
 
+def _flat_table(key: str) -> bool:
+    """Whether a top key names a table whose rows may come as a :class:`FlatRow`: the
+    state and event tables, the big ones (a recovery row's data is a YAML value)."""
+    return _column(key) in ("states", "events")
+
+
 def read_yaml(text: str, file: str) -> tuple[DeviceTables | None, list[Diagnostic]]:
     """Read a YAML device file; every problem becomes a diagnostic."""
     diags: list[Diagnostic] = []
     source = Location(file, 1)
     try:
-        root = compose(text)
+        root = compose(text, flat=_flat_table)
     except YamlRefused as exc:
         return None, [diag(exc.code, Location(file, exc.line or 1), exc.message, exc.hint)]
     if root is None:
