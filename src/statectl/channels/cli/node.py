@@ -33,11 +33,13 @@ import threading
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
-from statectl.channels.cli.problems import Problems, verdict
 from statectl.kernel.errors import DiagnosticError, StatectlError, did_you_mean
 from statectl.kernel.exits import OK, PROBLEMS, USAGE
+
+if TYPE_CHECKING:  # imported where used: every command's start imports this module
+    from statectl.channels.cli.problems import Problems
 
 __all__ = ["dashboard_main", "node_main", "register"]
 
@@ -223,6 +225,7 @@ def node_main(
 ) -> int:
     """The whole ``statectl node``; returns the exit code (0 ok, 1 problems, 2 usage)."""
     from statectl.channels.cli.lifecycle import Ending, say_resumed
+    from statectl.channels.cli.problems import Problems, verdict
     from statectl.channels.distributed import Wire
 
     setup = _node_setup(path, node, journal, resume, fresh, guarantee, port, err)
