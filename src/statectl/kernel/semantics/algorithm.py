@@ -163,7 +163,7 @@ def get_effective_target_states(m: Machine, run: Run, t: Transition) -> list[str
 
 
 def get_transition_domain(m: Machine, run: Run, t: Transition) -> str | None:
-    static = m._static_domain.get(id(t), "")
+    static = m.static_domains().get(id(t), "")
     if static != "":
         return static
     return m._domain(t, get_effective_target_states(m, run, t))

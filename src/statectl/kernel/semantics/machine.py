@@ -61,10 +61,7 @@ class Machine:
         }
         self._compile_guards(chart, guards)
         self.ignored = chart.ignored | chart.deferred  # a deferred event is kept, not taken
-        self._static_domain: dict[int, str | None] = {}
-        for t in chart.transitions:
-            if t.targets and not any(self.kind[x].is_history for x in t.targets):
-                self._static_domain[id(t)] = self._domain(t, t.targets)
+        self._static_domains: dict[int, str | None] | None = None  # see static_domains()
         self._candidates: dict[tuple[str, str | None], tuple[Transition, ...]] = {}
         self._memo: dict[tuple[Snapshot, str], Step] = {}
         # data-guarded steps: per (snapshot, event), the guard outcomes seen and their step
@@ -228,6 +225,23 @@ class Machine:
             ):
                 return anc
         return None
+
+    def static_domains(self) -> dict[int, str | None]:
+        """The domain of each transition whose targets fix it (none is a history), by id.
+
+        Worked out for every transition on the first step that asks: a host that only
+        asks structural questions (``statectl check``: a fifth of its rules' time on a
+        100,000-row chart) never pays for it. The table is published whole, so a thread
+        that races another to make it reads a complete one either way.
+        """
+        domains = self._static_domains
+        if domains is None:
+            domains = {}
+            for t in self.chart.transitions:
+                if t.targets and not any(self.kind[x].is_history for x in t.targets):
+                    domains[id(t)] = self._domain(t, t.targets)
+            self._static_domains = domains
+        return domains
 
     def _domain(self, t: Transition, targets: Iterable[str]) -> str | None:
         tstates = list(targets)
