@@ -8,7 +8,9 @@ Rules:
 2. The node tree is composed (not constructed, :mod:`statectl.front.tables.safeyaml`:
    no aliases, bounded nesting) so every row and cell keeps its
    1-based line; only ``data`` values and a recovery row's ``data`` are
-   constructed, as YAML values.
+   constructed, as YAML values. A state or event row of scalars comes as a
+   :class:`~statectl.front.tables.safeyaml.FlatRow` (texts and lines, no nodes) and is
+   read as its nodes would be (tests/test_yaml_flat_rows.py holds the two the same).
 3. A cell is a scalar (its text as written; ``null`` is empty) or, for the list
    columns, a sequence of scalars; a mapping anywhere else is T108.
 4. The writer leaves out empty optional cells and writes ``kind`` always, so
