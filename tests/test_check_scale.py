@@ -334,3 +334,29 @@ def test_the_domains_are_worked_out_once_when_first_asked(tmp_path: Path) -> Non
     domains = m.static_domains()
     assert domains == {id(t): m._domain(t, t.targets) for t in chart.transitions}
     assert m.static_domains() is domains
+
+
+def test_check_does_not_import_the_schemas_or_the_run_counters(tmp_path: Path) -> None:
+    """The start of every command builds the whole parser: ``statectl schema``'s choices
+    and ``statectl node``'s problem counter were imported with it (the schemas import
+    every reader they are made from: 0.14 s of each start)."""
+    import subprocess
+    import sys
+
+    path = _device(tmp_path / "d.yaml", 4)
+    probe = (
+        "import sys\nfrom statectl.channels.cli import main\n"
+        f"code = main(['check', {str(path)!r}])\n"
+        "print(code, sorted(m for m in sys.modules if m in "
+        "('statectl.out.schema', 'statectl.channels.cli.problems')))"
+    )
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert done.stdout.split("\n")[-2] == "0 []", done.stdout + done.stderr
+
+
+def test_the_schema_commands_choices_are_the_schemas_kinds() -> None:
+    """``statectl schema KIND`` offers the kinds out/schema.py makes, no more, no fewer."""
+    from statectl.channels.cli.editors import SCHEMA_KINDS
+    from statectl.out.schema import KINDS
+
+    assert SCHEMA_KINDS == KINDS
