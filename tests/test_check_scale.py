@@ -360,3 +360,26 @@ def test_the_schema_commands_choices_are_the_schemas_kinds() -> None:
     from statectl.out.schema import KINDS
 
     assert SCHEMA_KINDS == KINDS
+
+
+@pytest.mark.parametrize(("guard", "bad"), [("1 < 2", False), ("speed > 1", True)])
+def test_a_clean_guard_is_checked_once_per_event_a_bad_one_on_every_row(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, guard: str, bad: bool
+) -> None:
+    """400 rows sharing a clean guard over two events check it twice; a guard that reads
+    an undefined name is reported on each of its rows, at each row's line."""
+    import statectl.front.builder.chart as chart
+
+    checked: list[str] = []
+    real = chart.check_guard
+
+    def counting(*args: object) -> object:
+        checked.append("guard")
+        return real(*args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(chart, "check_guard", counting)
+    path = _device(tmp_path / "d.yaml", 400, guard)
+    found = rules.check_paths([str(path)])
+    x303 = [d.where.line for d in found if d.code == "X303"]
+    assert len(checked) == (400 if bad else 2)
+    assert x303 == (list(range(6, 406)) if bad else [])

@@ -237,10 +237,13 @@ def _check_rows(
     """Check each event row's states and guard (B201, X301-X303); its assignments by row key.
 
     Every row is checked before the merge, so each duplicate's own location is reported.
+    A guard found clean on one row is clean on every row of the same event: what it
+    reports depends on its text, the event and the tables, not on the row.
     """
     state_names = list(merged)
     known = set(data_names) | GUARD_NAMES
     assigns: dict[tuple[str, ...], tuple[Action, ...]] = {}  # a row's assignments (eventdata)
+    clean: set[tuple[str, str]] = set()  # (guard, event) that reported nothing
     for r in tables.events:
         for column, target in (("old", r.old), ("new", r.new)):
             if target not in merged:
@@ -253,11 +256,13 @@ def _check_rows(
                         _hint(target, state_names),
                     )
                 )
-        if r.guard:
+        if r.guard and (r.guard, r.event) not in clean:
             expression, problems = _compile(r.guard, r.where)
-            diags.extend(problems)
             if expression is not None:
-                diags.extend(check_guard(expression, r, known, fields, data_names))
+                problems += check_guard(expression, r, known, fields, data_names)
+            diags.extend(problems)
+            if expression is not None and not problems:
+                clean.add((r.guard, r.event))
         made = assign_actions(r, known, fields, data_names, diags)
         assigns.setdefault((r.event, r.old, r.new, r.guard), made)
     return assigns
