@@ -116,8 +116,8 @@ def build(tables: DeviceTables) -> tuple[Chart | None, list[Diagnostic]]:
     rows = _merge_events(tables.events, diags)
     events = tuple(_with(e, fields=fields.get(e.name, ())) for e in _event_defs(rows, diags))
     _check_invokes(rows, diags)
-    apis, invokes = derive_invokes(
-        [EventSpec(r.event, r.kind, r.api or None, r.new, r.invoke or None) for r in rows]
+    apis, invokes = derive_invokes(  # a row without an API derives nothing: not passed
+        [EventSpec(r.event, r.kind, r.api, r.new, r.invoke or None) for r in rows if r.api]
     )
     by_method: dict[str, InvokeNumber] = {i.method: i for i in invokes}
     transitions = [_transition(r, assigns, by_method) for r in rows]

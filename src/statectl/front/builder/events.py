@@ -55,6 +55,9 @@ def _event_defs(rows: Sequence[EventRow], diags: list[Diagnostic]) -> tuple[Even
     for name, group in groups.items():
         first = group[0]
         for column in ("kind", "api"):
+            same = getattr(first, column)
+            if all(getattr(r, column) == same for r in group):  # the usual event: agreed
+                continue
             values = list(dict.fromkeys(getattr(r, column) for r in group))
             if len(values) > 1:
                 shown = [v.value if column == "kind" else repr(v) for v in values]
