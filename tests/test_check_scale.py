@@ -286,6 +286,42 @@ def test_the_short_way_for_a_plain_event_row_reads_as_the_long_way(
     assert short == long
 
 
+@pytest.mark.parametrize(
+    "cells",
+    [
+        {"state": "A", "control": "default"},
+        {"state": " A ", "control": " Event_Trigger-Required "},
+        {"state": "A"},
+        {"state": "A", "control": ""},
+        {"state": "A", "parent": "P", "component": "C", "api": "m", "description": " d "},
+        {"state": "A", "control": "default, event trigger required"},  # two: the long way
+        {"state": "A", "control": "sometimes"},  # T106
+        {"state": "", "control": "default"},  # T104
+        {"control": "default"},  # T104
+        {"state": "A", "colour": "red"},  # T103
+        {"state": "A", "control": ("default",)},  # a list: the long way
+        {"state": "A", "ignore": "go", "timeout": "1 s -> go"},  # the long way
+    ],
+)
+def test_the_short_way_for_a_plain_state_row_reads_as_the_long_way(
+    monkeypatch: pytest.MonkeyPatch, cells: dict[str, object]
+) -> None:
+    """A state row of plain text cells skips the cell-by-cell checks: same row, same
+    diagnostics."""
+    from statectl.front.tables import cells as checked
+    from statectl.front.tables.rows import RawRow
+    from statectl.kernel.errors import Location
+
+    at = Location("d.yaml", 3)
+    row = RawRow(at, {k: (v, at) for k, v in cells.items()})  # type: ignore[misc]
+    short: list[object] = []
+    got = checked.state_row(row, short)  # type: ignore[arg-type]
+    monkeypatch.setattr(checked, "_plain_state_row", lambda _row: None)
+    long: list[object] = []
+    assert checked.state_row(row, long) == got  # type: ignore[arg-type]
+    assert short == long
+
+
 def test_check_does_not_load_the_explorer(tmp_path: Path) -> None:
     """A device file's check pays for what it uses: the cell explorer is imported by a
     cell's commands only (it was pulled in by every command through the run's problem

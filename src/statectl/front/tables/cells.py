@@ -195,7 +195,47 @@ def _check_keys(table: str, row: RawRow, diags: list[Diagnostic]) -> None:
             diags.append(unknown_column(table, name, row.cells[name][1]))
 
 
+#: The text columns of a state row that need no more than stripping when well formed.
+_PLAIN_STATE = frozenset(("component", "api", "state", "control", "description", "parent"))
+
+
+def _plain_state_row(row: RawRow) -> StateRow | None:
+    """The usual state row, when it has nothing to report: text cells of
+    :data:`_PLAIN_STATE` only, ``state`` filled, at most one control and a known one.
+    ``None`` otherwise, and :func:`state_row` checks it cell by cell (as for event rows)."""
+    texts: dict[str, str] = {}
+    for name, (value, _) in row.cells.items():
+        if type(value) is not str or name not in _PLAIN_STATE:
+            return None
+        texts[name] = value.strip()
+    get = texts.get
+    state, control = get("state", ""), get("control", "")
+    if not state or "," in control:
+        return None
+    controls: tuple[ControlKind, ...] = ()
+    if control:
+        kind = CONTROL_WORDS.get(
+            " ".join(control.lower().replace("_", " ").replace("-", " ").split())
+        )
+        if kind is None:
+            return None
+        controls = (kind,)
+    return StateRow(
+        component=get("component", ""),
+        api=get("api", ""),
+        state=state,
+        controls=controls,
+        description=get("description", ""),
+        ignore=(),
+        parent=get("parent", ""),
+        where=row.where,
+    )
+
+
 def state_row(row: RawRow, diags: list[Diagnostic]) -> StateRow:
+    plain = _plain_state_row(row)
+    if plain is not None:
+        return plain
     _check_keys("states", row, diags)
     return StateRow(
         component=_text(row, "component", diags),

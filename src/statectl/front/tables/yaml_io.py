@@ -189,7 +189,7 @@ def _flat_cells(
         if name in cells or (_columns.get(name) or _column(name)) != name:
             return _slow_flat_cells(file, row, diags)
         if line != at.line:
-            at = _at_line(file, line)
+            at = Location(file, line)
         cells[name] = ("" if text is None else text, at)
     return cells
 
