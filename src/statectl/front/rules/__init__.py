@@ -298,9 +298,12 @@ def _too_many_rows(state: str, event: str | None, rows: list[Transition]) -> Dia
 def _overlap(
     state: str, event: str | None, first: Transition, second: Transition
 ) -> Diagnostic | None:
+    both_unguarded = first.guard is None and second.guard is None
+    if not both_unguarded and guards_exclusive(first.guard, second.guard):
+        return None  # the usual pair: said before any text is made for it
     what = f"event {event!r}" if event is not None else "no event (eventless)"
     rows = f"{_line(first.origin)} and {_line(second.origin)}"
-    if first.guard is None and second.guard is None:
+    if both_unguarded:
         return Diagnostic(
             "C403",
             Severity.ERROR,
@@ -309,8 +312,6 @@ def _overlap(
             "only the first can ever fire",
             "merge the rows, or give them guards that exclude each other",
         )
-    if guards_exclusive(first.guard, second.guard):
-        return None
     guards = f"[{first.guard or 'no guard'}] and [{second.guard or 'no guard'}]"
     return Diagnostic(
         "C403",
