@@ -28,6 +28,9 @@ FILES = {
     "tags": HEAD + "  - {event: !!str 12, old: !!null x, new: !custom B, api: ! m}\n",
     "quoted and folded": HEAD + "  - event: 'go'\n    old: \"A\"\n    new: >\n      B\n"
     "    condition: |\n      when\n      ready\n",
+    "padded quoted": "device: D\nstates:\n  - {state: ' A ', control: ' Default '}\n"
+    "  - {state: \"B \", control: ' event trigger required', parent: ' '}\nevents:\n"
+    "  - {event: ' go ', old: \"A \", new: ' B', kind: ' Fault ', api: ' m '}\n",
     "multi-line plain": HEAD + "  - event: go\n    old: A\n    new: B\n    condition: the\n"
     "      door is shut\n",
     "comments": HEAD + "  # a comment\n  - event: go  # trailing\n    old: A\n\n    new: B\n",
@@ -138,6 +141,8 @@ PIECES = [
     ("old", "~"),
     ("new", "B"),
     ("new", "'B'"),
+    ("new", "' B '"),
+    ("kind", "' Fault '"),
     ("guard", "x > 1"),
     ("guard", "[a, b]"),
     ("kind", "fault"),
@@ -171,3 +176,27 @@ def test_generated_rows_read_the_same_with_and_without_flat_rows(
     """Rows mixed from the pieces above: the same tables and diagnostics both ways."""
     text = _generated(seed)
     assert _read(text, True, monkeypatch) == _read(text, False, monkeypatch), text
+
+
+@pytest.mark.parametrize(
+    ("table", "text", "read"),
+    [
+        ("events", "{event: go, old: A, new: B, guard: x > 1}", True),
+        ("events", "{event: go, old: A, new: B, kind: sometimes}", False),  # T107
+        ("events", "{event: go, old: A, new: B, data: x}", False),  # not a plain column
+        ("events", "{Event: go, old: A, new: B}", False),  # a key to normalize
+        ("events", "{event: go, old: A, new: B, old: C}", False),  # a key twice
+        ("states", "{state: A, control: default, description: ~}", True),
+        ("states", "{state: A, control: 'default, final'}", False),  # two controls
+    ],
+)
+def test_a_plain_row_is_read_at_once_and_any_other_gets_its_cells(
+    table: str, text: str, read: bool
+) -> None:
+    """A plain row comes read (no cells to make); any other row keeps its cells, so the
+    comparisons above compare the two ways."""
+    root = safeyaml.compose(f"{table}:\n  - {text}\n", flat=yaml_io._flat_table)
+    assert root is not None
+    (row,) = root.value[0][1].value
+    got = yaml_io._flat_row("d.yaml", table, row, [])
+    assert (got.read is not None, bool(got.cells)) == (read, not read)

@@ -6,7 +6,7 @@ tables from these rows.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 from statectl.front.tables.eventdata import event_data_cells
 from statectl.front.tables.literals import parse_payload
@@ -196,18 +196,24 @@ def _check_keys(table: str, row: RawRow, diags: list[Diagnostic]) -> None:
 
 
 #: The text columns of a state row that need no more than stripping when well formed.
-_PLAIN_STATE = frozenset(("component", "api", "state", "control", "description", "parent"))
+PLAIN_STATE = frozenset(("component", "api", "state", "control", "description", "parent"))
 
 
 def _plain_state_row(row: RawRow) -> StateRow | None:
     """The usual state row, when it has nothing to report: text cells of
-    :data:`_PLAIN_STATE` only, ``state`` filled, at most one control and a known one.
+    :data:`PLAIN_STATE` only, ``state`` filled, at most one control and a known one.
     ``None`` otherwise, and :func:`state_row` checks it cell by cell (as for event rows)."""
     texts: dict[str, str] = {}
     for name, (value, _) in row.cells.items():
-        if type(value) is not str or name not in _PLAIN_STATE:
+        if type(value) is not str or name not in PLAIN_STATE:
             return None
         texts[name] = value.strip()
+    return plain_state_row(texts, row.where)
+
+
+def plain_state_row(texts: Mapping[str, str], where: Location) -> StateRow | None:
+    """:func:`_plain_state_row` from the cells' stripped texts (columns of
+    :data:`PLAIN_STATE` only), for a reader that has them before any cell."""
     get = texts.get
     state, control = get("state", ""), get("control", "")
     if not state or "," in control:
@@ -228,11 +234,13 @@ def _plain_state_row(row: RawRow) -> StateRow | None:
         description=get("description", ""),
         ignore=(),
         parent=get("parent", ""),
-        where=row.where,
+        where=where,
     )
 
 
 def state_row(row: RawRow, diags: list[Diagnostic]) -> StateRow:
+    if type(row.read) is StateRow:
+        return row.read
     plain = _plain_state_row(row)
     if plain is not None:
         return plain
@@ -255,21 +263,27 @@ def state_row(row: RawRow, diags: list[Diagnostic]) -> StateRow:
 
 
 #: The text columns of an event row that need no more than stripping when well formed.
-_PLAIN_EVENT = frozenset(("event", "condition", "guard", "old", "new", "kind", "api", "invoke"))
+PLAIN_EVENT = frozenset(("event", "condition", "guard", "old", "new", "kind", "api", "invoke"))
 #: An event kind's text -> the kind.
 _KINDS = {k.value: k for k in EventKind}
 
 
 def _plain_event_row(row: RawRow) -> EventRow | None:
     """The usual event row, when it has nothing to report: text cells of
-    :data:`_PLAIN_EVENT` only, ``event``, ``old`` and ``new`` filled, a known kind.
+    :data:`PLAIN_EVENT` only, ``event``, ``old`` and ``new`` filled, a known kind.
     ``None`` otherwise, and :func:`event_row` checks it cell by cell; a 100,000-row table
     asked each row's eleven cells one at a time."""
     texts: dict[str, str] = {}
     for name, (value, _) in row.cells.items():
-        if type(value) is not str or name not in _PLAIN_EVENT:
+        if type(value) is not str or name not in PLAIN_EVENT:
             return None
         texts[name] = value.strip()
+    return plain_event_row(texts, row.where)
+
+
+def plain_event_row(texts: Mapping[str, str], where: Location) -> EventRow | None:
+    """:func:`_plain_event_row` from the cells' stripped texts (columns of
+    :data:`PLAIN_EVENT` only), for a reader that has them before any cell."""
     get = texts.get
     event, old, new = get("event", ""), get("old", ""), get("new", "")
     written = get("kind", "").lower()
@@ -285,11 +299,13 @@ def _plain_event_row(row: RawRow) -> EventRow | None:
         kind=kind,
         api=get("api", ""),
         invoke=get("invoke", ""),
-        where=row.where,
+        where=where,
     )
 
 
 def event_row(row: RawRow, diags: list[Diagnostic]) -> EventRow:
+    if type(row.read) is EventRow:
+        return row.read
     plain = _plain_event_row(row)
     if plain is not None:
         return plain

@@ -229,10 +229,16 @@ DataValue = object
 
 @dataclass(frozen=True, slots=True)
 class RawRow:
-    """A row's cells by normalized column name, each with where it was found."""
+    """A row's cells by normalized column name, each with where it was found.
+
+    ``read`` is the row as a reader already read it, when it had nothing to report (a
+    plain state or event row, :func:`statectl.front.tables.cells.plain_event_row`); its
+    cells are then left empty: a YAML row made one location per cell only to drop them.
+    """
 
     where: Location
     cells: Mapping[str, tuple[Cell, Location]] = field(default_factory=dict)
+    read: StateRow | EventRow | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -21,10 +21,18 @@ Rules:
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
+from types import MappingProxyType
 from typing import Any
 
 import yaml
 
+from statectl.front.tables.cells import (
+    PLAIN_EVENT,
+    PLAIN_STATE,
+    plain_event_row,
+    plain_state_row,
+)
 from statectl.front.tables.eventdata import format_assign, format_fields, yaml_event_cell
 from statectl.front.tables.literals import (
     format_literal,
@@ -36,8 +44,10 @@ from statectl.front.tables.rows import (
     Bad,
     Cell,
     DeviceTables,
+    EventRow,
     RawRow,
     RawTable,
+    StateRow,
     diag,
     normalize_column,
 )
@@ -137,8 +147,7 @@ def _table(
     rows: list[RawRow] = []
     for item in node.value:
         if type(item) is FlatRow:
-            where = _at_line(file, item.line)
-            rows.append(RawRow(where, _flat_cells(file, where, item, diags)))
+            rows.append(_flat_row(file, table, item, diags))
             continue
         if not isinstance(item, yaml.MappingNode):
             diags.append(
@@ -177,6 +186,33 @@ def _row_cells(
             at = _at(file, value)
         cells[name] = (cell, at)
     return cells
+
+
+_Read = StateRow | EventRow | None
+#: A table's plain columns and how a plain row of it is read from its texts (cells.py).
+_PLAIN: dict[str, tuple[frozenset[str], Callable[[dict[str, str], Location], _Read]]] = {
+    "states": (PLAIN_STATE, plain_state_row),
+    "events": (PLAIN_EVENT, plain_event_row),
+}
+#: The cells of a row read at once (:attr:`RawRow.read`): none, shared by every such row.
+_NO_CELLS: Mapping[str, tuple[Cell, Location]] = MappingProxyType({})
+
+
+def _flat_row(file: str, table: str, row: FlatRow, diags: list[Diagnostic]) -> RawRow:
+    """A :class:`FlatRow` as a raw row: a plain row (text in plain columns only, each
+    once, as cells.py reads the usual row) is read at once from its texts, with no cell
+    and no location per cell; any other row gets its cells, as its nodes would."""
+    where = _at_line(file, row.line)
+    columns, read = _PLAIN[table]
+    texts: dict[str, str] = {}
+    for name, _, text, _ in row.entries:
+        if name in texts or name not in columns:
+            return RawRow(where, _flat_cells(file, where, row, diags))
+        texts[name] = "" if text is None else text.strip()
+    done = read(texts, where)
+    if done is None:
+        return RawRow(where, _flat_cells(file, where, row, diags))
+    return RawRow(where, _NO_CELLS, done)
 
 
 def _flat_cells(
