@@ -244,18 +244,10 @@ def _check_rows(
     known = set(data_names) | GUARD_NAMES
     assigns: dict[tuple[str, ...], tuple[Action, ...]] = {}  # a row's assignments (eventdata)
     clean: set[tuple[str, str]] = set()  # (guard, event) that reported nothing
+    assigning = any(r.assign for r in tables.events)  # else no row has actions to keep
     for r in tables.events:
-        for column, target in (("old", r.old), ("new", r.new)):
-            if target not in merged:
-                diags.append(
-                    _d(
-                        "B201",
-                        Severity.ERROR,
-                        r.where,
-                        f"event {r.event!r}: {column} state {target!r} is not in the states table",
-                        _hint(target, state_names),
-                    )
-                )
+        if r.old not in merged or r.new not in merged:
+            _unknown_states(r, merged, state_names, diags)
         if r.guard and (r.guard, r.event) not in clean:
             expression, problems = _compile(r.guard, r.where)
             if expression is not None:
@@ -263,9 +255,27 @@ def _check_rows(
             diags.extend(problems)
             if expression is not None and not problems:
                 clean.add((r.guard, r.event))
-        made = assign_actions(r, known, fields, data_names, diags)
-        assigns.setdefault((r.event, r.old, r.new, r.guard), made)
+        if assigning:  # the first row of each merged group gives the transition's actions
+            made = assign_actions(r, known, fields, data_names, diags)
+            assigns.setdefault((r.event, r.old, r.new, r.guard), made)
     return assigns
+
+
+def _unknown_states(
+    r: EventRow, merged: dict[str, _Merged], state_names: list[str], diags: list[Diagnostic]
+) -> None:
+    """B201: the row's old or new state is not in the states table."""
+    for column, target in (("old", r.old), ("new", r.new)):
+        if target not in merged:
+            diags.append(
+                _d(
+                    "B201",
+                    Severity.ERROR,
+                    r.where,
+                    f"event {r.event!r}: {column} state {target!r} is not in the states table",
+                    _hint(target, state_names),
+                )
+            )
 
 
 def _transition(
@@ -274,7 +284,9 @@ def _transition(
     by_method: dict[str, InvokeNumber],
 ) -> Transition:
     """Rule 3: ``old + event [guard] = new``, notifying the API's invoke if it drives it."""
-    actions: tuple[Action, ...] = assigns.get((r.event, r.old, r.new, r.guard), ())
+    actions: tuple[Action, ...] = (
+        assigns.get((r.event, r.old, r.new, r.guard), ()) if assigns else ()
+    )
     invoke = by_method.get(r.api)
     if r.kind in DRIVING_KINDS and invoke is not None:
         actions += (Notify(invoke.number, invoke.name, invoke.method, r.event),)

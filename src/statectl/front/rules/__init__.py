@@ -180,10 +180,11 @@ def _reachable(st: _Structure) -> set[str]:
     m = structural(chart)
     reached = set(entry_set(m, []))
     work = list(reached)
+    names = frozenset(st.by_name)
     while work:
         name = work.pop()
         for t in st.out(name):
-            if not t.targets or not all(x in st.by_name for x in t.targets):
+            if not t.targets or not names.issuperset(t.targets):
                 continue
             for entered in st.entered(m, t):
                 if entered not in reached:
@@ -469,8 +470,10 @@ def _check_cover(st: _Structure) -> Iterator[Diagnostic]:
                 for e in t.events:
                     rows_of.setdefault(e, []).append(t)
         for event, rows in rows_of.items():
+            if len(rows) > MAX_OVERLAP_ROWS or any(t.guard is None for t in rows):
+                continue  # an unguarded row takes the event (the usual event): asked first
             own = [t for t in rows if t.source == s.name]
-            if not own or any(t.guard is None for t in rows) or len(rows) > MAX_OVERLAP_ROWS:
+            if not own:
                 continue
             if st.ignores(s.name, event):
                 continue  # when no guard holds the kernel ignores it, as declared
