@@ -198,5 +198,5 @@ def test_a_plain_row_is_read_at_once_and_any_other_gets_its_cells(
     root = safeyaml.compose(f"{table}:\n  - {text}\n", flat=yaml_io._flat_table)
     assert root is not None
     (row,) = root.value[0][1].value
-    got = yaml_io._flat_row("d.yaml", table, row, [])
+    got = yaml_io._raw_row("d.yaml", table, row, [])
     assert (got.read is not None, bool(got.cells)) == (read, not read)

@@ -147,7 +147,7 @@ def _table(
     rows: list[RawRow] = []
     for item in node.value:
         if type(item) is FlatRow:
-            rows.append(_flat_row(file, table, item, diags))
+            rows.append(_raw_row(file, table, item, diags))
             continue
         if not isinstance(item, yaml.MappingNode):
             diags.append(
@@ -198,7 +198,7 @@ _PLAIN: dict[str, tuple[frozenset[str], Callable[[dict[str, str], Location], _Re
 _NO_CELLS: Mapping[str, tuple[Cell, Location]] = MappingProxyType({})
 
 
-def _flat_row(file: str, table: str, row: FlatRow, diags: list[Diagnostic]) -> RawRow:
+def _raw_row(file: str, table: str, row: FlatRow, diags: list[Diagnostic]) -> RawRow:
     """A :class:`FlatRow` as a raw row: a plain row (text in plain columns only, each
     once, as cells.py reads the usual row) is read at once from its texts, with no cell
     and no location per cell; any other row gets its cells, as its nodes would."""
