@@ -69,8 +69,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-# benchmark the working tree, not whatever copy happens to be installed
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+# benchmark the working tree, not whatever copy happens to be installed; a PYTHONPATH
+# given chooses the tree (another checkout's src: a baseline timed by this same file)
+if not os.environ.get("PYTHONPATH"):
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
 from statectl.front.builder.build import load_chart
 from statectl.kernel.model import Chart, State, StateKind, Transition

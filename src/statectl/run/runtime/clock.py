@@ -23,25 +23,27 @@ import threading
 import time
 import traceback
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Protocol
+
+import msgspec
 
 from statectl.kernel.errors import StatectlError
 
 __all__ = ["Clock", "SimClock", "Timer", "WallClock"]
 
 
-@dataclass(eq=False, slots=True)
-class Timer:
+class Timer(msgspec.Struct, eq=False):
     """A scheduled callback; ``cancel()`` stops it if it has not fired yet.
 
     A ``background`` timer (a monitor's poll) repeats for as long as its state is
     active; it is no work in flight, so "wait until the work is done" skips it.
+    A mutable struct, compared by identity: a monitor makes one per poll and a driver
+    one per move, and a struct is built in C (half a slotted dataclass's time).
     """
 
     when: float
     fn: Callable[[], object]
-    cancelled: bool = field(default=False)
+    cancelled: bool = False
     background: bool = False
 
     def cancel(self) -> None:

@@ -32,7 +32,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
-from typing import Any, cast
+from typing import Any
 
 from statectl.front.observers import Notification
 from statectl.kernel.errors import UnhandledEventError
@@ -71,6 +71,7 @@ __all__ = ["RECORDS", "STEPS", "UNHEARD", "Bound", "Engine"]
 #: How a step is heard (rule 2): by nobody, as typed records, as one step record.
 UNHEARD, RECORDS, STEPS = 0, 1, 2
 HANDLED = Outcome.HANDLED
+DECLARED_IGNORED = Outcome.DECLARED_IGNORED
 #: Makes a notification from its fields without the named tuple's Python constructor.
 _NEW = tuple.__new__
 #: A sink's call and its argument: a watcher's method and a state, a notification's call
@@ -99,6 +100,7 @@ class Bound:
     made: tuple[_Made, ...] | None = None
     cursor: int = 1
     end: int = 1
+    quiet: bool = False  # an event that changed nothing, unheard, refused with no error
 
 
 class Engine:
@@ -228,6 +230,8 @@ class Engine:
     def _bind(self, program: Program, mode: int) -> Bound:
         """``program``'s effects as the calls of this device's sinks, in order."""
         hooks = self.hooks
+        if program.outcome is not HANDLED:  # changed nothing: nothing to call
+            return Bound(program, mode, quiet=not mode and self._ignored(program))
         if not mode and not program.invokes and not hooks.watch:
             return Bound(program, mode)  # nothing to call: the target is taken up
         if mode == STEPS:
@@ -316,6 +320,8 @@ class Engine:
             steppers = self.hooks.steppers
         program = bound.program
         if program.outcome is not HANDLED:
+            if bound.quiet and not steppers:  # nobody to tell, nothing to raise
+                return program.outcome
             return self._refuse(bound, event, data, steppers)
         mode = bound.mode
         if mode:  # heard: EventReceived for listeners, a step record's start for step ones
@@ -366,6 +372,8 @@ class Engine:
         """An event that changed nothing: its listeners, its record, its error (rule 3)."""
         program, mode = bound.program, bound.mode
         reason = program.outcome
+        failure: GuardFailure | None = program.step.failure if program.step else None
+        ignore = self._ignored(program)
         assert event is not None and self.snapshot is not None
         if mode:
             self._now = self.clock.now()
@@ -373,8 +381,6 @@ class Engine:
                 self.emit(EventReceived(self.name, self._now, event, data))
         for callback in steppers:
             callback(event, data, reason)
-        failure = cast(GuardFailure | None, program.step.failure if program.step else None)
-        ignore = failure is None and (self.policy == "ignore" or reason is Outcome.DECLARED_IGNORED)
         if mode == RECORDS:
             kind = EventIgnored if ignore else EventRejected
             self.emit(kind(self.name, self._now, event, reason))
@@ -391,6 +397,12 @@ class Engine:
                 "'ignore'"
             )
         return reason
+
+    def _ignored(self, program: Program) -> bool:
+        """Whether ``program``, which changed nothing, raises no error: no guard raised,
+        and the policy is ``ignore`` or the state table declares the event ignored."""
+        raised = program.step is not None and program.step.failure is not None
+        return not raised and (self.policy == "ignore" or program.outcome is DECLARED_IGNORED)
 
     def _finish(self, bound: Bound) -> None:
         """The step reached a final state: the run is over (watchers stop, ``Finished``)."""

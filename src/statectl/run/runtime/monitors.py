@@ -23,6 +23,7 @@ Rules:
 
 from __future__ import annotations
 
+from functools import partial
 from typing import Protocol
 
 from statectl.front.observers import MonitorSpec, extract
@@ -63,6 +64,9 @@ class Monitor:
         self.polls = 0
         self._timer: Timer | None = None  # armed (or fired, its poll not yet run), or None
         self._due = 0.0  # when the next poll is due while active
+        # what the timer calls: the poll queued for the owner (rule 2), made once here,
+        # not a bound method and a closure per poll
+        self._fired = partial(subject.call_soon, self._poll)
 
     # -- StateWatcher: called by the subject's step, on the owner
 
@@ -100,10 +104,6 @@ class Monitor:
 
     def _arm(self, delay: float) -> None:
         self._timer = self.subject.clock.call_later(delay, self._fired, background=True)
-
-    def _fired(self) -> None:
-        """On the clock's thread: the poll itself runs on the owner (rule 2)."""
-        self.subject.call_soon(self._poll)
 
     def _poll(self) -> None:
         self._timer = None

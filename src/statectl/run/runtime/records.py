@@ -302,7 +302,9 @@ class StepRecord(msgspec.Struct, eq=False):
         if records is None:  # not read yet
             builder = self._builder
             if builder is not None and self._tail is None:  # a program's usual step
-                records = self._records = builder.build(self)
+                compiled = builder.compiled
+                built = compiled(self) if compiled is not None else builder.build(self)
+                records = self._records = built
             else:
                 records = self._records = _typed(self)
         return records
@@ -431,26 +433,31 @@ class Builder:
     """The builder of one step's typed records: its program keeps it, its step records
     carry it, so reading them costs no lookup.
 
-    ``build(record)`` reads the step's records plan the first time; the second time it
-    compiles the plan (:func:`_compile`) and uses that from then on, so a step that is
-    not memoised (seen once) never pays for compiling.
+    :meth:`build` reads the step's records plan the first time; the second time it
+    compiles the plan (:func:`_compile`) into :attr:`compiled`, which a step record
+    calls directly from then on, so a step that is not memoised (seen once) never pays
+    for compiling. (A plain function in a slot, not a bound method of the builder: a
+    builder refers to nothing that refers back to it, so no program is ever left for
+    the cyclic collector.)
     """
 
-    __slots__ = ("_plan", "build")
+    __slots__ = ("_plan", "compiled")
 
     def __init__(self) -> None:
         self._plan: list[tuple[Any, tuple[Any, ...]] | Notify] | None = None
-        self.build: _Build = self._first
+        self.compiled: _Build | None = None
 
-    def _first(self, r: StepRecord) -> tuple[Record, ...]:
-        plan = self._plan = records_plan(r.step)  # type: ignore[arg-type]
-        self.build = self._again
-        return _interpret(plan)(r)
-
-    def _again(self, r: StepRecord) -> tuple[Record, ...]:
-        plan = self._plan if self._plan is not None else records_plan(r.step)  # type: ignore[arg-type]
-        build = self.build = _compile(plan)
-        return build(r)
+    def build(self, r: StepRecord) -> tuple[Record, ...]:
+        """The typed records of ``r`` (a step record of this builder's step)."""
+        compiled = self.compiled
+        if compiled is not None:
+            return compiled(r)
+        plan = self._plan
+        if plan is None:  # the first time: read the plan
+            plan = self._plan = records_plan(r.step)  # type: ignore[arg-type]
+            return _interpret(plan)(r)
+        compiled = self.compiled = _compile(plan)  # the second: compile it
+        return compiled(r)
 
 
 def _typed(r: StepRecord) -> tuple[Record, ...]:

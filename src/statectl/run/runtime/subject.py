@@ -79,6 +79,7 @@ class Subject:
         "_closed",
         "_declared",
         "_engine",
+        "_alone",
         "_fast",
         "_hooks",
         "_inbox",
@@ -108,6 +109,7 @@ class Subject:
         self._engine = Engine(compiled(chart), self._hooks, clock, policy, values)
         self._inbox = Inbox()
         self._fast = False  # dispatch may process at once: started, nothing queued, no loop
+        self._alone = False  # started, no worker or owner loop, not closed (see _refresh)
         self._busy = False
         self._closed = False
         self._stopping = False
@@ -210,7 +212,7 @@ class Subject:
         second, a queued item is never overtaken (one flag test on the hot path
         instead of a queue test before and after).
         """
-        self._fast = (
+        self._fast = self._alone = (
             self._engine.snapshot is not None
             and self._worker is None
             and not self._serving
@@ -285,8 +287,12 @@ class Subject:
         inbox = self._inbox
         inbox.append((event, data, then))
         self._fast = False  # after the append: see _refresh()
-        if inbox.wake is not None or inbox.hook is not None:
-            inbox.told()
+        wake = inbox.wake  # Inbox.told(self), inlined: the hot path of a System's posts
+        if wake is not None:
+            wake.set()
+        hook = inbox.hook
+        if hook is not None:
+            hook(self)
 
     def on_queued(self, hook: Callable[[Subject], object] | None) -> None:
         """Call ``hook(subject)`` after every post or call_soon (from the posting thread).
@@ -294,7 +300,6 @@ class Subject:
         A host that owns many devices (a :class:`~statectl.run.system.System`) learns
         which ones have work instead of asking them all; ``None`` removes it.
         """
-        self._inbox.owner = self
         self._inbox.hook = hook
 
     def call_soon(self, fn: Callable[[], object]) -> None:
@@ -305,7 +310,7 @@ class Subject:
         inbox.append((None, None, fn))
         self._fast = False  # after the append: see _refresh()
         if inbox.wake is not None or inbox.hook is not None:
-            inbox.told()
+            inbox.told(self)
 
     def call_next(self, fn: Callable[[], object]) -> None:
         """On the owner: run ``fn`` before anything queued (a deferred event's release)."""
@@ -363,7 +368,8 @@ class Subject:
 
     def run_until_idle(self) -> int:
         """Process queued events until the queue is empty; returns how many events ran."""
-        self._check_owner()
+        if self._worker is not None:
+            self._check_owner()
         engine = self._engine
         if engine.snapshot is None:
             raise StatectlError(f"{self.name}: call start() before processing events")
@@ -389,8 +395,10 @@ class Subject:
                 self._process_then(event, data, fn)
         finally:
             self._busy = False
-            if not self._fast:
-                self._refresh()
+            if self._alone and not self._fast:  # _refresh() when only the queue changed
+                self._fast = True
+                if queue:
+                    self._fast = False
         return count
 
     def _process_then(self, event: str, data: Any, then: Callable[[Outcome], object]) -> None:
@@ -454,7 +462,7 @@ class Subject:
             return
         self.stop()
         self._closed = True
-        self._fast = False
+        self._fast = self._alone = False
         self._engine.close()
 
     # -- an owner loop on a thread of its own ------------------------------------------------
@@ -465,7 +473,7 @@ class Subject:
             self.start()
         wake = self._inbox.waker()
         self._serving = True
-        self._fast = False
+        self._fast = self._alone = False
         try:
             while not self._stopping:
                 wake.wait()
@@ -486,7 +494,7 @@ class Subject:
             raise StatectlError(f"{self.name} has a worker already")
         self._inbox.waker()
         self._serving = True  # so a stop() before the thread runs is not lost
-        self._fast = False
+        self._fast = self._alone = False
         self._worker = threading.Thread(
             target=self.serve_forever, args=(on_error,), name=f"statectl-{self.name}", daemon=True
         )
