@@ -355,11 +355,11 @@ class Engine:
                 self._finish(bound)
         except BaseException:
             if mode == STEPS:  # its typed records end where it failed
-                self._hand_step(bound, event, data, failed=True)
+                self._hand_step(bound, event, data, True)
             raise
         else:
             if mode == STEPS:
-                self._hand_step(bound, event, data, failed=False)
+                self._hand_step(bound, event, data, False)
         finally:  # taken, even when an observer raised: the journal must hear it
             if steppers:
                 for callback in steppers:
@@ -457,8 +457,9 @@ class Engine:
             self._made.append(update_api(observer, note.invoke))
             self._shift += 1
 
-    def _hand_step(self, bound: Bound, event: str | None, data: Any, *, failed: bool) -> None:
-        """STEPS: the step's one record, its typed records ending where it failed."""
+    def _hand_step(self, bound: Bound, event: str | None, data: Any, failed: bool) -> None:
+        """STEPS: the step's one record, its typed records ending where it ``failed``.
+        (No keyword-only parameter: CPython 3.11 calls such a function the slow way.)"""
         extras = self._extras
         self._extras = None
         final = self._final

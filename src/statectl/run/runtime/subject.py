@@ -271,12 +271,14 @@ class Subject:
     # -- posting (any thread) ----------------------------------------------------------------
 
     def post(
-        self, event: str, data: Any = None, *, then: Callable[[Outcome], object] | None = None
+        self, event: str, data: Any = None, then: Callable[[Outcome], object] | None = None
     ) -> None:
         """Queue ``event`` for the owner; never blocks, safe from any thread.
 
-        ``then(outcome)`` is called on the owner right after the event ran, with its
-        :class:`~statectl.kernel.semantics.Outcome`.
+        ``then(outcome)`` (pass it by name) is called on the owner right after the event
+        ran, with its :class:`~statectl.kernel.semantics.Outcome`. (Not keyword-only:
+        CPython 3.11 runs a call of a function with keyword-only parameters on its
+        generic path, ~60 ns more per post or dispatch.)
         """
         if not isinstance(event, str):
             raise StatectlError(f"an event name must be a str (got {event!r})")
@@ -415,7 +417,7 @@ class Subject:
             then(heard[0] if heard else Outcome.HANDLED)
 
     def dispatch(
-        self, event: str, data: Any = None, *, then: Callable[[Outcome], object] | None = None
+        self, event: str, data: Any = None, then: Callable[[Outcome], object] | None = None
     ) -> int:
         """Process ``event`` now, on the calling thread as the owner, after anything queued.
 
