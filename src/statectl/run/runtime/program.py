@@ -19,7 +19,9 @@ Rules:
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+
+import msgspec
 
 from statectl.kernel.model import Notify
 from statectl.kernel.semantics import Outcome, PlanTable, Snapshot, Step
@@ -57,9 +59,12 @@ class Enter:
 Effect = Transit | Exit | Enter | Notify
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class Program:
-    """One step compiled for performing (rule 1): compared by identity, shared (rule 2)."""
+class Program(msgspec.Struct, frozen=True, eq=False):
+    """One step compiled for performing (rule 1): compared by identity, shared (rule 2).
+
+    A frozen struct, not a frozen dataclass: a device makes one for each event that
+    changed nothing the first time it meets it, and a frozen dataclass is built field
+    by field through ``object.__setattr__`` (about seven times as long)."""
 
     event: str | None
     step: Step | None  # None for an event the chart does not know
@@ -69,7 +74,7 @@ class Program:
     effects: tuple[Effect, ...]
     invokes: int  # notifications among the effects
     final: bool  # the step reaches a top-level final state
-    records: Builder = field(default_factory=Builder)  # the typed records, when read
+    records: Builder = msgspec.field(default_factory=Builder)  # the typed records, when read
 
 
 def _effects(step: Step) -> tuple[Effect, ...]:

@@ -75,11 +75,11 @@ class Subject:
     """A device's chart running on a clock; observers get the notifications meant for them."""
 
     __slots__ = (
+        "_alone",
         "_busy",
         "_closed",
         "_declared",
         "_engine",
-        "_alone",
         "_fast",
         "_hooks",
         "_inbox",
