@@ -65,8 +65,8 @@ def check_event_data(
     fields = declared.get(event)
     if fields is None or data is None:
         return
-    listed = ", ".join(f"{k}: {v}" for k, v in fields.items())
     if not isinstance(data, Mapping):
+        listed = _listed(fields)
         raise EventDataError(
             f"{device}: event {event!r} carries data fields ({listed}), "
             f"not a {type(data).__name__}: send a mapping such as {{{listed}}}"
@@ -75,13 +75,20 @@ def check_event_data(
         kind = fields.get(key)
         if kind is None:
             raise EventDataError(
-                f"{device}: event {event!r} has no data field {key!r}; it declares: {listed}"
+                f"{device}: event {event!r} has no data field {key!r}; it declares: "
+                f"{_listed(fields)}"
             )
         if not field_accepts(kind, value):
             raise EventDataError(
                 f"{device}: event {event!r} field {key!r} must be {kind} "
                 f"(got {type(value).__name__} {value!r})"
             )
+
+
+def _listed(fields: Mapping[str, str]) -> str:
+    """The declared fields as a message names them (made only for a refusal: every
+    accepted event with data was paying for it)."""
+    return ", ".join(f"{k}: {v}" for k, v in fields.items())
 
 
 def check_posted(subject: Subject, event: str, data: Any) -> None:
