@@ -109,8 +109,7 @@ class Monitor:
         self._timer = None
         if not self.active:  # left since (also: a poll queued before the state was left)
             return
-        clock = self.subject.clock
-        now = clock.now()
+        now = self.subject.clock.now()
         if self._due - now > _EARLY:  # entered again after the timer was armed
             self._arm(self._due - now)
             return
@@ -122,9 +121,8 @@ class Monitor:
             if s.listening:
                 s.emit(FaultDetected(s.name, now, self.spec.state, event, detail))
             s.post(event, {"detail": detail})
-        period = self.period
-        self._due = now + period
-        self._timer = clock.call_later(period, self._fired, background=True)  # _arm(period)
+        self._due = now + self.period
+        self._arm(self.period)
 
 
 def attach_monitors(
