@@ -183,6 +183,11 @@ class DeviceUnderTest:
         """The active atomic states in document order: the state reached."""
         return tuple(self.impl.states())
 
+    @property
+    def observed(self) -> Observed:
+        """What the implementation showed for the last event sent or stretch of time."""
+        return self._seen
+
     def send(self, event: str, data: Any = None) -> None:
         """Process ``event`` (with ``data``, else ``event_data[event]``) to completion.
 

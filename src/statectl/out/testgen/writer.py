@@ -237,21 +237,38 @@ _HYPOTHESIS = '''"""{device} against its tables under random event sequences (st
 
 Tables: {source}
 Regenerate: statectl testgen {source} --hypothesis --out {out}
-Hypothesis sends the chart's events in any order, each with the data its guards are
-tested with. The oracle is the specification: the tables' chart stepped by the
-kernel on its own (``statectl_spec``). After every event the implementation (the
-device the harness runs: the ``statectl_chart`` fixture's chart and the driver under
-test) must be where the specification is, with the invokes it issues and the
-driver's API call for each, or unhandled for its reason. A failure shrinks to a
-short sequence. The driver is the simulated twin unless a conftest.py overrides
-``statectl_new_driver`` (a fresh driver per example); see docs/testing.md.
+Hypothesis drives the implementation and the specification side by side. The
+specification is the tables' chart stepped by the kernel on its own
+(``statectl_spec``); the implementation is the device the harness runs (the
+``statectl_chart`` fixture's chart with the driver under test, or --statectl-impl).
+Its rules, in any order:
+
+- send: one of the chart's events, with the data its guards are tested with;
+- run: time runs until the device has completed every call it owes: each
+  completion within the completion bound, each event it takes by itself one the
+  tables allow;
+- fault: the device reports a fault in a monitored state: its monitor must raise
+  the state's fault event;
+- monitor: the monitor of each monitored state runs and polls, raising nothing.
+
+After every rule the device must be where the specification is, with the invokes
+and API calls it decides (names and arguments; a stray or wrong one is named), or
+unhandled for its reason. A rule the implementation cannot do is skipped with a
+warning saying why. A failure shrinks to a short sequence. The driver is the
+simulated twin unless a conftest.py overrides ``statectl_new_driver`` (a fresh
+driver per example); see docs/testing.md.
 """
 
 from __future__ import annotations
 
 from hypothesis import HealthCheck, settings
 from hypothesis import strategies as st
-from hypothesis.stateful import RuleBasedStateMachine, rule, run_state_machine_as_test
+from hypothesis.stateful import (
+    RuleBasedStateMachine,
+    precondition,
+    rule,
+    run_state_machine_as_test,
+)
 
 STATECTL_TABLES = {tables}
 
@@ -264,7 +281,8 @@ SENT = {sent}
 
 
 def test_{slug}_follows_the_specification(statectl_device_factory, statectl_spec):
-    """After any sequence of the chart's events, the device did what the tables decide."""
+    """After any sequence of events, time, faults and monitor checks, the device did what
+    the tables decide."""
 
     class {cls}(RuleBasedStateMachine):
         def __init__(self):
@@ -276,6 +294,21 @@ def test_{slug}_follows_the_specification(statectl_device_factory, statectl_spec
         @rule(sent=st.sampled_from(SENT))
         def send(self, sent):
             self.spec.check(self.device, *sent)
+
+        @precondition(lambda self: self.spec.can("run"))
+        @rule()
+        def run(self):
+            self.spec.run(self.device)
+
+        @precondition(lambda self: self.spec.can("fault"))
+        @rule()
+        def fault(self):
+            self.spec.inject(self.device)
+
+        @precondition(lambda self: self.spec.can("monitor"))
+        @rule()
+        def monitor(self):
+            self.spec.watch(self.device)
 
     run_state_machine_as_test(
         {cls},
