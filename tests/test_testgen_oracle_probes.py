@@ -32,6 +32,7 @@ from statectl.out.testgen.harness import DeviceUnderTest
 from statectl.out.testgen.oracle import RuleSkipped, Specification, twin_call_problems
 from statectl.run.devices import SimTwin
 from support import MOTOR, ROOT
+from test_testgen import counts, run_pytest
 
 PRESS = ROOT / "examples" / "press" / "press.yaml"
 MODBUS_CLAMP = ROOT / "examples" / "modbus" / "clamp.yaml"
@@ -163,6 +164,31 @@ def test_a_fault_check_that_never_reports_fails(tmp_path: Path) -> None:
 def test_a_fault_check_that_always_reports_fails(tmp_path: Path) -> None:
     message = fails(MOTOR, tmp_path, driver=AlwaysFaults)
     assert "the device took Error by itself in ['Moving'], but no fault was reported" in message
+
+
+SLOW_CONFTEST = """\
+import pytest
+from statectl.run.devices import SimTwin
+
+
+@pytest.fixture
+def statectl_new_driver():
+    return lambda chart: SimTwin(chart, delay=8.0)
+"""
+
+
+def test_the_completion_bound_is_the_suites(tmp_path: Path) -> None:
+    """A twin taking 8 s per call fails the module under pytest; with the conftest's
+    statectl_completion_bound at 10 s it passes (the fixture reaches the module's devices)."""
+    generate_hypothesis(MOTOR, tmp_path)
+    (tmp_path / "conftest.py").write_text(SLOW_CONFTEST, encoding="utf-8")
+    result = run_pytest(tmp_path)
+    assert counts(result) == {"failed": 1}, result.stdout[-3000:]
+    assert re.search(OVERDUE, result.stdout)
+    bound = "\n\n@pytest.fixture\ndef statectl_completion_bound():\n    return 10.0\n"
+    (tmp_path / "conftest.py").write_text(SLOW_CONFTEST + bound, encoding="utf-8")
+    result = run_pytest(tmp_path)
+    assert counts(result) == {"passed": 1}, result.stdout[-3000:]
 
 
 # -- table mutants: a fault made a command, monitoring dropped ----------------------------------

@@ -355,9 +355,10 @@ def statectl_device_factory(
     statectl_api: Mapping[str, str | None] | None,
     request: pytest.FixtureRequest,
     statectl_impl: Callable[[Chart], Implementation | None],
+    statectl_completion_bound: float,
 ) -> Callable[[], DeviceUnderTest]:
     """Makes a new started device with a fresh driver each call (a Hypothesis example each),
-    on the implementation ``--statectl-impl`` chooses."""
+    on the implementation ``--statectl-impl`` chooses, with the suite's completion bound."""
     chart = statectl_chart
     if chart is None:
         pytest.fail(
@@ -378,6 +379,7 @@ def statectl_device_factory(
             tally=_tally(request.config, chart),
             where=request.node.nodeid,
             impl=impl,
+            completion_bound=statectl_completion_bound,
         )
 
     return make
