@@ -197,6 +197,8 @@ TABLES = [
     (MOTOR, "fault as command", "Error"),
     (MOTOR, "monitoring dropped", "Moving"),
     (MODBUS_CLAMP, "fault as command", "Leak"),
+    (MODBUS_CLAMP, "fault as command", "Stuck"),
+    (MODBUS_CLAMP, "monitoring dropped", "Clamping"),
     (MODBUS_CLAMP, "monitoring dropped", "Clamped"),
     (MODBUS_CLAMP, "monitoring dropped", "Weak"),
 ]

@@ -23,7 +23,10 @@ Rules:
    settles the oldest such call), the fault an active monitored state's monitor
    raises after a fault was injected (once per fault), or the timeout event of an
    active state. The specification takes each in turn and compares as in rule 2
-   (the API calls by name: their data is the device's own).
+   (the API calls by name: their data is the device's own). While a pending call's
+   completion would meet a guard that reads the completion's data, which the
+   specification cannot know, time runs only up to ``FAULT_BOUND`` past the call
+   (what the harness assumes a device takes at least for a call; its fault probes too).
 5. ``run`` lets time run until nothing is owed: a call owed longer than the bound
    fails, naming it (a device that never completes, or completes late). ``inject``
    has the device report a fault in a monitored state: the monitor must raise the
@@ -42,6 +45,7 @@ Rules:
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any, NoReturn, Protocol
@@ -150,22 +154,26 @@ class Specification:
         """The active states whose monitor raises a fault, in table order."""
         return [s for s in self.monitors if s in self.snapshot.active]
 
-    def quiet(self) -> bool:
-        """Whether time may run: no pending call's completion would meet a guard that reads
-        its data here (the device reports that data, or fails for want of it; the
-        specification cannot know it, rule 4)."""
-        return not any(
-            step(self.machine, self.snapshot, c, self.data).unhandled is Unhandled.GUARD_ERROR
-            for k in self.pending
+    def until(self) -> float:
+        """Until when time may run (rule 4): while a pending call's completion would meet a
+        guard reading its data (the device reports that data, or fails for want of it; the
+        specification cannot know it), only :data:`FAULT_BOUND` past the call, the time
+        the harness assumes a device takes at least for a call; else without end."""
+        due = [
+            made + FAULT_BOUND
+            for k, made in self.pending.items()
             for c in self.calls.call(*k).completions
-        )
+            if step(self.machine, self.snapshot, c, self.data).unhandled is Unhandled.GUARD_ERROR
+        ]
+        return min(due, default=math.inf)
 
     def can(self, rule: str) -> bool:
         """Whether ``rule`` (``run``, ``fault``, ``monitor``) has something to do now."""
-        if rule in self.unsupported or not self.quiet():
+        until = self.until()
+        if rule in self.unsupported or self.now + TICK > until + _EPS:
             return False
         if rule == "run":
-            return bool(self.owed())
+            return until == math.inf and bool(self.owed())
         return bool(self.monitored()) and (rule != "fault" or self.fault is None)
 
     def start(self, device: HarnessDevice) -> None:
@@ -270,7 +278,9 @@ class Specification:
         start, label = self.now, len(device.sent)
         device.sent.append("(time runs)")
         while (
-            self.owed() and self.quiet() and self.now - start < 2 * device.completion_bound - _EPS
+            self.owed()
+            and self.until() == math.inf
+            and self.now - start < 2 * device.completion_bound - _EPS
         ):
             if self._tick(device, "run", label) is None:
                 return
@@ -287,18 +297,22 @@ class Specification:
         self.fault = FAULT_DETAIL
         start, label = self.now, len(device.sent)
         device.sent.append(f"(device fault in {', '.join(watched)})")
-        while self.fault is not None and self.monitored() and self.quiet():
-            if self.now - start >= FAULT_BOUND - _EPS:
-                raised = sorted({self.monitors[s] for s in self.monitored()})
-                _fail(
-                    device,
-                    f"the device reported a fault in {', '.join(self.monitored())}, which "
-                    f"requires monitoring; its monitor raised nothing within {FAULT_BOUND:g} s "
-                    f"(the tables expect {' or '.join(raised)}); the device is in "
-                    f"{list(device.states)}",
-                )
+        while (
+            self.fault is not None
+            and self.monitored()
+            and self.now - start < FAULT_BOUND - _EPS
+            and self.now + TICK <= self.until() + _EPS
+        ):
             if self._tick(device, "fault", label) is None:
                 return
+        if self.fault is not None and self.monitored() and self.now - start >= FAULT_BOUND - _EPS:
+            raised = sorted({self.monitors[s] for s in self.monitored()})
+            _fail(
+                device,
+                f"the device reported a fault in {', '.join(self.monitored())}, which requires "
+                f"monitoring; its monitor raised nothing within {FAULT_BOUND:g} s (the tables "
+                f"expect {' or '.join(raised)}); the device is in {list(device.states)}",
+            )
 
     def watch(self, device: HarnessDevice) -> None:
         """Each active monitored state's monitor runs and polls (rule 5)."""
@@ -319,6 +333,8 @@ class Specification:
         start, label = self.now, len(device.sent)
         device.sent.append(f"(monitor {', '.join(watched)})")
         while self.now - start < FAULT_BOUND - _EPS:
+            if self.now + TICK > self.until() + _EPS:
+                return  # time may not run on (rule 4): too short a watch to count polls
             seen = self._tick(device, "monitor", label)
             if seen is None or seen.events:
                 return  # something happened: the states may have changed meanwhile
