@@ -112,7 +112,9 @@ class AlwaysFaults(SimTwin):
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
-@pytest.mark.parametrize("tables", [MOTOR, PRESS, MODBUS_CLAMP, TIMED_CLAMP], ids=lambda p: p.stem)
+@pytest.mark.parametrize(
+    "tables", [MOTOR, PRESS, MODBUS_CLAMP, TIMED_CLAMP], ids=lambda p: f"{p.parent.name}-{p.stem}"
+)
 def test_the_right_device_passes_whatever_the_seed(tmp_path: Path, tables: Path, seed: int) -> None:
     """On the tables' twin, time, faults and monitor checks agree with the specification:
     the completions come, the monitor raises the fault, deferred events are released."""
