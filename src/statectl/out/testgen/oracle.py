@@ -10,9 +10,10 @@ Rules:
 2. :meth:`Specification.check` decides an event from the specification's snapshot,
    sends it to the device and compares the device with the decision (``expect``):
    the states reached, the invokes and the API calls, or the reason nothing
-   happened. Then the specification takes the step itself, with the data it assigns.
-   An event the specification cannot take for want of data its assignments read
-   leaves the specification where it was; the device must stay there too.
+   happened. The specification takes the step itself, with the data it assigns, and
+   keeps or releases deferred events as the runtime does. An event the specification
+   cannot take for want of data its assignments read leaves the specification where
+   it was; the device must stay there too.
 3. The specification keeps the calls the device owes, as every host of the tables
    does (:class:`~statectl.kernel.semantics.calls.DeviceCalls`): each notification is
    a call; a call is *owed* while the device is in a state it entered, and must be
