@@ -2,10 +2,10 @@
 
 Every channel hands its events to ``submit`` (or ``post``, submit without a handle), and
 the run's own events (links, drivers' completions, timeouts, monitors' faults) pass the
-same check on their way in: the handle resolves with the outcome of the device's step, with and without a journal,
-from any thread and from asyncio; the door alone decides whether the submitting
-thread runs the step; a refused command, whatever its channel, changes nothing and is
-journalled as refused.
+same check on their way in: the handle resolves with the outcome of the device's step,
+with and without a journal, from any thread and from asyncio; the door alone decides
+whether the submitting thread runs the step; a refused command, whatever its channel,
+changes nothing and is journalled as refused.
 """
 
 from __future__ import annotations
