@@ -117,7 +117,7 @@ class Subject:
         self._serving = False
         self._worker: threading.Thread | None = None
         #: per-state timeouts (runtime/timers.py); a System routes them through its door
-        self.timers = attach_timers(self) if any(s.timeout for s in chart.states) else ()
+        self.timers = attach_timers(self)  # none for a chart without timeouts
         if any(s.defer for s in chart.states):
             attach_defer(self)  # deferred events (runtime/defer.py)
 
