@@ -126,6 +126,20 @@ def test_a_commands_section_reads_into_grants(tmp_path: Path) -> None:
     assert not load_run_config(_config(tmp_path, "dashboard: {port: 0}\n")).commands.configured
 
 
+def test_timer_and_monitor_are_channels_a_grant_names(tmp_path: Path) -> None:
+    """A state's timeout and a monitor's fault come as ``timer`` and ``monitor`` with the
+    device as principal; a section naming one replaces its default, the other stays open."""
+    path = _config(tmp_path, "commands:\n  - {from: timer/Clamp, send: Close timeout}\n")
+    policy = load_run_config(path).commands
+    assert [str(g) for g in policy.grants("timer")] == [
+        f"timer/Clamp may send Close timeout to any device ({path}:3)"
+    ]
+    assert policy.allows(Origin("timer", "Clamp"), "Clamp", "Close timeout")
+    assert not policy.allows(Origin("timer", "Door"), "Door", "Jam")
+    assert not policy.open_to_all("timer") and policy.open_to_all("monitor")
+    assert Commands().open_to_all("timer") and Commands().open_to_all("monitor")
+
+
 @pytest.mark.parametrize(
     ("section", "message"),
     [
@@ -197,7 +211,7 @@ def test_the_door_refuses_a_command_and_nothing_reaches_the_device() -> None:
 
 
 def test_an_event_without_an_origin_is_the_hosts_own() -> None:
-    """A driver's or the Python API's post carries no origin: the policy is not asked."""
+    """The Python API's post carries no origin: the policy is not asked."""
     system = _system((Grant("stdin", "nobody", frozenset({"Motor"}), frozenset({"Error"})),))
     try:
         system.post("Motor", "Movement")

@@ -1,10 +1,11 @@
 """System.submit, the one front door (run/door.py, system.py rule 8).
 
-Every channel hands its events to ``submit`` (or ``post``, submit without a handle):
-the handle resolves with the outcome of the device's step, with and without a journal,
-from any thread and from asyncio; the door alone decides whether the submitting
-thread runs the step; a refused command, whatever its channel, changes nothing and is
-journalled as refused.
+Every channel hands its events to ``submit`` (or ``post``, submit without a handle), and
+the run's own events (links, drivers' completions, timeouts, monitors' faults) pass the
+same check on their way in: the handle resolves with the outcome of the device's step,
+with and without a journal, from any thread and from asyncio; the door alone decides
+whether the submitting thread runs the step; a refused command, whatever its channel,
+changes nothing and is journalled as refused.
 """
 
 from __future__ import annotations
@@ -370,6 +371,151 @@ links:
     assert log.count("\n") == 1 and "link event 'Hit' from a to pong" in log and "refused" in log
 
 
+CLAMP = Path(__file__).resolve().parents[1] / "examples" / "clamp" / "clamp.yaml"
+#: A ``commands:`` policy whose timer and monitor grants go to another device: this one's
+#: are refused. A policy that grants them to this device by name: each one is checked.
+_NOT_MINE = (Grant("timer", "Other"), Grant("monitor", "Other"))
+_MINE = (Grant("timer", "Clamp"), Grant("timer", "Motor"), Grant("monitor", "Motor"))
+
+
+def _clamp(tmp_path: Path, grants: tuple[Grant, ...], journalled: bool) -> System:
+    journal = _journal(tmp_path, "prompt") if journalled else None
+    setup = DeviceSetup("Clamp", statectl.load(CLAMP))
+    system = System((setup,), SimClock(), journal, commands=Commands(grants))
+    system.start()
+    return system
+
+
+def _fault_run(tmp_path: Path, grants: tuple[Grant, ...]) -> tuple[System, list[str]]:
+    """The Motor moving a long way with its sim driver, journalled; a fault injected, and
+    time let pass for its monitor to poll. The events of the steps it ran, in order."""
+    chart = motor_chart()
+    driver = make_driver("sim-motor", {}, chart=chart)
+    system = System(
+        (DeviceSetup("Motor", chart, driver=driver),), SimClock(), _journal(tmp_path, "prompt"),
+        commands=Commands(grants),
+    )  # fmt: skip
+    steps: list[str] = []
+    system.subjects["Motor"].on_step(lambda event, _data, _outcome: steps.append(event))
+    system.start()
+    system.post("Motor", "Movement", {"amount": 1000})
+    system.advance(0.25)
+    driver.inject_fault("stall")
+    system.advance(0.25)
+    return system, steps
+
+
+@pytest.mark.parametrize("journalled", [False, True])
+@pytest.mark.parametrize(
+    ("grants", "timed_out"),
+    [((), True), (_MINE, True), (_NOT_MINE, False)],
+    ids=["default", "granted", "refused"],
+)
+def test_a_timeout_passes_the_door(
+    tmp_path: Path,
+    caplog: pytest.LogCaptureFixture,
+    journalled: bool,
+    grants: tuple[Grant, ...],
+    timed_out: bool,
+) -> None:
+    """A state's timeout enters as origin ``timer``/its device: let in (by the default or
+    by a grant), the Clamp jams; refused, the timeout is dropped with one log line and
+    (journalled) a refused row, and the Clamp stays Closing."""
+    system = _clamp(tmp_path, grants, journalled)
+    try:
+        with caplog.at_level(logging.WARNING, logger="statectl.run.system"):
+            system.post("Clamp", "Close")
+            system.settle()
+        assert system.subjects["Clamp"].configuration == ({"Jammed"} if timed_out else {"Closing"})
+        assert system.work_pending() is False
+    finally:
+        system.close()
+    dropped = [r.getMessage() for r in caplog.records if "timeout dropped" in r.getMessage()]
+    assert len(dropped) == (0 if timed_out else 1)
+    assert all("Close timeout refused: timer Clamp" in m for m in dropped)
+    if journalled:
+        last = (
+            ("Close timeout", "handled")
+            if timed_out
+            else ("Close timeout", f"{REFUSED}: timer Clamp")
+        )
+        assert _rows(tmp_path / "j.db", "Clamp")[-1] == last
+
+
+@pytest.mark.parametrize("journalled", [False, True])
+@pytest.mark.parametrize("grants", [(), _MINE], ids=["default", "granted"])
+def test_a_timeout_through_the_door_still_runs_at_its_point_of_the_queue(
+    tmp_path: Path, journalled: bool, grants: tuple[Grant, ...]
+) -> None:
+    """The door only checks a timeout, then the device processes it at once (timers.py
+    rule 2): an event queued behind the timer's firing meets the Jammed clamp, it does not
+    leave Closing first and turn the timeout into an ignored event."""
+    system = _clamp(tmp_path, grants, journalled)
+    try:
+        system.post("Clamp", "Close")
+        system.drain()
+        clock = system.clock
+        assert isinstance(clock, SimClock)
+        clock.advance(2.0)  # the timer fires: its firing is queued on the Clamp, not run
+        system.post("Clamp", "Closed")  # behind the firing in the device's queue
+        system.quiesce()
+        assert system.subjects["Clamp"].configuration == {"Jammed"}
+    finally:
+        system.close()
+
+
+@pytest.mark.parametrize(
+    ("grants", "faulted"),
+    [((), True), (_MINE, True), (_NOT_MINE, False)],
+    ids=["default", "granted", "refused"],
+)
+def test_a_monitors_fault_passes_the_door(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, grants: tuple[Grant, ...], faulted: bool
+) -> None:
+    """A monitor's fault enters as origin ``monitor``/its device and is posted as before:
+    let in, the Motor's next step is the fault (Error, to Returning); refused, it is
+    dropped with one log line and a refused row, and the Motor stays Moving."""
+    with caplog.at_level(logging.WARNING, logger="statectl.run.system"):
+        system, steps = _fault_run(tmp_path, grants)
+    try:
+        state = system.subjects["Motor"].configuration
+    finally:
+        system.close()
+    dropped = [r.getMessage() for r in caplog.records if "monitor fault dropped" in r.getMessage()]
+    rows = _rows(tmp_path / "j.db")
+    if faulted:
+        assert steps[:2] == ["Movement", "Error"] and "Returning" in state
+        assert dropped == [] and ("Error", "handled") in rows
+    else:
+        assert steps == ["Movement"] and state == {"Moving"}
+        assert len(dropped) == 1 and "Error refused: monitor Motor" in dropped[0]
+        assert rows[-1] == ("Error", f"{REFUSED}: monitor Motor")
+
+
+def test_the_runs_own_channels_are_open_by_default_and_never_queue_full() -> None:
+    """``timer`` and ``monitor`` are channels of the policy, open to all by default (no
+    per-event check: the door hands back the Subject's own method), and the run's own:
+    a full queue does not refuse them."""
+    from statectl.run.commands import CHANNELS, INTERNAL
+
+    policy = Commands()
+    assert {"timer", "monitor"} <= set(CHANNELS) and {"timer", "monitor"} <= INTERNAL
+    assert policy.open_to_all("timer") and policy.open_to_all("monitor")
+    system = _motor(max_queue=1)
+    try:
+        subject = system.subjects["Motor"]
+        assert system._reporter("Motor", "timer", subject.deliver) == subject.deliver
+        assert system._reporter("Motor", "monitor") == subject.post
+        with system.owner:  # nobody drains: the queue stays full
+            system.post("Motor", "Movement")
+            system.admit("Motor", "Error", None, Origin("monitor", "Motor"))
+            system.admit("Motor", "Error", None, Origin("timer", "Motor"))
+            with pytest.raises(StatectlError, match="max_queue"):
+                system.admit("Motor", "Error", None, Origin("stdin", "operator"))
+    finally:
+        system.close()
+
+
 class _Sample:
     """What a Zenoh subscriber callback reads of a sample: its payload."""
 
@@ -384,40 +530,58 @@ class _Sample:
 # -- nothing goes around the door ----------------------------------------------------------
 
 #: Calls that hand an event to a device, step one, drain or take the owner lock: the
-#: door's business (run/door.py), never a channel's.
+#: door's business (run/door.py), never a channel's nor the run's own (timers, monitors,
+#: drivers, links: they hand the door's reporter their events, Door._reporter).
 _DOOR_CALLS = {"post", "dispatch", "deliver", "run_until_idle", "_drain", "drain", "acquire"}
 #: Where a channel may call ``post``: the System (its post is the door), a cell view that
 #: forwards over Zenoh to another node's door, a Zenoh key helper (a key, not an event).
 _POST_RECEIVERS = {"system", "self.system", "view", "self.keys"}
-#: Modules that may, and why.
+#: Modules that may, and why: the door and what stands behind it, and hosts of bare
+#: Subjects (no System, so no door to go around).
 _MAY_GO_AROUND = {
+    "run/door.py": "the door itself",
+    "run/runtime/subject.py": "the Subject: post, dispatch and deliver are its own methods",
+    "run/runtime/defer.py": "a deferred event goes back to its device: it entered by the "
+    "door when it first came",
+    "run/journal/device.py": "the journal hands its device what the door let in "
+    "(Door._let_in: bound.post) and the link events the door admitted with the step",
+    "run/journal/read.py": "journal replay steps a bare Subject through the rows",
+    "cell/explore/replay.py": "a counterexample's replay runs bare Subjects",
+    "out/testgen/adapters/runtime.py": "a generated test drives one bare Subject, and owns "
+    "its System alone to restart it",
+    "out/testgen/cellharness.py": "the cell harness's reference runs bare Subjects, and "
+    "owns its System alone",
+    "out/scxml/scheduler.py": "SCXML sessions: no Subject",
+    "out/scxml/sending.py": "SCXML sessions: no Subject",
+    "out/scxml/session.py": "SCXML sessions: no Subject",
     "channels/cli/demo.py": "the demo runs one bare Subject, no System (README's first run)",
     "channels/distributed/system.py": "NodeSystem is a System: its link sends, checked "
     "by Door._link_admitted first",
 }
+#: The System owns the devices (system.py rule 1): it drains them, and posts nothing.
+_MAY_DRAIN = {"run/system.py": {"run_until_idle", "_drain", "drain"}}
 
 
-def _calls_around_the_door(path: Path) -> list[str]:
+def _calls_around_the_door(path: Path, owner: set[str] | None = None) -> list[str]:
     found = []
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
         func = node.func if isinstance(node, ast.Call) else None
-        if isinstance(func, ast.Attribute) and func.attr in _DOOR_CALLS:
+        if isinstance(func, ast.Attribute) and func.attr in _DOOR_CALLS - (owner or set()):
             receiver = ast.unparse(func.value)
             if func.attr != "post" or receiver not in _POST_RECEIVERS:
                 found.append(f"line {node.lineno}: {receiver}.{func.attr}(...)")
     return found
 
 
-@pytest.mark.parametrize(
-    "path", sorted((SRC / "channels").rglob("*.py")), ids=lambda p: str(p.relative_to(SRC))
-)
-def test_no_channel_goes_around_the_door(path: Path) -> None:
-    """A channel hands events to the System only (submit or post): it never posts to a
-    Subject, steps one, drains the System or takes its owner lock itself."""
+@pytest.mark.parametrize("path", sorted(SRC.rglob("*.py")), ids=lambda p: str(p.relative_to(SRC)))
+def test_nothing_goes_around_the_door(path: Path) -> None:
+    """A channel, a timer, a monitor, a driver or a cell link hands events to the System
+    only (submit or post, or the reporter the door gave it): no module posts to a
+    Subject, steps one, drains the System or takes its owner lock behind the door."""
     rel = str(path.relative_to(SRC))
     if rel in _MAY_GO_AROUND:
         return
-    assert _calls_around_the_door(path) == [], f"{rel} goes around System.submit"
+    assert _calls_around_the_door(path, _MAY_DRAIN.get(rel)) == [], f"{rel} goes around it"
 
 
 def test_only_the_door_decides_who_runs_a_step() -> None:
@@ -431,6 +595,10 @@ def test_only_the_door_decides_who_runs_a_step() -> None:
 
 
 def test_the_exceptions_still_need_their_exception() -> None:
-    """Each module allowed around the door still does it (else remove it from the list)."""
+    """Each module allowed around the door still does it (else remove it from the list),
+    and the System still drains (its allowance is what it needs)."""
     for rel in _MAY_GO_AROUND:
         assert _calls_around_the_door(SRC / rel), rel
+    for rel, calls in _MAY_DRAIN.items():
+        found = _calls_around_the_door(SRC / rel)
+        assert {f.removesuffix("(...)").rpartition(".")[2] for f in found} == calls, rel

@@ -2,12 +2,13 @@
 
 Rules:
 1. An :class:`Origin` says where a command comes from: its channel (:data:`CHANNELS`:
-   ``stdin``, ``dashboard``, ``opcua``, ``zenoh``, ``link``, ``driver``) and, where the
-   channel authenticates, its principal (the OPC UA session's user, the dashboard
-   token's holder, the Zenoh peer, a link's source device in one process or its
-   sending node over Zenoh, the device whose driver reports). ``None`` is an anonymous
-   principal. ``link`` and ``driver`` are the run's own (:data:`INTERNAL`): a full
-   queue never refuses them.
+   ``stdin``, ``dashboard``, ``opcua``, ``zenoh``, ``link``, ``driver``, ``timer``,
+   ``monitor``) and, where the channel authenticates, its principal (the OPC UA
+   session's user, the dashboard token's holder, the Zenoh peer, a link's source device
+   in one process or its sending node over Zenoh, the device whose driver reports,
+   whose state timed out or whose monitor found a fault). ``None`` is an anonymous
+   principal. ``link``, ``driver``, ``timer`` and ``monitor`` are the run's own
+   (:data:`INTERNAL`): a full queue never refuses them.
 2. A policy is a list of grants. A grant names one channel and who on it: ``CHANNEL``
    anyone (anonymous included), ``CHANNEL/*`` any authenticated principal,
    ``CHANNEL/NAME`` that principal; the devices it may command (all by default) and the
@@ -15,9 +16,9 @@ Rules:
    channel covers its principal, device and event.
 3. The defaults are what each channel allowed before the policy existed
    (:data:`DEFAULT_GRANTS`): anyone on ``stdin``, ``dashboard`` (it checks its token
-   before it posts), ``zenoh``, ``link`` and ``driver``; on ``opcua`` an authenticated user only. A
-   run config's ``commands:`` section replaces the grants of the channels it names;
-   a channel it does not name keeps its default.
+   before it posts), ``zenoh``, ``link``, ``driver``, ``timer`` and ``monitor``; on
+   ``opcua`` an authenticated user only. A run config's ``commands:`` section replaces
+   the grants of the channels it names; a channel it does not name keeps its default.
 4. :meth:`Commands.check` raises :class:`CommandRefused` (a ``StatectlError``) saying who
    was refused what, and what to do; the System journals the refusal and changes
    nothing, and each channel answers with its own refusal (OPC UA
@@ -58,9 +59,10 @@ __all__ = [
 ]
 
 #: The channels a command can come through (rule 1).
-CHANNELS: Final = ("stdin", "dashboard", "opcua", "zenoh", "link", "driver")
-#: The channels that are the run itself: a cell's links and drivers' completions (rule 1).
-INTERNAL: Final = frozenset({"link", "driver"})
+CHANNELS: Final = ("stdin", "dashboard", "opcua", "zenoh", "link", "driver", "timer", "monitor")
+#: The channels that are the run itself (rule 1): a cell's links, drivers' completions,
+#: state timeouts and monitors' faults.
+INTERNAL: Final = frozenset({"link", "driver", "timer", "monitor"})
 #: A grant's principal: anyone on the channel, anonymous included (``from: CHANNEL``); no
 #: principal is named so (an empty name is refused).
 ANYONE: Final = ""
@@ -137,6 +139,8 @@ DEFAULT_GRANTS: Final = (
     Grant("zenoh"),
     Grant("link"),
     Grant("driver"),
+    Grant("timer"),
+    Grant("monitor"),
 )
 
 
@@ -158,7 +162,8 @@ class Commands:
 
     def open_to_all(self, channel: str) -> bool:
         """Whether anyone on ``channel`` may send anything anywhere: the door need not ask
-        (a cell's links and drivers' completions by default, on the hot path)."""
+        (a cell's links, drivers' completions, timeouts and faults by default, on the
+        hot path)."""
         return channel in self._open
 
     def grants(self, channel: str) -> tuple[Grant, ...]:

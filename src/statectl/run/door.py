@@ -7,8 +7,10 @@ Rules:
    queue bound and a cell's ``when``, hands the event to the journal or the device,
    and decides, in :meth:`Door._run_here` alone, whether the calling thread runs the
    step now (also for a channel's own work on a device's owner, :meth:`Door.call_soon`).
-   A cell's link events and drivers' completions pass the same check
-   (:meth:`Door._link_admitted`, :meth:`Door._reporter`).
+   A cell's link events, drivers' completions, state timeouts and monitors' faults
+   pass the same check (:meth:`Door._pass_link`, :meth:`Door._reporter`), each with
+   the run's own origin (``link``, ``driver``, ``timer``, ``monitor``); a refused one
+   is dropped with one log line and journalled as refused.
 2. :meth:`Door.submit` returns a :class:`Submitted` for an event it
    let in: the device, the event, the journal's :class:`~statectl.run.journal.Ticket` when
    the System has a journal (None without one), and, once the device's step on that
@@ -33,7 +35,7 @@ import contextlib
 import logging
 import threading
 from collections import deque
-from collections.abc import Callable, Generator
+from collections.abc import Callable, Generator, Iterable
 from typing import Any
 
 from statectl.cell.explore.enforce import CellRules
@@ -41,11 +43,17 @@ from statectl.kernel.errors import StatectlError, did_you_mean
 from statectl.kernel.semantics import Outcome
 from statectl.run.commands import INTERNAL, CommandRefused, Commands, Origin
 from statectl.run.journal import Guarantee, Journal, JournalledDevice, Ticket
-from statectl.run.runtime import Subject
+from statectl.run.runtime import Monitor, Subject
 
 __all__ = ["Door", "QueueFull", "Submitted"]
 
 _LOG = logging.getLogger("statectl.run.system")
+#: What the log line says was dropped when the policy refuses the run's own (rule 1).
+_DROPPED = {
+    "driver": "driver completion",
+    "timer": "timeout",
+    "monitor": "monitor fault",
+}
 
 
 class QueueFull(StatectlError):
@@ -326,24 +334,59 @@ class Door:
                 raise
             self._failed(exc)
 
-    def _reporter(self, device: str) -> Callable[..., None]:
-        """A driver's completions through the door (rule 8), queued as before: not run here
-        (the driver may be on the owner mid-step) and never into the journal's inbox (the
-        journal has the step); refused by the policy: dropped, one log line."""
-        origin = Origin("driver", device)
-        subject = self.subjects[device]
-        if self.commands.open_to_all("driver"):  # the default: nothing to ask per completion
-            return subject.post
+    def _reporter(
+        self, device: str, channel: str = "driver", hand: Callable[..., None] | None = None
+    ) -> Callable[..., None]:
+        """What the run's own ``channel`` hands ``device``'s events to (rule 1): a driver's
+        completions and a monitor's faults queued as before (``hand``, by default the
+        Subject's ``post``: not run here, the driver may be on the owner mid-step), a
+        timeout processed at once (``hand`` the Subject's ``deliver``, timers.py rule 2);
+        never into the journal's inbox (the journal has the step). Refused by the policy:
+        dropped, one log line, journalled as refused. Open to all (the default): ``hand``
+        itself, nothing to ask per event."""
+        origin = Origin(channel, device)
+        give = self.subjects[device].post if hand is None else hand
+        if self.commands.open_to_all(channel):
+            return give
+        what = _DROPPED[channel]
 
         def report(event: str, data: Any = None) -> None:
             try:
                 self.admit(device, event, data, origin)
             except CommandRefused as exc:
-                _LOG.warning("driver completion dropped: %s", exc)
+                _LOG.warning("%s dropped: %s", what, exc)
                 return
-            subject.post(event, data)
+            give(event, data)
 
         return report
+
+    def _route_own(self, device: str, monitors: Iterable[Monitor] = ()) -> None:
+        """Rule 1: ``device``'s timers and ``monitors`` hand their events to the door."""
+        subject = self.subjects[device]
+        if subject.timers:
+            timeout = self._reporter(device, "timer", subject.deliver)
+            for t in subject.timers:
+                t.report = timeout
+        if monitors:
+            fault = self._reporter(device, "monitor")
+            for m in monitors:
+                m.report = fault
+
+    def _pass_link(self, source: str, target: str, event: str, data: Any) -> None:
+        """Rule 1 for a cell's link event, on the owner after its source's step: queued
+        for the target once the policy lets it in (:meth:`_link_admitted`)."""
+        if self._link_admitted(source, target, event, data):
+            self.subjects[target].post(event, data)
+
+    def _send_own(self, device: str, event: str) -> None:
+        """An event the run sends itself, on the owner (an invariant's declared event,
+        system.py rule 6): through the journal when the device is journalled, else queued
+        on it; the policy is not asked, as for the host's own (``origin=None``)."""
+        bound = self.bound.get(device)
+        if bound is not None:
+            bound.post(event)
+        else:
+            self.subjects[device].post(event)
 
     def _link_admitted(self, source: str, target: str, event: str, data: Any) -> bool:
         """Rule 8 for a cell's link event (on the owner): whether the policy lets it in; a

@@ -46,17 +46,20 @@ Rules:
    driver refusing an event's data) refuses that event only: the message goes to the
    ``on_failure`` callbacks (``statectl run`` prints it and exits 1), and the other
    devices and the device's later events go on.
-8. One front door, :meth:`System.submit` (DESIGN.md): every event from stdin, the
-   Python API, the dashboard, OPC UA, Zenoh, a cell link or a driver's completion
-   enters there (:meth:`post` and :meth:`send` are submit without a handle, and
-   awaited). Its ``origin`` (:mod:`statectl.run.commands`) enters if
-   :attr:`System.commands` allows it, else ``CommandRefused``, journalled as a
-   ``refused`` step that changes nothing (a refused link or driver event is dropped
-   with one log line). Without an origin it is the host's own (the Python API).
-   Whether the submitting thread runs the step at once is decided there alone
-   (:meth:`_run_here`): when the System is live and nobody owns the devices, it does
-   (no hop to the owner's thread); else the owner is woken. Timers and monitors are
-   the owner's own work, queued on the device at their point of its queue.
+8. One front door, :meth:`System.submit` (DESIGN.md): every event from stdin, the Python
+   API, the dashboard, OPC UA, Zenoh, a cell link, a driver's completion, a state's
+   timeout or a monitor's fault enters there (:meth:`post` and :meth:`send` are submit
+   without a handle, and awaited). Its ``origin`` (:mod:`statectl.run.commands`) enters
+   if :attr:`System.commands` allows it, else ``CommandRefused``, journalled as a
+   ``refused`` step that changes nothing (a refused link, driver, timer or monitor event
+   is dropped with one log line). Without an origin it is the host's own (the Python
+   API). Whether the submitting thread runs the step at once is decided there alone
+   (:meth:`_run_here`): when the System is live and nobody owns the devices, it does (no
+   hop to the owner's thread); else the owner is woken. Timers and monitors are the
+   owner's own work, queued on the device at their point of its queue; when one runs out
+   or finds a fault, its event passes the door's check as origin ``timer`` or
+   ``monitor`` (the device) and is then processed as it always was: a timeout at once,
+   at that point of the queue, a fault posted.
 """
 
 from __future__ import annotations
@@ -169,8 +172,10 @@ class System(Door):
             s = Subject(d.chart, clock=self.clock, name=d.name)
             s.on_queued(ready)
             self.subjects[d.name] = s
-            if d.driver is not None:  # its completions come through the door (rule 8)
-                connect(s, d.driver, report=self._reporter(d.name))
+            # its completions, timeouts and monitors' faults come through the door (rule 8)
+            driver = d.driver
+            monitors = () if driver is None else connect(s, driver, report=self._reporter(d.name))
+            self._route_own(d.name, monitors)
             if self.journal is not None:
                 self.bound[d.name] = JournalledDevice(s, self.journal, source=d.source)
         if self.cell is not None and self.journal is not None:
@@ -201,8 +206,7 @@ class System(Door):
             return
         links = self.links.cell.links
         for send in self.links.sends(data):
-            if self._link_admitted(links[send.link].source, send.target, send.event, send.data):
-                self.subjects[send.target].post(send.event, send.data)
+            self._pass_link(links[send.link].source, send.target, send.event, send.data)
         self._unchecked = self.rules is not None  # rule 6: once the cascade settles
 
     def _link_sends(self) -> list[tuple[JournalledDevice, str]]:
@@ -226,11 +230,7 @@ class System(Door):
         self._unchecked = False
         sent = False
         for device, ev in self._violations():
-            bound = self.bound.get(device)
-            if bound is not None:
-                bound.post(ev)
-            else:
-                self.subjects[device].post(ev)
+            self._send_own(device, ev)
             sent = True
         return sent
 

@@ -7,9 +7,9 @@ Rules:
    started (servers first: nothing posts to a System that is closing), then the
    System closes, then what must outlive that close runs (the shipper ships what
    the journal committed, for a few seconds at most).
-3. A failure is said once, as ``statectl COMMAND: ...`` (no traceback); a journal
-   failure the close raises is said (as ``statectl run: ...``, by a node too) unless
-   the command already said it.
+3. A failure is said once, as ``statectl COMMAND: ...`` (no traceback), the command
+   being the one the user ran (``run`` or ``node``); a journal failure the close raises
+   is said so too, unless the command already said it.
 """
 
 from __future__ import annotations
@@ -68,7 +68,7 @@ class Ending:
             try:
                 self.system.close()
             except JournalError as exc:
-                if str(exc) not in self.failed:  # "run" for a node too, as it always said
-                    self.err.write(f"statectl run: {exc}\n")
+                if str(exc) not in self.failed:
+                    self.err.write(f"statectl {self.command}: {exc}\n")
         for finish in self._after:
             finish()

@@ -16,7 +16,9 @@ Rules:
    (the end of the run) cancels it.
 3. When ``poll_fault()`` returns a detail string the monitor records
    ``FaultDetected`` and posts the state's first fault event with
-   ``{"detail": detail}`` as its data; the transition it drives stops the monitor.
+   ``{"detail": detail}`` as its data to :attr:`Monitor.report` (the Subject's own
+   ``post``; in a System the door's reporter, which checks the ``monitor`` origin,
+   run/door.py); the transition it drives stops the monitor.
 4. A monitored state with no fault event leaving it gets no monitor: there is
    nothing it could raise (``statectl check`` reports such a state).
 """
@@ -62,6 +64,8 @@ class Monitor:
         self.period = period
         self.active = False
         self.polls = 0
+        #: where a fault's event goes (rule 3): the Subject's queue, or a System's door
+        self.report = subject.post
         self._timer: Timer | None = None  # armed (or fired, its poll not yet run), or None
         self._due = 0.0  # when the next poll is due while active
         # what the timer calls: the poll queued for the owner (rule 2), made once here,
@@ -120,7 +124,7 @@ class Monitor:
             event = self.spec.raises[0]
             if s.listening:
                 s.emit(FaultDetected(s.name, now, self.spec.state, event, detail))
-            s.post(event, {"detail": detail})
+            self.report(event, {"detail": detail})
         self._due = now + self.period
         self._arm(self.period)
 

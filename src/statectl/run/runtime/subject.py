@@ -88,6 +88,7 @@ class Subject:
         "_worker",
         "chart",
         "clock",
+        "timers",
     )
 
     def __init__(
@@ -115,8 +116,8 @@ class Subject:
         self._stopping = False
         self._serving = False
         self._worker: threading.Thread | None = None
-        if any(s.timeout is not None for s in chart.states):
-            attach_timers(self)  # per-state timeouts (runtime/timers.py)
+        #: per-state timeouts (runtime/timers.py); a System routes them through its door
+        self.timers = attach_timers(self)  # none for a chart without timeouts
         if any(s.defer for s in chart.states):
             attach_defer(self)  # deferred events (runtime/defer.py)
 

@@ -20,11 +20,17 @@ Rules:
    device's completion.
 4. :func:`attach_timers` is called by the Subject itself for a chart with timeouts,
    so every host (``statectl run``, a System, a bare Subject) gets them.
+5. A timer hands its event to :attr:`StateTimer.report`: a bare Subject's own
+   :meth:`~statectl.run.runtime.Subject.deliver`; in a System the door's reporter
+   (run/door.py), which checks the ``timer`` origin against the commands policy and
+   then delivers, still at once and at that point of the queue (rule 2), or drops a
+   refused timeout.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 from statectl.kernel.model import Timeout
 from statectl.run.runtime.clock import Timer
@@ -38,14 +44,25 @@ __all__ = ["StateTimer", "attach_timers"]
 class StateTimer:
     """Arms ``timeout`` while ``state`` is active and delivers its event when it runs out."""
 
-    __slots__ = ("_generation", "_timer", "armed", "fired", "state", "subject", "timeout")
+    __slots__ = (
+        "_generation",
+        "_timer",
+        "armed",
+        "fired",
+        "report",
+        "state",
+        "subject",
+        "timeout",
+    )
 
     def __init__(self, subject: Subject, state: str, timeout: Timeout) -> None:
         self.subject = subject
         self.state = state
         self.timeout = timeout
         self.armed = False
-        self.fired = 0  # timeout events delivered
+        self.fired = 0  # timeouts run out and handed to report
+        #: who processes the timeout event at once (rule 5): the Subject, or a System's door
+        self.report: Callable[[str, Any], None] = subject.deliver
         self._generation = 0
         self._timer: Timer | None = None
 
@@ -80,7 +97,7 @@ class StateTimer:
         self.armed = False
         self._timer = None
         self.fired += 1
-        self.subject.deliver(self.timeout.event)
+        self.report(self.timeout.event, None)
 
 
 def attach_timers(subject: Subject) -> tuple[StateTimer, ...]:
