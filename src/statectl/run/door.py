@@ -252,10 +252,10 @@ class Door:
             subject = self.subjects[name]  # no inbox row to write, no 'when' to judge first
             if self._run_here(lambda: self._step_here(subject, event, data, handle)):
                 return handle
-            self._let_in(name, event, data, handle.resolve, None, wake=True)
+            self._let_in(name, event, data, handle.resolve, None, True)
             return handle
         here = journal is None or journal.guarantee is Guarantee.PROMPT  # else: the writer's
-        handle.ticket = self._let_in(name, event, data, handle.resolve, note, wake=not here)
+        handle.ticket = self._let_in(name, event, data, handle.resolve, note, not here)
         if here:
             self._run_here()  # it runs now, or wakes the owner
         return handle
@@ -265,9 +265,7 @@ class Door:
     ) -> Ticket | None:
         """:meth:`submit` without a handle, never running the step here: it never blocks
         (rule 4); with a journal the ticket says when the event is durable."""
-        return self._let_in(
-            self.admit(device, event, data, origin), event, data, None, None, wake=True
-        )
+        return self._let_in(self.admit(device, event, data, origin), event, data, None, None, True)
 
     def _let_in(
         self,
@@ -276,11 +274,12 @@ class Door:
         data: Any,
         then: Callable[[Outcome], object] | None,
         note: tuple[str, str] | None,
-        *,
         wake: bool,
     ) -> Ticket | None:
         """Past the policy: a cell's ``when`` (rule 6), then the journal or the device; then
-        ``wake`` the owner (submit does not when it is about to run the step itself)."""
+        ``wake`` the owner (submit does not when it is about to run the step itself).
+        Called with positional arguments only: CPython 3.11 runs a call that names its
+        arguments on its generic path (``Subject.post`` says the same)."""
         if self.rules is not None and self.rules.guarded(name, event):
             with self.owner:  # the global state once what came before has settled (rule 6)
                 if not self._draining:  # (a post from a step: the drain running is the owner)
@@ -292,7 +291,7 @@ class Door:
             if wake and bound.journal.guarantee is Guarantee.PROMPT:
                 self.wake.set()  # the device has it now; durable-first: the writer wakes
             return ticket
-        self.subjects[name].post(event, data, then=then)
+        self.subjects[name].post(event, data, then)
         if wake and not self.wake.is_set():  # set already: the owner clears it before it drains
             self.wake.set()
         return None
