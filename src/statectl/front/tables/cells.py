@@ -203,12 +203,18 @@ def _plain_state_row(row: RawRow) -> StateRow | None:
     """The usual state row, when it has nothing to report: text cells of
     :data:`PLAIN_STATE` only, ``state`` filled, at most one control and a known one.
     ``None`` otherwise, and :func:`state_row` checks it cell by cell (as for event rows)."""
+    texts = _plain_texts(row, PLAIN_STATE)
+    return None if texts is None else plain_state_row(texts, row.where)
+
+
+def _plain_texts(row: RawRow, columns: frozenset[str]) -> dict[str, str] | None:
+    """The row's stripped cell texts when every cell is a text of ``columns``, else None."""
     texts: dict[str, str] = {}
     for name, (value, _) in row.cells.items():
-        if type(value) is not str or name not in PLAIN_STATE:
+        if type(value) is not str or name not in columns:
             return None
         texts[name] = value.strip()
-    return plain_state_row(texts, row.where)
+    return texts
 
 
 def plain_state_row(texts: Mapping[str, str], where: Location) -> StateRow | None:
@@ -273,12 +279,8 @@ def _plain_event_row(row: RawRow) -> EventRow | None:
     :data:`PLAIN_EVENT` only, ``event``, ``old`` and ``new`` filled, a known kind.
     ``None`` otherwise, and :func:`event_row` checks it cell by cell; a 100,000-row table
     asked each row's eleven cells one at a time."""
-    texts: dict[str, str] = {}
-    for name, (value, _) in row.cells.items():
-        if type(value) is not str or name not in PLAIN_EVENT:
-            return None
-        texts[name] = value.strip()
-    return plain_event_row(texts, row.where)
+    texts = _plain_texts(row, PLAIN_EVENT)
+    return None if texts is None else plain_event_row(texts, row.where)
 
 
 def plain_event_row(texts: Mapping[str, str], where: Location) -> EventRow | None:
