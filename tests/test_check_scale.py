@@ -272,17 +272,25 @@ def test_the_short_way_for_a_plain_event_row_reads_as_the_long_way(
     monkeypatch: pytest.MonkeyPatch, cells: dict[str, object]
 ) -> None:
     """A row of plain text cells skips the cell-by-cell checks: same row, same diagnostics."""
+    _same_both_ways(monkeypatch, "event_row", "_plain_event_row", cells)
+
+
+def _same_both_ways(
+    monkeypatch: pytest.MonkeyPatch, reader: str, short_way: str, cells: dict[str, object]
+) -> None:
+    """``reader`` gives the same row and diagnostics with its ``short_way`` and without."""
     from statectl.front.tables import cells as checked
     from statectl.front.tables.rows import RawRow
     from statectl.kernel.errors import Location
 
     at = Location("d.yaml", 3)
     row = RawRow(at, {k: (v, at) for k, v in cells.items()})  # type: ignore[misc]
+    read = getattr(checked, reader)
     short: list[object] = []
-    got = checked.event_row(row, short)  # type: ignore[arg-type]
-    monkeypatch.setattr(checked, "_plain_event_row", lambda _row: None)
+    got = read(row, short)
+    monkeypatch.setattr(checked, short_way, lambda _row: None)
     long: list[object] = []
-    assert checked.event_row(row, long) == got  # type: ignore[arg-type]
+    assert read(row, long) == got
     assert short == long
 
 
@@ -308,18 +316,7 @@ def test_the_short_way_for_a_plain_state_row_reads_as_the_long_way(
 ) -> None:
     """A state row of plain text cells skips the cell-by-cell checks: same row, same
     diagnostics."""
-    from statectl.front.tables import cells as checked
-    from statectl.front.tables.rows import RawRow
-    from statectl.kernel.errors import Location
-
-    at = Location("d.yaml", 3)
-    row = RawRow(at, {k: (v, at) for k, v in cells.items()})  # type: ignore[misc]
-    short: list[object] = []
-    got = checked.state_row(row, short)  # type: ignore[arg-type]
-    monkeypatch.setattr(checked, "_plain_state_row", lambda _row: None)
-    long: list[object] = []
-    assert checked.state_row(row, long) == got  # type: ignore[arg-type]
-    assert short == long
+    _same_both_ways(monkeypatch, "state_row", "_plain_state_row", cells)
 
 
 def test_check_does_not_load_the_explorer(tmp_path: Path) -> None:
