@@ -14,7 +14,6 @@ from __future__ import annotations
 import importlib.util
 import re
 import shutil
-import subprocess
 import textwrap
 import warnings
 from collections.abc import Callable
@@ -33,6 +32,7 @@ from statectl.out.testgen.oracle import RuleSkipped, Specification
 from statectl.run.devices import SimTwin
 from support import MOTOR, ROOT
 from test_testgen import counts, run_pytest
+from test_testgen_adapters import _harness
 
 PRESS = ROOT / "examples" / "press" / "press.yaml"
 MODBUS_CLAMP = ROOT / "examples" / "modbus" / "clamp.yaml"
@@ -256,26 +256,6 @@ def test_a_rule_the_implementation_cannot_do_is_skipped_saying_why(tmp_path: Pat
         "Motor: the Hypothesis rule 'monitor' is skipped: the implementation under test "
         "cannot do this: Changed has no monitoring()",
     }
-
-
-def _harness(tmp_path: Path, tables: Path, work: str | None = None) -> Path:
-    """The C++ harness of ``tables`` compiled; ``work``: its twin's seconds per call."""
-    from statectl.channels.cli import main
-
-    cpp = tmp_path / "cpp"
-    assert main(["codegen", str(tables), "--out", str(cpp), "--harness"]) == 0
-    source = cpp / f"{tables.stem}_harness.cpp"
-    if work is not None:
-        text = source.read_text(encoding="utf-8")
-        source.write_text(text.replace("kWork = 1.0;", f"kWork = {work};"), encoding="utf-8")
-    program = cpp / f"{tables.stem}_harness"
-    done = subprocess.run(
-        [GXX or "g++", "-std=c++17", "-fno-exceptions", "-fno-rtti", "-DSTATECTL_TRACE=1",
-         "-I", str(cpp), str(source), "-o", str(program)],
-        capture_output=True, text=True, check=False,
-    )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    return program
 
 
 @pytest.mark.skipif(GXX is None, reason="no g++ on this machine")
