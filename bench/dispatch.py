@@ -1032,7 +1032,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         runs = sorted(fresh_system_rates(devices, cycles, 1 if args.quick else 3))
         print(
             f"\n{devices:,} Motors on one System (1 owner thread, {SYSTEM_THREADS} posting "
-            f"threads), paper cycle x {cycles}, {len(runs)} runs, each in a fresh process:"
+            f"threads), paper cycle x {cycles}, {len(runs)} run{'s' * (len(runs) > 1)}, each in a "
+            "fresh process:"
         )
         ends = (("worst", runs[-1]), ("best", runs[0]))
         for label, (cpu, rate, processed) in ends:
