@@ -34,21 +34,6 @@ def test_pairs_kills_every_non_equivalent_mutant(file: Path) -> None:
 # -- the driver's real API calls against the tables ------------------------------------------
 
 
-class Twice(SimTwin):
-    """Calls ``Extra()`` after every call the tables ask for."""
-
-    def log_call(self, function: str, *args: Any) -> None:
-        super().log_call(function, *args)
-        super().log_call("Extra")
-
-
-class MinusOne(SimTwin):
-    """Passes -1 to every call."""
-
-    def log_call(self, function: str, *args: Any) -> None:
-        super().log_call(function, *args, -1)
-
-
 class Again(SimTwin):
     """Makes the call the tables ask for twice."""
 
@@ -78,24 +63,25 @@ class Reversing(SimMotor):
 CALLS: list[tuple[str, Any, Path, tuple[Any, ...], str]] = [
     (
         "an extra call",
-        Twice,
+        mutation.ExtraCall,
         MOTOR,
         ("Movement",),
-        "stray API call Twice.Extra() serving Movement(): the tables make no such call here",
+        "stray API call ExtraCall.Extra() serving Movement(): the tables make no such call here",
     ),
     (
         "a wrong argument",
-        MinusOne,
+        mutation.WrongArgument,
         MOTOR,
         ("Movement",),
-        "API call MinusOne.Movement(-1): wrong argument, the tables give Movement()",
+        "API call WrongArgument.Movement(-1): wrong argument, the tables give Movement()",
     ),
     (
         "a wrong argument with event data",
-        MinusOne,
+        mutation.WrongArgument,
         PRESS,
         (["Press", {"pressure": 3.0}],),
-        "API call MinusOne.Stroke(-1): wrong argument, the tables give Stroke({'pressure': 3.0})",
+        "API call WrongArgument.Stroke(-1): wrong argument, "
+        "the tables give Stroke({'pressure': 3.0})",
     ),
     (
         "the call made twice",
