@@ -32,6 +32,7 @@ from statectl.run.journal import REFUSED, Journal, JournalReader
 from statectl.run.runner.cells import cell_setups
 from statectl.run.runtime import SimClock
 from statectl.run.system import DeviceSetup, System
+from test_distributed_receive import PING, PONG
 
 SRC = Path(statectl.__file__).parent
 
@@ -245,17 +246,6 @@ def test_opcua_methods_refuse_at_the_door_with_bad_user_access_denied(tmp_path: 
     ]
 
 
-PING = """device: Ping
-states:
-  - {component: Ping, api: Go(), state: Idle, control: default, description: waits}
-  - {component: Ping, api: Go(), state: Busy, control: event trigger required,
-     description: toggles}
-events:
-  - {event: Go, condition: go, old: Idle, new: Busy, kind: command, api: Go}
-  - {event: Go, condition: go, old: Busy, new: Idle, kind: command, api: Go}
-"""
-PONG = PING.replace("Ping", "Pong").replace("Go", "Hit").replace("Idle", "Up")
-PONG = PONG.replace("Busy", "Down")
 CELL = """cell: Door
 devices: {ping: ping.yaml, pong: pong.yaml}
 links:
