@@ -128,6 +128,21 @@ def test_at_most_max_deferred_events_are_kept(tmp_path: Path) -> None:
     assert [r.entered for r in records if isinstance(r, MicrostepTaken)][-1] == ("Idle",)
 
 
+def test_the_chart_answers_which_events_a_configuration_defers(tmp_path: Path) -> None:
+    """One answer for the runtime, the explorer and testgen's oracle: each event once, by
+    state name and then as the defer cell lists them; nothing for states that defer none."""
+    text = PRESS.replace(
+        "{state: Stopped, ignore: [all others]}", "{state: Stopped, defer: [Eject, Stop]}"
+    )
+    chart = load_chart(press(tmp_path, text))
+    assert chart.deferring({"Pressing"}) == ("Stop", "Eject")
+    assert chart.deferring({"Stopped"}) == ("Eject", "Stop")
+    assert chart.deferring({"Stopped", "Pressing"}) == ("Stop", "Eject")  # Pressing's first
+    assert chart.deferring({"Idle", "Done"}) == ()
+    motor = load_chart(ROOT / "examples" / "motor" / "motor.yaml")
+    assert motor.deferring({"Blocked"}) == ()
+
+
 def test_a_chart_without_defer_keeps_nothing() -> None:
     """The Motor has no defer cells: an unhandled event is simply ignored, never re-delivered."""
     subject, records = run(load_chart(ROOT / "examples" / "motor" / "motor.yaml"))

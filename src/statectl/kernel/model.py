@@ -14,7 +14,7 @@ Rules:
 from __future__ import annotations
 
 import enum
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
@@ -436,6 +436,22 @@ class Chart:
         """(state, event) pairs of the states' ``defer`` cells: ignored by the kernel, kept
         by the runtime (statectl.run.runtime.defer) until the state is left."""
         return frozenset((s.name, e) for s in self.states for e in s.defer)
+
+    def deferring(self, active: Iterable[str]) -> tuple[str, ...]:
+        """The events the states ``active`` defer, each once: by state name, then as each
+        ``defer`` cell lists them. The one answer the runtime (which keeps them,
+        statectl.run.runtime.defer), the cell explorer and testgen's oracle ask."""
+        index = self._lookup()
+        defers: dict[str, tuple[str, ...]] | None = index.get("defers")
+        if defers is None:
+            defers = {}
+            for st in self.states:
+                if st.defer:
+                    defers.setdefault(st.name, st.defer)  # the first of a name, as state()
+            index["defers"] = defers
+        if not defers:
+            return ()
+        return tuple(dict.fromkeys(e for s in sorted(active) if s in defers for e in defers[s]))
 
     @property
     def event_names(self) -> tuple[str, ...]:

@@ -33,8 +33,7 @@ DEFERRED = "events the device may have kept (deferred) released at once"
 
 
 def _deferring(space: LocalSpace, snap: Snapshot) -> tuple[str, ...]:
-    chart = space.chart
-    return tuple(dict.fromkeys(e for s in sorted(snap.active) for e in chart.state(s).defer))
+    return space.chart.deferring(snap.active)
 
 
 def _values(space: LocalSpace, lid: int) -> tuple[Any, ...]:

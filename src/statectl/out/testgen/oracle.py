@@ -117,7 +117,6 @@ class Specification:
         self.now = 0.0
         self.fault: str | None = None  # a fault injected that no monitor raised yet
         self.unsupported: dict[str, str] = {}
-        self.defers = {s.name: frozenset(s.defer) for s in chart.states if s.defer}
         self.kept: list[tuple[str, Any]] = []  # deferred events the device keeps
 
     @property
@@ -198,9 +197,8 @@ class Specification:
             released = self._step(*self.kept.pop(i))
             taken += [released] if released is not None else []
 
-    def _deferring(self) -> frozenset[str]:
-        active = self.snapshot.active
-        return frozenset(e for s, events in self.defers.items() if s in active for e in events)
+    def _deferring(self) -> tuple[str, ...]:
+        return self.chart.deferring(self.snapshot.active)
 
     def _step(self, event: str, data: Any) -> Step | None:
         """One step of the kernel, taken by the specification with what it assigns."""

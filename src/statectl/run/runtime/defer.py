@@ -36,24 +36,18 @@ __all__ = ["Deferrer", "attach_defer"]
 class Deferrer:
     """Keeps the deferred events of one Subject and releases them when their state is left."""
 
-    __slots__ = ("_defers", "_scheduled", "dropped", "kept", "subject")
+    __slots__ = ("_scheduled", "dropped", "kept", "subject")
 
     def __init__(self, subject: Subject) -> None:
         self.subject = subject
         self.kept: deque[tuple[str, Any]] = deque()
         self.dropped = 0
         self._scheduled = False
-        self._defers = {s.name: frozenset(s.defer) for s in subject.chart.states if s.defer}
 
-    def deferring(self) -> frozenset[str]:
-        """The events the active configuration defers now."""
-        defers = self._defers
-        out: frozenset[str] = frozenset()
-        for state in self.subject.configuration:
-            found = defers.get(state)
-            if found:
-                out |= found
-        return out
+    def deferring(self) -> tuple[str, ...]:
+        """The events the active configuration defers now (the chart's answer)."""
+        subject = self.subject
+        return subject.chart.deferring(subject.configuration)
 
     def heard(self, event: str, data: Any, outcome: str) -> None:
         """The step listener: keep a deferred arrival, release what is no longer deferred."""
