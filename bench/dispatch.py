@@ -32,6 +32,11 @@ Rules:
    device cost.
 2c. The journal row's round ends when the journal has committed every event of the
    round (``Journal.flush``), so its commits are in the round's time.
+2d. A by-hand row: the bare cycle, and after each event the very typed records a
+   step-record listener reads, built directly from their fields (the clock read, one
+   struct each, a tuple handed to a listener): what reading every typed record costs
+   with no engine, step record or builder in between, the least any design that keeps
+   the records as they are can pay.
 3. One process, interleaved: each round runs every contender once, in an order
    that rotates from round to round, after warm-up rounds that are thrown away.
    A figure is the median over the rounds, so a noisy moment hurts one round of
@@ -84,6 +89,7 @@ from statectl.run.journal import Journal
 from statectl.run.journal.device import JournalledDevice
 from statectl.run.runtime import SimClock, StepRecord, Subject, TraceWriter
 from statectl.run.runtime.monitors import attach_monitors
+from statectl.run.runtime.records import fields_of
 from statectl.run.system import DeviceSetup, System
 
 MOTOR_YAML = Path(__file__).resolve().parents[1] / "examples" / "motor" / "motor.yaml"
@@ -209,6 +215,38 @@ def _typed_listener(subject: Subject) -> None:
     subject.listen(hear)
 
 
+def _by_hand(subject: Subject) -> Fire:
+    """Rule 2d: the bare cycle, and after each event its typed records built directly:
+    the clock read, then one line of struct calls per event, handed to a listener."""
+    probe = Subject(subject.chart, clock=SimClock())
+    probe.attach(Counter())
+    steps: list[StepRecord] = []
+    probe.listen_steps(steps.append)
+    probe.start()
+    cycle = [(e, MOTOR_DATA.get(e)) for e in MOTOR_CYCLE]
+    for e, d in cycle:
+        probe.dispatch(e, d)
+    names: dict[str, Any] = {"dispatch": subject.dispatch, "now": subject.clock.now}
+    names.update(hear=lambda records: None, name=subject.name)
+
+    def bind(value: object) -> str:  # every value reaches the code by a name, never as text
+        key = f"v{len(names)}"
+        names[key] = value
+        return key
+
+    lines = ["def fire():"]
+    for (e, d), step in zip(cycle, steps[-len(cycle) :], strict=True):
+        calls = [
+            f"{bind(type(r))}(name, t, {', '.join(bind(v) for v in fields_of(r))})"
+            for r in step.records
+        ]
+        lines += [f"    dispatch({bind(e)}, {bind(d)})", "    t = now()"]
+        lines.append(f"    hear(({', '.join(calls)},))")
+    exec("\n".join(lines), names)
+    fire: Fire = names["fire"]
+    return fire
+
+
 #: Bare dispatch with a listener that asked for records, three ways (rule 2).
 RECORD_LISTENERS: dict[str, Callable[[Subject], None]] = {
     "steps": _keep_last,
@@ -226,7 +264,7 @@ def _motor_subject(wiring: str) -> tuple[Subject, JournalledDevice | None, Any]:
     chart = load_chart(MOTOR_YAML)
     subject = Subject(chart, clock=SimClock())
     journalled, driver = None, None
-    if wiring == "bare":
+    if wiring in ("bare", "by-hand"):
         subject.attach(Counter())
     elif wiring in RECORD_LISTENERS:
         subject.attach(Counter())
@@ -328,10 +366,18 @@ def statectl_paper(wiring: str) -> Callable[[], Made]:
         subject, journalled, driver = _motor_subject(wiring)
         if wiring in DRIVEN:
             post = journalled.post if journalled is not None else subject.post
-            settle = journalled.journal.flush if journalled is not None else None
+            settle: Fire | None = None
+            if journalled is not None:
+                journal = journalled.journal
+
+                def settle() -> None:  # the round ends when every event is committed
+                    journal.flush()
+
             return _checked(subject, _clocked(subject, post, driver), settle)
         if wiring == "monitor":
             return _checked(subject, _clocked_monitor(subject))
+        if wiring == "by-hand":
+            return _checked(subject, _by_hand(subject))
         cycle = [(e, MOTOR_DATA.get(e)) for e in MOTOR_CYCLE]
         dispatch = subject.dispatch
 
@@ -398,7 +444,10 @@ def system_rate(devices: int, threads: int, cycles: int) -> tuple[float, float, 
         p.start()
     for p in posters:
         p.join()
-    done = lambda: sum(s.events_processed for s in system.subjects.values())  # noqa: E731
+
+    def done() -> int:
+        return sum(s.events_processed for s in system.subjects.values())
+
     while done() < total:
         time.sleep(0.001)
     took, cpu = time.perf_counter() - t0, time.process_time() - cpu0
@@ -745,8 +794,8 @@ def instance_makers() -> dict[str, Callable[[], Callable[[], object]] | None]:
         return lambda: cls(Counter())
 
     def sismic_new() -> Callable[[], object]:
-        from sismic.interpreter import Interpreter  # type: ignore[import-untyped]  # no stubs
-        from sismic.io import import_from_yaml  # type: ignore[import-untyped]  # no stubs
+        from sismic.interpreter import Interpreter
+        from sismic.io import import_from_yaml
 
         chart = import_from_yaml(_sismic_motor_yaml())
 
@@ -868,6 +917,12 @@ def build(libs: Sequence[str]) -> tuple[list[Contender], list[str]]:
             "statectl",
             "statectl bare + step records, all typed records read",
             statectl_paper("steps-read"),
+        ),
+        (
+            "motor",
+            "statectl",
+            "statectl bare + the same typed records built by hand (no engine)",
+            statectl_paper("by-hand"),
         ),
         (
             "motor",
