@@ -88,6 +88,11 @@ def test_a_refusal_says_who_what_is_granted_and_what_to_do() -> None:
         "config's commands: section, or send it as someone who may"
     )
     assert "opcua (anonymous)" in str(Commands().refusal(Origin("opcua"), "Motor", "Error"))
+    coded = Commands([Grant("opcua", "operator", MOTOR, MOVES)])  # granted in code, not a file
+    assert str(coded.refusal(Origin("opcua"), "Motor", "Error")).endswith(
+        "(commands policy: opcua/operator may send Movement to Motor); grant it in the run "
+        "config's commands: section, or send it as someone who may"
+    )
 
 
 def test_an_origin_names_a_known_channel() -> None:
@@ -180,6 +185,8 @@ def _system(
          "commands: run.yaml:3: no device 'Motr'; devices: Motor"),
         (Grant("opcua", "operator", None, frozenset({"Move"}), "run.yaml:4"),
          "commands: run.yaml:4: no device it names has an event 'Move'"),
+        (Grant("opcua", "operator", frozenset({"Motr"})),  # granted in code: named by itself
+         "commands: grant 'opcua/operator may send any event to Motr': no device 'Motr'"),
     ],
 )  # fmt: skip
 def test_a_grant_naming_what_the_run_lacks_is_refused_at_start(grant: Grant, message: str) -> None:

@@ -104,7 +104,7 @@ class Grant:
     principal: str = ANYONE
     devices: frozenset[str] | None = None
     events: frozenset[str] | None = None
-    where: str = "the defaults"
+    where: str = ""  # where it was granted: a file and line, "the defaults", or "" (code)
 
     def covers(self, principal: str | None, device: str, event: str) -> bool:
         who = self.principal
@@ -118,7 +118,8 @@ class Grant:
         who = {ANYONE: "", AUTHENTICATED: "/*"}.get(self.principal, f"/{_shown(self.principal)}")
         to = "any device" if self.devices is None else ", ".join(sorted(self.devices))
         send = "any event" if self.events is None else ", ".join(sorted(self.events))
-        return f"{self.channel}{who} may send {send} to {to} ({self.where})"
+        said = f"{self.channel}{who} may send {send} to {to}"
+        return f"{said} ({self.where})" if self.where else said
 
 
 def _everything(g: Grant) -> bool:
@@ -132,15 +133,8 @@ def _shown(name: str) -> str:
 
 
 #: Rule 3: what each channel allowed before there was a policy.
-DEFAULT_GRANTS: Final = (
-    Grant("stdin"),
-    Grant("dashboard"),
-    Grant("opcua", AUTHENTICATED),
-    Grant("zenoh"),
-    Grant("link"),
-    Grant("driver"),
-    Grant("timer"),
-    Grant("monitor"),
+DEFAULT_GRANTS: Final = tuple(
+    Grant(c, AUTHENTICATED if c == "opcua" else ANYONE, where="the defaults") for c in CHANNELS
 )
 
 
@@ -197,14 +191,15 @@ class Commands:
         problems = []
         for gs in self._by_channel.values():
             for g in gs:
+                at = g.where or f"grant '{g}'"
                 for d in sorted(g.devices or ()):
                     if d not in events:
-                        problems.append(f"{g.where}: no device {d!r}; devices: {', '.join(events)}")
+                        problems.append(f"{at}: no device {d!r}; devices: {', '.join(events)}")
                 scope = [events[d] for d in (g.devices or events) if d in events]
                 known = {e for es in scope for e in es}
                 for e in sorted(g.events or ()):
                     if e not in known:
-                        problems.append(f"{g.where}: no device it names has an event {e!r}")
+                        problems.append(f"{at}: no device it names has an event {e!r}")
         if problems:
             raise StatectlError(f"commands: {'; '.join(problems)}")
 
