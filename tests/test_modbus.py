@@ -159,7 +159,7 @@ def test_grip_writes_the_valves_and_completes_on_the_sensor(server: Server) -> N
         server.set_input(0, True)
         event, values = g.wait(lambda: g.events)[0]
         assert event == "Grip completion" and values["closed"] is True
-        assert [c.function for c in g.driver.api_log] == ["actuate"]
+        assert [str(c) for c in g.driver.api_log] == ["ModbusIO.Grip()"]  # as the tables name it
     finally:
         g.close()
 

@@ -21,6 +21,9 @@ Rules:
    outage (:data:`QUIET`, a filter on its logger). Nothing raises into the Subject.
 5. ``pymodbus`` (the ``modbus`` extra; ``pyserial`` for RTU) is imported when the
    driver binds.
+6. Each observer call is logged as the API call of its method's own name
+   (``ModbusIO.Clamp()``): the action is the device's API here, so a trace reads as
+   the tables do and a generated test suite checks the calls with no ``statectl_api``.
 """
 
 from __future__ import annotations
@@ -253,7 +256,7 @@ class ModbusIO(Driver):
             )
         with self._lock:
             self.method = notification.method
-            self.log_call("actuate", notification.method)
+            self.log_call(notification.method)  # the API call the tables name (rule 6)
             self._waiting = None  # a new command replaces the one under way
             self._hit.clear()
             self._queue.append((notification.method, action))
