@@ -20,6 +20,7 @@ from statectl.channels.cli.outputs import output, wrote
 from statectl.kernel.errors import DiagnosticError, StatectlError, did_you_mean
 from statectl.kernel.exits import OK, PROBLEMS, USAGE
 from statectl.kernel.model import Chart
+from statectl.kernel.semantics import Outcome
 from statectl.kernel.text import shown
 from statectl.run.journal import (
     JournalError,
@@ -148,7 +149,7 @@ def journal_show(
             via = f" (#{s.inbox})" if s.inbox else ""
             state = ", ".join(sorted(s.snapshot.active))
             text = f"step {s.id:<4} {s.device}  {s.kind.value:<8} {what}{via} -> [{state}]"
-            if s.outcome and s.outcome != "handled":
+            if s.outcome and s.outcome != Outcome.HANDLED:
                 text += f"  {s.outcome}"
             yield s.wall, 1, text
 

@@ -28,7 +28,7 @@ from collections.abc import Callable
 from typing import Any, TextIO
 
 from statectl.kernel.model import Notify
-from statectl.kernel.semantics import Unhandled
+from statectl.kernel.semantics import Outcome, Unhandled
 from statectl.run.runtime.records import EventRejected, InvokeIssued, StepRecord
 from statectl.run.system import System
 
@@ -92,7 +92,7 @@ class StepLog:
             None,
         )
         outcome = "not processed" if own is None else own["outcome"]
-        handled = outcome == "handled"
+        handled = outcome == Outcome.HANDLED
         self._write(
             {
                 "line": number,

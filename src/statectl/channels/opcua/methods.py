@@ -38,6 +38,7 @@ from typing import Any
 from statectl.channels.opcua.access import caller
 from statectl.channels.opcua.access import ua_module as _ua
 from statectl.kernel.errors import StatectlError
+from statectl.kernel.semantics import Outcome
 from statectl.run.commands import CommandRefused, Origin
 from statectl.run.system import System
 
@@ -218,7 +219,7 @@ class Calls:
 
         async def run(data: Any, origin: Origin) -> list[Any]:
             outcome = await self.outcome(device, event, data, origin)
-            handled = outcome == "handled"
+            handled = outcome == Outcome.HANDLED
             return [
                 ua.Variant(handled, ua.VariantType.Boolean),
                 ua.Variant("" if handled else str(outcome), ua.VariantType.String),

@@ -87,6 +87,7 @@ from statectl.channels.opcua.packml import PackmlNaming, PackmlSpace, naming, pa
 from statectl.channels.opcua.packtags import PackTags
 from statectl.channels.opcua.space import Change, Layout, changes, layout
 from statectl.kernel.errors import StatectlError
+from statectl.kernel.semantics import Outcome
 from statectl.run.runtime import InvokeIssued, MicrostepTaken, Started, StepRecord
 from statectl.run.system import System
 
@@ -214,7 +215,7 @@ class OpcuaServer:
                 device.pending = []
                 loop = self._loop
                 fault = None  # a fault that raises an alarm (rule 6): its event and data
-                if event in self._faults[device.name] and outcome == "handled":
+                if event in self._faults[device.name] and outcome == Outcome.HANDLED:
                     fault = (event, data)
                 now = (device, s.configuration, records, dict(s.data), fault)
                 if threading.get_ident() == self._loop_thread:
