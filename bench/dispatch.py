@@ -215,9 +215,9 @@ def _typed_listener(subject: Subject) -> None:
     subject.listen(hear)
 
 
-def _by_hand(subject: Subject) -> Fire:
+def _by_hand(subject: Subject, hear: Callable[[tuple[Any, ...]], object] | None = None) -> Fire:
     """Rule 2d: the bare cycle, and after each event its typed records built directly:
-    the clock read, then one line of struct calls per event, handed to a listener."""
+    the clock read, then one line of struct calls per event, handed to ``hear``."""
     probe = Subject(subject.chart, clock=SimClock())
     probe.attach(Counter())
     steps: list[StepRecord] = []
@@ -227,7 +227,7 @@ def _by_hand(subject: Subject) -> Fire:
     for e, d in cycle:
         probe.dispatch(e, d)
     names: dict[str, Any] = {"dispatch": subject.dispatch, "now": subject.clock.now}
-    names.update(hear=lambda records: None, name=subject.name)
+    names.update(hear=hear or (lambda records: None), name=subject.name)
 
     def bind(value: object) -> str:  # every value reaches the code by a name, never as text
         key = f"v{len(names)}"

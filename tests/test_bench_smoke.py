@@ -7,6 +7,7 @@ and prints a row per scenario for each library asked for.
 from __future__ import annotations
 
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -35,6 +36,7 @@ def output() -> str:
     "row",
     [
         "| paper cycle | statectl bare dispatch() |",
+        "| paper cycle | statectl bare + the same typed records built by hand (no engine) |",
         "| paper cycle | statectl + Moving monitor |",
         "| paper cycle | statectl wired as the demo (driver + monitor) |",
         "| paper cycle | statectl demo wiring + journal |",
@@ -115,3 +117,48 @@ def test_the_many_devices_line_says_its_threads_and_cpu(output: str) -> None:
     assert "each in a fresh process" in line
     for run in _system_runs(output):
         assert "ns/event of the process's CPU, all threads" in run
+
+
+def test_the_by_hand_row_builds_the_records_a_step_listener_reads() -> None:
+    """Rule 2d's floor is honest only if it builds what the engine gives: the same records,
+    field for field, for each event of the cycle (its clock standing still, as in the row)."""
+    sys.path.insert(0, str(BENCH.parent))
+    try:
+        import dispatch as bench
+    finally:
+        sys.path.remove(str(BENCH.parent))
+    subject, _, _ = bench._motor_subject("by-hand")
+    by_hand: list[tuple[object, ...]] = []
+    bench._by_hand(subject, by_hand.append)()
+    listened, _, _ = bench._motor_subject("bare")
+    steps: list[object] = []
+    listened.listen_steps(steps.append)
+    for event in bench.MOTOR_CYCLE:
+        listened.dispatch(event, bench.MOTOR_DATA.get(event))
+    engine = [tuple(step.records) for step in steps]  # type: ignore[attr-defined]
+    assert len(by_hand) == len(bench.MOTOR_CYCLE) == len(engine)
+    assert by_hand == engine
+    assert sum(map(len, by_hand)) == 24  # three a event: what docs/runtime.md counts
+
+
+INSTRUCTIONS = ROOT / "bench" / "instructions.py"
+
+
+def test_the_instruction_count_refuses_an_unknown_row() -> None:
+    done = subprocess.run(
+        [sys.executable, str(INSTRUCTIONS), "--rows", "bare,fast"],
+        capture_output=True, text=True, timeout=60, cwd=ROOT, check=False,
+    )  # fmt: skip
+    assert done.returncode == 2 and "unknown rows ['fast']" in done.stdout, done
+
+
+@pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind is not installed")
+def test_the_instruction_count_gives_a_row_per_event() -> None:
+    """20 cycles and 40 under valgrind: the bare row counts a positive figure, ratio 1."""
+    done = subprocess.run(
+        [sys.executable, str(INSTRUCTIONS), "--rows", "bare", "--cycles", "20"],
+        capture_output=True, text=True, timeout=600, cwd=ROOT, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    row = re.search(r"^\| bare \| ([\d,]+) \| 1\.00 \|$", done.stdout, re.MULTILINE)
+    assert row is not None and int(row.group(1).replace(",", "")) > 1000, done.stdout
