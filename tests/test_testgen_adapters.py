@@ -5,9 +5,13 @@ recovery tested through the implementation, each kind shown to catch its mutant
 from __future__ import annotations
 
 import shutil
+import socket
 import subprocess
 import textwrap
+import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -213,6 +217,71 @@ def test_the_fault_test_runs_on_a_served_device_whose_driver_is_at_hand(tmp_path
     result = run_pytest(out, "-rs", "-k", "fault_01 or monitor_01")
     assert counts(result) == {"passed": 1, "skipped": 1}, result.stdout[-3000:]
     assert "the OPC UA address space shows no monitors" in result.stdout
+
+
+def _returned(impl: Any, system: Any, then: Callable[[], object]) -> tuple[str, ...]:
+    """The events ``impl`` reads over OPC UA for the Motor's way back to Blocked, after
+    ``then`` sent it into Returning; the served System's simulated clock is moved."""
+    deadline = time.monotonic() + 10
+    then()
+    while impl.states() != ("Returning",):
+        assert time.monotonic() < deadline, impl.states()
+        system.advance(0.1)
+        time.sleep(0.01)
+    system.advance(5.0)  # the twin arrives: a completion takes Returning to Blocked
+    while impl.states() != ("Blocked",):
+        assert time.monotonic() < deadline, impl.states()
+        time.sleep(0.01)
+    events: tuple[str, ...] = impl._events(("Returning",), ("Blocked",))
+    return events
+
+
+def test_the_opcua_adapter_reads_which_of_two_transitions_the_server_took() -> None:
+    """Initialization completion and Error completion both take Returning to Blocked: the
+    state change alone cannot tell them apart (the Hypothesis module against OPC UA failed
+    on it); the machine's LastTransition can."""
+    pytest.importorskip("asyncua")
+    from statectl.channels.opcua.server import OpcuaServer, OpcuaSettings
+    from statectl.out.testgen.adapters.opcua import OpcuaImpl
+    from statectl.run.devices import SimTwin
+    from statectl.run.runtime import SimClock
+    from statectl.run.system import DeviceSetup, System
+
+    chart = load_chart(MOTOR)
+    twin = SimTwin(chart)
+    system = System((DeviceSetup("Motor", chart, driver=twin),), SimClock())
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    user, password = "tester", "a-long-password-1"
+    url = f"opc.tcp://127.0.0.1:{port}"
+    server = OpcuaServer(system, OpcuaSettings(url, user, password, ("None",)))
+    server.start()
+    system.start()
+    server.refresh()
+    halt = system.start_owner(paced=False)
+    try:
+        impl = OpcuaImpl(f"opc.tcp://{user}:{password}@127.0.0.1:{port}", chart, behind=twin)
+
+        def error() -> None:
+            impl.send("Movement")
+            twin.inject_fault("stuck")
+
+        assert _returned(impl, system, error) == ("Error completion",)
+
+        def initialization() -> None:
+            impl.send("Movement")
+            while impl.states() != ("Blocked",):  # Movement completion, then back
+                system.advance(0.5)
+                time.sleep(0.01)
+            impl.send("Initialization")
+
+        assert _returned(impl, system, initialization) == ("Initialization completion",)
+        impl.client.disconnect()
+    finally:
+        halt()
+        server.stop()
+        system.close()
 
 
 # -- each kind of test catches its mutant -----------------------------------------------------

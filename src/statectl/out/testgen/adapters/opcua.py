@@ -14,7 +14,9 @@ Rules:
    skipped saying so.
 2. ``advance`` is a bounded wall wait: the device runs on its own clock. The events it
    took meanwhile are read from the state change (the chart's transition from the
-   states before to the states after).
+   states before to the states after); where two transitions join the same states
+   (the Motor's ``Initialization completion`` and ``Error completion``), the
+   machines' ``LastTransition`` numbers say which one the server took.
 3. Invoke numbers and API calls are the server's business, not shown. The address
    space has no method that injects a fault, shows a monitor, silences the device or
    restarts it (a fault event is no method; the driver is behind the server), so those
@@ -48,6 +50,8 @@ NAMESPACE = "urn:statectl"
 WAIT = 5.0
 #: The steps it waits in.
 STEP = 0.05
+#: Reads of ``LastTransition`` before a state change's transition is guessed (rule 2).
+WAIT_LAST = 10
 
 
 def _silent(event: str, data: Any = None) -> None:
@@ -187,11 +191,40 @@ class OpcuaImpl:
                 parent = self.chart.state(cur).parent if cur in self.order else None
                 cur = parent
         found = [
-            t.events[0]
-            for t in self.chart.transitions
+            number
+            for number, t in enumerate(self.chart.transitions, 1)  # numbered as served
             if t.events and t.source in before and all(x in ancestors for x in t.targets)
         ]
-        return tuple(found[:1]) if found else ("(a state change)",)
+        if len(found) > 1:  # rule 2: the server says which of them it took
+            found = self._taken(found)
+        return (self.chart.transitions[found[0] - 1].events[0],) if found else ("(a state change)",)
+
+    def _taken(self, candidates: list[int]) -> list[int]:
+        """Of the transition ``candidates``, those a machine's ``LastTransition`` shows.
+
+        The server writes ``LastTransition`` just after ``CurrentState``, so it is read a
+        few times before the first candidate is taken as the answer."""
+        for _ in range(WAIT_LAST):
+            shown = self._last_numbers(self.machine)
+            taken = [n for n in candidates if n in shown]
+            if taken:
+                return taken
+            time.sleep(STEP / 5)
+        return candidates
+
+    def _last_numbers(self, machine: Any) -> set[int]:
+        """The ``LastTransition`` numbers of ``machine`` and its active sub-state machines."""
+        ua = self.ua
+        try:
+            numbers = {int(machine.get_child(["0:LastTransition", "0:Number"]).read_value())}
+            shown = machine.get_child("0:CurrentState").read_value().Text or ""
+            node = machine.get_child([f"{self.ns}:{shown}"]) if shown else None
+            subs = node.get_referenced_nodes(ua.ObjectIds.HasSubStateMachine) if node else []
+        except Exception:  # a server without the optional Number: nothing to go by
+            return set()
+        for sub in subs:
+            numbers |= self._last_numbers(sub)
+        return numbers
 
     def inject_fault(self, detail: str) -> None:
         inject = getattr(self.behind, "inject_fault", None)
