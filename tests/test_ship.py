@@ -227,6 +227,22 @@ def test_show_export_and_replay_read_a_shipped_journal_as_the_file(
         assert a.getvalue() == b.getvalue() and a.getvalue()
 
 
+def test_a_shipped_journal_finds_the_step_that_entered_a_state_as_the_file(
+    tmp_path: Path, url: str
+) -> None:
+    """entering_step (journal/read.py rule 4) answers alike from the URL and from the file."""
+    db = tmp_path / "run.db"
+    fill(db, 5)
+    Shipper(db, url, source="s").ship_all()
+    with JournalReader(db) as file, PgJournalReader(url, source="s") as pg:
+        asked = [(state, upto) for state in ("Busy", "Idle") for upto in (None, 1, 2, 3, 4, 5, 6)]
+        found = {(s, u): file.entering_step("Arm", s, u) for s, u in asked}
+        assert {(s, u): pg.entering_step("Arm", s, u) for s, u in asked} == found
+    entered = {(s, u): (b.id, e.id) for (s, u), f in found.items() if f is not None for b, e in [f]}
+    assert entered == {("Busy", None): (5, 6), ("Busy", 2): (1, 2), ("Busy", 4): (3, 4),
+                       ("Busy", 6): (5, 6), ("Idle", 3): (2, 3), ("Idle", 5): (4, 5)}  # fmt: skip
+
+
 BAD = [
     ("postgresql://statectl:s3cret@127.0.0.1:1/nowhere", "cannot connect"),
     ("postgresql://127.0.0.1:1/x?bogus_option=1", "cannot connect"),

@@ -28,10 +28,17 @@ from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
 
 from statectl.kernel.errors import require
-from statectl.kernel.semantics import Outcome
 from statectl.run.devices.urls import url_problem as url_syntax
 from statectl.run.journal.format import JournalError
-from statectl.run.journal.read import DeviceRow, InboxRow, StepRow, _datamodel, _json, _step
+from statectl.run.journal.read import (
+    DeviceRow,
+    InboxRow,
+    StepRow,
+    _datamodel,
+    _entering,
+    _json,
+    _step,
+)
 
 if TYPE_CHECKING:
     import psycopg
@@ -325,21 +332,7 @@ class PgJournalReader:
         self, device: str, state: str, upto: int | None = None
     ) -> tuple[StepRow, StepRow] | None:
         """As :meth:`JournalReader.entering_step` (journal/read.py rule 4)."""
-        from statectl.run.journal.format import StepKind
-
-        later: StepRow | None = None
-        rows = list(self.steps(device, upto=upto))
-        for row in reversed(rows):
-            if state not in row.snapshot.active:
-                if later is None or later.outcome != Outcome.HANDLED or later.event is None:
-                    return None
-                if later.kind in (StepKind.EVENT, StepKind.RECOVERY):
-                    return row, later
-                return None
-            if row.kind is StepKind.START:
-                return None
-            later = row
-        return None
+        return _entering(reversed(list(self.steps(device, upto=upto))), state)
 
     def last_step(self, device: str) -> StepRow | None:
         row = self._one(

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import json
 import sqlite3
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol, TextIO
@@ -168,6 +168,22 @@ def _window(
     return (" WHERE " + " AND ".join(where)) if where else "", args
 
 
+def _entering(newest_first: Iterable[StepRow], state: str) -> tuple[StepRow, StepRow] | None:
+    """Rule 4 over one device's steps, newest first: every journal's ``entering_step``."""
+    later: StepRow | None = None
+    for row in newest_first:
+        if state not in row.snapshot.active:
+            if later is None or later.outcome != Outcome.HANDLED or later.event is None:
+                return None  # not active at the newest step, or entered by a restore
+            if later.kind in (StepKind.EVENT, StepKind.RECOVERY):
+                return row, later
+            return None
+        if row.kind is StepKind.START:
+            return None  # the device started in the state
+        later = row
+    return None  # the journal begins inside the state
+
+
 class JournalSource(Protocol):
     """What show, export and replay read: a journal file or a shipped one (journal/pg.py)."""
 
@@ -249,19 +265,8 @@ class JournalReader:
         if upto is not None:
             sql += " AND id <= ?"
             args.append(upto)
-        later: StepRow | None = None
-        for raw in self._db.execute(sql + " ORDER BY id DESC", args):
-            row = _step(raw)
-            if state not in row.snapshot.active:
-                if later is None or later.outcome != Outcome.HANDLED or later.event is None:
-                    return None  # not active at the newest step, or entered by a restore
-                if later.kind in (StepKind.EVENT, StepKind.RECOVERY):
-                    return row, later
-                return None
-            if row.kind is StepKind.START:
-                return None  # the device started in the state
-            later = row
-        return None  # the journal begins inside the state
+        rows = self._db.execute(sql + " ORDER BY id DESC", args)
+        return _entering((_step(raw) for raw in rows), state)
 
     def steps(
         self,
