@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import pytest
+from openpyxl import load_workbook  # type: ignore[import-untyped, unused-ignore]  # untyped
 
 from statectl.front.builder.build import build
 from statectl.front.tables import (
@@ -20,6 +22,8 @@ from statectl.front.tables import (
 )
 from statectl.front.tables.literals import format_literal, parse_literal
 from statectl.front.tables.md_io import escape, split_row, unescape
+from statectl.front.tables.schema import flat_tables
+from statectl.front.tables.xlsx_io import dump_xlsx
 from statectl.kernel.errors import Location
 from statectl.kernel.model import ControlKind, EventKind
 
@@ -207,6 +211,32 @@ def test_data_round_trips_through_every_format(tmp_path: Path) -> None:
         assert diags == [], fmt
         assert back is not None
         assert back.data == data, fmt
+
+
+@pytest.mark.parametrize(
+    ("data", "recovery", "written"),
+    [
+        (True, True, ["states", "events", "data", "recovery"]),
+        (False, True, ["states", "events", "recovery"]),
+        (True, False, ["states", "events", "data"]),
+        (False, False, ["states", "events"]),
+    ],
+)
+def test_csv_md_and_xlsx_write_the_same_tables(
+    data: bool, recovery: bool, written: list[str]
+) -> None:
+    """The flat formats each write flat_tables' tables: data and recovery only with rows."""
+    m = motor()
+    extra = (("speed", 1.5),) if data else ()
+    tables = DeviceTables("Motor", m.states, m.events, extra, recovery=m.recovery * recovery)
+    assert [name for name, _, _ in flat_tables(tables)] == written
+    files = dict(zip(("states", "events", "data", "recovery"), dump_csv(tables), strict=True))
+    assert [name for name, text in files.items() if text is not None] == written
+    md = dump(tables, "md")
+    assert isinstance(md, str)
+    assert [line[3:].lower() for line in md.splitlines() if line.startswith("## ")] == written
+    book = load_workbook(io.BytesIO(dump_xlsx(tables)), read_only=True)
+    assert [name.lower() for name in book.sheetnames] == [*written, "device"]
 
 
 @pytest.mark.parametrize(

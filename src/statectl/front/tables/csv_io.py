@@ -21,23 +21,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from statectl.front.tables.cells import check_header
-from statectl.front.tables.eventdata import event_cells, event_columns
-from statectl.front.tables.literals import format_literal, parse_literal
+from statectl.front.tables.literals import parse_literal
 from statectl.front.tables.rows import (
-    DATA_COLUMNS,
-    FLAT_EVENT_COLUMNS,
     DeviceTables,
     RawRow,
     RawTable,
     diag,
 )
-from statectl.front.tables.schema import (
-    make_tables,
-    recovery_cells,
-    recovery_columns,
-    state_cells,
-    state_columns,
-)
+from statectl.front.tables.schema import flat_tables, make_tables
 from statectl.kernel.errors import Diagnostic, Location
 
 __all__ = ["CsvFiles", "csv_paths", "dump_csv", "input_exists", "read_csv"]
@@ -248,28 +239,8 @@ def _write(header: tuple[str, ...], rows: list[list[str]], device: str, profile:
 
 def dump_csv(tables: DeviceTables) -> tuple[str, str, str | None, str | None]:
     """The states, events, data and recovery files' text (``None``: that table is empty)."""
-    columns = state_columns(tables)
-    states = _write(
-        columns,
-        [state_cells(s, columns) for s in tables.states],
-        tables.device,
-        tables.profile,
-    )
-    ecols = event_columns(tables.events, FLAT_EVENT_COLUMNS)
-    events = _write(
-        ecols,
-        [event_cells(e, ecols) for e in tables.events],
-        tables.device,
-    )
-    data = None
-    if tables.data:
-        data = _write(
-            DATA_COLUMNS,
-            [[name, format_literal(value)] for name, value in tables.data],
-            tables.device,
-        )
-    recovery = None
-    if tables.recovery:
-        rcols = recovery_columns(tables)
-        recovery = _write(rcols, [recovery_cells(r, rcols) for r in tables.recovery], tables.device)
-    return states, events, data, recovery
+    text = {
+        name: _write(header, rows, tables.device, tables.profile if name == "states" else "")
+        for name, header, rows in flat_tables(tables)
+    }
+    return text["states"], text["events"], text.get("data"), text.get("recovery")

@@ -16,23 +16,14 @@ from __future__ import annotations
 import re
 
 from statectl.front.tables.cells import check_header
-from statectl.front.tables.eventdata import event_cells, event_columns
-from statectl.front.tables.literals import format_literal, parse_literal
+from statectl.front.tables.literals import parse_literal
 from statectl.front.tables.rows import (
-    DATA_COLUMNS,
-    FLAT_EVENT_COLUMNS,
     DeviceTables,
     RawRow,
     RawTable,
     diag,
 )
-from statectl.front.tables.schema import (
-    make_tables,
-    recovery_cells,
-    recovery_columns,
-    state_cells,
-    state_columns,
-)
+from statectl.front.tables.schema import flat_tables, make_tables
 from statectl.kernel.errors import Diagnostic, Location
 
 __all__ = ["dump_md", "escape", "read_md", "unescape"]
@@ -203,28 +194,11 @@ def _table(header: tuple[str, ...], rows: list[list[str]]) -> list[str]:
 
 def dump_md(tables: DeviceTables) -> str:
     """The tables as Markdown that :func:`read_md` reads back unchanged."""
-    columns = state_columns(tables)
     lines = [f"# Device: {tables.device}", ""]
     if tables.profile:
         lines += [f"Profile: {tables.profile}", ""]
-    lines += ["## States", ""]
-    lines += _table(
-        columns,
-        [state_cells(s, columns) for s in tables.states],
-    )
-    lines += ["", "## Events", ""]
-    ecols = event_columns(tables.events, FLAT_EVENT_COLUMNS)
-    lines += _table(
-        ecols,
-        [event_cells(e, ecols) for e in tables.events],
-    )
-    if tables.data:
-        lines += ["", "## Data", ""]
-        lines += _table(
-            DATA_COLUMNS, [[name, format_literal(value)] for name, value in tables.data]
-        )
-    if tables.recovery:
-        lines += ["", "## Recovery", ""]
-        rcols = recovery_columns(tables)
-        lines += _table(rcols, [recovery_cells(r, rcols) for r in tables.recovery])
+    for n, (name, header, rows) in enumerate(flat_tables(tables)):
+        if n:
+            lines.append("")  # a blank line between one table and the next heading
+        lines += [f"## {name.title()}", "", *_table(header, rows)]
     return "\n".join(lines) + "\n"

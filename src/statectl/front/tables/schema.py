@@ -49,6 +49,7 @@ from statectl.front.tables.cells import (
     recovery_row,
     state_row,
 )
+from statectl.front.tables.eventdata import event_cells, event_columns
 from statectl.front.tables.literals import (
     format_literal,
     make_data,
@@ -56,6 +57,8 @@ from statectl.front.tables.literals import (
     normalize_value,
 )
 from statectl.front.tables.rows import (
+    DATA_COLUMNS,
+    FLAT_EVENT_COLUMNS,
     FLAT_RECOVERY_COLUMNS,
     FLAT_STATE_COLUMNS,
     RECOVERY_COLUMNS,
@@ -72,6 +75,8 @@ from statectl.kernel.errors import Diagnostic, Location
 
 #: The names this module defines (the values are in rows, literals and cells).
 __all__ = [
+    "FlatTable",
+    "flat_tables",
     "make_tables",
     "recovery_cells",
     "recovery_columns",
@@ -173,6 +178,27 @@ def recovery_cells(r: RecoveryRow, columns: Sequence[str] = FLAT_RECOVERY_COLUMN
         "redo": "yes" if r.redo else "",
     }
     return [cells[c] for c in columns]
+
+
+#: A table as the flat formats write it: its name, its header, its rows of text cells.
+FlatTable = tuple[str, tuple[str, ...], list[list[str]]]
+
+
+def flat_tables(tables: DeviceTables) -> tuple[FlatTable, ...]:
+    """What CSV, Markdown and XLSX each write, in file order: the states and events, then
+    the data and recovery tables when they have rows."""
+    scols = state_columns(tables)
+    ecols = event_columns(tables.events, FLAT_EVENT_COLUMNS)
+    flat: list[FlatTable] = [
+        ("states", scols, [state_cells(s, scols) for s in tables.states]),
+        ("events", ecols, [event_cells(e, ecols) for e in tables.events]),
+    ]
+    if tables.data:
+        flat.append(("data", DATA_COLUMNS, [[n, format_literal(v)] for n, v in tables.data]))
+    if tables.recovery:
+        rcols = recovery_columns(tables)
+        flat.append(("recovery", rcols, [recovery_cells(r, rcols) for r in tables.recovery]))
+    return tuple(flat)
 
 
 def validate_for_writing(tables: DeviceTables, where: Location) -> list[Diagnostic]:

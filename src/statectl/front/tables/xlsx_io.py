@@ -23,11 +23,8 @@ from collections.abc import Iterable
 from typing import Any
 
 from statectl.front.tables.cells import check_header
-from statectl.front.tables.eventdata import event_cells, event_columns
-from statectl.front.tables.literals import format_literal, parse_literal
+from statectl.front.tables.literals import parse_literal
 from statectl.front.tables.rows import (
-    DATA_COLUMNS,
-    FLAT_EVENT_COLUMNS,
     Bad,
     Cell,
     DeviceTables,
@@ -35,13 +32,7 @@ from statectl.front.tables.rows import (
     RawTable,
     diag,
 )
-from statectl.front.tables.schema import (
-    make_tables,
-    recovery_cells,
-    recovery_columns,
-    state_cells,
-    state_columns,
-)
+from statectl.front.tables.schema import flat_tables, make_tables
 from statectl.front.tables.xlsx_formulas import uncached_formulas
 from statectl.kernel.errors import Diagnostic, Location
 
@@ -216,35 +207,16 @@ def _fill(ws: Any, header: tuple[str, ...], rows: Iterable[list[str]]) -> None:
 
 def dump_xlsx(tables: DeviceTables) -> bytes:
     """The tables as workbook bytes (States, Events, Data and Recovery if any, Device)."""
-    columns = state_columns(tables)
     openpyxl = _openpyxl()
     wb = openpyxl.Workbook()
-    states = wb.active
-    assert isinstance(states, openpyxl.worksheet.worksheet.Worksheet)
-    states.title = SHEETS["states"]
-    _fill(
-        states,
-        columns,
-        (state_cells(s, columns) for s in tables.states),
-    )
-    ecols = event_columns(tables.events, FLAT_EVENT_COLUMNS)
-    _fill(
-        wb.create_sheet(SHEETS["events"]),
-        ecols,
-        (event_cells(e, ecols) for e in tables.events),
-    )
-    if tables.data:
-        _fill(
-            wb.create_sheet(SHEETS["data"]),
-            DATA_COLUMNS,
-            ([name, format_literal(value)] for name, value in tables.data),
-        )
-    if tables.recovery:
-        _fill(
-            wb.create_sheet(SHEETS["recovery"]),
-            recovery_columns(tables),
-            (recovery_cells(r, recovery_columns(tables)) for r in tables.recovery),
-        )
+    for name, header, rows in flat_tables(tables):
+        if name == "states":  # the sheet a new workbook has
+            ws = wb.active
+            assert isinstance(ws, openpyxl.worksheet.worksheet.Worksheet)
+            ws.title = SHEETS["states"]
+        else:
+            ws = wb.create_sheet(SHEETS[name])
+        _fill(ws, header, rows)
     profile = [["profile", tables.profile]] if tables.profile else []
     _fill(wb.create_sheet(SHEETS["device"]), ("device", tables.device), profile)
     out = io.BytesIO()
