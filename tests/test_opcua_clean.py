@@ -212,11 +212,11 @@ def test_a_step_the_writer_cannot_show_is_logged_and_later_steps_are_still_shown
     server: Any = plant.server
     write, failed = server._write, []
 
-    async def first_fails(*update: Any) -> None:
+    async def first_fails(update: Any) -> None:
         if not failed:
             failed.append(update[0].name)
             raise RuntimeError("broken update")
-        await write(*update)
+        await write(update)
 
     server._write = first_fails
     try:

@@ -161,6 +161,12 @@ class _Device:
     packtags: PackTags | None = None  # a PackML device's Status and Admin (packtags.py)
 
 
+#: What a step shows: the device, its active states, its changes, its data, a fault.
+_Update = tuple[
+    _Device, frozenset[str], list[Change], dict[str, Any] | None, tuple[str, Any] | None
+]
+
+
 class OpcuaServer:
     """Serve ``system``'s devices over OPC UA; :meth:`start` returns once it listens."""
 
@@ -178,7 +184,7 @@ class OpcuaServer:
         }
         self._offs: list[Callable[[], None]] = []
         self._server: Any = None
-        self._updates: deque[tuple[_Device, frozenset[str], list[Change], Any, Any]] = deque()
+        self._updates: deque[_Update] = deque()
         self._alarms: AlarmSpace | None = None  # rule 6 (alarms.py)
         self._faults = {n: frozenset(alarm_events(s.chart)) for n, s in system.subjects.items()}
         self._kick: Any = None  # an asyncio.Event of the server's loop
@@ -217,12 +223,12 @@ class OpcuaServer:
                 fault = None  # a fault that raises an alarm (rule 6): its event and data
                 if event in self._faults[device.name] and outcome == Outcome.HANDLED:
                     fault = (event, data)
-                now = (device, s.configuration, records, dict(s.data), fault)
+                now: _Update = (device, s.configuration, records, dict(s.data), fault)
                 if threading.get_ident() == self._loop_thread:
-                    self._publish(*now)
+                    self._publish(now)
                 elif loop is not None:
                     with contextlib.suppress(RuntimeError):  # the loop closed: stopping
-                        loop.call_soon_threadsafe(self._publish, *now)
+                        loop.call_soon_threadsafe(self._publish, now)
 
             self._offs.append(subject.listen_steps(keep))
             self._offs.append(subject.on_step(stepped))
@@ -250,8 +256,8 @@ class OpcuaServer:
         if loop is None:
             return
         for name, s in self.system.subjects.items():
-            data = dict(s.data)
-            loop.call_soon_threadsafe(self._publish, self._devices[name], s.configuration, [], data)
+            now: _Update = (self._devices[name], s.configuration, [], dict(s.data), None)
+            loop.call_soon_threadsafe(self._publish, now)
 
     def stop(self) -> None:
         """Unhook the devices, stop the server and its thread."""
@@ -475,15 +481,8 @@ class OpcuaServer:
             variable = await folder.add_variable(idx, browse(item), variant)
             device.data[item] = [variable, kind, variant]
 
-    def _publish(
-        self,
-        device: _Device,
-        active: frozenset[str],
-        records: list[Change],
-        data: dict[str, Any] | None = None,
-        fault: tuple[str, Any] | None = None,
-    ) -> None:
-        self._updates.append((device, active, records, data, fault))
+    def _publish(self, update: _Update) -> None:
+        self._updates.append(update)
         self._kick.set()
 
     async def _writer(self) -> None:
@@ -495,19 +494,13 @@ class OpcuaServer:
             while updates:
                 update = updates.popleft()
                 try:
-                    await self._write(*update)
+                    await self._write(update)
                 except Exception:  # one bad update must not stop every later one
                     _LOG.exception("cannot show a step of %s; later ones still", update[0].name)
 
-    async def _write(
-        self,
-        device: _Device,
-        active: frozenset[str],
-        records: list[Change],
-        data: dict[str, Any] | None = None,
-        fault: tuple[str, Any] | None = None,
-    ) -> None:
+    async def _write(self, update: _Update) -> None:
         ua = _ua()
+        device, active, records, data, fault = update
 
         if device.machines is None or device.state_nodes is None:
             return
