@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import ast
 import re
 from pathlib import Path
 
 import pytest
 
 from statectl.cell.model import CODES, InputKind, Trigger, load_cell, load_cell_or_raise
+from statectl.cell.options import foreign_in
+from statectl.front.builder.build import load_chart
 from statectl.kernel.errors import DiagnosticError, Severity
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -157,3 +160,19 @@ def test_codes_documented() -> None:
     used = set(re.findall(r'"(V8[0-9][0-9])"', source))
     assert used, "the scan found no V8xx code: it no longer reads the loader"
     assert used <= set(CODES)
+
+
+@pytest.mark.parametrize(
+    ("source", "foreign"),
+    [
+        ("In('arm.Moving')", "arm.Moving"),  # another device's state
+        ("In('Moving')", None),  # the Motor's own state
+        ("In('Nowhere')", None),  # no dot: the device file's to report (C420)
+        ("In(x)", None),
+        ("'arm.Moving'", None),
+    ],
+)
+def test_foreign_in_names_only_another_devices_state(source: str, foreign: str | None) -> None:
+    """foreign_in: what cross_refs, the explorer's local space and its cross guards ask."""
+    chart = load_chart(MOTOR)
+    assert foreign_in(ast.parse(source, mode="eval").body, chart) == foreign

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ast
 import re
 from typing import Any
 
@@ -15,6 +16,7 @@ from statectl.kernel.expr import (
     ExpressionRefused,
     check_names,
     compile_expression,
+    in_target,
     value_size,
 )
 
@@ -286,3 +288,21 @@ def test_ordinary_attributes_stay_readable() -> None:
     for source in ("_event.data.f_speed", "_event.data.frame", "_event.data.code", "x.tb"):
         expr, diags = compile_expression(source, HERE)
         assert diags == [] and expr is not None, source
+
+
+@pytest.mark.parametrize(
+    ("source", "named"),
+    [
+        ("In('Moving')", "Moving"),
+        ("In('arm.Moving')", "arm.Moving"),
+        ("In(x)", None),  # no text literal
+        ("In('a', 'b')", None),
+        ("In(3)", None),
+        ("Out('arm.Moving')", None),
+        ("p.In('arm.Moving')", None),
+        ("'arm.Moving'", None),
+    ],
+)
+def test_in_target_is_the_state_an_in_call_names(source: str, named: str | None) -> None:
+    """in_target: the one text an In('...') call names; None for anything else."""
+    assert in_target(ast.parse(source, mode="eval").body) == named

@@ -11,7 +11,7 @@ from collections.abc import Mapping
 
 from statectl.cell.values import GlobalExpr
 from statectl.kernel.errors import Diagnostic, Location, Severity, did_you_mean
-from statectl.kernel.expr import compile_expression
+from statectl.kernel.expr import compile_expression, in_target
 from statectl.kernel.model import Chart
 
 
@@ -84,23 +84,21 @@ def _state_ref(
     The only call a global expression may make is ``In`` on one text naming a state the
     cell has (V811, V807, V808): that is all a cell's global state holds.
     """
-    arg = node.args[0] if len(node.args) == 1 else None
-    ok = isinstance(arg, ast.Constant) and isinstance(arg.value, str)
-    if not (isinstance(node.func, ast.Name) and node.func.id == "In") or not ok:
+    named = in_target(node)
+    if named is None:
         return _d(
             "V811",
             where,
             f"{what} {source!r}: {ast.unparse(node)} is not In('device.State')",
             "write In('arm.Moving'): one text argument naming device and state",
         )
-    assert isinstance(arg, ast.Constant)
-    device, dot, state = str(arg.value).partition(".")
+    device, dot, state = named.partition(".")
     chart = charts.get(device)
     if not dot or chart is None:
         return _d(
             "V807",
             where,
-            f"{what} {source!r}: In({arg.value!r}) names no device of the cell",
+            f"{what} {source!r}: In({named!r}) names no device of the cell",
             "devices: " + ", ".join(sorted(charts)),
         )
     if not chart.has_state(state):

@@ -29,12 +29,14 @@ import yaml
 from statectl.cell.expressions import _d
 from statectl.front.tables import safeyaml
 from statectl.kernel.errors import Diagnostic, Location
+from statectl.kernel.expr import in_target
 from statectl.kernel.model import Chart
 
 __all__ = [
     "LINK_OPTION_KEYS",
     "check_cross_refs",
     "cross_refs",
+    "foreign_in",
     "link_options",
     "send_and_data",
     "violation_events",
@@ -182,6 +184,14 @@ def violation_events(
     return tuple(out), diags
 
 
+def foreign_in(node: ast.AST, chart: Chart) -> str | None:
+    """``'device.State'`` when ``node`` is an ``In`` of another device's state: a dotted name
+    that is no state of ``chart`` (a name without a dot is the device's own, or a typo its
+    device file reports)."""
+    name = in_target(node)
+    return name if name is not None and "." in name and not chart.has_state(name) else None
+
+
 def cross_refs(chart: Chart) -> list[tuple[str, str, str, Location]]:
     """``In('device.State')`` calls in ``chart``'s guards that name no state of its own.
 
@@ -197,15 +207,8 @@ def cross_refs(chart: Chart) -> list[tuple[str, str, str, Location]]:
         except SyntaxError:
             continue
         for node in ast.walk(tree):
-            if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)):
-                continue
-            if node.func.id != "In" or len(node.args) != 1:
-                continue
-            arg = node.args[0]
-            if not (isinstance(arg, ast.Constant) and isinstance(arg.value, str)):
-                continue
-            name = arg.value
-            if chart.has_state(name) or "." not in name:
+            name = foreign_in(node, chart)
+            if name is None:
                 continue
             device, _, state = name.partition(".")
             out.append((t.guard, device, state, t.origin))

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from statectl.cell.explore.local import LocalSpace, Reaction
+from statectl.cell.options import foreign_in
 from statectl.kernel.errors import Location
 from statectl.kernel.expr import Expression, compile_expression
 from statectl.kernel.semantics import Machine, Unhandled
@@ -177,16 +178,4 @@ def _in_calls(guard: str, chart: Any) -> list[ast.Call]:
         tree = ast.parse(guard.strip(), mode="eval")
     except SyntaxError:
         return []
-    out = []
-    for n in ast.walk(tree):
-        if (
-            isinstance(n, ast.Call)
-            and isinstance(n.func, ast.Name)
-            and n.func.id == "In"
-            and len(n.args) == 1
-            and isinstance(n.args[0], ast.Constant)
-            and isinstance(n.args[0].value, str)
-            and not chart.has_state(n.args[0].value)
-        ):
-            out.append(n)
-    return out
+    return [n for n in ast.walk(tree) if isinstance(n, ast.Call) and foreign_in(n, chart)]

@@ -43,6 +43,7 @@ from typing import Any
 from statectl.cell.explore.data import MAX_LOCAL_STATES, DataTracker
 from statectl.cell.explore.deferred import released
 from statectl.cell.links import triggers
+from statectl.cell.options import foreign_in
 from statectl.front.observers import extract
 from statectl.kernel.errors import Location
 from statectl.kernel.expr import Expression
@@ -151,17 +152,7 @@ def _untracked(node: ast.AST, tracked_data: frozenset[str], chart: Chart | None 
 
 def _foreign(node: ast.AST, chart: Chart) -> bool:
     """``In('device.State')`` naming no state of ``chart``: another device of a cell reads it."""
-    return any(
-        isinstance(n, ast.Call)
-        and isinstance(n.func, ast.Name)
-        and n.func.id == "In"
-        and len(n.args) == 1
-        and isinstance(n.args[0], ast.Constant)
-        and isinstance(n.args[0].value, str)
-        and "." in n.args[0].value
-        and not chart.has_state(n.args[0].value)
-        for n in ast.walk(node)
-    )
+    return any(foreign_in(n, chart) is not None for n in ast.walk(node))
 
 
 class _Rewriter(ast.NodeTransformer):

@@ -51,6 +51,7 @@ from statectl.kernel.expr.compiler import (
     Expression,
     check_names,
     compile_expression,
+    in_target,
 )
 
 __all__ = [
@@ -64,5 +65,6 @@ __all__ = [
     "ExpressionRefused",
     "check_names",
     "compile_expression",
+    "in_target",
     "value_size",
 ]

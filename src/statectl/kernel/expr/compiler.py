@@ -48,6 +48,24 @@ INTERNAL_ATTRIBUTES = frozenset(
 )
 
 
+def in_target(node: ast.AST) -> str | None:
+    """The state an ``In('name')`` call names (one text literal); ``None`` for any other node.
+
+    Whoever reads a guard's ``In`` calls (a cell's cross-device references, the explorer)
+    recognises them here, so they all agree on what counts as one.
+    """
+    if (
+        isinstance(node, ast.Call)
+        and isinstance(node.func, ast.Name)
+        and node.func.id == "In"
+        and len(node.args) == 1
+        and isinstance(node.args[0], ast.Constant)
+        and isinstance(node.args[0].value, str)
+    ):
+        return node.args[0].value
+    return None
+
+
 def internal_attribute(name: str) -> bool:
     """Whether an attribute read would reach the interpreter's internals (private or frame)."""
     return name.startswith(("_", "co_")) or name in INTERNAL_ATTRIBUTES
