@@ -14,7 +14,8 @@ import pytest
 
 from statectl.channels.cli.run import run
 from statectl.channels.cli.run_setup import TOKEN_VARIABLE
-from statectl.channels.runconfig import load_driver_config, load_run_config
+from statectl.channels.opcua.config import OpcuaConfig
+from statectl.channels.runconfig import load_driver_config, load_run_config, run_config
 from statectl.channels.web.config import DashboardConfig
 from statectl.kernel.errors import DiagnosticError
 from statectl.run.runner import System
@@ -47,6 +48,21 @@ def test_both_sections_are_read(tmp_path: Path) -> None:
     assert config.drivers == {"Motor": ("sim-motor", {})}
     assert config.dashboard == DashboardConfig("127.0.0.1", 8765, SECRET)
     assert load_driver_config(path) == {"Motor": ("sim-motor", {})}
+
+
+def test_without_a_config_a_run_has_no_sections(tmp_path: Path) -> None:
+    """run_config(None), what run, node and dashboard take without --config: no section set;
+    with a path it is the file's."""
+    empty = run_config(None)
+    assert (empty.drivers, empty.dashboard, empty.opcua, empty.ship) == (
+        None,
+        DashboardConfig(),
+        OpcuaConfig(),
+        None,
+    )
+    path = write(tmp_path, "dashboard: {port: 8765}\n")
+    assert run_config(path).dashboard == load_run_config(path).dashboard
+    assert run_config(path).dashboard != empty.dashboard
 
 
 @pytest.mark.parametrize(

@@ -39,7 +39,7 @@ from statectl.run.commands import Commands, parse_commands
 from statectl.run.devices.config import DriverConfig, SectionError, parse_devices
 from statectl.run.journal.ship_config import ShipConfig, parse_ship
 
-__all__ = ["RUN_CONFIG_KEYS", "RunConfig", "load_driver_config", "load_run_config"]
+__all__ = ["RUN_CONFIG_KEYS", "RunConfig", "load_driver_config", "load_run_config", "run_config"]
 
 #: The sections of a run config (the JSON Schema, out/schema.py, reads them).
 RUN_CONFIG_KEYS = ("devices", "dashboard", "opcua", "ship", "commands")
@@ -57,6 +57,11 @@ class RunConfig:
     ship: ShipConfig | None = None
     #: the ``commands:`` section: who may command which device (run/commands.py)
     commands: Commands = field(default_factory=Commands)
+
+
+def run_config(path: str | Path | None) -> RunConfig:
+    """The run config ``--config`` names; without one, the empty config (no sections)."""
+    return RunConfig(None, DashboardConfig()) if path is None else load_run_config(path)
 
 
 def load_driver_config(path: str | Path) -> DriverConfig:

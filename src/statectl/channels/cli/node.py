@@ -131,8 +131,7 @@ def dashboard_main(
     from statectl.cell.model import load_cell
     from statectl.channels.cli import run_setup
     from statectl.channels.distributed.dashboard import station
-    from statectl.channels.runconfig import RunConfig, load_run_config
-    from statectl.channels.web.config import DashboardConfig
+    from statectl.channels.runconfig import run_config
 
     if not Path(path).exists():
         err.write(f"statectl dashboard: {path}: no such file\n")
@@ -153,9 +152,7 @@ def dashboard_main(
         return PROBLEMS
     halt = stop or threading.Event()
     try:
-        table = RunConfig(None, DashboardConfig())
-        if config is not None:
-            table = load_run_config(config)
+        table = run_config(config)
         host, port, token, where = run_setup.dashboard_settings(
             host, port, token, config, table.dashboard
         )
@@ -352,14 +349,11 @@ def _node_system(
         undone_on_failure,
     )
     from statectl.channels.distributed import NodeSystem
-    from statectl.channels.runconfig import RunConfig, load_run_config
-    from statectl.channels.web.config import DashboardConfig
+    from statectl.channels.runconfig import run_config
     from statectl.run.journal import Sync
     from statectl.run.runtime import WallClock
 
-    table = RunConfig(None, DashboardConfig())
-    if config is not None:
-        table = load_run_config(config)
+    table = run_config(config)
     drivers = run_setup.drivers_for(devices, driver, config, table)
     setups = tuple(replace(d, driver=drivers.get(d.name)) for d in devices)
     store = None

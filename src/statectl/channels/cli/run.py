@@ -91,8 +91,7 @@ from statectl.channels.cli.run_setup import (
 from statectl.channels.cli.settle import unsettled_note
 from statectl.channels.cli.steps import StepLog
 from statectl.channels.opcua.config import OpcuaConfig
-from statectl.channels.runconfig import RunConfig, load_run_config
-from statectl.channels.web.config import DashboardConfig
+from statectl.channels.runconfig import RunConfig, run_config
 from statectl.front.kinds import is_cell
 from statectl.kernel.errors import (
     DiagnosticError,
@@ -328,7 +327,7 @@ class _Run:
     def _config(self) -> RunConfig:
         """The ``--config`` file's sections; an ``opcua:`` section serves OPC UA (live)."""
         config = self.opts.config
-        table = RunConfig(None, DashboardConfig()) if config is None else load_run_config(config)
+        table = run_config(config)
         if self.opts.opcua is None and table.opcua != OpcuaConfig():
             self.opts = replace(self.opts, opcua="")
             if self.opts.as_json:
