@@ -227,6 +227,31 @@ def test_show_export_and_replay_read_a_shipped_journal_as_the_file(
         assert a.getvalue() == b.getvalue() and a.getvalue()
 
 
+def test_a_shipped_journal_reads_every_window_as_the_file(tmp_path: Path, url: str) -> None:
+    """device, since/until (journal/read.py rule 2) and after/upto pick the same rows from
+    the URL as from the file."""
+    db = tmp_path / "run.db"
+    fill(db, 6)
+    Shipper(db, url, source="s").ship_all()
+    with JournalReader(db) as file, PgJournalReader(url, source="s") as pg:
+        walls = sorted({s.wall for s in file.steps()})
+        windows: list[dict[str, Any]] = [
+            {},
+            {"device": "Arm"},
+            {"device": "Nobody"},
+            {"since": walls[len(walls) // 2]},
+            {"until": walls[len(walls) // 2]},
+            {"device": "Arm", "since": walls[1], "until": walls[-1]},
+        ]
+        for window in windows:
+            assert list(pg.steps(**window)) == list(file.steps(**window)), window
+            assert list(pg.inbox(**window)) == list(file.inbox(**window)), window
+        bounds = [{"after": 2}, {"upto": 4}, {"after": 2, "upto": 5}, {"device": "Arm", "after": 6}]
+        picked = [[s.id for s in file.steps(**b)] for b in bounds]
+        assert [[s.id for s in pg.steps(**b)] for b in bounds] == picked
+    assert picked == [[3, 4, 5, 6, 7], [1, 2, 3, 4], [3, 4, 5], [7]]
+
+
 def test_a_shipped_journal_finds_the_step_that_entered_a_state_as_the_file(
     tmp_path: Path, url: str
 ) -> None:

@@ -36,6 +36,7 @@ from statectl.run.journal.read import (
     StepRow,
     _datamodel,
     _entering,
+    _filters,
     _json,
     _step,
 )
@@ -289,17 +290,6 @@ class PgJournalReader:
     def device(self, name: str) -> DeviceRow | None:
         return next((d for d in self.devices() if d.name == name), None)
 
-    @staticmethod
-    def _window(
-        device: str | None, since: float | None, until: float | None
-    ) -> tuple[str, list[Any]]:
-        where, args = "", []
-        for clause, value in (("device = %s", device), ("wall >= %s", since), ("wall < %s", until)):
-            if value is not None:
-                where += f" AND {clause}"
-                args.append(value)
-        return where, args
-
     def steps(
         self,
         device: str | None = None,
@@ -308,11 +298,8 @@ class PgJournalReader:
         after: int | None = None,
         upto: int | None = None,
     ) -> Iterator[StepRow]:
-        where, args = self._window(device, since, until)
-        for clause, value in (("id > %s", after), ("id <= %s", upto)):
-            if value is not None:
-                where += f" AND {clause}"
-                args.append(value)
+        clauses, args = _filters("%s", device, since, until, after, upto)
+        where = "".join(f" AND {c}" for c in clauses)
         sql = f"SELECT {_STEP_SELECT} FROM statectl_steps WHERE source = %s{where} ORDER BY id"
         for row in self._rows(sql, args):
             yield _step(row)
@@ -320,7 +307,8 @@ class PgJournalReader:
     def inbox(
         self, device: str | None = None, since: float | None = None, until: float | None = None
     ) -> Iterator[InboxRow]:
-        where, args = self._window(device, since, until)
+        clauses, args = _filters("%s", device, since, until)
+        where = "".join(f" AND {c}" for c in clauses)
         sql = (
             "SELECT seq, device, wall, event, data::text FROM statectl_inbox "
             f"WHERE source = %s{where} ORDER BY seq"

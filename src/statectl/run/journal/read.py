@@ -148,24 +148,32 @@ def _datamodel(text: Any, what: str) -> dict[str, Any] | None:
     return data
 
 
-def _window(
-    device: str | None, since: float | None, until: float | None, after: int | None, key: str
-) -> tuple[str, list[Any]]:
-    where: list[str] = []
-    args: list[Any] = []
-    if device is not None:
-        where.append("device = ?")
-        args.append(device)
-    if since is not None:
-        where.append("wall >= ?")
-        args.append(since)
-    if until is not None:
-        where.append("wall < ?")
-        args.append(until)
-    if after is not None:
-        where.append(f"{key} > ?")
-        args.append(after)
-    return (" WHERE " + " AND ".join(where)) if where else "", args
+def _filters(
+    mark: str,
+    device: str | None,
+    since: float | None,
+    until: float | None,
+    after: int | None = None,
+    upto: int | None = None,
+) -> tuple[list[str], list[Any]]:
+    """Rule 2's filters and the step id bounds as SQL conditions, ``mark`` standing for each
+    value (``?`` in SQLite, ``%s`` in PostgreSQL), and their values: every reader's window."""
+    given = [
+        (clause, value)
+        for clause, value in (
+            ("device = ", device),
+            ("wall >= ", since),
+            ("wall < ", until),
+            ("id > ", after),
+            ("id <= ", upto),
+        )
+        if value is not None
+    ]
+    return [clause + mark for clause, _ in given], [value for _, value in given]
+
+
+def _where(clauses: list[str]) -> str:
+    return (" WHERE " + " AND ".join(clauses)) if clauses else ""
 
 
 def _entering(newest_first: Iterable[StepRow], state: str) -> tuple[StepRow, StepRow] | None:
@@ -277,19 +285,16 @@ class JournalReader:
         upto: int | None = None,
     ) -> Iterator[StepRow]:
         """Step rows in order; ``after``/``upto`` bound the row id."""
-        where, args = _window(device, since, until, after, "id")
-        if upto is not None:
-            where += (" AND " if where else " WHERE ") + "id <= ?"
-            args.append(upto)
-        for row in self._db.execute(f"SELECT * FROM steps{where} ORDER BY id", args):
+        clauses, args = _filters("?", device, since, until, after, upto)
+        for row in self._db.execute(f"SELECT * FROM steps{_where(clauses)} ORDER BY id", args):
             yield _step(row)
 
     def inbox(
         self, device: str | None = None, since: float | None = None, until: float | None = None
     ) -> Iterator[InboxRow]:
-        where, args = _window(device, since, until, None, "seq")
+        clauses, args = _filters("?", device, since, until)
         for seq, dev, wall, event, data in self._db.execute(
-            f"SELECT * FROM inbox{where} ORDER BY seq", args
+            f"SELECT * FROM inbox{_where(clauses)} ORDER BY seq", args
         ):
             yield InboxRow(seq, dev, wall, event, _json(data, f"accepted event #{seq}"))
 
