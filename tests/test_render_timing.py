@@ -10,9 +10,10 @@ from pathlib import Path
 import pytest
 
 from statectl.front.builder.build import load_chart
+from statectl.front.tables.timeouts import format_timeout
 from statectl.kernel.model import Chart, State, Timeout
 from statectl.out.render import FORMATS, from_chart, render
-from statectl.out.render.diagram import duration, state_details
+from statectl.out.render.diagram import state_details
 
 CLAMP = Path(__file__).resolve().parent.parent / "examples" / "clamp" / "clamp.yaml"
 NEEDS_DOT = pytest.mark.skipif(shutil.which("dot") is None, reason="Graphviz 'dot' is absent")
@@ -53,8 +54,9 @@ DURATIONS = [(2.0, "2s"), (0.25, "250ms"), (1.5, "1500ms"), (120.0, "2min")]
 
 @pytest.mark.parametrize(("seconds", "text"), DURATIONS)
 def test_duration_is_written_as_the_tables_write_it(seconds: float, text: str) -> None:
-    """A timeout's seconds are shown in the largest whole unit."""
-    assert duration(seconds) == text
+    """A timeout's seconds are shown in the largest whole unit, by diagrams and tables alike."""
+    assert Timeout(seconds, "Ev").duration == text
+    assert format_timeout(seconds, "Ev") == f"{text} -> Ev"
 
 
 def test_state_without_timing_has_no_details() -> None:

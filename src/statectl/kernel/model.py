@@ -245,6 +245,17 @@ class Timeout:
     event: str
     origin: Location = NOWHERE
 
+    @property
+    def duration(self) -> str:
+        """``250ms``, ``2s``, ``2min``: the largest whole unit, as the tables write it (the
+        tables' timeout cell and every diagram show this text)."""
+        ms = round(self.seconds * 1000)
+        if ms % 60000 == 0:
+            return f"{ms // 60000}min"
+        if ms % 1000 == 0:
+            return f"{ms // 1000}s"
+        return f"{ms}ms"
+
 
 @dataclass(frozen=True, slots=True)
 class State:

@@ -19,6 +19,7 @@ import re
 
 from statectl.front.tables.rows import Bad, DeviceTables, RawRow, diag
 from statectl.kernel.errors import Diagnostic, Location
+from statectl.kernel.model import Timeout
 
 __all__ = [
     "ALL_OTHERS",
@@ -63,12 +64,7 @@ def parse_timeout(text: str) -> tuple[float, str] | str:
 
 def format_timeout(seconds: float, event: str) -> str:
     """The cell text that :func:`parse_timeout` reads back as ``(seconds, event)``."""
-    ms = round(seconds * 1000)
-    if ms % 60000 == 0:
-        return f"{ms // 60000}min -> {event}"
-    if ms % 1000 == 0:
-        return f"{ms // 1000}s -> {event}"
-    return f"{ms}ms -> {event}"
+    return f"{Timeout(seconds, event).duration} -> {event}"
 
 
 def is_all_others(item: str) -> bool:

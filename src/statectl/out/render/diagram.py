@@ -31,7 +31,6 @@ __all__ = [
     "Node",
     "NodeKind",
     "Note",
-    "duration",
     "edge_label",
     "from_chart",
     "safe_id",
@@ -167,21 +166,11 @@ def edge_label(t: Transition) -> str:
     return " ".join(text.split())
 
 
-def duration(seconds: float) -> str:
-    """``2s``, ``1.5s``, ``250ms``, ``2min``: a timeout's duration as the tables write it."""
-    ms = round(seconds * 1000)
-    if ms % 60000 == 0:
-        return f"{ms // 60000}min"
-    if ms % 1000 == 0:
-        return f"{ms // 1000}s"
-    return f"{ms}ms"
-
-
 def state_details(state: State) -> tuple[str, ...]:
     """The lines shown under a state's name: its timeout, then the events it defers."""
     out: list[str] = []
     if state.timeout is not None:
-        out.append(f"after {duration(state.timeout.seconds)} / {state.timeout.event}")
+        out.append(f"after {state.timeout.duration} / {state.timeout.event}")
     if state.defer:
         out.append("defer: " + ", ".join(state.defer))
     return tuple(out)

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from statectl.kernel.model import Chart, ControlKind, State
 from statectl.out.escape.diagram import markdown_cell
 from statectl.out.render import mermaid
-from statectl.out.render.diagram import Diagram, duration
+from statectl.out.render.diagram import Diagram
 
 __all__ = ["cell", "table", "write"]
 
@@ -43,7 +43,7 @@ def _timed(chart: Chart) -> bool:
 
 
 def _timing(s: State) -> list[str]:
-    timeout = "" if s.timeout is None else f"{duration(s.timeout.seconds)} -> {s.timeout.event}"
+    timeout = "" if s.timeout is None else f"{s.timeout.duration} -> {s.timeout.event}"
     return [timeout, ", ".join(s.defer)]
 
 
