@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from statectl.kernel.model import Chart, EventDef, Notify, Raise, State, StateKind, Transition
@@ -437,3 +439,39 @@ def test_entry_set_enters_every_region_of_a_parallel_target() -> None:
         "Open",
     )
     assert entry_set(m, []) == ("Idle",)
+
+
+def _with_data(*items: tuple[str, str]) -> Chart:
+    from statectl.kernel.model import DataItem
+
+    c = chart("Idle + Go = Idle", [State("Idle")], ("Idle",))
+    return Chart(
+        c.name, c.states, c.transitions, c.initial, data=tuple(DataItem(*i) for i in items)
+    )
+
+
+def test_initial_data_evaluates_each_item_over_the_earlier_ones_and_given_values_win() -> None:
+    """One answer for every host: in order, an item may read the ones before it."""
+    from statectl.kernel.semantics import initial_data
+
+    c = _with_data(("speed", "2"), ("top", "speed * 10"), ("none", ""))
+    assert initial_data(c) == {"speed": 2, "top": 20, "none": None}
+    assert initial_data(c, {"speed": 5}) == {"speed": 5, "top": 50, "none": None}
+
+
+@pytest.mark.parametrize(
+    ("expr", "said"),
+    [
+        ("speed +", "data 'speed +' does not parse"),
+        ("1 // 0", "data item 'top' = '1 // 0' fails: integer division"),
+    ],
+)
+def test_initial_data_refuses_an_item_that_does_not_compile_or_evaluate(
+    expr: str, said: str
+) -> None:
+    """A clear StatectlError, never a raw ZeroDivisionError from the runtime's start."""
+    from statectl.kernel.errors import StatectlError
+    from statectl.kernel.semantics import initial_data
+
+    with pytest.raises(StatectlError, match=re.escape(said)):
+        initial_data(_with_data(("speed", "1"), ("top", expr)))

@@ -71,7 +71,7 @@ from statectl.kernel.semantics.records import (
     Step,
     Unhandled,
 )
-from statectl.kernel.semantics.stepping import initial, step, unhandled_reason
+from statectl.kernel.semantics.stepping import initial, initial_data, step, unhandled_reason
 
 __all__ = [
     "MAX_GUARD_PATHS",
@@ -101,6 +101,7 @@ __all__ = [
     "get_transition_domain",
     "guard_env",
     "initial",
+    "initial_data",
     "macrostep",
     "microstep",
     "name_match",

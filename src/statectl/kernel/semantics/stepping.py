@@ -1,4 +1,5 @@
-"""The pure step of a device chart: :func:`initial` and :func:`step`, memoised.
+"""The pure step of a device chart: :func:`initial` and :func:`step`, memoised, and the
+data a device starts with (:func:`initial_data`).
 
 The W3C algorithm (:mod:`statectl.kernel.semantics.algorithm`) runs on a mutable
 :class:`~statectl.kernel.semantics.records.Run`; these wrap it into decisions over
@@ -12,7 +13,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from statectl.kernel.model import Assign
+from statectl.kernel.errors import StatectlError
+from statectl.kernel.expr import compile_expression
+from statectl.kernel.model import Assign, Chart
 from statectl.kernel.semantics.algorithm import enter_initial_states, macrostep, process_event
 from statectl.kernel.semantics.eventview import EventView, GuardError, GuardFailure
 from statectl.kernel.semantics.machine import Machine
@@ -29,7 +32,31 @@ from statectl.kernel.semantics.records import (
     Unhandled,
 )
 
-__all__ = ["initial", "step", "unhandled_reason"]
+__all__ = ["initial", "initial_data", "step", "unhandled_reason"]
+
+
+def initial_data(chart: Chart, given: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The chart's data items at start, in order, each evaluated over the earlier ones; a
+    value in ``given`` stands for its item. The one answer for the runtime and the
+    generated tests (the C++ generator reports each item's problem as a diagnostic
+    instead). An item that does not compile or evaluate raises :class:`StatectlError`."""
+    data = dict(given or {})
+    for item in chart.data:
+        if item.name in data:
+            continue
+        value = None
+        if item.expr:
+            expr, diags = compile_expression(item.expr, item.origin, what="data")
+            if expr is None:
+                raise StatectlError("; ".join(str(d) for d in diags))
+            try:
+                value = expr.evaluate(data)
+            except Exception as exc:  # a value no check caught: said, not a traceback
+                raise StatectlError(
+                    f"{item.origin}: data item {item.name!r} = {item.expr!r} fails: {exc}"
+                ) from None
+        data[item.name] = value
+    return data
 
 
 def _snapshot(run: Run) -> Snapshot:

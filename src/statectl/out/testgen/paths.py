@@ -29,8 +29,6 @@ from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from statectl.kernel.errors import StatectlError
-from statectl.kernel.expr import compile_expression
 from statectl.kernel.model import Chart, EventKind, Notify, StateKind, Transition, field_accepts
 from statectl.kernel.semantics import (
     Machine,
@@ -41,6 +39,7 @@ from statectl.kernel.semantics import (
     compiled,
     condition_match,
     initial,
+    initial_data,
     step,
 )
 from statectl.kernel.semantics.offers import Offers
@@ -137,17 +136,8 @@ def sendable_events(chart: Chart) -> tuple[str, ...]:
 
 
 def default_data(chart: Chart) -> Data:
-    """The chart's data items in order, each evaluated over the earlier ones (as a Subject)."""
-    data: dict[str, Any] = {}
-    for item in chart.data:
-        value = None
-        if item.expr:
-            expr, diags = compile_expression(item.expr, item.origin)
-            if expr is None:
-                raise StatectlError("; ".join(str(d) for d in diags))
-            value = expr.evaluate(data)
-        data[item.name] = value
-    return tuple(data.items())
+    """The chart's data at start, as a device starts with it (the kernel's answer)."""
+    return tuple(initial_data(chart).items())
 
 
 def _literals(source: str) -> list[Any]:

@@ -44,9 +44,8 @@ from typing import Any
 
 from statectl.front.observers import Observer
 from statectl.kernel.errors import StatectlError
-from statectl.kernel.expr import compile_expression
 from statectl.kernel.model import Action, Chart, Notify
-from statectl.kernel.semantics import Machine, Outcome, Snapshot, Step, compiled
+from statectl.kernel.semantics import Machine, Outcome, Snapshot, Step, compiled, initial_data
 from statectl.run.runtime.clock import Clock, SimClock
 from statectl.run.runtime.defer import attach_defer
 from statectl.run.runtime.engine import Engine
@@ -104,7 +103,7 @@ class Subject:
             raise StatectlError(f"policy must be 'ignore' or 'error' (got {policy!r})")
         self.chart = chart
         self.clock = clock
-        values = self._initial_data(chart, data) if chart.data else dict(data) if data else {}
+        values = initial_data(chart, data) if chart.data else dict(data) if data else {}
         self._declared = declared_fields(chart)  # event -> declared data fields, or None
         self._hooks = Hooks(chart, name or chart.name)
         self._engine = Engine(compiled(chart), self._hooks, clock, policy, values)
@@ -120,22 +119,6 @@ class Subject:
         self.timers = attach_timers(self)  # none for a chart without timeouts
         if any(s.defer for s in chart.states):
             attach_defer(self)  # deferred events (runtime/defer.py)
-
-    @staticmethod
-    def _initial_data(chart: Chart, given: Mapping[str, Any] | None) -> dict[str, Any]:
-        """The chart's data items in order, each evaluated over the earlier ones."""
-        data = dict(given or {})
-        for item in chart.data:
-            if item.name in data:
-                continue
-            value = None
-            if item.expr:
-                expr, diags = compile_expression(item.expr, item.origin)
-                if expr is None:
-                    raise StatectlError("; ".join(str(d) for d in diags))
-                value = expr.evaluate(data)
-            data[item.name] = value
-        return data
 
     # -- state -----------------------------------------------------------------------------
 
