@@ -16,7 +16,7 @@ import pytest
 from statectl.cell.model import load_cell_or_raise
 from statectl.front.builder.build import load_chart
 from statectl.out.testgen import generate
-from statectl.out.testgen.cellharness import CellUnderTest, holds
+from statectl.out.testgen.cellharness import CellUnderTest
 from statectl.out.testgen.harness import DeviceUnderTest
 from support import MOTOR
 from test_testgen import (  # noqa: F401  # journal: a fixture used below
@@ -151,22 +151,17 @@ def test_one_device_exports_refuse_a_cell(tmp_path: Path, flag: str) -> None:
     assert "is a cell" in err and list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.parametrize(
-    ("expr", "expected"),
-    [
-        ("In('arm.Moving')", True),
-        ("In('arm.Blocked')", False),
-        ("not In('arm.Blocked')", True),
-        ("In('arm.Moving') and In('conveyor.Running')", False),
-        ("In('arm.Moving') or In('conveyor.Running')", True),
-        ("True and not False", True),
-        ("In('nobody.Moving')", False),
-    ],
-)
-def test_global_expressions_read_the_devices_states(expr: str, expected: bool) -> None:
-    """A cell's global expression is evaluated over each device's active states."""
-    active = {"arm": frozenset({"Moving"}), "conveyor": frozenset({"Stopped"})}
-    assert holds(expr, active) is expected
+def test_the_harness_asks_the_cells_model_whether_its_expressions_hold() -> None:
+    """An input's `when` and an invariant are the compiled model's answer over the devices'
+    states now (what the System enforces and verify explores), not an evaluator of its own."""
+    c = CellUnderTest(load_cell_or_raise(CELL))
+    assert ("sensor", "Part in") not in c.allowed()  # when: In('conveyor.Running')
+    assert ("conveyor", "Start") in c.allowed()  # when: In('arm.Blocked') and In('gripper.Open')
+    assert c.broken_invariants() == []
+    c.step("conveyor", "Start")
+    assert ("sensor", "Part in") in c.allowed()
+    c.system.subjects["arm"].dispatch("Movement")  # the arm reaches while the belt runs
+    assert c.broken_invariants() == ["belt-still-while-arm-reaches"]
 
 
 def test_cell_step_fails_when_a_device_leaves_the_kernels_path() -> None:

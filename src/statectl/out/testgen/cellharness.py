@@ -15,7 +15,6 @@ Rules:
 
 from __future__ import annotations
 
-import ast
 from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
@@ -23,7 +22,7 @@ from typing import Any
 from statectl.cell.explore import Composed
 from statectl.cell.explore.conditions import bind_cross_guards
 from statectl.cell.explore.replay import CellLinks
-from statectl.cell.model import Cell, GlobalExpr
+from statectl.cell.model import Cell
 from statectl.kernel.errors import StatectlError
 from statectl.kernel.model import ControlKind, EventKind, StateKind
 from statectl.kernel.semantics import Snapshot, Unhandled
@@ -42,7 +41,7 @@ from statectl.run.runtime import (
 )
 from statectl.run.system import DeviceSetup, System
 
-__all__ = ["CellState", "CellUnderTest", "holds", "reference_step"]
+__all__ = ["CellState", "CellUnderTest", "reference_step"]
 
 #: Per device of the cell (in its order): the snapshot and the datamodel.
 CellState = tuple[tuple[Snapshot, tuple[tuple[str, Any], ...]], ...]
@@ -55,33 +54,6 @@ def _leaves(s: Subject) -> tuple[str, ...]:
         for x in sorted(s.configuration, key=m.order.__getitem__)
         if m.kind[x] in (StateKind.ATOMIC, StateKind.FINAL)
     )
-
-
-def holds(expr: GlobalExpr | str, active: Mapping[str, frozenset[str]]) -> bool:
-    """Evaluate a global expression over each device's active states (rule 3)."""
-    source = expr.source if isinstance(expr, GlobalExpr) else expr
-
-    def ev(node: ast.expr) -> bool:
-        if isinstance(node, ast.BoolOp):
-            values = [ev(v) for v in node.values]
-            return all(values) if isinstance(node.op, ast.And) else any(values)
-        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.Not):
-            return not ev(node.operand)
-        if isinstance(node, ast.Constant) and isinstance(node.value, bool):
-            return node.value
-        if (
-            isinstance(node, ast.Call)
-            and isinstance(node.func, ast.Name)
-            and node.func.id == "In"
-            and len(node.args) == 1
-            and isinstance(node.args[0], ast.Constant)
-            and isinstance(node.args[0].value, str)
-        ):
-            device, _, state = node.args[0].value.partition(".")
-            return state in active.get(device, frozenset())
-        raise StatectlError(f"not a global expression: {source!r}")
-
-    return ev(ast.parse(source, mode="eval").body)
 
 
 _MODELS: dict[int, tuple[Cell, Composed]] = {}
@@ -189,6 +161,12 @@ class CellUnderTest:
         self.system.listen(self.recorder)
         self.sent: list[str] = []
         self.system.start()
+        # whether an invariant or an input's `when` holds: the compiled model's answer, as
+        # the System's enforcement and the explorer ask it (cell/explore/compose.py)
+        links = self.system.links
+        assert links is not None  # a System given a cell has its links
+        self._links = links
+        self._invariants = [(inv.name, links.model.predicate(inv.expr)) for inv in cell.invariants]
 
     # -- reading -------------------------------------------------------------------------------
 
@@ -213,8 +191,8 @@ class CellUnderTest:
 
     def broken_invariants(self) -> list[str]:
         """The names of the cell's invariants that do not hold now."""
-        active = {n: self.system.subjects[n].configuration for n in self.devices}
-        return [inv.name for inv in self.cell.invariants if not holds(inv.expr, active)]
+        g = self._links.state()
+        return [name for name, holds in self._invariants if not holds(g)]
 
     def allowed(self) -> list[tuple[str, str]]:
         """What the outside world may do now: the cell's environment and the completions.
@@ -225,9 +203,9 @@ class CellUnderTest:
         only while a call it completes is pending (or its row says ``unasked``): the
         twin's model, :mod:`statectl.kernel.semantics.calls`, which verify assumes too.
         """
-        active = {n: self.system.subjects[n].configuration for n in self.devices}
+        g = self._links.state()
         out: list[tuple[str, str]] = []
-        for inp in self.cell.environment:
+        for inp, when in zip(self.cell.environment, self._links.model.when, strict=True):
             s = self.system.subjects[inp.device]
             if inp.kind.value == "fault":
                 monitored = any(
@@ -235,7 +213,7 @@ class CellUnderTest:
                 )
                 if monitored:
                     out.append((inp.device, inp.event))
-            elif inp.when is None or holds(inp.when, active):
+            elif when is None or when(g):
                 out.append((inp.device, inp.event))
         if self.cell.completions:
             for name in self.devices:
