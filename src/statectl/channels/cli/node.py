@@ -302,7 +302,7 @@ def _node_setup(
     try:
         promise = Guarantee(guarantee.lower())
     except ValueError:
-        err.write(f"statectl node: --guarantee must be prompt or durable-first ({guarantee!r})\n")
+        err.write(f"statectl node: --guarantee must be prompt or durable-first (got {guarantee!r})\n")
         return USAGE
     try:
         cell, devices = run_setup.load_cell_setups(path, err, journal is not None, node)
