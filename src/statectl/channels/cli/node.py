@@ -302,7 +302,8 @@ def _node_setup(
     try:
         promise = Guarantee(guarantee.lower())
     except ValueError:
-        err.write(f"statectl node: --guarantee must be prompt or durable-first (got {guarantee!r})\n")
+        said = f"--guarantee must be prompt or durable-first (got {guarantee!r})"
+        err.write(f"statectl node: {said}\n")
         return USAGE
     try:
         cell, devices = run_setup.load_cell_setups(path, err, journal is not None, node)
