@@ -72,6 +72,9 @@ __all__ = ["LOG", "Cia402Driver"]
 LOG = logging.getLogger("statectl.run.devices.cia402")
 _RPDO = struct.Struct("<Hi")
 _FAULTED = (PowerState.FAULT, PowerState.FAULT_REACTION)
+#: The defaults the driver and its simulated variant share (one place: they cannot drift).
+SCALE, HOMING_METHOD, HOMING_SPEEDS = 1000.0, 35, (1.0, 0.1)
+HEARTBEAT_TIMEOUT = STALE_AFTER = MODE_TIMEOUT = 0.5  # seconds each
 #: The calls that stop at a drive in Fault (Error() is the one that resets it).
 _STOP_AT_FAULT = frozenset({"Movement", "Homing", "Velocity"})
 
@@ -103,14 +106,14 @@ class Cia402Driver(Driver):
         node_id: int = 1,
         eds: str | None = None,
         bitrate: int | None = None,
-        scale: float = 1000.0,
+        scale: float = SCALE,
         window: int = 10,
         sdo_timeout: float = 0.5,
-        heartbeat_timeout: float = 0.5,
-        stale_after: float = 0.5,
-        mode_timeout: float = 0.5,
-        homing_method: int = 35,
-        homing_speeds: Sequence[float] = (1.0, 0.1),
+        heartbeat_timeout: float = HEARTBEAT_TIMEOUT,
+        stale_after: float = STALE_AFTER,
+        mode_timeout: float = MODE_TIMEOUT,
+        homing_method: int = HOMING_METHOD,
+        homing_speeds: Sequence[float] = HOMING_SPEEDS,
     ) -> None:
         super().__init__()
         self.interface, self.channel, self.node_id = interface, channel, node_id
@@ -507,12 +510,12 @@ class Cia402SimDriver(Cia402Driver):
         *,
         node_id: int = 1,
         speed: float = 20000.0,
-        scale: float = 1000.0,
-        heartbeat_timeout: float = 0.5,
-        stale_after: float = 0.5,
-        mode_timeout: float = 0.5,
-        homing_method: int = 35,
-        homing_speeds: Sequence[float] = (1.0, 0.1),
+        scale: float = SCALE,
+        heartbeat_timeout: float = HEARTBEAT_TIMEOUT,
+        stale_after: float = STALE_AFTER,
+        mode_timeout: float = MODE_TIMEOUT,
+        homing_method: int = HOMING_METHOD,
+        homing_speeds: Sequence[float] = HOMING_SPEEDS,
         fault_reaction: float = 0.05,
         acceleration: float = 200000.0,
     ) -> None:
