@@ -16,11 +16,21 @@ Rules:
 4. A driver whose device runs in wall time (``realtime``: a CiA 402 or Modbus bus)
    gets the time too: ``advance`` waits that long on the wall clock, then moves the
    simulated one (its reports, queued meanwhile, are taken then).
+5. Such a driver reports from its own thread whenever its device is done, so its
+   reports are kept (:class:`WallReports`) until the test lets time run: between
+   ``advance`` calls time stands still for it as for the twin, and a completion the
+   bus saw while the test sent its next events cannot slip in before them. A
+   completion the test sent itself in place of the device (a test's path) answers
+   the device's call (:class:`~statectl.kernel.semantics.calls.DeviceCalls`); the
+   device's own report of that call, made before or after, is then dropped and noted
+   (``WallReports.stood_in``), as the twin never reports a call whose state was left.
+   Any other report is taken as the device made it, for the checks to judge.
 """
 
 from __future__ import annotations
 
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -28,7 +38,8 @@ from typing import Any
 
 from statectl.front.observers import Notification, Observer
 from statectl.front.tables import RecoveryRow
-from statectl.kernel.model import Chart, StateKind
+from statectl.kernel.model import Chart, EventKind, StateKind
+from statectl.kernel.semantics.calls import CallKey, DeviceCalls
 from statectl.out.testgen.adapters import ApiMade, Call, Observed, Served, Unsupported
 from statectl.run.devices import SimTwin, connect
 from statectl.run.devices.base import Driver
@@ -47,7 +58,7 @@ from statectl.run.runtime.hooks import ApiLogging, api_calls_since, api_count
 from statectl.run.runtime.monitors import Monitor
 from statectl.run.system import DeviceSetup, System
 
-__all__ = ["Recorder", "RuntimeImpl", "Tap"]
+__all__ = ["Recorder", "RuntimeImpl", "Tap", "WallReports"]
 
 
 class Recorder:
@@ -74,9 +85,13 @@ class Tap:
         self.logs = isinstance(driver, ApiLogging)  # else: no API log to read
         self.served: list[Served] = []
         self._count = api_count(driver) if self.logs else 0
+        #: told (method, event) of each notification before the driver gets it (rule 5)
+        self.heard: Callable[[str, str], None] | None = None
 
     def update(self, notification: Notification) -> None:
         self.calls.append(Call(notification.method, notification.data))
+        if self.heard is not None:
+            self.heard(notification.method, notification.event)
         self.catch_up()
         self.driver.update(notification)
         if self.logs:
@@ -99,6 +114,81 @@ class Tap:
 
     def __getattr__(self, name: str) -> Any:  # bind, poll_fault, serves, api_log, ...
         return getattr(self.driver, name)
+
+
+class WallReports:
+    """Rule 5: the reports of a driver in wall time, kept until the test lets time run.
+
+    ``report`` is the driver's (any thread); everything else runs on the test's
+    thread. ``pending`` are the calls the device owes a report of, by the one model
+    of calls and completions; ``answered`` counts, per completion, the calls the
+    test answered itself whose report has not come yet.
+    """
+
+    def __init__(self, chart: Chart, dropped: list[str]) -> None:
+        self.calls = DeviceCalls(chart)
+        self.completions = frozenset(e.name for e in chart.events if e.kind is EventKind.COMPLETION)
+        self.pending: tuple[CallKey, ...] = ()
+        self.answered: dict[str, int] = {}
+        #: reports dropped because the test had sent them in the device's place
+        self.stood_in: list[str] = []
+        self._dropped = dropped  # where a silenced device's reports go (stall)
+        self._held: list[tuple[str, Any]] = []
+        self._lock = threading.Lock()
+        self._silent = False
+
+    def report(self, event: str, data: Any = None) -> None:
+        """The driver's report: kept, or dropped once the device was silenced."""
+        with self._lock:
+            if self._silent:
+                self._dropped.append(event)
+            else:
+                self._held.append((event, data))
+
+    def called(self, method: str, event: str) -> None:
+        """A notification: a call the device now owes (superseding those it leaves)."""
+        self.pending = self.calls.after_calls(self.pending, [(method, event)])
+
+    def _settle(self, completion: str) -> bool:
+        ways = self.calls.settled_by(self.pending, completion)
+        if ways:
+            self.pending = ways[0]
+        return bool(ways)
+
+    def sent(self, event: str) -> None:
+        """The test sends ``event`` itself; a completion stands in for the device's report."""
+        if event not in self.completions:
+            return
+        settled = self._settle(event)
+        with self._lock:
+            kept = next((i for i, (e, _) in enumerate(self._held) if e == event), None)
+            if kept is not None:
+                del self._held[kept]
+                self.stood_in.append(event)
+                return
+        if settled:
+            self.answered[event] = self.answered.get(event, 0) + 1
+
+    def release(self) -> list[tuple[str, Any]]:
+        """The reports kept so far, in order, but those the test stood in for."""
+        with self._lock:
+            held, self._held = self._held, []
+        out = []
+        for event, data in held:
+            if event in self.completions and not self._settle(event):
+                if self.answered.get(event, 0) > 0:
+                    self.answered[event] -= 1
+                    self.stood_in.append(event)
+                    continue
+            out.append((event, data))
+        return out
+
+    def silence(self) -> None:
+        """stall(): what was kept and whatever comes later is dropped."""
+        with self._lock:
+            self._silent = True
+            self._dropped.extend(e for e, _ in self._held)
+            self._held.clear()
 
 
 def _silent(event: str, data: Any = None) -> None:
@@ -132,11 +222,16 @@ class RuntimeImpl:
         self.subject = Subject(chart, clock=self.clock, data=data)
         self.subject.listen(self.recorder)
         self.monitors: tuple[Monitor, ...] = ()
+        self.dropped: list[str] = []  # what the driver reported after stall()
+        self.wall: WallReports | None = None  # rule 5
         if _is_device_driver(self.driver):
-            self.monitors = connect(self.subject, self.tap)
+            if getattr(self.driver, "realtime", False):
+                self.wall = WallReports(chart, self.dropped)
+                self.tap.heard = self.wall.called
+            report = self.wall.report if self.wall is not None else None
+            self.monitors = connect(self.subject, self.tap, report=report)
         else:
             self.subject.attach(self.tap)  # a plain observer: no monitors to poll it
-        self.dropped: list[str] = []  # what the driver reported after stall()
         self.history: list[tuple[str, Any]] = []  # what the test did, for restart()
         self._system: System | None = None
         self._tmp: tempfile.TemporaryDirectory[str] | None = None
@@ -157,6 +252,8 @@ class RuntimeImpl:
     def send(self, event: str, data: Any = None) -> Observed:
         self._mark()
         self.history.append(("send", (event, data)))
+        if self.wall is not None:
+            self.wall.sent(event)
         self.subject.dispatch(event, data)
         return self.observed(sent=event)
 
@@ -165,6 +262,9 @@ class RuntimeImpl:
         self.history.append(("advance", seconds))
         if getattr(self.driver, "realtime", False):
             time.sleep(seconds)  # rule 4: a bus in wall time needs the time to pass
+        if self.wall is not None:
+            for event, data in self.wall.release():
+                self.subject.post(event, data)
         if self._system is not None:
             self._system.advance(seconds)
         else:
@@ -184,7 +284,9 @@ class RuntimeImpl:
     def stall(self) -> None:
         """From now on the driver's own reports (its completions) are dropped."""
         self.history.append(("stall", None))
-        if isinstance(self.driver, Driver) and self.driver._clock is not None:
+        if self.wall is not None:
+            self.wall.silence()
+        elif isinstance(self.driver, Driver) and self.driver._clock is not None:
             Driver.bind(self.driver, self._drop, self.driver._clock)
 
     def restart(self) -> Observed:
@@ -265,6 +367,7 @@ class RuntimeImpl:
         self.subject.listen(self.recorder)
         self.monitors = ()
         self.history = []
+        self.wall = None  # the resumed driver reports to the System's door
 
     def observed(self, sent: str | None = None) -> Observed:
         """What the records since the mark show (rule 2)."""
