@@ -175,11 +175,11 @@ class WallReports:
             held, self._held = self._held, []
         out = []
         for event, data in held:
-            if event in self.completions and not self._settle(event):
-                if self.answered.get(event, 0) > 0:
-                    self.answered[event] -= 1
-                    self.stood_in.append(event)
-                    continue
+            settled = event not in self.completions or self._settle(event)
+            if not settled and self.answered.get(event, 0) > 0:
+                self.answered[event] -= 1
+                self.stood_in.append(event)
+                continue
             out.append((event, data))
         return out
 
