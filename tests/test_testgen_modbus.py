@@ -132,16 +132,20 @@ class Gripper(Plant):
 
 
 class Clamp(Plant):
-    """The pressure settles at the set-point 1 s after the valve opens, at 0 when it closes
-    (the fault and monitor tests of Clamping assume a call takes more than 0.5 s)."""
+    """The pressure settles 1 s after the last write: at the set-point with the valve
+    open, at 0 with it closed (the fault and monitor tests of Clamping assume a call
+    takes more than 0.5 s)."""
 
     PRESSURE = Register("pressure", "input", 0, "float32", word_order="little")
+    settling = None
 
     def written(self):  # on the server's loop: it answers the driver's write
         setpoint = self.io.getValues(3, 10, 1)[0] * 0.1  # 0.1 bar a count
         target = setpoint if self.coil("valve") else 0.0
         words = encode_register(self.PRESSURE, target)
-        self.loop.call_later(1.0, self.store, 4, 0, words)
+        if self.settling is not None:
+            self.settling.cancel()  # the valve changed again before it settled
+        self.settling = self.loop.call_later(1.0, self.store, 4, 0, words)
 
 
 PLANTS, DRIVER = {"Gripper": Gripper, "Clamp": Clamp}, ModbusIO
@@ -151,17 +155,22 @@ PLANTS, DRIVER = {"Gripper": Gripper, "Clamp": Clamp}, ModbusIO
 def statectl_new_driver():
     made = []
 
-    def new(chart):
+    def new(chart):  # a device per test (per example in the Hypothesis module)
+        stop()  # the one before is done with: a fresh device replaces it
         _, options = load_driver_config(EXAMPLES / CONFIGS[chart.name])[chart.name]
         plant = PLANTS[chart.name](options)
         driver = DRIVER(**(options | {"port": plant.port}), chart=chart)
         made.append((plant, driver))
         return driver
 
+    def stop():
+        while made:
+            plant, driver = made.pop()
+            driver.close()
+            plant.stop()
+
     yield new
-    for plant, driver in made:
-        driver.close()
-        plant.stop()
+    stop()
 '''
 
 #: Broken variants, appended to the conftest: what each breaks.
