@@ -23,8 +23,9 @@ Rules:
    completion the test sent itself in place of the device (a test's path) answers
    the device's call (:class:`~statectl.kernel.semantics.calls.DeviceCalls`); the
    device's own report of that call, made before or after, is then dropped and noted
-   (``WallReports.stood_in``), as the twin never reports a call whose state was left.
-   Any other report is taken as the device made it, for the checks to judge.
+   (``WallReports.stood_in``): the test's event was that report, and a second one
+   would show up in the next probe as an event the device took by itself. Any other
+   report is taken as the device made it, for the checks to judge.
 """
 
 from __future__ import annotations
