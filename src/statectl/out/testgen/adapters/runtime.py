@@ -123,7 +123,10 @@ class WallReports:
     ``report`` is the driver's (any thread); everything else runs on the test's
     thread. ``pending`` are the calls the device owes a report of, by the one model
     of calls and completions; ``answered`` counts, per completion, the calls the
-    test answered itself whose report has not come yet.
+    test answered itself whose report has not come yet. A count stays until that
+    report comes, even when a later command made the device give the call up (a
+    report already on its way may still come): a device that never sends it leaves
+    one, which drops one later report of that completion that no call is pending for.
     """
 
     def __init__(self, chart: Chart, dropped: list[str]) -> None:
