@@ -132,7 +132,7 @@ class Gripper(Plant):
 
 
 class Clamp(Plant):
-    """The pressure settles 1 s after the last write: at the set-point with the valve
+    """The pressure settles 2 s after the last write: at the set-point with the valve
     open, at 0 with it closed (the fault and monitor tests of Clamping assume a call
     takes more than 0.5 s)."""
 
@@ -145,7 +145,7 @@ class Clamp(Plant):
         words = encode_register(self.PRESSURE, target)
         if self.settling is not None:
             self.settling.cancel()  # the valve changed again before it settled
-        self.settling = self.loop.call_later(1.0, self.store, 4, 0, words)
+        self.settling = self.loop.call_later(2.0, self.store, 4, 0, words)
 
 
 PLANTS, DRIVER = {"Gripper": Gripper, "Clamp": Clamp}, ModbusIO
