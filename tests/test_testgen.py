@@ -693,3 +693,13 @@ def test_generated_tests_run_on_the_cia402_simulated_drive(tmp_path: Path) -> No
     result = run_pytest(tmp_path)
     assert result.returncode == 0, result.stdout[-3000:]
     assert counts(result).get("passed", 0) >= 20
+
+
+def test_a_generated_modules_notes_are_lines_of_its_docstring(tmp_path: Path) -> None:
+    """A note (the clamp's completion taken only with the device's data) reads as a line
+    of the module's docstring, not as an escaped ``\\n\\nNote:`` in one long line."""
+    made = generate(ROOT / "examples" / "modbus" / "clamp.yaml", "rows", tmp_path)
+    text = made.path.read_text(encoding="utf-8")
+    docstring = ast.get_docstring(ast.parse(text)) or ""
+    assert "\nNote: Clamp() called by Clamp: Clamp completion is taken only" in docstring
+    assert "\\n" not in text.split('"""')[1]

@@ -249,7 +249,7 @@ def generate_cell(file: str | Path, criterion: str, out_dir: str | Path) -> Cell
         cell=docstring(cell.name),
         source=docstring(str(file)),
         out=docstring(out.as_posix()),
-        notes=docstring("".join(f"\n\nNote: {n}." for n in notes)),
+        notes="".join(f"\n\nNote: {docstring(n)}." for n in notes),  # lines of their own
         tables=_lit(_rel(source, out)),
     )
     body = "".join(_cell_case(c) for c in cases)

@@ -196,7 +196,7 @@ def module_text(
     if suite.parts:
         each = ", ".join(f"{part} {k}" for part, k in suite.parts)
         counts += f"\nCases each part adds: {each}."
-    notes = "".join(f"\n\nNote: {n_}." for n_ in suite.notes)
+    notes = "".join(f"\n\nNote: {docstring(n_)}." for n_ in suite.notes)  # lines of their own
     if big:
         notes += (
             "\n\nA big chart: each table of unhandled events is one test over its events,\n"
@@ -207,7 +207,7 @@ def module_text(
         criterion=suite.criterion,
         source=docstring(shown),
         counts=counts,
-        notes=docstring(notes),
+        notes=notes,
         tables=_lit(tables),
         out=docstring(out_dir.as_posix()),
     )
