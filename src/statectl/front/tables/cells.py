@@ -50,7 +50,14 @@ def check_header(
             diags.append(unknown_column(table, text, at))
             columns.append(None)
         elif name in seen:
-            diags.append(diag("T101", at, f"column {name!r} appears twice in the {table} header"))
+            diags.append(
+                diag(
+                    "T101",
+                    at,
+                    f"column {name!r} appears twice in the {table} header",
+                    "name each column once: rename or delete the second",
+                )
+            )
             columns.append(None)
         else:
             seen.add(name)

@@ -10,6 +10,8 @@ Rules:
    columns ``state,event,data`` (and ``redo``: yes, or empty); data is a YAML flow value.
 4. Locations are the CSV line where a record starts (1-based, comments counted).
 5. Quoting is strict: an unclosed quote is T101 at the line the parser reached.
+6. Blank lines, the header, short rows and cells past the header follow the rules
+   every flat format shares (:mod:`statectl.front.tables.grid`).
 """
 
 from __future__ import annotations
@@ -20,14 +22,8 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from statectl.front.tables.cells import check_header
-from statectl.front.tables.literals import parse_literal
-from statectl.front.tables.rows import (
-    DeviceTables,
-    RawRow,
-    RawTable,
-    diag,
-)
+from statectl.front.tables.grid import FlatSource, Record, data_entries, read_grid
+from statectl.front.tables.rows import DeviceTables, RawTable, diag
 from statectl.front.tables.schema import flat_tables, make_tables
 from statectl.kernel.errors import Diagnostic, Location
 
@@ -119,10 +115,9 @@ def csv_paths(path: Path, device: str | None = None) -> CsvFiles | None:
     )
 
 
-def _records(
-    text: str, file: str, diags: list[Diagnostic]
-) -> tuple[str | None, list[tuple[int, list[str]]]]:
-    """The device comment and each non-blank record with its starting line."""
+def _records(text: str, file: str, diags: list[Diagnostic]) -> tuple[str | None, list[Record]]:
+    """The device comment and each record with its starting line (blank ones too: what
+    a record means is the flat formats' one answer, :mod:`statectl.front.tables.grid`)."""
     lines = text.split("\n")
     device: str | None = None
     skip = 0
@@ -132,53 +127,27 @@ def _records(
             device = m.group(1).strip()
         skip += 1
     reader = csv.reader(io.StringIO("\n".join(lines[skip:])), strict=True)
-    records: list[tuple[int, list[str]]] = []
+    records: list[Record] = []
     last = 0
     try:
         for record in reader:
-            start = last + 1 + skip
+            records.append((last + 1 + skip, record))
             last = reader.line_num
-            if any(cell.strip() for cell in record):
-                records.append((start, record))
     except csv.Error as exc:
         diags.append(diag("T101", Location(file, reader.line_num + skip), f"malformed CSV: {exc}"))
     return device, records
+
+
+#: What to do about a cell with text past the header, in CSV's terms (grid rule 3).
+FIX = "delete the stray cells or name their column in the header; quote a cell with a comma"
 
 
 def _table(
     table: str, text: str, file: str, diags: list[Diagnostic]
 ) -> tuple[str | None, RawTable | None]:
     device, records = _records(text, file, diags)
-    if not records:
-        diags.append(
-            diag("T105", Location(file, 1), f"the {table} file has no header row and no rows")
-        )
-        return device, None
-    header_line, header = records[0]
-    at = Location(file, header_line)
-    columns = check_header(table, [(h, at) for h in header], at, diags)
-    if columns is None:
-        return device, None
-    rows: list[RawRow] = []
-    for line, record in records[1:]:
-        where = Location(file, line)
-        if len(record) > len(columns) and any(c.strip() for c in record[len(columns) :]):
-            diags.append(
-                diag(
-                    "T101",
-                    where,
-                    f"the row has {len(record)} cells but the header names {len(columns)}",
-                    "quote cells that contain commas",
-                )
-            )
-            continue
-        cells = {
-            name: (cell, Location(file, line, column=name))
-            for name, cell in zip(columns, record, strict=False)
-            if name is not None
-        }
-        rows.append(RawRow(where, cells))
-    return device, RawTable(table, at, tuple(rows))
+    source = FlatSource(table, file, f"the {table} file", FIX)
+    return device, read_grid(source, records, diags)
 
 
 def read_csv(
@@ -203,13 +172,7 @@ def read_csv(
     device = dev_s or dev_e or name
     entries: list[tuple[str, object, Location]] = []
     if data is not None:
-        _, data_table = _table("data", data[0], data[1], diags)
-        for row in data_table.rows if data_table is not None else ():
-            where = row.where
-            key = row.cells.get("name", ("", where))[0]
-            value = row.cells.get("value", ("", where))[0]
-            assert isinstance(key, str) and isinstance(value, str)  # CSV cells are text
-            entries.append((key.strip(), parse_literal(value, where, diags), where))
+        entries = data_entries(_table("data", data[0], data[1], diags)[1], diags)
     recovery_table = None
     if recovery is not None:
         _, recovery_table = _table("recovery", recovery[0], recovery[1], diags)

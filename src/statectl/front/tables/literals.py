@@ -85,7 +85,18 @@ def format_literal(value: object) -> str:
     return text[1:-1].strip()
 
 
+#: What a data value may be, said where one is not.
+LITERAL_HINT = (
+    "write null, true or false, a number, text (quoted if it holds ':' '#' or brackets) "
+    "or a list such as [1, 2]"
+)
 _REPORTED = Bad("malformed literal")  # a cell parse_literal reported already
+
+
+def reported() -> Bad:
+    """The value of a data cell whose problem its reader has already reported, so that
+    :func:`make_data` does not report it again."""
+    return _REPORTED
 
 
 def parse_literal(text: str, where: Location, diags: list[Diagnostic]) -> object | Bad:
@@ -96,7 +107,7 @@ def parse_literal(text: str, where: Location, diags: list[Diagnostic]) -> object
         code = exc.code if exc.code in ("T115", "T116") else "T108"
         shown = text if len(text) <= 60 else text[:57] + "..."
         message = f"data value {shown!r} is not a YAML literal: {exc.message}"
-        diags.append(diag(code, where, message, exc.hint))
+        diags.append(diag(code, where, message, exc.hint or LITERAL_HINT))
         return Bad(_REPORTED.found, code)
     return normalize_value(value)
 

@@ -9,20 +9,16 @@ Rules:
 3. In a cell, ``\\|`` is a pipe, ``\\\\`` a backslash, ``\\n`` a line break and
    ``\\r`` a carriage return, so any text survives a round trip.
 4. Locations are the 1-based line of the row.
+5. Blank lines (inside a table too), the header, short rows and cells past the header
+   follow the rules every flat format shares (:mod:`statectl.front.tables.grid`).
 """
 
 from __future__ import annotations
 
 import re
 
-from statectl.front.tables.cells import check_header
-from statectl.front.tables.literals import parse_literal
-from statectl.front.tables.rows import (
-    DeviceTables,
-    RawRow,
-    RawTable,
-    diag,
-)
+from statectl.front.tables.grid import FlatSource, data_entries, read_grid
+from statectl.front.tables.rows import DeviceTables, RawTable, diag
 from statectl.front.tables.schema import flat_tables, make_tables
 from statectl.kernel.errors import Diagnostic, Location
 
@@ -78,45 +74,28 @@ def split_row(line: str) -> list[str]:
     return [c.strip() for c in cells]
 
 
+#: What to do about a cell with text past the header, in Markdown's terms (grid rule 3).
+FIX = "delete the stray cells or name their column in the header; write a pipe in a cell as \\|"
+
+
 def _parse_table(
     table: str, block: list[tuple[int, str]], file: str, diags: list[Diagnostic]
 ) -> RawTable | None:
-    header_line, header_text = block[0]
-    where = Location(file, header_line)
+    header_line = block[0][0]
     if len(block) < 2 or not all(SEPARATOR.match(c) for c in split_row(block[1][1])):
         diags.append(
             diag(
                 "T101",
                 Location(file, block[1][0] if len(block) > 1 else header_line),
                 f"the {table} table has no '|---|' separator under its header",
+                "write a row such as |---|---| right under the header row",
             )
         )
         return None
-    header = [(unescape(c), where) for c in split_row(header_text)]
-    columns = check_header(table, header, where, diags)
-    if columns is None:
-        return None
-    rows: list[RawRow] = []
-    for line, text in block[2:]:
-        cells = split_row(text)
-        at = Location(file, line)
-        if len(cells) > len(columns):
-            diags.append(
-                diag(
-                    "T101",
-                    at,
-                    f"the row has {len(cells)} cells but the header names {len(columns)}",
-                    "write a pipe inside a cell as \\|",
-                )
-            )
-            continue
-        raw = {
-            name: (unescape(cell), Location(file, line, column=name))
-            for name, cell in zip(columns, cells, strict=False)
-            if name is not None
-        }
-        rows.append(RawRow(at, raw))
-    return RawTable(table, where, tuple(rows))
+    records = [
+        (line, [unescape(c) for c in split_row(text)]) for line, text in (block[0], *block[2:])
+    ]
+    return read_grid(FlatSource(table, file, f"the {table} table", FIX), records, diags)
 
 
 def read_md(text: str, file: str, stem: str) -> tuple[DeviceTables | None, list[Diagnostic]]:
@@ -144,7 +123,7 @@ def read_md(text: str, file: str, stem: str) -> tuple[DeviceTables | None, list[
             continue
         if line.startswith("|"):
             blocks.setdefault(section, []).append((number, line))
-        elif section in blocks:
+        elif line and section in blocks:  # text ends the table; a blank line does not (grid)
             closed.add(section)
     if "states" not in blocks and "events" not in blocks:
         return None, [
@@ -165,18 +144,11 @@ def read_md(text: str, file: str, stem: str) -> tuple[DeviceTables | None, list[
                 diags.append(
                     diag("T104", Location(file, 1), f"no '## {table.title()}' table in the file")
                 )
-    entries: list[tuple[str, object, Location]] = []
-    data = tables["data"]
-    for row in data.rows if data is not None else ():
-        name = row.cells.get("name", ("", row.where))[0]
-        value, at = row.cells.get("value", ("", row.where))
-        assert isinstance(name, str) and isinstance(value, str)  # Markdown cells are text
-        entries.append((name.strip(), parse_literal(value, at, diags), row.where))
     result = make_tables(
         device if device is not None else stem,
         tables["states"],
         tables["events"],
-        entries,
+        data_entries(tables["data"], diags),
         Location(file, 1),
         diags,
         tables["recovery"],

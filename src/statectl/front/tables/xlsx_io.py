@@ -2,8 +2,10 @@
 
 Rules:
 1. Sheets ``States`` and ``Events`` (and optional ``Data`` with ``name, value``
-   and ``Recovery`` with ``state, event, data, redo``) each have their header in row 1;
-   sheet names are matched without regard to case.
+   and ``Recovery`` with ``state, event, data, redo``) each have a header row (the
+   first row that is not blank) and rows under it; sheet names are matched without
+   regard to case. Blank rows, short rows and cells past the header follow the rules
+   every flat format shares (:mod:`statectl.front.tables.grid`).
 2. The device name is cell B1 of a sheet ``Device`` whose A1 reads ``device``;
    without that sheet it is the file's name without ``.xlsx``.
 3. Cells are read as text: numbers as written, booleans as ``true``/``false``;
@@ -22,16 +24,8 @@ import zipfile
 from collections.abc import Iterable
 from typing import Any
 
-from statectl.front.tables.cells import check_header
-from statectl.front.tables.literals import parse_literal
-from statectl.front.tables.rows import (
-    Bad,
-    Cell,
-    DeviceTables,
-    RawRow,
-    RawTable,
-    diag,
-)
+from statectl.front.tables.grid import FlatSource, data_entries, read_grid
+from statectl.front.tables.rows import Bad, Cell, DeviceTables, RawTable, diag
 from statectl.front.tables.schema import flat_tables, make_tables
 from statectl.front.tables.xlsx_formulas import uncached_formulas
 from statectl.kernel.errors import Diagnostic, Location
@@ -78,26 +72,26 @@ def _rows(ws: Any) -> Iterable[tuple[int, tuple[Any, ...]]]:
         yield number, tuple(values)
 
 
+#: What to do about a cell with text past the header, in a spreadsheet's terms (grid rule 3).
+FIX = "delete the stray cells or name their column in the header row"
+
+
+def column_letter(position: int) -> str:
+    """A 1-based column as a spreadsheet names it: 1 is A, 27 is AA."""
+    letters = ""
+    while position > 0:
+        position, rest = divmod(position - 1, 26)
+        letters = chr(ord("A") + rest) + letters
+    return letters
+
+
 def _table(table: str, ws: Any, file: str, diags: list[Diagnostic]) -> RawTable | None:
     sheet = str(ws.title)
-    rows = [(n, v) for n, v in _rows(ws) if any(c is not None and str(c).strip() for c in v)]
-    where = Location(file, 1, sheet=sheet)
-    if not rows or rows[0][0] != 1:
-        diags.append(diag("T105", where, f"sheet {sheet!r} has no header in row 1"))
-        return None
-    header = [(str(_cell(h)) if isinstance(_cell(h), str) else "", where) for h in rows[0][1]]
-    columns = check_header(table, header, where, diags)
-    if columns is None:
-        return None
-    raw: list[RawRow] = []
-    for number, values in rows[1:]:
-        at = Location(file, number, sheet=sheet)
-        cells: dict[str, tuple[Cell, Location]] = {}
-        for name, value in zip(columns, values, strict=False):
-            if name is not None:
-                cells[name] = (_cell(value), Location(file, number, sheet=sheet, column=name))
-        raw.append(RawRow(at, cells))
-    return RawTable(table, where, tuple(raw))
+    source = FlatSource(
+        table, file, f"sheet {sheet!r}", FIX, sheet, lambda n: f"column {column_letter(n)}"
+    )
+    records = [(n, [_cell(v) for v in values]) for n, values in _rows(ws)]
+    return read_grid(source, records, diags)
 
 
 #: Largest total a workbook's parts may unpack to (T117): a zip bomb stops here.
@@ -159,14 +153,7 @@ def read_xlsx(content: bytes, file: str, stem: str) -> tuple[DeviceTables | None
                 tables[table] = _table(table, sheets[table], file, diags)
         entries: list[tuple[str, object, Location]] = []
         if "data" in sheets:
-            data = _table("data", sheets["data"], file, diags)
-            for row in data.rows if data is not None else ():
-                name = row.cells.get("name", ("", row.where))[0]
-                value, at = row.cells.get("value", ("", row.where))
-                literal: object = (
-                    parse_literal(value, at, diags) if isinstance(value, str) else value
-                )
-                entries.append((name if isinstance(name, str) else "", literal, row.where))
+            entries = data_entries(_table("data", sheets["data"], file, diags), diags)
         recovery = None
         if "recovery" in sheets:
             recovery = _table("recovery", sheets["recovery"], file, diags)
