@@ -148,6 +148,10 @@ def unnamed_column(d: Device) -> None:
     _rows(d, "states")[1].append("stray")
 
 
+def note_beside(d: Device) -> None:
+    d["events"].append(["", "", "", "", "", "ask Ann"])
+
+
 def spaced_name(d: Device) -> None:
     _rows(d, "data")[1][0] = "  limit  "
 
@@ -201,6 +205,7 @@ CASES = [
     Case("trailing empty cells", trailing_empty),
     Case("extra cell with text", extra_text, Where("T101", "events", 2)),
     Case("text under an unnamed column", unnamed_column, Where("T101", "states", 1)),
+    Case("note beside the table", note_beside, Where("T101", "events", 3)),
     Case("data name with spaces", spaced_name),
     Case("bad data literal", bad_literal, Where("T108", "data", 2, "value")),
     Case("blank row inside a table", blank_inside),

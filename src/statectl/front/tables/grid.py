@@ -11,7 +11,8 @@ what a record means is decided here, once, so the three cannot drift apart
    empty cells past it, since editors and spreadsheets leave them. A cell with text in
    a column the header does not name (past its end, or under an empty header cell) is
    T101 at the row, naming the cell, the text and what to do; the row's named cells
-   are still read, so its other problems are reported in the same run.
+   are still read, so its other problems are reported in the same run (a row with
+   text only there is a note beside the table, and not read as a row).
 4. Every cell keeps its location: the row's line (sheet row) and its column's name.
 5. A data row's name is stripped and its value read as a YAML literal; a value that is
    not one is reported at its cell (:func:`data_entries`).
@@ -93,6 +94,8 @@ def read_grid(
         stray = _stray(cells, unnamed, len(header))
         if stray is not None:
             _report_stray(source, line, (stray, cells[stray]), last, diags)
+            if blank([cells[i] for i in named if i < len(cells)]):
+                continue  # a note beside the table: a row with nothing else is no row
         raw = {
             name: (cell, source.at(line, name))
             for name, cell in zip(columns, cells, strict=False)
