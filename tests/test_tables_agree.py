@@ -9,6 +9,7 @@ there is one). The rules are docs/tables.md, "What every flat format accepts".
 from __future__ import annotations
 
 import csv
+import datetime
 import io
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -286,3 +287,38 @@ def test_an_extra_cell_is_named_with_what_to_do(fmt: str, tmp_path: Path) -> Non
     assert "T101" in text and "'oops'" in text
     assert ("column F" if fmt == "xlsx" else "column 6") in text  # as the format counts
     assert "Traceback" not in text
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_a_row_with_a_stray_cell_is_still_read(fmt: str, tmp_path: Path) -> None:
+    """The row whose cell sits past the header still has its own problems reported in
+    the same run (diagnostics, not first errors), in every format."""
+    device = base()
+    row = _rows(device, "events")[2]
+    row[3] = "finished"  # no such kind
+    row.append("oops")
+    path, lines = write(fmt, device, tmp_path)
+    _, diags = load(path)
+    found = sorted((d.code, d.where.line) for d in diags if d.severity is Severity.ERROR)
+    assert found == [("T101", lines["events"][2]), ("T107", lines["events"][2])]
+
+
+def test_a_workbook_data_cell_of_another_type_is_reported_at_its_cell(tmp_path: Path) -> None:
+    """A date typed into a workbook's data value is T108 at that cell, naming the item."""
+    wb = openpyxl.Workbook()
+    wb.active.title = "States"
+    wb.active.append(["state", "control"])
+    wb.active.append(["Idle", "default"])
+    events = wb.create_sheet("Events")
+    events.append(["event", "old", "new"])
+    events.append(["Go", "Idle", "Idle"])
+    data = wb.create_sheet("Data")
+    data.append(["name", "value"])
+    data.append(["since", datetime.date(2026, 1, 1)])
+    path = tmp_path / "d.xlsx"
+    wb.save(path)
+    _, diags = load(path)
+    assert [(d.code, d.where.sheet, d.where.line, d.where.column) for d in diags] == [
+        ("T108", "Data", 2, "value")
+    ]
+    assert "'since'" in diags[0].message and diags[0].hint

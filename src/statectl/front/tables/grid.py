@@ -24,7 +24,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 
 from statectl.front.tables.cells import check_header
-from statectl.front.tables.literals import parse_literal, reported
+from statectl.front.tables.literals import LITERAL_HINT, parse_literal, reported
 from statectl.front.tables.rows import Bad, Cell, RawRow, RawTable, diag, normalize_column
 from statectl.kernel.errors import Diagnostic, Location
 
@@ -148,20 +148,21 @@ def data_entries(
     stripped, the value a YAML literal read from its cell, reported at that cell."""
     entries: list[tuple[str, object, Location]] = []
     for row in table.rows if table is not None else ():
-        name = row.cells.get("name", ("", row.where))[0]
+        cell = row.cells.get("name", ("", row.where))[0]
+        name = cell.strip() if isinstance(cell, str) else ""
         value, at = row.cells.get("value", ("", row.where))
         if isinstance(value, str):
-            literal: object = parse_literal(value, at, diags)
+            literal: object = parse_literal(value, at, diags, name)
         else:  # a cell of another type (an XLSX date): said here, at the cell
             found = value.found if isinstance(value, Bad) else "a list"
             diags.append(
                 diag(
                     "T108",
                     at,
-                    f"data value must be a YAML literal (got {found})",
-                    "type the value as text: null, true/false, a number, a string or a list",
+                    f"data value of {name!r} must be a YAML literal (got {found})",
+                    "type the value as text: " + LITERAL_HINT.removeprefix("write "),
                 )
             )
             literal = reported()
-        entries.append((name.strip() if isinstance(name, str) else "", literal, row.where))
+        entries.append((name, literal, row.where))
     return entries

@@ -99,14 +99,17 @@ def reported() -> Bad:
     return _REPORTED
 
 
-def parse_literal(text: str, where: Location, diags: list[Diagnostic]) -> object | Bad:
-    """Read a YAML literal from a cell; an empty cell is null."""
+def parse_literal(
+    text: str, where: Location, diags: list[Diagnostic], name: str = ""
+) -> object | Bad:
+    """Read a YAML literal from a cell (of data ``name``); an empty cell is null."""
     try:
         value = load_value(text)
     except YamlRefused as exc:
         code = exc.code if exc.code in ("T115", "T116") else "T108"
         shown = text if len(text) <= 60 else text[:57] + "..."
-        message = f"data value {shown!r} is not a YAML literal: {exc.message}"
+        of = f" of {name!r}" if name else ""
+        message = f"data value{of} {shown!r} is not a YAML literal: {exc.message}"
         diags.append(diag(code, where, message, exc.hint or LITERAL_HINT))
         return Bad(_REPORTED.found, code)
     return normalize_value(value)
