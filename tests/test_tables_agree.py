@@ -322,3 +322,18 @@ def test_a_workbook_data_cell_of_another_type_is_reported_at_its_cell(tmp_path: 
         ("T108", "Data", 2, "value")
     ]
     assert "'since'" in diags[0].message and diags[0].hint
+
+
+def test_a_second_markdown_table_in_a_section_is_refused(tmp_path: Path) -> None:
+    """A blank line no longer ends a Markdown table, so a second table under the same
+    heading would read its header and '|---|' rows as rows: it is T101 at its header."""
+    device = base()
+    path, lines = write("md", device, tmp_path)
+    text = path.read_text(encoding="utf-8").replace(
+        "| Done | Busy | Idle | completion |",
+        "| Done | Busy | Idle | completion |\n\n| note |\n|---|\n| see the manual |",
+    )
+    path.write_text(text, encoding="utf-8")
+    tables, diags = load(path)
+    assert [(d.code, d.where.line) for d in diags] == [("T101", lines["events"][2] + 2)]
+    assert tables is not None and [e.event for e in tables.events] == ["Go", "Done"]

@@ -89,6 +89,7 @@ def read_grid(
     named = [i for i, (text, _) in enumerate(header) if normalize_column(text)]
     unnamed = sorted(set(range(len(header))) - set(named))
     last = (named[-1], header[named[-1]][0].strip()) if named else (0, "")
+    file, sheet = source.file, source.sheet
     rows: list[RawRow] = []
     for line, cells in filled[1:]:
         stray = _stray(cells, unnamed, len(header))
@@ -96,12 +97,12 @@ def read_grid(
             _report_stray(source, line, (stray, cells[stray]), last, diags)
             if blank([cells[i] for i in named if i < len(cells)]):
                 continue  # a note beside the table: a row with nothing else is no row
-        raw = {
-            name: (cell, source.at(line, name))
+        raw = {  # a Location per cell, built in place: a long table has a million cells
+            name: (cell, Location(file, line, sheet, name))
             for name, cell in zip(columns, cells, strict=False)
             if name is not None
         }
-        rows.append(RawRow(source.at(line), raw))
+        rows.append(RawRow(Location(file, line, sheet), raw))
     return RawTable(source.table, where, tuple(rows))
 
 

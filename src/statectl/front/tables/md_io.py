@@ -10,7 +10,8 @@ Rules:
    ``\\r`` a carriage return, so any text survives a round trip.
 4. Locations are the 1-based line of the row.
 5. Blank lines (inside a table too), the header, short rows and cells past the header
-   follow the rules every flat format shares (:mod:`statectl.front.tables.grid`).
+   follow the rules every flat format shares (:mod:`statectl.front.tables.grid`). Since
+   a blank line does not end a table, a second table under one heading is T101.
 """
 
 from __future__ import annotations
@@ -78,11 +79,17 @@ def split_row(line: str) -> list[str]:
 FIX = "delete the stray cells or name their column in the header; write a pipe in a cell as \\|"
 
 
+def _separator(text: str) -> bool:
+    """The line is a ``|---|---|`` row."""
+    cells = split_row(text)
+    return bool(cells) and all(SEPARATOR.match(c) for c in cells)
+
+
 def _parse_table(
     table: str, block: list[tuple[int, str]], file: str, diags: list[Diagnostic]
 ) -> RawTable | None:
     header_line = block[0][0]
-    if len(block) < 2 or not all(SEPARATOR.match(c) for c in split_row(block[1][1])):
+    if len(block) < 2 or not _separator(block[1][1]):
         diags.append(
             diag(
                 "T101",
@@ -92,8 +99,20 @@ def _parse_table(
             )
         )
         return None
+    end = next((k for k in range(3, len(block)) if _separator(block[k][1])), len(block) + 1)
+    if end <= len(block):  # a blank line does not end a table (rule 5): a second one is refused
+        diags.append(
+            diag(
+                "T101",
+                Location(file, block[end - 1][0]),
+                f"a second table under '## {table.title()}': a section holds one table",
+                "give the other table its own '## ' heading, or delete its header and "
+                "'|---|' rows to go on with this one",
+            )
+        )
     records = [
-        (line, [unescape(c) for c in split_row(text)]) for line, text in (block[0], *block[2:])
+        (line, [unescape(c) for c in split_row(text)])
+        for line, text in (block[0], *block[2 : end - 1])
     ]
     return read_grid(FlatSource(table, file, f"the {table} table", FIX), records, diags)
 
