@@ -25,7 +25,15 @@ from dataclasses import dataclass, field
 
 from statectl.front.tables.cells import check_header
 from statectl.front.tables.literals import LITERAL_HINT, parse_literal, reported
-from statectl.front.tables.rows import Bad, Cell, RawRow, RawTable, diag, normalize_column
+from statectl.front.tables.rows import (
+    REQUIRED,
+    Bad,
+    Cell,
+    RawRow,
+    RawTable,
+    diag,
+    normalize_column,
+)
 from statectl.kernel.errors import Diagnostic, Location
 
 __all__ = ["FlatSource", "Record", "data_entries", "numbered", "read_grid"]
@@ -75,8 +83,8 @@ def read_grid(
                 "T105",
                 source.at(1),
                 f"{source.noun} has no header row and no rows",
-                "write a header row naming the columns (such as state, control), then a row "
-                "for each state",
+                f"write a header row naming its columns, at least "
+                f"{', '.join(REQUIRED[source.table])}, then the rows under it",
             )
         )
         return None
