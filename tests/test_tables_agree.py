@@ -337,3 +337,32 @@ def test_a_second_markdown_table_in_a_section_is_refused(tmp_path: Path) -> None
     tables, diags = load(path)
     assert [(d.code, d.where.line) for d in diags] == [("T101", lines["events"][2] + 2)]
     assert tables is not None and [e.event for e in tables.events] == ["Go", "Done"]
+
+
+@pytest.mark.parametrize(
+    ("between", "why"),
+    [
+        ("\nSee the manual for the other events.\n\n", "a table after text in the section"),
+        ("\n## Events\n\n", "a table under the section's heading again"),
+    ],
+)
+def test_a_markdown_table_after_the_sections_own_is_refused(
+    between: str, why: str, tmp_path: Path
+) -> None:
+    """Its rows would be dropped without a word: one T101 at its header, saying where the
+    section's table is and what to do; the section's own table is still read."""
+    device = base()
+    path, lines = write("md", device, tmp_path)
+    text = path.read_text(encoding="utf-8").replace(
+        "| Done | Busy | Idle | completion |",
+        "| Done | Busy | Idle | completion |\n"
+        + between
+        + "| event | old | new |\n|---|---|---|\n| Stop | Busy | Idle |",
+    )
+    path.write_text(text, encoding="utf-8")
+    tables, diags = load(path)
+    header = text.split("\n").index("| event | old | new |") + 1
+    assert [(d.code, d.where.line) for d in diags] == [("T101", header)], why
+    assert f"after the one at line {lines['events'][0]}" in diags[0].message
+    assert diags[0].hint and "move its rows" in diags[0].hint
+    assert tables is not None and [e.event for e in tables.events] == ["Go", "Done"]

@@ -12,6 +12,8 @@ Rules:
 5. Blank lines (inside a table too), the header, short rows and cells past the header
    follow the rules every flat format shares (:mod:`statectl.front.tables.grid`). Since
    a blank line does not end a table, a second table under one heading is T101.
+6. So is a table after the section's table has ended (after text, or under a second
+   heading of the same name): its rows would otherwise be dropped without a word.
 """
 
 from __future__ import annotations
@@ -117,6 +119,18 @@ def _parse_table(
     return read_grid(FlatSource(table, file, f"the {table} table", FIX), records, diags)
 
 
+def _another_table(table: str, line: int, first: int, file: str) -> Diagnostic:
+    """Rule 6: a table after the section's own (after text, or under a repeated heading)."""
+    return diag(
+        "T101",
+        Location(file, line),
+        f"another {table} table after the one at line {first}: the file holds one, and "
+        "its rows would not be read",
+        f"move its rows into the table at line {first}, or put it under a heading other "
+        "than States, Events, Data or Recovery",
+    )
+
+
 def read_md(text: str, file: str, stem: str) -> tuple[DeviceTables | None, list[Diagnostic]]:
     """Read a Markdown device file; ``stem`` names the device without a heading."""
     diags: list[Diagnostic] = []
@@ -125,6 +139,7 @@ def read_md(text: str, file: str, stem: str) -> tuple[DeviceTables | None, list[
     section: str | None = None
     blocks: dict[str, list[tuple[int, str]]] = {}
     closed: set[str] = set()
+    refused: set[str] = set()  # sections whose further table was reported
     for number, raw_line in enumerate(text.split("\n"), start=1):
         line = raw_line.rstrip("\r").strip()
         if line.startswith("#"):
@@ -138,7 +153,12 @@ def read_md(text: str, file: str, stem: str) -> tuple[DeviceTables | None, list[
             continue
         if section is None and profile is None and (p := PROFILE.match(line)):
             profile = p.group(1).strip()  # a 'Profile: NAME' line before the first table
-        if section is None or section in closed:
+        if section is None:
+            continue
+        if section in closed:  # a table here would be lost: said once (rule 6)
+            if line.startswith("|") and section not in refused:
+                refused.add(section)
+                diags.append(_another_table(section, number, blocks[section][0][0], file))
             continue
         if line.startswith("|"):
             blocks.setdefault(section, []).append((number, line))
