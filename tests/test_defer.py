@@ -372,3 +372,23 @@ def test_the_other_region_takes_the_released_event_at_run_time() -> None:
     assert subject.configuration >= {"r1a", "r2b"}, subject.configuration
     subject.dispatch("n")  # leaving r1a releases x; r2b takes it
     assert subject.configuration == {"done"}, [r for r in records if isinstance(r, MicrostepTaken)]
+
+
+def test_the_testgen_oracle_keeps_and_releases_as_the_runtime(tmp_path: Path) -> None:
+    """Testgen's specification keeps deferred events by the runtime's own rule: one more
+    than MAX_DEFERRED is dropped, and the kept ones come back in arrival order once the
+    state is left (it kept every one before, so a device that dropped the extra failed)."""
+    from statectl.out.testgen.oracle import Specification
+
+    chart = load_chart(press(tmp_path))
+    spec = Specification(chart)
+    device, _ = run(chart)
+    for event in ("Go", *(["Eject"] * (MAX_DEFERRED + 1))):
+        spec._process(event, None)
+        device.dispatch(event)
+    taken = spec._process("Stroke done", None)
+    device.dispatch("Stroke done")
+    assert taken is not None and [s.event for s in taken] == ["Stroke done"] + ["Eject"] * (
+        MAX_DEFERRED
+    )
+    assert spec.kept == [] and set(spec.states) == set(device.configuration) == {"Idle"}

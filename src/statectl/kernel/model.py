@@ -14,7 +14,7 @@ Rules:
 from __future__ import annotations
 
 import enum
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Collection, Iterable, Iterator, Mapping, MutableSequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
@@ -40,6 +40,7 @@ __all__ = [
     "Foreach",
     "If",
     "InvokeNumber",
+    "Kept",
     "Log",
     "Notify",
     "Param",
@@ -51,6 +52,8 @@ __all__ = [
     "Timeout",
     "Transition",
     "field_accepts",
+    "keep_deferred",
+    "take_released",
 ]
 
 NOWHERE = Location()
@@ -234,6 +237,28 @@ class ChildInvoke:
 
 #: How many deferred events a running device keeps at most, in Python and in generated C++.
 MAX_DEFERRED = 16
+#: A deferred event kept with its data, in arrival order.
+Kept = tuple[str, Any]
+
+
+def keep_deferred(kept: MutableSequence[Kept], event: str, data: Any) -> bool:
+    """Keep a deferred arrival after those kept before it, while fewer than
+    :data:`MAX_DEFERRED` are kept; False: dropped. The one rule the runtime
+    (statectl.run.runtime.defer) and testgen's oracle keep by."""
+    if len(kept) >= MAX_DEFERRED:
+        return False
+    kept.append((event, data))
+    return True
+
+
+def take_released(kept: MutableSequence[Kept], deferring: Collection[str]) -> Kept | None:
+    """Remove and return the first kept event, in arrival order, that no active state
+    defers (``deferring``, :meth:`Chart.deferring`); None when every one is still deferred."""
+    for i, (event, data) in enumerate(kept):
+        if event not in deferring:
+            del kept[i]
+            return event, data
+    return None
 
 
 @dataclass(frozen=True, slots=True)

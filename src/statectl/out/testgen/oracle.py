@@ -51,7 +51,7 @@ from collections.abc import Mapping
 from typing import Any, NoReturn, Protocol
 
 from statectl.front.observers import extract
-from statectl.kernel.model import Chart, Notify
+from statectl.kernel.model import Chart, Kept, Notify, keep_deferred, take_released
 from statectl.kernel.semantics import Step, Unhandled, compiled, initial, step
 from statectl.kernel.semantics.calls import CallKey, DeviceCalls
 from statectl.out.testgen.adapters import Implementation, Observed, Unsupported
@@ -117,7 +117,7 @@ class Specification:
         self.now = 0.0
         self.fault: str | None = None  # a fault injected that no monitor raised yet
         self.unsupported: dict[str, str] = {}
-        self.kept: list[tuple[str, Any]] = []  # deferred events the device keeps
+        self.kept: list[Kept] = []  # deferred events the device keeps
 
     @property
     def states(self) -> tuple[str, ...]:
@@ -186,16 +186,13 @@ class Specification:
         if decided is None:
             return None
         if decided.unhandled is Unhandled.DECLARED_IGNORED and event in self._deferring():
-            self.kept.append((event, data))
+            keep_deferred(self.kept, event, data)  # kept, or dropped when full, as the runtime
             return [decided]
         taken = [decided]
-        while True:
-            deferring = self._deferring()
-            i = next((i for i, (e, _) in enumerate(self.kept) if e not in deferring), None)
-            if i is None:
-                return taken
-            released = self._step(*self.kept.pop(i))
+        while (kept := take_released(self.kept, self._deferring())) is not None:
+            released = self._step(*kept)
             taken += [released] if released is not None else []
+        return taken
 
     def _deferring(self) -> tuple[str, ...]:
         return self.chart.deferring(self.snapshot.active)

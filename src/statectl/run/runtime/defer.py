@@ -23,7 +23,7 @@ from __future__ import annotations
 from collections import deque
 from typing import TYPE_CHECKING, Any
 
-from statectl.kernel.model import MAX_DEFERRED
+from statectl.kernel.model import Kept, keep_deferred, take_released
 from statectl.kernel.semantics import Unhandled
 from statectl.run.runtime.records import EventRejected
 
@@ -40,7 +40,7 @@ class Deferrer:
 
     def __init__(self, subject: Subject) -> None:
         self.subject = subject
-        self.kept: deque[tuple[str, Any]] = deque()
+        self.kept: deque[Kept] = deque()
         self.dropped = 0
         self._scheduled = False
 
@@ -52,13 +52,11 @@ class Deferrer:
     def heard(self, event: str, data: Any, outcome: str) -> None:
         """The step listener: keep a deferred arrival, release what is no longer deferred."""
         if outcome == Unhandled.DECLARED_IGNORED and event in self.deferring():
-            if len(self.kept) >= MAX_DEFERRED:
+            if not keep_deferred(self.kept, event, data):  # rule 3: no room
                 self.dropped += 1
                 s = self.subject
                 if s.listening:
                     s.emit(EventRejected(s.name, s.clock.now(), event, Unhandled.DECLARED_IGNORED))
-                return
-            self.kept.append((event, data))
             return
         if self.kept and not self._scheduled:
             self._schedule()
@@ -72,12 +70,9 @@ class Deferrer:
     def _release(self) -> None:
         """On the owner, before anything queued: deliver the first kept event not deferred."""
         self._scheduled = False
-        deferring = self.deferring()
-        for i, (event, data) in enumerate(self.kept):
-            if event not in deferring:
-                del self.kept[i]
-                self.subject.deliver(event, data)
-                break
+        released = take_released(self.kept, self.deferring())
+        if released is not None:
+            self.subject.deliver(*released)
         if self.kept and not self._scheduled:
             self._schedule()
 
