@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from typing import Any
 from urllib.parse import unquote, urlparse
 
@@ -102,23 +102,23 @@ class OpcuaImpl:
                 f"{plain}: no device {chart.name!r} in namespace {NAMESPACE} ({exc})"
             ) from None
 
-    def _machine_states(self, machine: Any) -> list[str]:
+    def _active(self, machine: Any) -> Iterator[tuple[Any, str]]:
+        """``machine`` and its active sub-state machines, each with the state it shows."""
         ua = self.ua
         shown = machine.get_child("0:CurrentState").read_value().Text or ""
+        yield machine, shown
         if not shown:
-            return []
-        found = [shown]
+            return
         try:
             node = machine.get_child([f"{self.ns}:{shown}"])
             subs = node.get_referenced_nodes(ua.ObjectIds.HasSubStateMachine)
         except Exception:  # a server without sub-state machines there: the state is a leaf
             subs = []
         for sub in subs:
-            found += self._machine_states(sub)
-        return found
+            yield from self._active(sub)
 
     def states(self) -> tuple[str, ...]:
-        found = [s for s in self._machine_states(self.machine) if s in self.leaves]
+        found = [s for _, s in self._active(self.machine) if s in self.leaves]
         return tuple(sorted(set(found), key=self.order.__getitem__))
 
     def _inputs(self, method: Any, data: Any) -> list[Any]:
@@ -205,26 +205,23 @@ class OpcuaImpl:
         The server writes ``LastTransition`` just after ``CurrentState``, so it is read a
         few times before the first candidate is taken as the answer."""
         for _ in range(WAIT_LAST):
-            shown = self._last_numbers(self.machine)
+            shown = self._last_numbers()
             taken = [n for n in candidates if n in shown]
             if taken:
                 return taken
             time.sleep(STEP / 5)
         return candidates
 
-    def _last_numbers(self, machine: Any) -> set[int]:
-        """The ``LastTransition`` numbers of ``machine`` and its active sub-state machines."""
-        ua = self.ua
+    def _last_numbers(self) -> set[int]:
+        """The ``LastTransition`` numbers of the active machines (the main one and those
+        of its active states)."""
         try:
-            numbers = {int(machine.get_child(["0:LastTransition", "0:Number"]).read_value())}
-            shown = machine.get_child("0:CurrentState").read_value().Text or ""
-            node = machine.get_child([f"{self.ns}:{shown}"]) if shown else None
-            subs = node.get_referenced_nodes(ua.ObjectIds.HasSubStateMachine) if node else []
+            return {
+                int(m.get_child(["0:LastTransition", "0:Number"]).read_value())
+                for m, _ in self._active(self.machine)
+            }
         except Exception:  # a server without the optional Number: nothing to go by
             return set()
-        for sub in subs:
-            numbers |= self._last_numbers(sub)
-        return numbers
 
     def inject_fault(self, detail: str) -> None:
         inject = getattr(self.behind, "inject_fault", None)
