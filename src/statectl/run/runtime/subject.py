@@ -273,12 +273,8 @@ class Subject:
         inbox = self._inbox
         inbox.append((event, data, then))
         self._fast = False  # after the append: see _refresh()
-        wake = inbox.wake  # Inbox.told(self), inlined: the hot path of a System's posts
-        if wake is not None:
-            wake.set()
-        hook = inbox.hook
-        if hook is not None:
-            hook(self)
+        if inbox.wake is not None or inbox.hook is not None:
+            inbox.told(self)
 
     def on_queued(self, hook: Callable[[Subject], object] | None) -> None:
         """Call ``hook(subject)`` after every post or call_soon (from the posting thread).
