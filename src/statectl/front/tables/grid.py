@@ -135,15 +135,11 @@ def _report_stray(
 ) -> None:
     """Rule 3: the first cell of a row with text where the header names no column."""
     i, cell = stray
-    if isinstance(cell, str):
-        found = repr(cell.strip() if len(cell.strip()) <= 40 else cell.strip()[:37] + "...")
-    else:
-        found = cell.found if isinstance(cell, Bad) else "a list"
     diags.append(
         diag(
             "T101",
             source.at(line),
-            f"{source.column(i + 1)} holds {found}, but the {source.table} header names no "
+            f"{source.column(i + 1)} holds {_found(cell)}, but the {source.table} header names no "
             f"column there (its last is {source.column(last[0] + 1)}, {last[1]!r})",
             source.fix,
         )
@@ -163,15 +159,22 @@ def data_entries(
         if isinstance(value, str):
             literal: object = parse_literal(value, at, diags, name)
         else:  # a cell of another type (an XLSX date): said here, at the cell
-            found = value.found if isinstance(value, Bad) else "a list"
             diags.append(
                 diag(
                     "T108",
                     at,
-                    f"data value of {name!r} must be a YAML literal (got {found})",
+                    f"data value of {name!r} must be a YAML literal (got {_found(value)})",
                     "type the value as text: " + LITERAL_HINT.removeprefix("write "),
                 )
             )
             literal = reported()
         entries.append((name, literal, row.where))
     return entries
+
+
+def _found(cell: Cell) -> str:
+    """A cell as a message quotes it: its text (cut at 40 characters), or what it held."""
+    if isinstance(cell, str):
+        text = cell.strip()
+        return repr(text if len(text) <= 40 else text[:37] + "...")
+    return cell.found if isinstance(cell, Bad) else "a list"
