@@ -9,10 +9,6 @@ a simulated gripper behind it, and a ModbusIO bound to it; no ``statectl_api``.
 
 from __future__ import annotations
 
-import os
-import re
-import subprocess
-import sys
 import threading
 from collections.abc import Iterator
 from pathlib import Path
@@ -25,14 +21,13 @@ from statectl.front.builder.build import load_chart
 from statectl.front.observers import Notification
 from statectl.out.testgen.harness import DeviceUnderTest
 from statectl.run.devices.base import Driver
+from test_testgen import counts, run_pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SRC = ROOT / "src"
 EXAMPLES = ROOT / "examples"
 GRIPPER = EXAMPLES / "pick-and-place" / "gripper.yaml"
 CLAMP = EXAMPLES / "modbus" / "clamp.yaml"
 CRITERIA = ["rows", "transitions", "states", "pairs"]
-PLUGIN = ("-p", "statectl.out.testgen.plugin", "-p", "no:cacheprovider")
 
 #: The conftest beside the generated modules: per device, a plant on its own server.
 CONFTEST = '''
@@ -198,25 +193,6 @@ PLANTS["Gripper"] = StuckGripper
 }
 
 
-def run_pytest(directory: Path) -> subprocess.CompletedProcess[str]:
-    """The generated modules in a fresh interpreter with the plugin named."""
-    env = {**os.environ, "PYTHONPATH": str(SRC)}
-    return subprocess.run(
-        [sys.executable, "-m", "pytest", "-q", "-rfs", *PLUGIN, str(directory)],
-        cwd=directory,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-    )
-
-
-def counts(result: subprocess.CompletedProcess[str]) -> dict[str, int]:
-    found = re.findall(r"(\d+) (passed|failed|errors?|skipped)", result.stdout)
-    return {kind: int(n) for n, kind in found}
-
-
 def generate(tmp_path: Path, tables: list[Path], criteria: list[str], broken: str = "") -> Path:
     """The modules of ``tables`` for each criterion, and the conftest (``broken``'s)."""
     for path in tables:
@@ -233,7 +209,7 @@ def test_the_generated_suites_accept_modbusio_on_a_real_server(tmp_path: Path) -
     probes included (completions from the jaw sensors, the fault and monitor of Closed),
     with no statectl_api: the driver logs each call under its method's own name."""
     pytest.importorskip("pymodbus")
-    result = run_pytest(generate(tmp_path, [GRIPPER, CLAMP], CRITERIA))
+    result = run_pytest(generate(tmp_path, [GRIPPER, CLAMP], CRITERIA), "-rfs")
     found = counts(result)
     assert result.returncode == 0, result.stdout[-4000:]
     assert found.get("passed", 0) >= 40 and "failed" not in found, result.stdout[-2000:]
@@ -262,7 +238,7 @@ def test_the_generated_suite_rejects_a_broken_driver_or_plant(
     """A driver that logs the wrong API function, or a plant whose sensor never comes,
     fails the rows module, naming the call or the completion that did not come."""
     pytest.importorskip("pymodbus")
-    result = run_pytest(generate(tmp_path, [GRIPPER], ["rows"], broken=broken))
+    result = run_pytest(generate(tmp_path, [GRIPPER], ["rows"], broken=broken), "-rfs")
     assert result.returncode == 1, result.stdout[-4000:]
     assert counts(result).get("failed", 0) >= 1
     assert says in result.stdout, result.stdout[-4000:]
